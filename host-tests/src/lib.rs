@@ -1,0 +1,1 @@
+//! Host-side helpers shared by the tests and the evaluation binaries.

@@ -1,0 +1,695 @@
+//! Per-sample fusion of N gyros into one virtual gyro (one axis at a time).
+//!
+//! Methods (SEEDS.md "Seed 004"):
+//! - [`Method::Mean`]: the baseline.
+//! - [`Method::Zhang`]: support `exp(−(yi−yj)²)` (Zhang 2012, eq. 2), eq. 9.
+//! - [`Method::Seed`]: normalised distance and log support (eq. 3–9),
+//!   optionally Grubbs rejection of abnormal supports (eq. 10–12) and
+//!   limited-memory weighting (eq. 13–16). Every ambiguity is a knob.
+//! - [`Method::Adaptive`] (ours, the default): per-gyro noise variance from
+//!   leave-one-out residuals, inverse-variance weights, median gating and
+//!   frozen-output rejection.
+//!
+//! Settings ([`Fusion`]) are immutable and shared by the three axes; the
+//! per-axis running state is [`AxisState`]. Capacity is the const `N ≤ 8`;
+//! gyro sets are bit masks (bit i = gyro i).
+
+use crate::algo::math::{expf, lnf, sqrtf};
+use crate::algo::stats::grubbs_critical;
+
+/// Largest array supported (masks are `u8`).
+pub const MAX_GYROS: usize = 8;
+/// Longest memory window for eq. 13–16.
+pub const MAX_MEMORY: usize = 16;
+
+/// Denominator of the normalised distance, eq. 4 (SEEDS ambiguity 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Denominator {
+    /// `m² − 1`, as printed.
+    MSquaredMinus1,
+    /// `m(m − 1)`, the number of ordered pairs: d* is then distance over
+    /// mean pairwise distance.
+    OrderedPairs,
+}
+
+/// Standard deviation used by the Grubbs statistic, eq. 11.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StdKind {
+    /// 1/N, as printed in eq. 11.
+    Population,
+    /// 1/(N − 1), textbook Grubbs.
+    Sample,
+}
+
+/// Grubbs settings (eq. 10–12).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GrubbsConfig {
+    /// Significance level α (0.05 by default).
+    pub alpha: f32,
+    /// Two-sided critical value (α/2N) rather than one-sided (α/N).
+    pub two_sided: bool,
+    /// Include the diagonal `s_ii = 1` in each row, so N = m (our reading of
+    /// the undefined N; the alternative is N = m − 1).
+    pub include_diagonal: bool,
+    /// Which standard deviation eq. 11 uses.
+    pub std: StdKind,
+}
+
+impl Default for GrubbsConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 0.05,
+            two_sided: true,
+            include_diagonal: true,
+            std: StdKind::Population,
+        }
+    }
+}
+
+/// Limited-memory weighting (eq. 13–16) settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MemoryConfig {
+    /// Memory length M (8 by default): epochs u = k−M+1 ..= k.
+    pub len: usize,
+    /// Lag of the current epoch: `t = k − u + lag0`. 1 is our reading (the
+    /// printed `t = k − u` divides by zero at the current epoch, so with 0 the
+    /// current epoch is skipped).
+    pub lag0: u8,
+    /// Guard ε added to `(r − r̄)²` in eq. 14 (not in the paper).
+    pub eps: f32,
+}
+
+impl Default for MemoryConfig {
+    fn default() -> Self {
+        Self {
+            len: 8,
+            lag0: 1,
+            eps: 1e-3,
+        }
+    }
+}
+
+/// The seed's method and its readings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SeedConfig {
+    /// Eq. 4 denominator.
+    pub denominator: Denominator,
+    /// Clamp total supports `r_i` at 0. Eq. 5 gives negative supports for
+    /// `d* > e − 1`, which makes a far outlier pull the fused value *away*
+    /// from itself with a negative weight. `false` is the literal paper.
+    pub clamp_negative: bool,
+    /// Grubbs rejection (eq. 10–12), if enabled.
+    pub grubbs: Option<GrubbsConfig>,
+    /// Memory weighting (eq. 13–16), if enabled.
+    pub memory: Option<MemoryConfig>,
+}
+
+impl SeedConfig {
+    /// Eq. 3–9 only, literal.
+    pub const SUPPORT: Self = Self {
+        denominator: Denominator::MSquaredMinus1,
+        clamp_negative: false,
+        grubbs: None,
+        memory: None,
+    };
+}
+
+/// Our adaptive method's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AdaptiveConfig {
+    /// EWMA factor of the squared residuals once warmed up (1/64).
+    pub alpha: f32,
+    /// Samples averaged plainly before the EWMA takes over.
+    pub warmup: u16,
+    /// Gate: a gyro further than `gate_k` residual sigmas from the median is
+    /// rejected for this sample.
+    pub gate_k: f32,
+    /// Floor of each noise variance, (°/s)² (quantisation: LSB²/12).
+    pub var_floor: f32,
+    /// Consecutive bit-identical outputs after which a gyro counts as frozen.
+    pub frozen_after: u8,
+}
+
+impl Default for AdaptiveConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 1.0 / 64.0,
+            warmup: 32,
+            gate_k: 5.0,
+            var_floor: 1e-6,
+            frozen_after: 4,
+        }
+    }
+}
+
+/// Fusion method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Method {
+    /// Arithmetic mean of the valid inputs.
+    Mean,
+    /// Support `exp(−(yi − yj)²)` with y in °/s.
+    Zhang,
+    /// The seed's support method (eq. 3–16 as configured).
+    Seed(SeedConfig),
+    /// Inverse-variance weighting with online noise estimates.
+    Adaptive(AdaptiveConfig),
+}
+
+/// Errors found when a configuration is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// N must be 1..=8.
+    ArraySize,
+    /// α must lie in (0, 1).
+    Alpha,
+    /// Memory length must be 1..=16.
+    MemoryLen,
+    /// A factor or threshold is out of range (non-finite, ≤ 0, α ≥ 1).
+    Parameter,
+}
+
+/// Why no fused value came out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FuseError {
+    /// No input was valid and finite.
+    NoValidInput,
+}
+
+/// One fused sample of one axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Fused<const N: usize> {
+    /// The fused rate, °/s.
+    pub rate_dps: f32,
+    /// Normalised weights (sum 1 over the used gyros, 0 elsewhere).
+    pub weights: [f32; N],
+    /// Gyros that were offered but rejected this sample (non-finite input,
+    /// Grubbs-isolated, gated, frozen).
+    pub rejected: u8,
+    /// Why the method fell back to the plain mean, if it did.
+    pub fallback: bool,
+}
+
+/// Immutable fusion settings; one value drives all axes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fusion<const N: usize> {
+    method: Method,
+    /// T(n, α) for n = 0..=N (0 where undefined).
+    grubbs_t: [f32; MAX_GYROS + 1],
+}
+
+/// Running state of one axis.
+#[derive(Clone, Copy, Debug)]
+pub struct AxisState<const N: usize> {
+    k: u32,
+    // Memory weighting: ring of r_i(u) and of 1/((r_i(u) − r̄_i(u))² + ε).
+    ring_r: [[f32; N]; MAX_MEMORY],
+    ring_inv: [[f32; N]; MAX_MEMORY],
+    head: usize,
+    rbar: [f32; N],
+    // Adaptive: noise variance estimates, last input, frozen counters.
+    var: [f32; N],
+    last: [f32; N],
+    frozen: [u8; N],
+    n_upd: [u16; N],
+}
+
+impl<const N: usize> Default for AxisState<N> {
+    fn default() -> Self {
+        Self {
+            k: 0,
+            ring_r: [[0.0; N]; MAX_MEMORY],
+            ring_inv: [[0.0; N]; MAX_MEMORY],
+            head: 0,
+            rbar: [0.0; N],
+            var: [0.0; N],
+            last: [f32::NAN; N],
+            frozen: [0; N],
+            n_upd: [0; N],
+        }
+    }
+}
+
+impl<const N: usize> AxisState<N> {
+    /// Current noise standard deviation estimates of the adaptive method,
+    /// °/s (NaN before any update).
+    pub fn sigma_dps(&self, cfg: &AdaptiveConfig) -> [f32; N] {
+        let mut s = [f32::NAN; N];
+        for i in 0..N {
+            if self.n_upd[i] > 0 {
+                s[i] = sqrtf(self.var[i].max(cfg.var_floor));
+            }
+        }
+        s
+    }
+}
+
+fn mask_iter<const N: usize>(m: u8) -> impl Iterator<Item = usize> {
+    (0..N).filter(move |i| m & (1 << i) != 0)
+}
+
+/// First masked value: the reference the sums are taken about, so that
+/// constant input comes back exactly and large rates lose no precision.
+fn first<const N: usize>(y: &[f32; N], m: u8) -> f32 {
+    mask_iter::<N>(m).next().map_or(0.0, |i| y[i])
+}
+
+fn mean_of<const N: usize>(y: &[f32; N], m: u8) -> (f32, [f32; N]) {
+    let n = m.count_ones() as f32;
+    let y0 = first(y, m);
+    let mut w = [0.0; N];
+    let mut s = 0.0;
+    for i in mask_iter::<N>(m) {
+        s += y[i] - y0;
+        w[i] = 1.0 / n;
+    }
+    (y0 + s / n, w)
+}
+
+/// Weighted average with weights `r` on mask `m`; `None` if Σr ≤ 0.
+fn weighted<const N: usize>(y: &[f32; N], r: &[f32; N], m: u8) -> Option<(f32, [f32; N])> {
+    let y0 = first(y, m);
+    let mut sr = 0.0;
+    let mut sy = 0.0;
+    for i in mask_iter::<N>(m) {
+        sr += r[i];
+        sy += r[i] * (y[i] - y0);
+    }
+    if !(sr > 0.0) || !sr.is_finite() {
+        return None;
+    }
+    let mut w = [0.0; N];
+    for i in mask_iter::<N>(m) {
+        w[i] = r[i] / sr;
+    }
+    let x = y0 + sy / sr;
+    x.is_finite().then_some((x, w))
+}
+
+impl<const N: usize> Fusion<N> {
+    /// Check the settings and precompute the Grubbs critical values.
+    pub fn new(method: Method) -> Result<Self, ConfigError> {
+        if N == 0 || N > MAX_GYROS {
+            return Err(ConfigError::ArraySize);
+        }
+        let mut grubbs_t = [0.0f32; MAX_GYROS + 1];
+        match method {
+            Method::Seed(c) => {
+                if let Some(g) = c.grubbs {
+                    if !(g.alpha > 0.0 && g.alpha < 1.0) {
+                        return Err(ConfigError::Alpha);
+                    }
+                    for (n, t) in grubbs_t.iter_mut().enumerate() {
+                        *t = grubbs_critical(n, g.alpha as f64, g.two_sided).unwrap_or(0.0) as f32;
+                    }
+                }
+                if let Some(m) = c.memory {
+                    if m.len == 0 || m.len > MAX_MEMORY {
+                        return Err(ConfigError::MemoryLen);
+                    }
+                    if !(m.eps > 0.0 && m.eps.is_finite()) {
+                        return Err(ConfigError::Parameter);
+                    }
+                }
+            }
+            Method::Adaptive(a) => {
+                let ok = a.alpha > 0.0
+                    && a.alpha < 1.0
+                    && a.gate_k > 0.0
+                    && a.gate_k.is_finite()
+                    && a.var_floor > 0.0
+                    && a.var_floor.is_finite()
+                    && a.frozen_after >= 2;
+                if !ok {
+                    return Err(ConfigError::Parameter);
+                }
+            }
+            Method::Mean | Method::Zhang => {}
+        }
+        Ok(Self { method, grubbs_t })
+    }
+
+    /// The configured method.
+    pub fn method(&self) -> Method {
+        self.method
+    }
+
+    /// Grubbs critical value used for `n` values (0 where undefined).
+    pub fn grubbs_critical(&self, n: usize) -> f32 {
+        self.grubbs_t.get(n).copied().unwrap_or(0.0)
+    }
+
+    /// Fuse one axis. `offered` marks the gyros the pipeline considers
+    /// healthy; non-finite values among them are rejected here.
+    pub fn fuse(
+        &self,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        offered: u8,
+    ) -> Result<Fused<N>, FuseError> {
+        let offered = offered & (((1u16 << N) - 1) as u8);
+        let mut valid = 0u8;
+        for i in mask_iter::<N>(offered) {
+            if y[i].is_finite() {
+                valid |= 1 << i;
+            }
+        }
+        let mut out = Fused {
+            rate_dps: f32::NAN,
+            weights: [0.0; N],
+            rejected: offered & !valid,
+            fallback: false,
+        };
+        st.k = st.k.saturating_add(1);
+        let res = match self.method {
+            Method::Mean => (valid != 0).then(|| mean_of(y, valid)),
+            Method::Zhang => self.zhang(y, valid, &mut out),
+            Method::Seed(c) => self.seed(&c, st, y, valid, &mut out),
+            Method::Adaptive(c) => adaptive(&c, st, y, valid, &mut out),
+        };
+        match res {
+            Some((x, w)) => {
+                out.rate_dps = x;
+                out.weights = w;
+                Ok(out)
+            }
+            None => Err(FuseError::NoValidInput),
+        }
+    }
+
+    fn zhang(&self, y: &[f32; N], m: u8, out: &mut Fused<N>) -> Option<(f32, [f32; N])> {
+        if m == 0 {
+            return None;
+        }
+        let mut r = [0.0f32; N];
+        for i in mask_iter::<N>(m) {
+            for j in mask_iter::<N>(m).filter(|&j| j > i) {
+                let d = y[i] - y[j];
+                let s = expf(-d * d);
+                r[i] += s;
+                r[j] += s;
+            }
+        }
+        if m.count_ones() == 1 {
+            return Some(mean_of(y, m));
+        }
+        weighted(y, &r, m).or_else(|| {
+            out.fallback = true;
+            Some(mean_of(y, m))
+        })
+    }
+
+    fn seed(
+        &self,
+        c: &SeedConfig,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        m: u8,
+        out: &mut Fused<N>,
+    ) -> Option<(f32, [f32; N])> {
+        let n = m.count_ones() as usize;
+        if n == 0 {
+            return None;
+        }
+        if n == 1 {
+            return Some(mean_of(y, m));
+        }
+        // Eq. 3–4: distances and their normaliser over ordered pairs.
+        let mut d = [[0.0f32; N]; N];
+        let mut sum = 0.0;
+        for i in mask_iter::<N>(m) {
+            for j in mask_iter::<N>(m).filter(|&j| j > i) {
+                let dij = (y[i] - y[j]).abs();
+                d[i][j] = dij;
+                d[j][i] = dij;
+                sum += 2.0 * dij;
+            }
+        }
+        let nf = n as f32;
+        let denom = match c.denominator {
+            Denominator::MSquaredMinus1 => nf * nf - 1.0,
+            Denominator::OrderedPairs => nf * (nf - 1.0),
+        };
+        let scale = sum / denom;
+        // Eq. 5–6: support matrix. All-equal inputs give 0/0 in eq. 4; we
+        // take d* = 0 (full support), which is the limit for equal values.
+        let mut s = [[1.0f32; N]; N];
+        if scale > 0.0 && scale.is_finite() {
+            let inv = 1.0 / scale;
+            for i in mask_iter::<N>(m) {
+                for j in mask_iter::<N>(m).filter(|&j| j > i) {
+                    let v = 1.0 - lnf(1.0 + d[i][j] * inv);
+                    s[i][j] = v;
+                    s[j][i] = v;
+                }
+            }
+        }
+        // Eq. 10–12: Grubbs on each row; zeroing breaks symmetry, as printed.
+        if let Some(g) = c.grubbs {
+            let nrow = if g.include_diagonal { n } else { n - 1 };
+            let t = self.grubbs_t[nrow.min(MAX_GYROS)];
+            if t > 0.0 {
+                let t2 = t * t;
+                for i in mask_iter::<N>(m) {
+                    let inrow = |j: usize| g.include_diagonal || j != i;
+                    let (mut s1, mut s2) = (0.0f32, 0.0f32);
+                    for j in mask_iter::<N>(m).filter(|&j| inrow(j)) {
+                        s1 += s[i][j];
+                    }
+                    let mean = s1 / nrow as f32;
+                    for j in mask_iter::<N>(m).filter(|&j| inrow(j)) {
+                        let e = s[i][j] - mean;
+                        s2 += e * e;
+                    }
+                    let dof = match g.std {
+                        StdKind::Population => nrow as f32,
+                        StdKind::Sample => nrow as f32 - 1.0,
+                    };
+                    let var = s2 / dof;
+                    if !(var > 0.0) {
+                        continue;
+                    }
+                    // T_ij ≥ T  ⇔  (s_ij − s̄)² ≥ T²·σ² (no division, no sqrt).
+                    for j in mask_iter::<N>(m).filter(|&j| inrow(j)) {
+                        let e = s[i][j] - mean;
+                        if e * e >= t2 * var {
+                            s[i][j] = 0.0;
+                        }
+                    }
+                }
+            }
+        }
+        // Eq. 7: total support.
+        let mut r = [0.0f32; N];
+        for i in mask_iter::<N>(m) {
+            for j in mask_iter::<N>(m).filter(|&j| j != i) {
+                r[i] += s[i][j];
+            }
+            if c.clamp_negative && r[i] < 0.0 {
+                r[i] = 0.0;
+            }
+        }
+        for i in mask_iter::<N>(m) {
+            if r[i] <= 0.0 && c.clamp_negative {
+                out.rejected |= 1 << i;
+            }
+        }
+        // Eq. 13–16: limited memory.
+        let r = match c.memory {
+            Some(mc) => memory_weights(&mc, st, &r, m),
+            None => r,
+        };
+        weighted(y, &r, m).or_else(|| {
+            out.fallback = true;
+            Some(mean_of(y, m))
+        })
+    }
+}
+
+/// Eq. 13–16 with our consistent indexing: `R_i(k) = Σ_u r_i(u)·∂_i(u;k)`
+/// over the last `len` epochs, `∂ = 1 / (t² ((r_i(u) − r̄_i(u))² + ε))`,
+/// `t = k − u + lag0`; r̄ is the running mean since start (eq. 13). μ and
+/// 1/k cancel in eq. 16 and are left out.
+fn memory_weights<const N: usize>(
+    mc: &MemoryConfig,
+    st: &mut AxisState<N>,
+    r: &[f32; N],
+    m: u8,
+) -> [f32; N] {
+    let kf = st.k as f32;
+    st.head = (st.head + 1) % MAX_MEMORY;
+    for i in 0..N {
+        if m & (1 << i) != 0 {
+            st.rbar[i] += (r[i] - st.rbar[i]) / kf;
+        }
+        let dev = r[i] - st.rbar[i];
+        st.ring_r[st.head][i] = if m & (1 << i) != 0 { r[i] } else { 0.0 };
+        st.ring_inv[st.head][i] = 1.0 / (dev * dev + mc.eps);
+    }
+    let mut big_r = [0.0f32; N];
+    let len = mc.len.min(st.k as usize);
+    for lag in 0..len {
+        let t = (lag + mc.lag0 as usize) as f32;
+        if t == 0.0 {
+            continue;
+        }
+        let inv_t2 = 1.0 / (t * t);
+        let u = (st.head + MAX_MEMORY - lag) % MAX_MEMORY;
+        for i in 0..N {
+            big_r[i] += st.ring_r[u][i] * st.ring_inv[u][i] * inv_t2;
+        }
+    }
+    big_r
+}
+
+/// Median of the masked values (small insertion sort; N ≤ 8).
+fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
+    let mut b = [0.0f32; MAX_GYROS];
+    let mut n = 0;
+    for i in mask_iter::<N>(m) {
+        let v = y[i];
+        let mut j = n;
+        while j > 0 && b[j - 1] > v {
+            b[j] = b[j - 1];
+            j -= 1;
+        }
+        b[j] = v;
+        n += 1;
+    }
+    if n % 2 == 1 {
+        b[n / 2]
+    } else {
+        0.5 * (b[n / 2 - 1] + b[n / 2])
+    }
+}
+
+fn adaptive<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    if valid == 0 {
+        return None;
+    }
+    // Frozen outputs: bit-identical for `frozen_after` samples while some
+    // other gyro moves. A stuck chip is caught before it drifts away.
+    let mut moving = 0u8;
+    for i in mask_iter::<N>(valid) {
+        if y[i].to_bits() == st.last[i].to_bits() {
+            st.frozen[i] = st.frozen[i].saturating_add(1);
+        } else {
+            st.frozen[i] = 0;
+            moving |= 1 << i;
+        }
+        st.last[i] = y[i];
+    }
+    let mut active = valid;
+    if moving != 0 {
+        for i in mask_iter::<N>(valid) {
+            if st.frozen[i] + 1 >= c.frozen_after {
+                active &= !(1 << i);
+            }
+        }
+    }
+    let n = active.count_ones();
+    if n == 0 {
+        out.rejected |= valid;
+        return None;
+    }
+    let warm = |st: &AxisState<N>, i: usize| st.n_upd[i] >= c.warmup;
+    // Current weights: inverse variance once warmed up, equal before.
+    let mut w = [0.0f32; N];
+    let all_warm = mask_iter::<N>(active).all(|i| warm(st, i));
+    for i in mask_iter::<N>(active) {
+        w[i] = if all_warm {
+            1.0 / st.var[i].max(c.var_floor)
+        } else {
+            1.0
+        };
+    }
+    // Median gate (needs 3 gyros to tell which one is off): the residual
+    // y_i − median has variance about σ_i² + (mean σ²)/(n − 1).
+    let med = median(y, active);
+    let mut good = active;
+    if n >= 3 && all_warm {
+        let mut vbar = 0.0;
+        for i in mask_iter::<N>(active) {
+            vbar += st.var[i].max(c.var_floor);
+        }
+        vbar /= n as f32;
+        let k2 = c.gate_k * c.gate_k;
+        for i in mask_iter::<N>(active) {
+            let e = y[i] - med;
+            if e * e > k2 * (st.var[i].max(c.var_floor) + vbar / (n as f32 - 1.0)) {
+                good &= !(1 << i);
+            }
+        }
+        if good.count_ones() < 2 {
+            // Everybody disagrees: nothing to single out, fall back.
+            good = active;
+            out.fallback = true;
+        }
+    }
+    out.rejected |= valid & !good;
+    // Noise update. Each gyro is compared with the weighted mean of the
+    // *other* good gyros, x₋ᵢ, whose variance V₋ᵢ = 1/Σ_{j≠i} w_j is known
+    // from the current estimates, so E[(y_i − x₋ᵢ)²] − V₋ᵢ = σ_i². Sums are
+    // taken about the median to keep precision at high rates.
+    let (mut sw, mut swy) = (0.0f32, 0.0f32);
+    for i in mask_iter::<N>(good) {
+        sw += w[i];
+        swy += w[i] * (y[i] - med);
+    }
+    if good.count_ones() >= 2 {
+        for i in mask_iter::<N>(active) {
+            let inside = good & (1 << i) != 0;
+            let (wo, wyo) = if inside {
+                (sw - w[i], swy - w[i] * (y[i] - med))
+            } else {
+                (sw, swy)
+            };
+            if !(wo > 0.0) {
+                continue;
+            }
+            let e = (y[i] - med) - wyo / wo;
+            let v_others = if all_warm { 1.0 / wo } else { 0.0 };
+            let mut e2 = e * e;
+            let was_warm = warm(st, i);
+            if was_warm {
+                // Clip, so one spike moves the estimate by at most gate_k².
+                e2 = e2.min(c.gate_k * c.gate_k * (st.var[i].max(c.var_floor) + v_others));
+            }
+            st.n_upd[i] = st.n_upd[i].saturating_add(1);
+            let a = if was_warm {
+                c.alpha
+            } else {
+                1.0 / st.n_upd[i] as f32
+            };
+            st.var[i] += a * (e2 - v_others - st.var[i]);
+        }
+    }
+    // Inverse-variance weights over the good set.
+    for i in mask_iter::<N>(active) {
+        if good & (1 << i) == 0 {
+            w[i] = 0.0;
+        }
+    }
+    weighted(y, &w, good).or_else(|| {
+        out.fallback = true;
+        Some(mean_of(y, good))
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,307 @@
+//! Robustness and property tests of the fusion stage.
+use super::*;
+use crate::emu::Rng;
+
+/// Every method in the reading we ship (supports clamped at 0).
+fn all_methods() -> [Method; 6] {
+    let full = SeedConfig {
+        denominator: Denominator::MSquaredMinus1,
+        clamp_negative: true,
+        grubbs: Some(GrubbsConfig::default()),
+        memory: Some(MemoryConfig::default()),
+    };
+    [
+        Method::Mean,
+        Method::Zhang,
+        Method::Seed(SeedConfig {
+            clamp_negative: true,
+            ..SeedConfig::SUPPORT
+        }),
+        Method::Seed(SeedConfig {
+            clamp_negative: true,
+            grubbs: Some(GrubbsConfig::default()),
+            ..SeedConfig::SUPPORT
+        }),
+        Method::Seed(full),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ]
+}
+
+#[test]
+fn bad_inputs_never_panic_and_are_rejected() {
+    for m in all_methods() {
+        let f = Fusion::<4>::new(m).unwrap();
+        let mut st = AxisState::default();
+        let y = [1.0, f32::NAN, f32::INFINITY, 1.5];
+        let r = f.fuse(&mut st, &y, 0b1111).unwrap();
+        assert_eq!(r.rejected & 0b0110, 0b0110, "{m:?}");
+        assert!(
+            r.rate_dps >= 1.0 && r.rate_dps <= 1.5,
+            "{m:?}: {}",
+            r.rate_dps
+        );
+        assert_eq!(r.weights[1], 0.0);
+        let none = f.fuse(&mut st, &[f32::NAN; 4], 0b1111);
+        assert_eq!(none, Err(FuseError::NoValidInput));
+        assert_eq!(f.fuse(&mut st, &[1.0; 4], 0), Err(FuseError::NoValidInput));
+    }
+}
+
+#[test]
+fn all_equal_inputs_give_that_value() {
+    // The seed's normaliser is 0/0 here; we define d* = 0.
+    for m in all_methods() {
+        let f = Fusion::<4>::new(m).unwrap();
+        let mut st = AxisState::default();
+        for _ in 0..50 {
+            let r = f.fuse(&mut st, &[-5.0; 4], 0b1111).unwrap();
+            assert_eq!(r.rate_dps, -5.0, "{m:?}");
+            let ws: f32 = r.weights.iter().sum();
+            assert!((ws - 1.0).abs() < 1e-5, "{m:?}: weights {:?}", r.weights);
+        }
+    }
+}
+
+#[test]
+fn one_and_two_gyros_are_defined() {
+    for m in all_methods() {
+        let f1 = Fusion::<1>::new(m).unwrap();
+        let mut s1 = AxisState::default();
+        assert_eq!(f1.fuse(&mut s1, &[2.5], 1).unwrap().rate_dps, 2.5);
+        let f2 = Fusion::<2>::new(m).unwrap();
+        let mut s2 = AxisState::default();
+        let r = f2.fuse(&mut s2, &[1.0, 3.0], 0b11).unwrap();
+        // Grubbs is undefined for two values, so nothing can be rejected and
+        // both gyros are symmetric: the fused value is their mean.
+        assert!((r.rate_dps - 2.0).abs() < 1e-6, "{m:?}: {}", r.rate_dps);
+    }
+}
+
+#[test]
+fn zero_weight_sum_falls_back_to_mean() {
+    // Zhang's supports underflow to 0 for gyros 20 °/s apart.
+    let f = Fusion::<3>::new(Method::Zhang).unwrap();
+    let mut st = AxisState::default();
+    let r = f.fuse(&mut st, &[0.0, 20.0, 40.0], 0b111).unwrap();
+    assert!(r.fallback);
+    assert_eq!(r.rate_dps, 20.0);
+    // The literal seed method: three values with negative total support.
+    let f = Fusion::<3>::new(Method::Seed(SeedConfig {
+        clamp_negative: true,
+        ..SeedConfig::SUPPORT
+    }))
+    .unwrap();
+    let r = f.fuse(&mut st, &[0.0, 0.0, 100.0], 0b111).unwrap();
+    assert!(r.rate_dps.abs() < 1e-6, "{}", r.rate_dps);
+}
+
+#[test]
+fn all_disagreeing_gyros_still_give_a_bounded_answer() {
+    for m in all_methods() {
+        let f = Fusion::<4>::new(m).unwrap();
+        let mut st = AxisState::default();
+        let mut rng = Rng::new(3);
+        for k in 0..200 {
+            let y = if k < 100 {
+                [
+                    rng.gaussian() * 0.1,
+                    rng.gaussian() * 0.1,
+                    rng.gaussian() * 0.1,
+                    rng.gaussian() * 0.1,
+                ]
+            } else {
+                [-100.0, -10.0, 10.0, 100.0]
+            };
+            let r = f.fuse(&mut st, &y, 0b1111).unwrap();
+            let lo = y.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = y.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            assert!(r.rate_dps >= lo && r.rate_dps <= hi, "{m:?}");
+        }
+    }
+}
+
+/// The literal eq. 5 gives negative supports to a far outlier, whose weight
+/// then pushes the fused value away from it, outside the inputs' range. This
+/// is why the shipped reading clamps supports at 0.
+#[test]
+fn literal_seed_weights_can_leave_the_input_range() {
+    let f = Fusion::<4>::new(Method::Seed(SeedConfig::SUPPORT)).unwrap();
+    let mut st = AxisState::default();
+    let r = f.fuse(&mut st, &[0.0, 0.01, -0.01, 10.0], 0b1111).unwrap();
+    assert!(r.weights[3] < 0.0, "{:?}", r.weights);
+    assert!(r.rate_dps < -0.01, "{}", r.rate_dps);
+    let f = Fusion::<4>::new(Method::Seed(SeedConfig {
+        clamp_negative: true,
+        ..SeedConfig::SUPPORT
+    }))
+    .unwrap();
+    let r = f.fuse(&mut st, &[0.0, 0.01, -0.01, 10.0], 0b1111).unwrap();
+    assert_eq!(r.weights[3], 0.0);
+    assert!(r.rate_dps.abs() <= 0.01);
+}
+
+#[test]
+fn bad_configurations_are_typed_errors() {
+    let g = |alpha| {
+        Method::Seed(SeedConfig {
+            grubbs: Some(GrubbsConfig {
+                alpha,
+                ..Default::default()
+            }),
+            ..SeedConfig::SUPPORT
+        })
+    };
+    assert_eq!(Fusion::<4>::new(g(0.0)).err(), Some(ConfigError::Alpha));
+    assert_eq!(
+        Fusion::<4>::new(g(f32::NAN)).err(),
+        Some(ConfigError::Alpha)
+    );
+    let mem = |len| {
+        Method::Seed(SeedConfig {
+            memory: Some(MemoryConfig {
+                len,
+                ..Default::default()
+            }),
+            ..SeedConfig::SUPPORT
+        })
+    };
+    assert_eq!(Fusion::<4>::new(mem(0)).err(), Some(ConfigError::MemoryLen));
+    assert_eq!(
+        Fusion::<4>::new(mem(17)).err(),
+        Some(ConfigError::MemoryLen)
+    );
+    assert_eq!(
+        Fusion::<9>::new(Method::Mean).err(),
+        Some(ConfigError::ArraySize)
+    );
+    let ad = Method::Adaptive(AdaptiveConfig {
+        alpha: 1.5,
+        ..Default::default()
+    });
+    assert_eq!(Fusion::<4>::new(ad).err(), Some(ConfigError::Parameter));
+}
+
+#[test]
+fn grubbs_table_covers_every_array_size() {
+    let f = Fusion::<8>::new(Method::Seed(SeedConfig {
+        grubbs: Some(GrubbsConfig::default()),
+        ..SeedConfig::SUPPORT
+    }))
+    .unwrap();
+    assert_eq!(f.grubbs_critical(2), 0.0);
+    for n in 3..=8 {
+        assert!(
+            f.grubbs_critical(n) > 1.0
+                && f.grubbs_critical(n) < (n as f32 - 1.0) / (n as f32).sqrt() + 1e-6
+        );
+    }
+    assert!((f.grubbs_critical(4) - 1.4812).abs() < 1e-4);
+}
+
+/// Property: the fused value lies within the range of the accepted inputs,
+/// is invariant under permutation of the gyros, and constant input gives the
+/// constant back. 2000 random cases per method, with outliers.
+#[test]
+fn properties_range_permutation_constant() {
+    let mut rng = Rng::new(11);
+    for m in all_methods() {
+        let f = Fusion::<5>::new(m).unwrap();
+        for case in 0..2000 {
+            let mut y = [0.0f32; 5];
+            let base = (rng.uniform() - 0.5) * 200.0;
+            for v in y.iter_mut() {
+                *v = base + rng.gaussian() * (0.01 + rng.uniform());
+                if rng.uniform() < 0.1 {
+                    *v += (rng.uniform() - 0.5) * 1000.0;
+                }
+            }
+            // A stateless first sample, so permuted runs see the same history.
+            let mut st = AxisState::default();
+            let r = f.fuse(&mut st, &y, 0b11111).unwrap();
+            let acc: Vec<f32> = (0..5)
+                .filter(|i| r.weights[*i] > 0.0)
+                .map(|i| y[i])
+                .collect();
+            let lo = acc.iter().cloned().fold(f32::INFINITY, f32::min);
+            let hi = acc.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+            let tol = 1e-5 * hi.abs().max(lo.abs()).max(1.0);
+            assert!(
+                r.rate_dps >= lo - tol && r.rate_dps <= hi + tol,
+                "{m:?} case {case}: {} not in [{lo}, {hi}]",
+                r.rate_dps
+            );
+            // Permutation: rotate and reverse.
+            let mut p = y;
+            p.rotate_left(case % 5);
+            p.reverse();
+            let mut st2 = AxisState::default();
+            let rp = f.fuse(&mut st2, &p, 0b11111).unwrap();
+            assert!(
+                (rp.rate_dps - r.rate_dps).abs() <= 1e-4 * r.rate_dps.abs().max(1.0),
+                "{m:?} case {case}: {} vs {}",
+                rp.rate_dps,
+                r.rate_dps
+            );
+            // Constant input.
+            let mut st3 = AxisState::default();
+            assert_eq!(
+                f.fuse(&mut st3, &[base; 5], 0b11111).unwrap().rate_dps,
+                base,
+                "{m:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn adaptive_learns_noise_and_rejects_outliers_and_frozen_outputs() {
+    let f = Fusion::<4>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+    let mut st = AxisState::default();
+    let mut rng = Rng::new(5);
+    let sig = [0.1f32, 0.1, 0.1, 0.5];
+    // The estimate is unbiased: its time average is within 5 %, and any
+    // single reading within 40 % (EWMA over 64 samples).
+    let mut acc = [0.0f64; 4];
+    for k in 0..20_000 {
+        let y = [0, 1, 2, 3].map(|i| sig[i] * rng.gaussian());
+        f.fuse(&mut st, &y, 0b1111).unwrap();
+        let s = st.sigma_dps(&AdaptiveConfig::default());
+        if k >= 1000 {
+            for i in 0..4 {
+                acc[i] += (s[i] * s[i]) as f64 / 19_000.0;
+                assert!(
+                    (s[i] / sig[i] - 1.0).abs() < 0.4,
+                    "sigma {i} at {k}: {} vs {}",
+                    s[i],
+                    sig[i]
+                );
+            }
+        }
+    }
+    for i in 0..4 {
+        let s = acc[i].sqrt() as f32;
+        assert!(
+            (s / sig[i] - 1.0).abs() < 0.05,
+            "mean sigma {i}: {s} vs {}",
+            sig[i]
+        );
+    }
+    // A spike is gated.
+    let r = f.fuse(&mut st, &[0.0, 0.05, -0.05, 30.0], 0b1111).unwrap();
+    assert_eq!(r.rejected, 0b1000);
+    // A frozen gyro is excluded after 4 identical samples.
+    let mut rejected_at = None;
+    for k in 0..10 {
+        let y = [
+            0.1 * rng.gaussian(),
+            0.1 * rng.gaussian(),
+            0.1 * rng.gaussian(),
+            0.02,
+        ];
+        let r = f.fuse(&mut st, &y, 0b1111).unwrap();
+        if r.rejected & 0b1000 != 0 && rejected_at.is_none() {
+            rejected_at = Some(k);
+        }
+    }
+    assert_eq!(rejected_at, Some(3));
+}

@@ -1,0 +1,5 @@
+//! Pure algorithms: no hardware, no heap, capacity in the types.
+
+pub mod fusion;
+pub mod math;
+pub mod stats;

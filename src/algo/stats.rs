@@ -1,0 +1,151 @@
+//! Student-t quantiles and Grubbs critical values, in f64.
+//!
+//! Used once, when a fusion configuration is built (not per sample), so the
+//! cost on the board does not matter and accuracy does. Checked against
+//! published t-table values and scipy in the tests.
+
+/// ln Γ(x) for x > 0 (Lanczos, g = 7, n = 9; ~1e-15 relative).
+pub fn ln_gamma(x: f64) -> f64 {
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        // Reflection: Γ(x)Γ(1−x) = π / sin(πx).
+        let pi = core::f64::consts::PI;
+        return libm::log(pi / libm::sin(pi * x).abs()) - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let mut a = C[0];
+    let t = x + 7.5;
+    for (i, c) in C.iter().enumerate().skip(1) {
+        a += c / (x + i as f64);
+    }
+    0.5 * libm::log(2.0 * core::f64::consts::PI) + (x + 0.5) * libm::log(t) - t + libm::log(a)
+}
+
+/// Regularised incomplete beta I_x(a, b) (continued fraction, modified Lentz).
+pub fn inc_beta(a: f64, b: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let ln_front =
+        ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * libm::log(x) + b * libm::log(1.0 - x);
+    if x > (a + 1.0) / (a + b + 2.0) {
+        return 1.0 - inc_beta(b, a, 1.0 - x);
+    }
+    // Continued fraction by the modified Lentz method (Numerical Recipes
+    // `betacf`): the terms alternate between the even and odd forms.
+    const TINY: f64 = 1e-300;
+    let guard = |v: f64| if v.abs() < TINY { TINY } else { v };
+    let mut c = 1.0;
+    let mut d = 1.0 / guard(1.0 - (a + b) * x / (a + 1.0));
+    let mut f = d;
+    for m in 1..300 {
+        let m = m as f64;
+        let even = m * (b - m) * x / ((a + 2.0 * m - 1.0) * (a + 2.0 * m));
+        d = 1.0 / guard(1.0 + even * d);
+        c = guard(1.0 + even / c);
+        f *= d * c;
+        let odd = -(a + m) * (a + b + m) * x / ((a + 2.0 * m) * (a + 2.0 * m + 1.0));
+        d = 1.0 / guard(1.0 + odd * d);
+        c = guard(1.0 + odd / c);
+        let delta = d * c;
+        f *= delta;
+        if (delta - 1.0).abs() < 1e-15 {
+            break;
+        }
+    }
+    libm::exp(ln_front) * f / a
+}
+
+/// Upper tail P(T > t) of Student's t with `nu` degrees of freedom, t ≥ 0.
+pub fn t_upper_tail(t: f64, nu: f64) -> f64 {
+    0.5 * inc_beta(nu / 2.0, 0.5, nu / (nu + t * t))
+}
+
+/// The t with upper tail probability `p` (0 < p < 0.5), by bisection.
+pub fn t_quantile_upper(p: f64, nu: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    while t_upper_tail(hi, nu) > p && hi < 1e12 {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if t_upper_tail(mid, nu) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Grubbs critical value T(N, α) (SEEDS §0.5): two-sided uses α/(2N),
+/// one-sided α/N. Defined for N ≥ 3 and 0 < α < 1; otherwise `None`.
+pub fn grubbs_critical(n: usize, alpha: f64, two_sided: bool) -> Option<f64> {
+    if n < 3 || !(alpha > 0.0 && alpha < 1.0) {
+        return None;
+    }
+    let nf = n as f64;
+    let p = if two_sided {
+        alpha / (2.0 * nf)
+    } else {
+        alpha / nf
+    };
+    let t = t_quantile_upper(p, nf - 2.0);
+    Some((nf - 1.0) / libm::sqrt(nf) * libm::sqrt(t * t / (nf - 2.0 + t * t)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn t_quantiles_match_published_tables() {
+        // Standard t table (and scipy.stats.t.ppf).
+        for (p, nu, t) in [
+            (0.025, 2.0, 4.302_652_7),
+            (0.01, 5.0, 3.364_929_9),
+            (0.05, 10.0, 1.812_461_1),
+            (0.005, 1.0, 63.656_741_2),
+        ] {
+            let got = t_quantile_upper(p, nu);
+            assert!((got - t).abs() < 1e-6 * t, "t({p},{nu}) = {got}, want {t}");
+        }
+    }
+
+    #[test]
+    fn grubbs_values_match_seeds_digest() {
+        // SEEDS.md §0.5 analyst-checked values.
+        let cases = [
+            (3, 0.05, false, 1.1531),
+            (3, 0.05, true, 1.1543),
+            (4, 0.05, false, 1.4625),
+            (4, 0.05, true, 1.4812),
+            (4, 0.01, false, 1.4925),
+            (4, 0.01, true, 1.4963),
+            (5, 0.05, false, 1.6714),
+            (5, 0.05, true, 1.7150),
+        ];
+        for (n, a, two, want) in cases {
+            let got = grubbs_critical(n, a, two).unwrap();
+            assert!(
+                (got - want).abs() < 6e-5,
+                "T({n},{a},{two}) = {got}, want {want}"
+            );
+        }
+        assert_eq!(grubbs_critical(2, 0.05, true), None);
+        assert_eq!(grubbs_critical(4, 0.0, true), None);
+    }
+}

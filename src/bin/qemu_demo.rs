@@ -1,0 +1,202 @@
+//! QEMU demo firmware: the board's real drivers read an emulated array
+//! (4 × ICM-42688-P, 1 × ADXRS453 on z) over one shared SPI bus, the
+//! pipeline fuses every sample, and faults are injected on a schedule:
+//! gyro 2 sticks at 1.5 s, the ADXRS453 has bit errors from 2.0 s to 2.2 s.
+//! The run fails (exit code 1) unless the stuck gyro is excluded within
+//! 20 samples, every bit error is caught, and every sample is accounted for.
+#![no_std]
+#![no_main]
+
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use cortex_m_rt::{entry, exception};
+use defmt_semihosting as _;
+use embedded_hal_bus::spi::RefCellDevice;
+
+use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::board::qemu::exit;
+use gyro_array::drivers::adxrs453::Adxrs453;
+use gyro_array::drivers::icm42688::{Config, Icm42688};
+use gyro_array::drivers::Gyro;
+use gyro_array::emu::{board_array, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
+use gyro_array::pipeline::{Pipeline, PipelineConfig};
+
+const FS_HZ: u32 = 1000;
+const SAMPLES: u32 = 3000;
+/// mps2-an386 core clock.
+const CORE_HZ: u32 = 25_000_000;
+
+static TICKS: AtomicU32 = AtomicU32::new(0);
+
+#[exception]
+fn SysTick() {
+    TICKS.fetch_add(1, Ordering::Release);
+}
+
+#[entry]
+fn main() -> ! {
+    let cp = cortex_m::Peripherals::take().unwrap_or_else(|| exit(false));
+    let profile = RateProfile {
+        base_dps: [0.5, -0.2, 10.0],
+        sine_dps: [0.0, 0.0, 20.0],
+        sine_hz: 0.5,
+        sine_start_s: 2.0,
+    };
+    let cs: [CsLine; 5] = Default::default();
+    let bus = RefCell::new(EmuBus::new(board_array(profile, 1), &cs));
+    let dt = 1.0 / FS_HZ as f32;
+    let mut delay = EmuDelay::new(&bus, dt);
+
+    let dev =
+        |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i])).unwrap_or_else(|_| exit(false));
+    let mut g0 = Icm42688::new(dev(0));
+    let mut g1 = Icm42688::new(dev(1));
+    let mut g2 = Icm42688::new(dev(2));
+    let mut g3 = Icm42688::new(dev(3));
+    let mut g4 = Adxrs453::new(dev(4), 2);
+
+    let mut pipe: Pipeline<5> = Pipeline::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    )
+    .unwrap_or_else(|_| exit(false));
+    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+        match g
+            .init(&mut delay, Config::default())
+            .and_then(|_| g.self_test(&mut delay, 20))
+        {
+            Ok(st) => defmt::info!("gyro {}: ICM-42688-P ok, self-test ratio {}", i, st.ratio()),
+            Err(e) => {
+                defmt::error!("gyro {}: ICM-42688-P init failed: {}", i, e);
+                pipe.mark_init_failed(i);
+            }
+        }
+    }
+    match g4.init(&mut delay) {
+        Ok(()) => defmt::info!("gyro 4: ADXRS453 ok (CHK passed, PID 0x52xx) on z"),
+        Err(e) => {
+            defmt::error!("gyro 4: ADXRS453 init failed: {}", e);
+            pipe.mark_init_failed(4);
+        }
+    }
+
+    let _ticks = {
+        let mut syst = cp.SYST;
+        syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
+        syst.set_reload(CORE_HZ / FS_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+        syst
+    };
+
+    let mut last_tick = TICKS.load(Ordering::Acquire);
+    let mut stuck_at = None;
+    let mut excluded_at = None;
+    let mut pass = true;
+    for n in 0..SAMPLES {
+        // Wait for the sample tick; count periods we missed.
+        let now = loop {
+            let t = TICKS.load(Ordering::Acquire);
+            if t != last_tick {
+                break t;
+            }
+            cortex_m::asm::wfi();
+        };
+        let missed = now.wrapping_sub(last_tick).saturating_sub(1);
+        if missed > 0 {
+            pipe.note_overrun(missed);
+            defmt::warn!("overrun: {} sample(s) missed before sample {}", missed, n);
+        }
+        last_tick = now;
+
+        {
+            let mut b = bus.borrow_mut();
+            match n {
+                1500 => {
+                    b.chips[2].set_fault(Fault::Stuck);
+                    stuck_at = Some(n);
+                    defmt::warn!("t={}ms: injecting: gyro 2 stuck", n);
+                }
+                2000 => {
+                    b.chips[4].set_fault(Fault::BitErrors { prob: 0.05 });
+                    defmt::warn!("t={}ms: injecting: gyro 4 bit errors", n);
+                }
+                2200 => b.chips[4].set_fault(Fault::None),
+                _ => {}
+            }
+            b.advance(dt);
+        }
+
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let out = pipe.step(&mut gyros);
+        if out.health_changed != 0 {
+            for i in 0..5 {
+                if out.health_changed & (1 << i) != 0 {
+                    defmt::warn!(
+                        "seq {}: gyro {} health flags now {=u8:#06b}",
+                        out.seq,
+                        i,
+                        pipe.health()[i].flags
+                    );
+                }
+            }
+        }
+        if let (Some(_), None) = (stuck_at, excluded_at) {
+            if out.fused[0].map_or(false, |f| f.weights[2] == 0.0) {
+                excluded_at = Some(n);
+            }
+        }
+        if n % 500 == 499 {
+            let truth = bus.borrow().chips[0].true_rate_dps();
+            for (a, f) in out.fused.iter().enumerate() {
+                match f {
+                    Some(f) => defmt::info!(
+                        "seq {} axis {}: fused {=f32} dps (true {=f32}), weights {}",
+                        out.seq,
+                        a,
+                        f.rate_dps,
+                        truth[a],
+                        f.weights
+                    ),
+                    None => {
+                        defmt::error!("seq {} axis {}: no fused value", out.seq, a);
+                        pass = false;
+                    }
+                }
+            }
+        }
+    }
+
+    let c = pipe.counters();
+    for (i, c) in c.iter().enumerate() {
+        defmt::info!(
+            "gyro {}: reads {} errors {} (parity {}, chip {}) saturated {} excluded {}",
+            i,
+            c.reads,
+            c.errors,
+            c.parity,
+            c.chip_faults,
+            c.saturated,
+            c.excluded
+        );
+    }
+    let accounted = c.iter().all(|c| c.reads + c.errors == SAMPLES);
+    defmt::info!(
+        "samples {} overruns {} accounted {}",
+        SAMPLES,
+        pipe.overruns(),
+        accounted
+    );
+    match (stuck_at, excluded_at) {
+        (Some(s), Some(e)) => {
+            defmt::info!("stuck gyro excluded {} samples after the fault", e - s);
+            pass &= e - s <= 20;
+        }
+        _ => pass = false,
+    }
+    pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
+    defmt::info!("demo {}", if pass { "PASS" } else { "FAIL" });
+    exit(pass)
+}

@@ -1,0 +1,63 @@
+//! QEMU `mps2-an386` (Cortex-M4F): semihosting exit codes and an
+//! instruction counter built on SysTick.
+//!
+//! Under `qemu-system-arm -icount shift=0` SysTick, clocked from the core,
+//! advances a fixed number of executed instructions per tick; the bench
+//! calibrates that ratio against a loop of known length at start-up.
+
+use core::sync::atomic::{AtomicU32, Ordering};
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::SYST;
+
+/// SysTick wraps counted by the binary's SysTick handler.
+pub static WRAPS: AtomicU32 = AtomicU32::new(0);
+
+const RELOAD: u32 = 0x00FF_FFFF;
+
+/// End the QEMU run with a pass or fail exit code.
+pub fn exit(pass: bool) -> ! {
+    use cortex_m_semihosting::debug;
+    debug::exit(if pass {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// A free-running 24-bit SysTick extended by the wrap counter.
+pub struct Ticks {
+    _syst: SYST,
+}
+
+impl Ticks {
+    /// Start SysTick on the core clock with the wrap interrupt enabled.
+    pub fn start(mut syst: SYST) -> Self {
+        syst.disable_counter();
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(RELOAD);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+        Self { _syst: syst }
+    }
+
+    /// Ticks since start (monotonic, 64-bit). The wrap handler runs right
+    /// after a wrap, so a changed counter means the read raced it: retry.
+    pub fn now(&self) -> u64 {
+        loop {
+            let w = WRAPS.load(Ordering::Acquire);
+            let v = SYST::get_current();
+            if WRAPS.load(Ordering::Acquire) == w {
+                return w as u64 * (RELOAD as u64 + 1) + (RELOAD - v) as u64;
+            }
+        }
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    exit(false)
+}

@@ -1,0 +1,43 @@
+//! embedded-hal 1.0 SPI drivers for the gyro parts on the board.
+//!
+//! Each driver takes an [`embedded_hal::spi::SpiDevice`] and does one SPI
+//! transaction per register access (ADXRS453: one per 32-bit frame). Both
+//! implement [`Gyro`], the small trait the sampling pipeline uses.
+
+pub mod adxrs453;
+pub mod icm42688;
+
+/// Why a gyro read failed, in the pipeline's terms. The drivers' own error
+/// types carry the detail; this is what the health logic needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ReadFault {
+    /// The SPI bus or chip select failed.
+    Bus,
+    /// A frame arrived with bad parity.
+    Parity,
+    /// The chip reported a fault in its status bits (raw bits attached).
+    ChipFault(u8),
+    /// The chip answered with something that is not a data frame.
+    BadResponse,
+}
+
+/// One reading of a gyro in its native counts and in degrees per second.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Reading {
+    /// Raw counts per axis (x, y, z). Axes the part lacks are 0.
+    pub raw: [i16; 3],
+    /// Rate in °/s per axis. Axes the part lacks are NaN.
+    pub rate_dps: [f32; 3],
+    /// Bit i set when axis i exists on this part.
+    pub axes: u8,
+    /// Bit i set when axis i reads at the end of its range.
+    pub saturated: u8,
+}
+
+/// What the pipeline needs from any gyro chip.
+pub trait Gyro {
+    /// Read the latest rate sample of every axis the part has.
+    fn read(&mut self) -> Result<Reading, ReadFault>;
+}

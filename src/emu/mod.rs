@@ -1,0 +1,329 @@
+//! Chip emulation at register and SPI-byte level.
+//!
+//! [`EmuBus`] implements [`embedded_hal::spi::SpiBus`] and [`EmuCs`]
+//! implements [`embedded_hal::digital::OutputPin`], so an
+//! `embedded_hal_bus::spi::RefCellDevice` built from them is an ordinary
+//! `SpiDevice` and the real drivers run on it unchanged. Each chip sees the
+//! bytes of a frame exactly as the silicon would, starting at the chip-select
+//! falling edge.
+
+pub mod adxrs453;
+pub mod icm42688;
+pub mod noise;
+pub mod rng;
+
+use core::cell::Cell;
+use core::convert::Infallible;
+
+use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
+use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
+
+pub use adxrs453::Adxrs453Model;
+pub use icm42688::Icm42688Model;
+pub use noise::{NoiseParams, RateProfile};
+pub use rng::Rng;
+
+/// A fault the emulated chip injects on demand.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Fault {
+    /// Behaves as specified.
+    None,
+    /// Output registers stop updating.
+    Stuck,
+    /// Output pinned at the positive end of the range.
+    Saturated,
+    /// With probability `prob` per sample, add `magnitude_dps` of either sign.
+    Spikes {
+        /// Probability per sample.
+        prob: f32,
+        /// Spike size in °/s.
+        magnitude_dps: f32,
+    },
+    /// Each MISO byte has one bit flipped with probability `prob`.
+    BitErrors {
+        /// Probability per byte.
+        prob: f32,
+    },
+    /// The identity register reads another part's id.
+    WrongId,
+    /// The chip does not drive MISO (reads 0xFF, the pull-up).
+    NoResponse,
+    /// The chip reports an internal fault (ADXRS453 fault bits).
+    ChipFault,
+    /// The built-in self-test produces no deflection.
+    DeadSelfTest,
+}
+
+/// A chip on the emulated bus.
+pub enum Chip {
+    /// An ICM-42688-P.
+    Icm(Icm42688Model),
+    /// An ADXRS453.
+    Adx(Adxrs453Model),
+}
+
+impl Chip {
+    fn begin_frame(&mut self) {
+        match self {
+            Chip::Icm(c) => c.begin_frame(),
+            Chip::Adx(c) => c.begin_frame(),
+        }
+    }
+    fn exchange(&mut self, mosi: u8) -> u8 {
+        match self {
+            Chip::Icm(c) => c.exchange(mosi),
+            Chip::Adx(c) => c.exchange(mosi),
+        }
+    }
+    /// Advance the chip's sensor by one sample period at time `t_s`.
+    pub fn advance(&mut self, t_s: f32, dt_s: f32) {
+        match self {
+            Chip::Icm(c) => c.advance(t_s, dt_s),
+            Chip::Adx(c) => c.advance(t_s, dt_s),
+        }
+    }
+    /// Inject (or clear, with [`Fault::None`]) a fault.
+    pub fn set_fault(&mut self, f: Fault) {
+        match self {
+            Chip::Icm(c) => c.fault = f,
+            Chip::Adx(c) => c.fault = f,
+        }
+    }
+    /// The true rate (°/s, per board axis) the chip's sensor sees now.
+    pub fn true_rate_dps(&self) -> [f32; 3] {
+        match self {
+            Chip::Icm(c) => c.true_rate_dps,
+            Chip::Adx(c) => c.true_rate_dps,
+        }
+    }
+}
+
+/// One chip-select line: its level and a count of falling edges, which is
+/// how the bus tells a new frame from the continuation of one.
+pub struct CsLine {
+    low: Cell<bool>,
+    edges: Cell<u32>,
+}
+
+impl CsLine {
+    /// A deasserted (high) line.
+    pub const fn new() -> Self {
+        Self {
+            low: Cell::new(false),
+            edges: Cell::new(0),
+        }
+    }
+}
+
+impl Default for CsLine {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Chip-select output pin driving a [`CsLine`].
+pub struct EmuCs<'a>(pub &'a CsLine);
+
+impl PinErrorType for EmuCs<'_> {
+    type Error = Infallible;
+}
+
+impl OutputPin for EmuCs<'_> {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        if !self.0.low.get() {
+            self.0.edges.set(self.0.edges.get().wrapping_add(1));
+        }
+        self.0.low.set(true);
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        self.0.low.set(false);
+        Ok(())
+    }
+}
+
+/// Bus errors the emulated controller can report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BusError {
+    /// More than one chip select was low during a transfer.
+    Contention,
+}
+
+impl embedded_hal::spi::Error for BusError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::ChipSelectFault
+    }
+}
+
+/// The shared SPI bus with `N` emulated chips, one chip-select line each.
+pub struct EmuBus<'a, const N: usize> {
+    /// The chips, indexed like their chip-select lines.
+    pub chips: [Chip; N],
+    cs: &'a [CsLine; N],
+    seen: [u32; N],
+    t_s: f32,
+    /// Bytes exchanged so far (a bus-load figure for benchmarks).
+    pub bytes: u32,
+}
+
+impl<'a, const N: usize> EmuBus<'a, N> {
+    /// A bus with `chips[i]` selected by `cs[i]`.
+    pub fn new(chips: [Chip; N], cs: &'a [CsLine; N]) -> Self {
+        Self {
+            chips,
+            cs,
+            seen: [0; N],
+            t_s: 0.0,
+            bytes: 0,
+        }
+    }
+
+    /// Advance every chip by one sample period.
+    pub fn advance(&mut self, dt_s: f32) {
+        self.t_s += dt_s;
+        for c in self.chips.iter_mut() {
+            c.advance(self.t_s, dt_s);
+        }
+    }
+
+    /// Emulated time in seconds.
+    pub fn time_s(&self) -> f32 {
+        self.t_s
+    }
+
+    fn exchange(&mut self, mosi: u8) -> Result<u8, BusError> {
+        self.bytes = self.bytes.wrapping_add(1);
+        let mut selected = None;
+        for (i, line) in self.cs.iter().enumerate() {
+            if line.low.get() {
+                if selected.is_some() {
+                    return Err(BusError::Contention);
+                }
+                selected = Some(i);
+            }
+        }
+        let Some(i) = selected else {
+            return Ok(0xFF); // nobody drives MISO: the pull-up reads high
+        };
+        let edges = self.cs[i].edges.get();
+        if edges != self.seen[i] {
+            self.seen[i] = edges;
+            self.chips[i].begin_frame();
+        }
+        Ok(self.chips[i].exchange(mosi))
+    }
+}
+
+impl<const N: usize> ErrorType for EmuBus<'_, N> {
+    type Error = BusError;
+}
+
+impl<const N: usize> SpiBus<u8> for EmuBus<'_, N> {
+    fn read(&mut self, words: &mut [u8]) -> Result<(), BusError> {
+        for w in words.iter_mut() {
+            *w = self.exchange(0)?;
+        }
+        Ok(())
+    }
+    fn write(&mut self, words: &[u8]) -> Result<(), BusError> {
+        for w in words {
+            self.exchange(*w)?;
+        }
+        Ok(())
+    }
+    fn transfer(&mut self, read: &mut [u8], write: &[u8]) -> Result<(), BusError> {
+        for i in 0..read.len().max(write.len()) {
+            let r = self.exchange(write.get(i).copied().unwrap_or(0))?;
+            if let Some(slot) = read.get_mut(i) {
+                *slot = r;
+            }
+        }
+        Ok(())
+    }
+    fn transfer_in_place(&mut self, words: &mut [u8]) -> Result<(), BusError> {
+        for w in words.iter_mut() {
+            *w = self.exchange(*w)?;
+        }
+        Ok(())
+    }
+    fn flush(&mut self) -> Result<(), BusError> {
+        Ok(())
+    }
+}
+
+/// Flip one random bit of `b` with probability `prob` (MISO corruption).
+pub(crate) fn corrupt(rng: &mut Rng, b: u8, fault: Fault) -> u8 {
+    match fault {
+        Fault::NoResponse => 0xFF,
+        Fault::BitErrors { prob } if rng.uniform() < prob => b ^ (1 << (rng.next_u32() % 8)),
+        _ => b,
+    }
+}
+
+/// A delay that advances emulated time: each elapsed sample period steps
+/// every chip on the bus, so drivers that wait for data (self-tests) see it.
+pub struct EmuDelay<'a, 'b, const N: usize> {
+    bus: &'a core::cell::RefCell<EmuBus<'b, N>>,
+    dt_s: f32,
+    pending_ns: u64,
+}
+
+impl<'a, 'b, const N: usize> EmuDelay<'a, 'b, N> {
+    /// Step the chips every `dt_s` seconds of requested delay.
+    pub fn new(bus: &'a core::cell::RefCell<EmuBus<'b, N>>, dt_s: f32) -> Self {
+        Self {
+            bus,
+            dt_s,
+            pending_ns: 0,
+        }
+    }
+}
+
+impl<const N: usize> embedded_hal::delay::DelayNs for EmuDelay<'_, '_, N> {
+    fn delay_ns(&mut self, ns: u32) {
+        self.pending_ns += ns as u64;
+        let step = (self.dt_s * 1e9) as u64;
+        while step > 0 && self.pending_ns >= step {
+            self.pending_ns -= step;
+            self.bus.borrow_mut().advance(self.dt_s);
+        }
+    }
+}
+
+/// The board's array: four ICM-42688-P (chips 0..=3, all axes) and one
+/// ADXRS453 on the z axis (chip 4), each with its own noise seed and
+/// a small per-chip bias and scale error.
+pub fn board_array(profile: RateProfile, seed: u64) -> [Chip; 5] {
+    let icm = |k: u64, bias: f32, scale: f32| {
+        let p = NoiseParams {
+            bias_dps: bias,
+            scale_error: scale,
+            ..NoiseParams::ICM42688
+        };
+        Chip::Icm(Icm42688Model::new(
+            p,
+            profile,
+            seed.wrapping_mul(31).wrapping_add(k),
+            70 + k as u8,
+        ))
+    };
+    let adx = NoiseParams {
+        bias_dps: 0.01,
+        scale_error: -0.001,
+        ..NoiseParams::ADXRS453
+    };
+    [
+        icm(0, 0.02, 0.002),
+        icm(1, -0.015, -0.001),
+        icm(2, 0.01, 0.0015),
+        icm(3, -0.005, -0.002),
+        Chip::Adx(Adxrs453Model::new(
+            adx,
+            profile,
+            seed.wrapping_mul(31).wrapping_add(4),
+            2,
+        )),
+    ]
+}

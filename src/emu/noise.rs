@@ -1,0 +1,142 @@
+//! MEMS gyro error model (IEEE Std 952 terms) and the true-rate profile.
+
+use super::Rng;
+use crate::algo::math::{expf, sqrtf};
+
+/// Error terms of one gyro axis, in the units of a datasheet.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NoiseParams {
+    /// Angle random walk N, °/√h (white rate noise; 60 × the °/s/√Hz density).
+    pub arw_deg_rt_h: f32,
+    /// Bias instability B, °/h: the Allan floor is 0.664·B.
+    pub bias_instability_deg_h: f32,
+    /// Correlation time of the Gauss–Markov bias process, s.
+    pub bias_tau_s: f32,
+    /// Rate random walk K, °/h/√h.
+    pub rrw_deg_h_rt_h: f32,
+    /// Constant bias, °/s.
+    pub bias_dps: f32,
+    /// Scale-factor error, as a fraction (0.01 = 1 %).
+    pub scale_error: f32,
+}
+
+impl NoiseParams {
+    /// ICM-42688-P: 0.0028 °/s/√Hz noise density (datasheet table 1), a few °/h
+    /// of bias instability as typical for consumer MEMS.
+    pub const ICM42688: Self = Self {
+        arw_deg_rt_h: 0.168,
+        bias_instability_deg_h: 5.0,
+        bias_tau_s: 100.0,
+        rrw_deg_h_rt_h: 2.0,
+        bias_dps: 0.0,
+        scale_error: 0.0,
+    };
+    /// ADXRS453: 0.015 °/s/√Hz noise density, 16 °/h bias stability.
+    pub const ADXRS453: Self = Self {
+        arw_deg_rt_h: 0.9,
+        bias_instability_deg_h: 16.0,
+        bias_tau_s: 100.0,
+        rrw_deg_h_rt_h: 2.0,
+        bias_dps: 0.0,
+        scale_error: 0.0,
+    };
+    /// No noise at all (for exact tests).
+    pub const IDEAL: Self = Self {
+        arw_deg_rt_h: 0.0,
+        bias_instability_deg_h: 0.0,
+        bias_tau_s: 100.0,
+        rrw_deg_h_rt_h: 0.0,
+        bias_dps: 0.0,
+        scale_error: 0.0,
+    };
+
+    /// Standard deviation of the white noise per sample, °/s, at `fs_hz`.
+    pub fn white_sigma_dps(&self, fs_hz: f32) -> f32 {
+        self.arw_deg_rt_h / 60.0 * sqrtf(fs_hz)
+    }
+}
+
+/// Running error state of one axis.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AxisNoise {
+    gm_dps: f32,
+    rw_dps: f32,
+}
+
+impl AxisNoise {
+    /// Measured rate for true rate `true_dps` over one step of `dt_s`.
+    ///
+    /// Bias instability is a first-order Gauss–Markov process whose Allan
+    /// peak (0.437·σ at τ ≈ 1.89·τc) is set to the flicker floor 0.664·B, so
+    /// σ = 1.52·B. Rate random walk adds K·√dt per step.
+    pub fn step(&mut self, p: &NoiseParams, rng: &mut Rng, true_dps: f32, dt_s: f32) -> f32 {
+        let white = p.white_sigma_dps(1.0 / dt_s) * rng.gaussian();
+        if p.bias_instability_deg_h > 0.0 {
+            let sigma = 1.52 * p.bias_instability_deg_h / 3600.0;
+            let a = expf(-dt_s / p.bias_tau_s);
+            self.gm_dps = a * self.gm_dps + sigma * sqrtf(1.0 - a * a) * rng.gaussian();
+        }
+        if p.rrw_deg_h_rt_h > 0.0 {
+            // K in °/h/√h = K/3600 °/s per √h = K/(3600·60) °/s per √s.
+            self.rw_dps += p.rrw_deg_h_rt_h / 216_000.0 * sqrtf(dt_s) * rng.gaussian();
+        }
+        (1.0 + p.scale_error) * true_dps + p.bias_dps + self.gm_dps + self.rw_dps + white
+    }
+}
+
+/// The true angular rate seen by the array: a constant per axis plus an
+/// optional sine (an antenna slewing or a vehicle rocking).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RateProfile {
+    /// Constant part per axis, °/s.
+    pub base_dps: [f32; 3],
+    /// Sine amplitude per axis, °/s.
+    pub sine_dps: [f32; 3],
+    /// Sine frequency, Hz.
+    pub sine_hz: f32,
+    /// Time the sine starts, s (the board self-tests while still).
+    pub sine_start_s: f32,
+}
+
+impl RateProfile {
+    /// The same constant rate on every axis.
+    pub const fn constant(dps: f32) -> Self {
+        Self {
+            base_dps: [dps; 3],
+            sine_dps: [0.0; 3],
+            sine_hz: 0.0,
+            sine_start_s: 0.0,
+        }
+    }
+
+    /// The true rate at time `t_s`.
+    pub fn at(&self, t_s: f32) -> [f32; 3] {
+        let t = t_s - self.sine_start_s;
+        let s = if t > 0.0 {
+            libm::sinf(2.0 * core::f32::consts::PI * self.sine_hz * t)
+        } else {
+            0.0
+        };
+        [
+            self.base_dps[0] + self.sine_dps[0] * s,
+            self.base_dps[1] + self.sine_dps[1] * s,
+            self.base_dps[2] + self.sine_dps[2] * s,
+        ]
+    }
+}
+
+/// Round to counts and clamp to the 16-bit output register.
+pub fn quantise(dps: f32, lsb_per_dps: f32) -> i16 {
+    let c = libm::roundf(dps * lsb_per_dps);
+    if c.is_nan() {
+        0
+    } else if c >= i16::MAX as f32 {
+        i16::MAX
+    } else if c <= i16::MIN as f32 {
+        i16::MIN
+    } else {
+        c as i16
+    }
+}

@@ -1,0 +1,27 @@
+//! Firmware core for the gyro board of a satcom-on-the-move antenna.
+//!
+//! The board reads an array of MEMS gyroscopes over one SPI bus, fuses them
+//! into one virtual gyro per axis on every sample, and tracks how the noise
+//! changes with a fixed-capacity dynamic Allan variance. Everything here is
+//! `no_std` and allocation-free, so the same code runs on the Cortex-M4F, in
+//! QEMU and on the host (tests, log analysis).
+//!
+//! - [`algo`]: pure numerical methods (fusion, Allan variance, E-DAVAR). They
+//!   know nothing of hardware.
+//! - [`drivers`]: embedded-hal 1.0 drivers for the ICM-42688-P and ADXRS453.
+//! - [`emu`]: register- and SPI-byte-level models of those chips, so the real
+//!   drivers run unchanged where the hardware is missing.
+//! - [`pipeline`]: the per-sample loop: read every gyro, account for every
+//!   sample, flag and exclude faulty chips, fuse.
+//! - [`board`]: bindings for the QEMU machine and the STM32F405 board
+//!   (firmware builds only).
+#![cfg_attr(not(test), no_std)]
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod algo;
+#[cfg(any(feature = "qemu", feature = "board"))]
+pub mod board;
+pub mod drivers;
+pub mod emu;
+pub mod pipeline;
