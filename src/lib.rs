@@ -18,10 +18,15 @@
 #![cfg_attr(not(test), no_std)]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
+// `!(x > 0.0)` is deliberate throughout: it is also true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Numeric kernels index several arrays by the same gyro index.
+#![allow(clippy::needless_range_loop)]
 
 pub mod algo;
 #[cfg(any(feature = "qemu", feature = "board"))]
 pub mod board;
+pub mod checks;
 pub mod drivers;
 pub mod emu;
 pub mod pipeline;

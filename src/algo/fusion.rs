@@ -597,7 +597,7 @@ fn adaptive<const N: usize>(
     let mut active = valid;
     if moving != 0 {
         for i in mask_iter::<N>(valid) {
-            if st.frozen[i] + 1 >= c.frozen_after {
+            if st.frozen[i].saturating_add(1) >= c.frozen_after {
                 active &= !(1 << i);
             }
         }

@@ -1,1 +1,142 @@
-fn main() {}
+//! Board firmware for the STM32F405RG gyro board.
+//!
+//! Wiring: SPI1 (PA5 SCK, PA6 MISO, PA7 MOSI, mode 0, 1 MHz) shared by four
+//! ICM-42688-P (CS on PA4, PB0, PB1, PC4) and one ADXRS453 on the z axis
+//! (CS on PC5). TIM2 paces sampling at 1 kHz; the DWT cycle counter measures
+//! the time between ticks, so missed periods are counted as overruns.
+//! Logs go out over RTT (defmt); flash and run with `cargo flash`.
+#![no_std]
+#![no_main]
+
+use core::cell::RefCell;
+
+use cortex_m_rt::entry;
+use defmt_rtt as _;
+use embedded_hal_bus::spi::RefCellDevice;
+use panic_probe as _;
+use stm32f4xx_hal::{
+    pac,
+    prelude::*,
+    rcc::Config as RccConfig,
+    spi::{Mode, Phase, Polarity, Spi},
+};
+
+use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::drivers::adxrs453::Adxrs453;
+use gyro_array::drivers::icm42688::{Config, Icm42688};
+use gyro_array::drivers::Gyro;
+use gyro_array::pipeline::{Pipeline, PipelineConfig};
+
+const FS_HZ: u32 = 1000;
+const SYSCLK_HZ: u32 = 168_000_000;
+
+#[entry]
+fn main() -> ! {
+    let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
+        panic!("peripherals taken twice");
+    };
+    let mut rcc = dp
+        .RCC
+        .freeze(RccConfig::hse(8.MHz()).sysclk(SYSCLK_HZ.Hz()));
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    let gpioc = dp.GPIOC.split(&mut rcc);
+    let mode = Mode {
+        polarity: Polarity::IdleLow,
+        phase: Phase::CaptureOnFirstTransition,
+    };
+    let spi = Spi::new(
+        dp.SPI1,
+        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        mode,
+        1.MHz(),
+        &mut rcc,
+    );
+    let bus = RefCell::new(spi);
+    let mut delay = dp.TIM5.delay_us(&mut rcc);
+
+    let cs0 = gpioa.pa4.into_push_pull_output().erase();
+    let cs1 = gpiob.pb0.into_push_pull_output().erase();
+    let cs2 = gpiob.pb1.into_push_pull_output().erase();
+    let cs3 = gpioc.pc4.into_push_pull_output().erase();
+    let cs4 = gpioc.pc5.into_push_pull_output().erase();
+    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (
+        RefCellDevice::new_no_delay(&bus, cs0),
+        RefCellDevice::new_no_delay(&bus, cs1),
+        RefCellDevice::new_no_delay(&bus, cs2),
+        RefCellDevice::new_no_delay(&bus, cs3),
+        RefCellDevice::new_no_delay(&bus, cs4),
+    );
+    let (mut g0, mut g1, mut g2, mut g3) = (
+        Icm42688::new(d0),
+        Icm42688::new(d1),
+        Icm42688::new(d2),
+        Icm42688::new(d3),
+    );
+    let mut g4 = Adxrs453::new(d4, 2);
+
+    let Ok(mut pipe) = Pipeline::<5>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ) else {
+        panic!("pipeline configuration");
+    };
+    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+        match g
+            .init(&mut delay, Config::default())
+            .and_then(|_| g.self_test(&mut delay, 200))
+        {
+            Ok(st) => defmt::info!("gyro {}: ICM-42688-P ok, self-test ratio {}", i, st.ratio()),
+            Err(e) => {
+                defmt::error!("gyro {}: init failed: {}", i, e);
+                pipe.mark_init_failed(i);
+            }
+        }
+    }
+    if let Err(e) = g4.init(&mut delay) {
+        defmt::error!("gyro 4: ADXRS453 init failed: {}", e);
+        pipe.mark_init_failed(4);
+    }
+
+    let mut tick = dp.TIM2.counter_hz(&mut rcc);
+    if tick.start(FS_HZ.Hz()).is_err() {
+        panic!("sampling timer");
+    }
+    let period = SYSCLK_HZ / FS_HZ;
+    let mut last = cortex_m::peripheral::DWT::cycle_count();
+    loop {
+        let _ = nb::block!(tick.wait());
+        let now = cortex_m::peripheral::DWT::cycle_count();
+        let missed = (now.wrapping_sub(last) + period / 2) / period;
+        last = now;
+        if missed > 1 {
+            pipe.note_overrun(missed - 1);
+            defmt::warn!("overrun: {} period(s) missed", missed - 1);
+        }
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let out = pipe.step(&mut gyros);
+        for i in 0..5 {
+            if out.health_changed & (1 << i) != 0 {
+                defmt::warn!(
+                    "seq {}: gyro {} health flags {=u8:#06b}",
+                    out.seq,
+                    i,
+                    pipe.health()[i].flags
+                );
+            }
+        }
+        if out.seq % 1000 == 0 {
+            for f in out.fused.iter().flatten() {
+                defmt::info!(
+                    "seq {}: fused {=f32} dps, weights {}",
+                    out.seq,
+                    f.rate_dps,
+                    f.weights
+                );
+            }
+        }
+    }
+}

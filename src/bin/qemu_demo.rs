@@ -144,7 +144,7 @@ fn main() -> ! {
             }
         }
         if let (Some(_), None) = (stuck_at, excluded_at) {
-            if out.fused[0].map_or(false, |f| f.weights[2] == 0.0) {
+            if out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
                 excluded_at = Some(n);
             }
         }

@@ -40,6 +40,9 @@ impl Ticks {
         syst.clear_current();
         syst.enable_interrupt();
         syst.enable_counter();
+        // VAL reads 0 until the first reload; wait for it so that time
+        // starts at RELOAD and only moves forward.
+        while SYST::get_current() == 0 {}
         Self { _syst: syst }
     }
 
@@ -60,4 +63,18 @@ impl Ticks {
 fn panic(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
     exit(false)
+}
+
+/// Executed instructions per SysTick tick, measured on a loop of known
+/// length (`subs` + `bne`: 2 instructions per iteration).
+pub fn instructions_per_tick(t: &Ticks) -> f32 {
+    const ITER: u32 = 1_000_000;
+    let t0 = t.now();
+    #[allow(unsafe_code)]
+    // SAFETY: a register-only countdown loop.
+    unsafe {
+        core::arch::asm!("1:", "subs {n}, {n}, #1", "bne 1b", n = inout(reg) ITER => _, options(nomem, nostack));
+    }
+    let ticks = t.now() - t0;
+    (2 * ITER) as f32 / ticks as f32
 }

@@ -82,6 +82,20 @@ pub enum Error<E> {
     WrongId(u16),
 }
 
+impl<E> Error<E> {
+    /// Convert the bus error (e.g. from a `DeviceError` to its bus part).
+    pub fn map_spi<F>(self, f: impl FnOnce(E) -> F) -> Error<F> {
+        match self {
+            Error::Spi(e) => Error::Spi(f(e)),
+            Error::Parity(r) => Error::Parity(r),
+            Error::BadResponse(r) => Error::BadResponse(r),
+            Error::Fault(f) => Error::Fault(f),
+            Error::CheckFailed { forced, after } => Error::CheckFailed { forced, after },
+            Error::WrongId(v) => Error::WrongId(v),
+        }
+    }
+}
+
 /// What the previous frame asked for, which is what the next response holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Pending {

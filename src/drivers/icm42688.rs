@@ -134,6 +134,21 @@ pub enum Error<E> {
     InvalidArgument,
 }
 
+impl<E> Error<E> {
+    /// Convert the bus error (e.g. from a `DeviceError` to its bus part).
+    pub fn map_spi<F>(self, f: impl FnOnce(E) -> F) -> Error<F> {
+        match self {
+            Error::Spi(e) => Error::Spi(f(e)),
+            Error::WrongId(v) => Error::WrongId(v),
+            Error::ConfigMismatch { reg, wrote, read } => {
+                Error::ConfigMismatch { reg, wrote, read }
+            }
+            Error::SelfTestFailed(a) => Error::SelfTestFailed(a),
+            Error::InvalidArgument => Error::InvalidArgument,
+        }
+    }
+}
+
 /// Gyro configuration applied by [`Icm42688::init`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -9,10 +9,10 @@ use crate::drivers::adxrs453::{cmd, fault, reg, LSB_PER_DPS};
 /// odd over 15:0.
 fn seal(mut r: u32) -> u32 {
     r &= !((1 << 28) | 1);
-    if (r >> 16).count_ones() % 2 == 0 {
+    if (r >> 16).count_ones().is_multiple_of(2) {
         r |= 1 << 28;
     }
-    if (r & 0xFFFF).count_ones() % 2 == 0 {
+    if (r & 0xFFFF).count_ones().is_multiple_of(2) {
         r |= 1;
     }
     r
@@ -28,6 +28,8 @@ pub struct Adxrs453Model {
     /// Response to the command being received, sent in the next frame.
     next: u32,
     rate: i16,
+    /// Bit of the current frame to flip (FrameBitError).
+    flip: Option<u32>,
     noise: AxisNoise,
     params: NoiseParams,
     profile: RateProfile,
@@ -48,6 +50,7 @@ impl Adxrs453Model {
             tx: 0,
             next: 0,
             rate: 0,
+            flip: None,
             noise: AxisNoise::default(),
             params,
             profile,
@@ -59,13 +62,23 @@ impl Adxrs453Model {
 
     pub(super) fn begin_frame(&mut self) {
         self.tx = self.next;
+        self.flip = None;
+        if let Fault::FrameBitError { prob } = self.fault {
+            if self.rng.uniform() < prob {
+                self.flip = Some(self.rng.next_u32() % 32);
+            }
+        }
         self.rx = 0;
         self.nbytes = 0;
     }
 
     pub(super) fn exchange(&mut self, mosi: u8) -> u8 {
         let shift = 24 - 8 * self.nbytes.min(3) as u32;
-        let out = (self.tx >> shift) as u8;
+        let tx = match self.flip {
+            Some(b) => self.tx ^ (1 << b),
+            None => self.tx,
+        };
+        let out = (tx >> shift) as u8;
         self.rx = (self.rx << 8) | mosi as u32;
         self.nbytes = self.nbytes.saturating_add(1);
         if self.nbytes == 4 {
@@ -88,7 +101,7 @@ impl Adxrs453Model {
 
     /// The response to one complete command frame.
     fn respond(&mut self, c: u32) -> u32 {
-        if c.count_ones() % 2 == 0 {
+        if c.count_ones().is_multiple_of(2) {
             // Command parity error: status "invalid", SPI fault.
             return seal(fault::CHK as u32);
         }

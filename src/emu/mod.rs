@@ -45,6 +45,13 @@ pub enum Fault {
         /// Probability per byte.
         prob: f32,
     },
+    /// With probability `prob` per frame, one bit of the frame is flipped
+    /// (ADXRS453 only; two flips in one parity half would escape any parity
+    /// check, which is what [`Fault::BitErrors`] can produce).
+    FrameBitError {
+        /// Probability per frame.
+        prob: f32,
+    },
     /// The identity register reads another part's id.
     WrongId,
     /// The chip does not drive MISO (reads 0xFF, the pull-up).
@@ -55,7 +62,9 @@ pub enum Fault {
     DeadSelfTest,
 }
 
-/// A chip on the emulated bus.
+/// A chip on the emulated bus. No heap here, so the variants are not boxed;
+/// the size difference is a few hundred bytes per chip.
+#[allow(clippy::large_enum_variant)]
 pub enum Chip {
     /// An ICM-42688-P.
     Icm(Icm42688Model),

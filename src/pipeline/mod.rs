@@ -222,13 +222,13 @@ impl<const N: usize> Pipeline<N> {
             h.same_run = 0;
         }
         h.last_raw = r.raw;
-        if h.same_run + 1 >= self.cfg.stuck_after {
+        if h.same_run.saturating_add(1) >= self.cfg.stuck_after {
             h.flags |= flag::STUCK;
         }
         if h.sat_run >= self.cfg.stuck_after {
             h.flags |= flag::SATURATED;
         }
-        let good = r.saturated == 0 && h.same_run + 1 < self.cfg.stuck_after;
+        let good = r.saturated == 0 && h.same_run.saturating_add(1) < self.cfg.stuck_after;
         h.good_run = if good {
             h.good_run.saturating_add(1)
         } else {

@@ -1,1 +1,220 @@
-fn main() {}
+//! Task runner: `cargo xtask <task>`.
+//!
+//! - `test`: host tests, then the on-target suite and the demo in QEMU
+//!   (each passes or fails by its semihosting exit code), then the board
+//!   firmware build. This is the project's one test command.
+//! - `run`: the demo firmware in QEMU, logs decoded by defmt-print.
+//! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`).
+//! - `size`: flash and static RAM of the firmware binaries.
+//!
+//! Missing tools are installed: the rustup target, qemu-system-arm (apt),
+//! defmt-print (cargo, pinned).
+use std::path::{Path, PathBuf};
+use std::process::{exit, Command, Stdio};
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+const DEFMT_PRINT: &str = "1.2.0";
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+fn run(cmd: &mut Command) -> bool {
+    eprintln!("xtask: {cmd:?}");
+    cmd.current_dir(root())
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false)
+}
+
+fn must(ok: bool, what: &str) {
+    if !ok {
+        eprintln!("xtask: FAILED: {what}");
+        exit(1);
+    }
+}
+
+fn have(tool: &str, arg: &str) -> Option<String> {
+    let out = Command::new(tool).arg(arg).output().ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+fn ensure_tools() {
+    must(
+        run(Command::new("rustup").args(["target", "add", TARGET])),
+        "rustup target add",
+    );
+    if have("qemu-system-arm", "--version").is_none() {
+        let sudo = if have("id", "-u").is_some_and(|u| u.trim() != "0") {
+            "sudo "
+        } else {
+            ""
+        };
+        must(
+            run(Command::new("sh").arg("-c").arg(format!(
+                "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq qemu-system-arm"
+            ))),
+            "install qemu-system-arm",
+        );
+    }
+    let v = have("defmt-print", "--version").unwrap_or_default();
+    if !v.contains(DEFMT_PRINT) {
+        must(
+            run(Command::new("cargo")
+                .args(["install", "defmt-print", "--locked", "--force", "--version"])
+                .arg(format!("={DEFMT_PRINT}"))),
+            "install defmt-print",
+        );
+    }
+}
+
+fn build_qemu(bin: &str) -> PathBuf {
+    must(
+        run(Command::new("cargo").args([
+            "build",
+            "--release",
+            "--target",
+            TARGET,
+            "--features",
+            "qemu",
+            "--bin",
+            bin,
+        ])),
+        &format!("build {bin}"),
+    );
+    root().join("target").join(TARGET).join("release").join(bin)
+}
+
+/// Run a firmware image in QEMU, decode its defmt stream, return (exit ok, log).
+fn qemu(elf: &Path, icount: bool) -> (bool, String) {
+    let mut q = Command::new("qemu-system-arm");
+    q.args([
+        "-cpu",
+        "cortex-m4",
+        "-machine",
+        "mps2-an386",
+        "-nographic",
+        "-monitor",
+        "none",
+    ]);
+    q.args(["-semihosting-config", "enable=on,target=native"]);
+    if icount {
+        q.args(["-icount", "shift=0"]);
+    }
+    q.arg("-kernel").arg(elf).stdout(Stdio::piped());
+    eprintln!("xtask: {q:?} | defmt-print -e {}", elf.display());
+    let mut child = q.spawn().unwrap_or_else(|e| {
+        eprintln!("xtask: cannot start qemu: {e}");
+        exit(1)
+    });
+    let stdout = child.stdout.take().unwrap();
+    let decoded = Command::new("defmt-print")
+        .arg("-e")
+        .arg(elf)
+        .stdin(stdout)
+        .stderr(Stdio::inherit())
+        .output()
+        .unwrap_or_else(|e| {
+            eprintln!("xtask: cannot start defmt-print: {e}");
+            exit(1)
+        });
+    let q_ok = child.wait().map(|s| s.success()).unwrap_or(false);
+    let log = String::from_utf8_lossy(&decoded.stdout).into_owned();
+    print!("{log}");
+    (q_ok && decoded.status.success(), log)
+}
+
+fn build_board() {
+    must(
+        run(Command::new("cargo").args([
+            "build",
+            "--release",
+            "--target",
+            TARGET,
+            "--features",
+            "board",
+            "--bin",
+            "board-f405",
+        ])),
+        "build board-f405",
+    );
+}
+
+fn main() {
+    let task = std::env::args().nth(1).unwrap_or_default();
+    match task.as_str() {
+        "test" => {
+            must(
+                run(Command::new("cargo").args(["test", "--workspace", "--profile", "host"])),
+                "host tests",
+            );
+            ensure_tools();
+            let (ok, _) = qemu(&build_qemu("qemu-tests"), false);
+            must(ok, "on-target suite (qemu-tests)");
+            let (ok, _) = qemu(&build_qemu("qemu-demo"), true);
+            must(ok, "demo (qemu-demo)");
+            build_board();
+            println!("xtask: all checks passed");
+        }
+        "run" => {
+            ensure_tools();
+            let (ok, _) = qemu(&build_qemu("qemu-demo"), true);
+            must(ok, "demo");
+        }
+        "bench" => {
+            ensure_tools();
+            let (ok, _) = qemu(&build_qemu("qemu-bench"), true);
+            must(ok, "bench");
+        }
+        "size" => {
+            build_board();
+            let elf = root()
+                .join("target")
+                .join(TARGET)
+                .join("release")
+                .join("board-f405");
+            size(&elf);
+        }
+        _ => {
+            eprintln!("usage: cargo xtask <test|run|bench|size>");
+            exit(2);
+        }
+    }
+}
+
+/// Flash (text + rodata + data) and static RAM (data + bss) from the ELF
+/// section headers, without binutils.
+fn size(elf: &Path) {
+    let b = std::fs::read(elf).unwrap_or_else(|e| {
+        eprintln!("xtask: {}: {e}", elf.display());
+        exit(1)
+    });
+    let u32_at = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]) as usize;
+    let u16_at = |o: usize| u16::from_le_bytes([b[o], b[o + 1]]) as usize;
+    let (shoff, shentsize, shnum, shstrndx) =
+        (u32_at(0x20), u16_at(0x2E), u16_at(0x30), u16_at(0x32));
+    let sh = |i: usize| shoff + i * shentsize;
+    let strtab = u32_at(sh(shstrndx) + 0x10);
+    let (mut flash, mut ram) = (0usize, 0usize);
+    for i in 0..shnum {
+        let name_off = strtab + u32_at(sh(i));
+        let end = b[name_off..].iter().position(|c| *c == 0).unwrap_or(0);
+        let name = String::from_utf8_lossy(&b[name_off..name_off + end]);
+        let size = u32_at(sh(i) + 0x14);
+        match name.as_ref() {
+            ".vector_table" | ".text" | ".rodata" => flash += size,
+            ".data" => {
+                flash += size;
+                ram += size
+            }
+            ".bss" | ".uninit" => ram += size,
+            _ => {}
+        }
+    }
+    println!("{}: flash {flash} B, static RAM {ram} B", elf.display());
+}

@@ -1,0 +1,337 @@
+//! Self-checks that run unchanged on the host (`cargo test`) and inside QEMU
+//! (`qemu-tests`). Each drives the real drivers against emulated chips or
+//! runs the algorithms on seeded data. The digest checks hash every output
+//! bit and compare with the committed golden values in
+//! `host-tests/vectors/digests.in`; since host and target both must match
+//! them, their results are bit-identical.
+
+use core::cell::RefCell;
+
+use embedded_hal_bus::spi::RefCellDevice;
+
+use crate::algo::fusion::{
+    AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, SeedConfig,
+};
+use crate::drivers::adxrs453::{self, Adxrs453};
+use crate::drivers::icm42688::{self, Config, Icm42688};
+use crate::drivers::Gyro;
+use crate::emu::{
+    board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model,
+    NoiseParams, RateProfile, Rng,
+};
+use crate::pipeline::{flag, Pipeline, PipelineConfig};
+
+/// Golden digests (generated on the host, checked on both sides).
+pub mod golden {
+    include!("../host-tests/vectors/digests.in");
+}
+
+/// FNV-1a over 32-bit words.
+#[derive(Clone, Copy)]
+pub struct Digest(pub u64);
+
+impl Digest {
+    /// Empty digest.
+    pub const fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+    /// Mix one word.
+    pub fn word(&mut self, w: u32) {
+        for b in w.to_le_bytes() {
+            self.0 ^= b as u64;
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    /// Mix an f32's bits.
+    pub fn f32(&mut self, v: f32) {
+        self.word(v.to_bits())
+    }
+}
+
+impl Default for Digest {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Every fusion method the evaluation compares, N = 4.
+pub fn methods() -> [(&'static str, Method); 7] {
+    let grubbs = Some(GrubbsConfig::default());
+    let seed = |clamp, g, m| {
+        Method::Seed(SeedConfig {
+            denominator: Denominator::MSquaredMinus1,
+            clamp_negative: clamp,
+            grubbs: g,
+            memory: m,
+        })
+    };
+    [
+        ("mean", Method::Mean),
+        ("zhang", Method::Zhang),
+        ("seed-literal", seed(false, None, None)),
+        ("seed-support", seed(true, None, None)),
+        ("seed-grubbs", seed(true, grubbs, None)),
+        (
+            "seed-full",
+            seed(true, grubbs, Some(MemoryConfig::default())),
+        ),
+        ("adaptive", Method::Adaptive(AdaptiveConfig::default())),
+    ]
+}
+
+/// Fuse 512 seeded frames of 4 gyros (noise, spikes, a gyro stuck halfway)
+/// with every method and hash rates, weights and rejections.
+pub fn fusion_digest() -> u64 {
+    let mut d = Digest::new();
+    for (_, m) in methods() {
+        let Ok(f) = Fusion::<4>::new(m) else { return 0 };
+        let mut st = AxisState::default();
+        let mut rng = Rng::new(42);
+        for k in 0..512 {
+            let truth = 95.0 * libm::sinf(k as f32 * 0.01);
+            let mut y = [0.0f32; 4];
+            for (i, v) in y.iter_mut().enumerate() {
+                *v = truth + [0.05, 0.05, 0.05, 0.25][i] * rng.gaussian();
+            }
+            if rng.uniform() < 0.05 {
+                y[1] += 20.0;
+            }
+            if k >= 256 {
+                y[2] = 1.0;
+            }
+            match f.fuse(&mut st, &y, 0b1111) {
+                Ok(r) => {
+                    d.f32(r.rate_dps);
+                    r.weights.iter().for_each(|w| d.f32(*w));
+                    d.word(r.rejected as u32);
+                }
+                Err(_) => d.word(0xDEAD),
+            }
+        }
+    }
+    d.0
+}
+
+/// Run the board's array (drivers, emulated bus, pipeline, adaptive fusion)
+/// for 400 samples and hash the fused output.
+pub fn pipeline_digest() -> u64 {
+    let profile = RateProfile {
+        base_dps: [0.5, -0.2, 10.0],
+        sine_dps: [0.0, 0.0, 20.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    };
+    let cs: [CsLine; 5] = Default::default();
+    let bus = RefCell::new(EmuBus::new(board_array(profile, 9), &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
+    let (mut g0, mut g1, mut g2, mut g3) = (
+        Icm42688::new(d0),
+        Icm42688::new(d1),
+        Icm42688::new(d2),
+        Icm42688::new(d3),
+    );
+    let mut g4 = Adxrs453::new(d4, 2);
+    let Ok(mut pipe) = Pipeline::<5>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ) else {
+        return 0;
+    };
+    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+        if g.init(&mut delay, Config::default()).is_err() {
+            pipe.mark_init_failed(i);
+        }
+    }
+    if g4.init(&mut delay).is_err() {
+        pipe.mark_init_failed(4);
+    }
+    let mut d = Digest::new();
+    for n in 0..400 {
+        if n == 200 {
+            bus.borrow_mut().chips[1].set_fault(Fault::Spikes {
+                prob: 0.2,
+                magnitude_dps: 5.0,
+            });
+        }
+        bus.borrow_mut().advance(1e-3);
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let out = pipe.step(&mut gyros);
+        for f in out.fused.iter() {
+            match f {
+                Some(f) => {
+                    d.f32(f.rate_dps);
+                    f.weights.iter().for_each(|w| d.f32(*w));
+                }
+                None => d.word(0xDEAD),
+            }
+        }
+    }
+    d.0
+}
+
+type Bus1<'a> = RefCell<EmuBus<'a, 1>>;
+
+fn bus_err(
+    e: embedded_hal_bus::spi::DeviceError<crate::emu::BusError, core::convert::Infallible>,
+) -> crate::emu::BusError {
+    match e {
+        embedded_hal_bus::spi::DeviceError::Spi(b) => b,
+        embedded_hal_bus::spi::DeviceError::Cs(i) => match i {},
+    }
+}
+
+fn icm_init(fault: Fault) -> Result<icm42688::SelfTest, icm42688::Error<crate::emu::BusError>> {
+    let cs: [CsLine; 1] = Default::default();
+    let mut chip = Icm42688Model::new(NoiseParams::ICM42688, RateProfile::constant(3.0), 1, 80);
+    chip.fault = fault;
+    let bus: Bus1 = RefCell::new(EmuBus::new([Chip::Icm(chip)], &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let mut g = Icm42688::new(dev);
+    g.init(&mut delay, Config::default())
+        .map_err(|e| e.map_spi(bus_err))?;
+    g.self_test(&mut delay, 50).map_err(|e| e.map_spi(bus_err))
+}
+
+fn adx_run(
+    fault: Fault,
+    reads: u32,
+) -> (Result<(), adxrs453::Error<crate::emu::BusError>>, u32, u32) {
+    let cs: [CsLine; 1] = Default::default();
+    let mut chip = Adxrs453Model::new(NoiseParams::ADXRS453, RateProfile::constant(-5.0), 2, 2);
+    chip.fault = if fault == Fault::WrongId {
+        fault
+    } else {
+        Fault::None
+    };
+    let bus: Bus1 = RefCell::new(EmuBus::new([Chip::Adx(chip)], &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let mut g = Adxrs453::new(dev, 2);
+    let init = g.init(&mut delay).map_err(|e| e.map_spi(bus_err));
+    bus.borrow_mut().chips[0].set_fault(fault);
+    let (mut errors, mut wild) = (0, 0);
+    for _ in 0..reads {
+        bus.borrow_mut().advance(1e-3);
+        match g.read_dps() {
+            // 3 °/s is over 6 σ of the part's noise at 1 kHz (0.47 °/s).
+            Ok(v) if (v + 5.0).abs() > 3.0 => wild += 1,
+            Ok(_) => {}
+            Err(_) => errors += 1,
+        }
+    }
+    (init, errors, wild)
+}
+
+/// Run every check; `report(name, pass)` is called for each. Returns
+/// (passed, failed).
+pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
+    let mut tally = (0u32, 0u32);
+    let mut check = |name: &str, pass: bool| {
+        report(name, pass);
+        if pass {
+            tally.0 += 1;
+        } else {
+            tally.1 += 1;
+        }
+    };
+    let st = icm_init(Fault::None);
+    check(
+        "icm42688: init and self-test on the emulated chip",
+        st.is_ok_and(|s| s.ratio().iter().all(|r| (r - 1.0).abs() < 0.1)),
+    );
+    check(
+        "icm42688: wrong WHO_AM_I is a typed error",
+        icm_init(Fault::WrongId) == Err(icm42688::Error::WrongId(0x98)),
+    );
+    check(
+        "icm42688: silent chip (MISO high) is rejected",
+        icm_init(Fault::NoResponse) == Err(icm42688::Error::WrongId(0xFF)),
+    );
+    check(
+        "icm42688: dead self-test fails on all axes",
+        icm_init(Fault::DeadSelfTest) == Err(icm42688::Error::SelfTestFailed(0b111)),
+    );
+    let (init, errors, wild) = adx_run(Fault::None, 200);
+    check(
+        "adxrs453: CHK start-up, PID and 200 clean reads",
+        init.is_ok() && errors == 0 && wild == 0,
+    );
+    let (init, ..) = adx_run(Fault::WrongId, 0);
+    check(
+        "adxrs453: wrong part id is a typed error",
+        init == Err(adxrs453::Error::WrongId(0x5A01)),
+    );
+    // The first response after the fault answers a request made before it.
+    let (_, errors, wild) = adx_run(Fault::ChipFault, 50);
+    check(
+        "adxrs453: chip fault bits surface on every read",
+        errors == 49 && wild == 0,
+    );
+    let (_, errors, wild) = adx_run(Fault::FrameBitError { prob: 0.05 }, 2000);
+    check(
+        "adxrs453: single-bit frame errors are all caught by parity",
+        errors > 50 && wild == 0,
+    );
+    check(
+        "fusion: every method bit-identical to the golden digest",
+        fusion_digest() == golden::FUSION,
+    );
+    check(
+        "pipeline: emulated array bit-identical to the golden digest",
+        pipeline_digest() == golden::PIPELINE,
+    );
+    check(
+        "pipeline: saturated gyro is flagged and excluded",
+        saturation_is_flagged(),
+    );
+    tally
+}
+
+fn saturation_is_flagged() -> bool {
+    let cs: [CsLine; 5] = Default::default();
+    let bus = RefCell::new(EmuBus::new(board_array(RateProfile::constant(1.0), 3), &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
+    let (mut g0, mut g1, mut g2, mut g3) = (
+        Icm42688::new(d0),
+        Icm42688::new(d1),
+        Icm42688::new(d2),
+        Icm42688::new(d3),
+    );
+    let mut g4 = Adxrs453::new(d4, 2);
+    let Ok(mut pipe) = Pipeline::<5>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ) else {
+        return false;
+    };
+    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
+        if g.init(&mut delay, Config::default()).is_err() {
+            return false;
+        }
+    }
+    if g4.init(&mut delay).is_err() {
+        return false;
+    }
+    bus.borrow_mut().chips[3].set_fault(Fault::Saturated);
+    let mut ok = true;
+    for n in 0..40 {
+        bus.borrow_mut().advance(1e-3);
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let out = pipe.step(&mut gyros);
+        // A saturated axis is never offered, even before the flag is set.
+        ok &= out.offered.iter().all(|m| m & (1 << 3) == 0);
+        ok &= out
+            .fused
+            .iter()
+            .all(|f| f.is_some_and(|f| (f.rate_dps - 1.0).abs() < 0.5));
+        if n == 39 {
+            ok &= pipe.health()[3].flags & flag::SATURATED != 0;
+        }
+    }
+    ok
+}
