@@ -246,7 +246,7 @@ impl<const N: usize> AxisState<N> {
         let mut s = [f32::NAN; N];
         for i in 0..N {
             if self.n_upd[i] > 0 {
-                s[i] = sqrtf(self.var[i].max(cfg.var_floor));
+                s[i] = sqrtf(floor(self.var[i], cfg.var_floor));
             }
         }
         s
@@ -551,6 +551,17 @@ fn memory_weights<const N: usize>(
     big_r
 }
 
+/// `max(v, lo)` without libm's `fmaxf` call (`f32::max` is a function
+/// call on this target); NaN gives `lo`.
+#[inline(always)]
+fn floor(v: f32, lo: f32) -> f32 {
+    if v > lo {
+        v
+    } else {
+        lo
+    }
+}
+
 /// Median of the masked values (small insertion sort; N ≤ 8).
 fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
     let mut b = [0.0f32; MAX_GYROS];
@@ -613,7 +624,7 @@ fn adaptive<const N: usize>(
     let all_warm = mask_iter::<N>(active).all(|i| warm(st, i));
     for i in mask_iter::<N>(active) {
         w[i] = if all_warm {
-            1.0 / st.var[i].max(c.var_floor)
+            1.0 / floor(st.var[i], c.var_floor)
         } else {
             1.0
         };
@@ -625,13 +636,13 @@ fn adaptive<const N: usize>(
     if n >= 3 && all_warm {
         let mut vbar = 0.0;
         for i in mask_iter::<N>(active) {
-            vbar += st.var[i].max(c.var_floor);
+            vbar += floor(st.var[i], c.var_floor);
         }
         vbar /= n as f32;
         let k2 = c.gate_k * c.gate_k;
         for i in mask_iter::<N>(active) {
             let e = y[i] - med;
-            if e * e > k2 * (st.var[i].max(c.var_floor) + vbar / (n as f32 - 1.0)) {
+            if e * e > k2 * (floor(st.var[i], c.var_floor) + vbar / (n as f32 - 1.0)) {
                 good &= !(1 << i);
             }
         }
@@ -668,7 +679,10 @@ fn adaptive<const N: usize>(
             let was_warm = warm(st, i);
             if was_warm {
                 // Clip, so one spike moves the estimate by at most gate_k².
-                e2 = e2.min(c.gate_k * c.gate_k * (st.var[i].max(c.var_floor) + v_others));
+                let cap = c.gate_k * c.gate_k * (floor(st.var[i], c.var_floor) + v_others);
+                if e2 > cap {
+                    e2 = cap;
+                }
             }
             st.n_upd[i] = st.n_upd[i].saturating_add(1);
             let a = if was_warm {

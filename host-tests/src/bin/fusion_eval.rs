@@ -52,7 +52,11 @@ struct Stats {
 
 impl Stats {
     fn new() -> Self {
-        Self { n: 0.0, s1: 0.0, s2: 0.0 }
+        Self {
+            n: 0.0,
+            s1: 0.0,
+            s2: 0.0,
+        }
     }
     fn add(&mut self, e: f64) {
         self.n += 1.0;
@@ -109,7 +113,10 @@ fn simulate(sc: Scenario, seed: u64) -> (Vec<[f32; 4]>, f32, [f32; 4]) {
 }
 
 fn main() {
-    let seed: u64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(1);
+    let seed: u64 = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
     println!("fusion-eval: seed {seed}, 4 gyros, {SAMPLES} samples at {FS} Hz per scenario, errors in deg/s");
     let scenarios = [
         Scenario::Equal,
@@ -125,7 +132,10 @@ fn main() {
     for (si, sc) in scenarios.iter().enumerate() {
         let (frames, truth, sig) = simulate(*sc, seed * 100 + si as u64);
         println!("\n{}", sc.name());
-        println!("{:<14} {:>12} {:>12} {:>12}", "method", "mean", "std", "rms err");
+        println!(
+            "{:<14} {:>12} {:>12} {:>12}",
+            "method", "mean", "std", "rms err"
+        );
         // Oracle: inverse true white-noise variance, all chips.
         let w: Vec<f64> = sig.iter().map(|s| 1.0 / (*s as f64).powi(2)).collect();
         let ws: f64 = w.iter().sum();
@@ -134,7 +144,13 @@ fn main() {
             let x: f64 = (0..4).map(|i| w[i] * y[i] as f64).sum::<f64>() / ws;
             o.add(x - truth as f64);
         }
-        println!("{:<14} {:>12.5} {:>12.5} {:>12.5}", "oracle", o.mean() + truth as f64, o.std(), o.rms());
+        println!(
+            "{:<14} {:>12.5} {:>12.5} {:>12.5}",
+            "oracle",
+            o.mean() + truth as f64,
+            o.std(),
+            o.rms()
+        );
         rms.insert((si, "oracle".to_string()), o.rms());
         for (name, m) in methods() {
             let f = Fusion::<4>::new(m).expect("valid method");
@@ -152,14 +168,22 @@ fn main() {
                     }
                 }
             }
-            println!("{:<14} {:>12.5} {:>12.5} {:>12.5}", name, s.mean() + truth as f64, s.std(), s.rms());
+            println!(
+                "{:<14} {:>12.5} {:>12.5} {:>12.5}",
+                name,
+                s.mean() + truth as f64,
+                s.std(),
+                s.rms()
+            );
             rms.insert((si, name.to_string()), s.rms());
             if let Scenario::Failing = sc {
                 exclusion.push((name, first_excluded));
             }
         }
     }
-    println!("\n(d) samples from the fault until the failed chip's weight is 0 (stuck, saturated):");
+    println!(
+        "\n(d) samples from the fault until the failed chip's weight is 0 (stuck, saturated):"
+    );
     for (name, e) in &exclusion {
         let f = |v: Option<usize>| v.map_or("never".to_string(), |v| v.to_string());
         println!("  {:<14} {:>6} {:>6}", name, f(e[0]), f(e[1]));
@@ -173,18 +197,44 @@ fn main() {
     };
     for si in 1..=3 {
         let (s, z, m) = (r(si, "seed-full"), r(si, "zhang"), r(si, "mean"));
-        target(format!("{}: seed-full {s:.5} <= zhang {z:.5}", scenarios[si].name()), s <= z);
-        target(format!("{}: zhang {z:.5} <= mean {m:.5}", scenarios[si].name()), z <= m);
+        target(
+            format!("{}: seed-full {s:.5} <= zhang {z:.5}", scenarios[si].name()),
+            s <= z,
+        );
+        target(
+            format!("{}: zhang {z:.5} <= mean {m:.5}", scenarios[si].name()),
+            z <= m,
+        );
     }
     for si in 0..=1 {
         let (a, o) = (r(si, "adaptive"), r(si, "oracle"));
-        target(format!("{}: adaptive/oracle rms = {:.3} <= 1.15", scenarios[si].name(), a / o), a / o <= 1.15);
+        target(
+            format!(
+                "{}: adaptive/oracle rms = {:.3} <= 1.15",
+                scenarios[si].name(),
+                a / o
+            ),
+            a / o <= 1.15,
+        );
     }
     let (a, o) = (r(2, "adaptive"), r(2, "oracle"));
     target(format!("(c): adaptive {a:.5} < oracle {o:.5}"), a < o);
     if let Some((_, e)) = exclusion.iter().find(|(n, _)| *n == "adaptive") {
         let ok = e.iter().all(|v| v.is_some_and(|v| v <= 10));
-        target(format!("(d): adaptive excludes the failed chip within 10 samples: {:?}", e), ok);
+        target(
+            format!(
+                "(d): adaptive excludes the failed chip within 10 samples: {:?}",
+                e
+            ),
+            ok,
+        );
     }
-    println!("\nfusion-eval: {}", if all { "all targets met" } else { "some targets NOT met" });
+    println!(
+        "\nfusion-eval: {}",
+        if all {
+            "all targets met"
+        } else {
+            "some targets NOT met"
+        }
+    );
 }
