@@ -7,6 +7,7 @@
 //! 1 kHz for 20 s per scenario, fuses it with every method and with an
 //! oracle that knows each chip's true white-noise variance, and prints mean
 //! error, std and RMS error against the true rate.
+#![allow(clippy::needless_range_loop)] // scenario indices key the result map too
 use gyro_array::algo::fusion::{AxisState, Fusion};
 use gyro_array::checks::methods;
 use gyro_array::emu::noise::{quantise, AxisNoise};
