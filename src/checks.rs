@@ -19,7 +19,7 @@ use crate::emu::{
     board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model,
     NoiseParams, RateProfile, Rng,
 };
-use crate::pipeline::{flag, Pipeline, PipelineConfig};
+use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
 
 /// Golden digests (generated on the host, checked on both sides).
 pub mod golden {
@@ -112,17 +112,17 @@ pub fn fusion_digest() -> u64 {
     d.0
 }
 
-/// Run the board's array (drivers, emulated bus, pipeline, adaptive fusion)
-/// for 400 samples and hash the fused output.
-pub fn pipeline_digest() -> u64 {
-    let profile = RateProfile {
-        base_dps: [0.5, -0.2, 10.0],
-        sine_dps: [0.0, 0.0, 20.0],
-        sine_hz: 2.0,
-        sine_start_s: 0.0,
-    };
+/// Build the board's emulated array (drivers on the emulated bus, pipeline
+/// with adaptive fusion), start every gyro, then call `each(n, bus, out,
+/// pipe)` for `samples` samples. `None` if the pipeline cannot be built.
+fn run_board_array(
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+) -> Option<()> {
     let cs: [CsLine; 5] = Default::default();
-    let bus = RefCell::new(EmuBus::new(board_array(profile, 9), &cs));
+    let bus = RefCell::new(EmuBus::new(board_array(profile, seed), &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
     let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
@@ -133,12 +133,11 @@ pub fn pipeline_digest() -> u64 {
         Icm42688::new(d3),
     );
     let mut g4 = Adxrs453::new(d4, 2);
-    let Ok(mut pipe) = Pipeline::<5>::new(
+    let mut pipe = Pipeline::<5>::new(
         PipelineConfig::default(),
         Method::Adaptive(AdaptiveConfig::default()),
-    ) else {
-        return 0;
-    };
+    )
+    .ok()?;
     for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
         if g.init(&mut delay, Config::default()).is_err() {
             pipe.mark_init_failed(i);
@@ -147,17 +146,32 @@ pub fn pipeline_digest() -> u64 {
     if g4.init(&mut delay).is_err() {
         pipe.mark_init_failed(4);
     }
+    for n in 0..samples {
+        bus.borrow_mut().advance(1e-3);
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let out = pipe.step(&mut gyros);
+        each(n, &bus, &out, &pipe);
+    }
+    Some(())
+}
+
+/// Run the board's array for 400 samples (spikes on gyro 1 from sample 200)
+/// and hash the fused output.
+pub fn pipeline_digest() -> u64 {
+    let profile = RateProfile {
+        base_dps: [0.5, -0.2, 10.0],
+        sine_dps: [0.0, 0.0, 20.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    };
     let mut d = Digest::new();
-    for n in 0..400 {
-        if n == 200 {
+    let ran = run_board_array(profile, 9, 400, |n, bus, out, _| {
+        if n == 199 {
             bus.borrow_mut().chips[1].set_fault(Fault::Spikes {
                 prob: 0.2,
                 magnitude_dps: 5.0,
             });
         }
-        bus.borrow_mut().advance(1e-3);
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let out = pipe.step(&mut gyros);
         for f in out.fused.iter() {
             match f {
                 Some(f) => {
@@ -167,8 +181,12 @@ pub fn pipeline_digest() -> u64 {
                 None => d.word(0xDEAD),
             }
         }
+    });
+    if ran.is_some() {
+        d.0
+    } else {
+        0
     }
-    d.0
 }
 
 type Bus1<'a> = RefCell<EmuBus<'a, 1>>;
@@ -291,47 +309,21 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
 }
 
 fn saturation_is_flagged() -> bool {
-    let cs: [CsLine; 5] = Default::default();
-    let bus = RefCell::new(EmuBus::new(board_array(RateProfile::constant(1.0), 3), &cs));
-    let mut delay = EmuDelay::new(&bus, 1e-3);
-    let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
-    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
-    let (mut g0, mut g1, mut g2, mut g3) = (
-        Icm42688::new(d0),
-        Icm42688::new(d1),
-        Icm42688::new(d2),
-        Icm42688::new(d3),
-    );
-    let mut g4 = Adxrs453::new(d4, 2);
-    let Ok(mut pipe) = Pipeline::<5>::new(
-        PipelineConfig::default(),
-        Method::Adaptive(AdaptiveConfig::default()),
-    ) else {
-        return false;
-    };
-    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
-        if g.init(&mut delay, Config::default()).is_err() {
-            return false;
-        }
-    }
-    if g4.init(&mut delay).is_err() {
-        return false;
-    }
-    bus.borrow_mut().chips[3].set_fault(Fault::Saturated);
     let mut ok = true;
-    for n in 0..40 {
-        bus.borrow_mut().advance(1e-3);
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let out = pipe.step(&mut gyros);
+    let ran = run_board_array(RateProfile::constant(1.0), 3, 41, |n, bus, out, pipe| {
+        if n == 0 {
+            bus.borrow_mut().chips[3].set_fault(Fault::Saturated);
+            return;
+        }
         // A saturated axis is never offered, even before the flag is set.
         ok &= out.offered.iter().all(|m| m & (1 << 3) == 0);
         ok &= out
             .fused
             .iter()
             .all(|f| f.is_some_and(|f| (f.rate_dps - 1.0).abs() < 0.5));
-        if n == 39 {
+        if n == 40 {
             ok &= pipe.health()[3].flags & flag::SATURATED != 0;
         }
-    }
-    ok
+    });
+    ran.is_some() && ok
 }
