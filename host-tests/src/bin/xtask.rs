@@ -73,7 +73,8 @@ fn ensure_tools() {
     }
 }
 
-fn build_qemu(bin: &str) -> PathBuf {
+/// Build one firmware binary for the Cortex-M4 with `feature`; its ELF path.
+fn build_firmware(feature: &str, bin: &str) -> PathBuf {
     must(
         run(Command::new("cargo").args([
             "build",
@@ -81,7 +82,7 @@ fn build_qemu(bin: &str) -> PathBuf {
             "--target",
             TARGET,
             "--features",
-            "qemu",
+            feature,
             "--bin",
             bin,
         ])),
@@ -90,8 +91,13 @@ fn build_qemu(bin: &str) -> PathBuf {
     root().join("target").join(TARGET).join("release").join(bin)
 }
 
-/// Run a firmware image in QEMU, decode its defmt stream, return (exit ok, log).
-fn qemu(elf: &Path, icount: bool) -> (bool, String) {
+fn build_qemu(bin: &str) -> PathBuf {
+    build_firmware("qemu", bin)
+}
+
+/// Run a firmware image in QEMU and decode its defmt stream to stdout; true
+/// when QEMU's semihosting exit code and defmt-print both report success.
+fn qemu(elf: &Path, icount: bool) -> bool {
     let mut q = Command::new("qemu-system-arm");
     q.args([
         "-cpu",
@@ -124,25 +130,12 @@ fn qemu(elf: &Path, icount: bool) -> (bool, String) {
             exit(1)
         });
     let q_ok = child.wait().map(|s| s.success()).unwrap_or(false);
-    let log = String::from_utf8_lossy(&decoded.stdout).into_owned();
-    print!("{log}");
-    (q_ok && decoded.status.success(), log)
+    print!("{}", String::from_utf8_lossy(&decoded.stdout));
+    q_ok && decoded.status.success()
 }
 
-fn build_board() {
-    must(
-        run(Command::new("cargo").args([
-            "build",
-            "--release",
-            "--target",
-            TARGET,
-            "--features",
-            "board",
-            "--bin",
-            "board-f405",
-        ])),
-        "build board-f405",
-    );
+fn build_board() -> PathBuf {
+    build_firmware("board", "board-f405")
 }
 
 fn main() {
@@ -154,31 +147,25 @@ fn main() {
                 "host tests",
             );
             ensure_tools();
-            let (ok, _) = qemu(&build_qemu("qemu-tests"), false);
+            let ok = qemu(&build_qemu("qemu-tests"), false);
             must(ok, "on-target suite (qemu-tests)");
-            let (ok, _) = qemu(&build_qemu("qemu-demo"), true);
+            let ok = qemu(&build_qemu("qemu-demo"), true);
             must(ok, "demo (qemu-demo)");
             build_board();
             println!("xtask: all checks passed");
         }
         "run" => {
             ensure_tools();
-            let (ok, _) = qemu(&build_qemu("qemu-demo"), true);
+            let ok = qemu(&build_qemu("qemu-demo"), true);
             must(ok, "demo");
         }
         "bench" => {
             ensure_tools();
-            let (ok, _) = qemu(&build_qemu("qemu-bench"), true);
+            let ok = qemu(&build_qemu("qemu-bench"), true);
             must(ok, "bench");
         }
         "size" => {
-            build_board();
-            let elf = root()
-                .join("target")
-                .join(TARGET)
-                .join("release")
-                .join("board-f405");
-            size(&elf);
+            size(&build_board());
         }
         _ => {
             eprintln!("usage: cargo xtask <test|run|bench|size>");
