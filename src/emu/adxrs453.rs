@@ -28,8 +28,6 @@ pub struct Adxrs453Model {
     /// Response to the command being received, sent in the next frame.
     next: u32,
     rate: i16,
-    /// Bit of the current frame to flip (FrameBitError).
-    flip: Option<u32>,
     noise: AxisNoise,
     params: NoiseParams,
     profile: RateProfile,
@@ -50,7 +48,6 @@ impl Adxrs453Model {
             tx: 0,
             next: 0,
             rate: 0,
-            flip: None,
             noise: AxisNoise::default(),
             params,
             profile,
@@ -62,10 +59,9 @@ impl Adxrs453Model {
 
     pub(super) fn begin_frame(&mut self) {
         self.tx = self.next;
-        self.flip = None;
         if let Fault::FrameBitError { prob } = self.fault {
             if self.rng.uniform() < prob {
-                self.flip = Some(self.rng.next_u32() % 32);
+                self.tx ^= 1 << (self.rng.next_u32() % 32);
             }
         }
         self.rx = 0;
@@ -74,11 +70,7 @@ impl Adxrs453Model {
 
     pub(super) fn exchange(&mut self, mosi: u8) -> u8 {
         let shift = 24 - 8 * self.nbytes.min(3) as u32;
-        let tx = match self.flip {
-            Some(b) => self.tx ^ (1 << b),
-            None => self.tx,
-        };
-        let out = (tx >> shift) as u8;
+        let out = (self.tx >> shift) as u8;
         self.rx = (self.rx << 8) | mosi as u32;
         self.nbytes = self.nbytes.saturating_add(1);
         if self.nbytes == 4 {
