@@ -1,5 +1,6 @@
 //! Pure algorithms: no hardware, no heap, capacity in the types.
 
+pub mod allan;
 pub mod fusion;
 pub mod math;
 pub mod stats;

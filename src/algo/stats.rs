@@ -1,4 +1,4 @@
-//! Student-t quantiles and Grubbs critical values, in f64.
+//! Student-t and χ² quantiles and Grubbs critical values, in f64.
 //!
 //! Used once, when a fusion configuration is built (not per sample), so the
 //! cost on the board does not matter and accuracy does. Checked against
@@ -105,6 +105,82 @@ pub fn grubbs_critical(n: usize, alpha: f64, two_sided: bool) -> Option<f64> {
     };
     let t = t_quantile_upper(p, nf - 2.0);
     Some((nf - 1.0) / libm::sqrt(nf) * libm::sqrt(t * t / (nf - 2.0 + t * t)))
+}
+
+/// Regularised lower incomplete gamma P(a, x) (series for x < a + 1,
+/// continued fraction otherwise; bounded iterations, ~1e-14 relative).
+pub fn inc_gamma_p(a: f64, x: f64) -> f64 {
+    if !(a > 0.0) || !(x > 0.0) {
+        return 0.0;
+    }
+    let gln = ln_gamma(a);
+    if x < a + 1.0 {
+        let (mut ap, mut del) = (a, 1.0 / a);
+        let mut sum = del;
+        for _ in 0..1000 {
+            ap += 1.0;
+            del *= x / ap;
+            sum += del;
+            if del.abs() < sum.abs() * 1e-16 {
+                break;
+            }
+        }
+        (sum * libm::exp(-x + a * libm::log(x) - gln)).min(1.0)
+    } else {
+        const TINY: f64 = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / TINY;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..1000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < TINY {
+                d = TINY;
+            }
+            c = b + an / c;
+            if c.abs() < TINY {
+                c = TINY;
+            }
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        (1.0 - libm::exp(-x + a * libm::log(x) - gln) * h).max(0.0)
+    }
+}
+
+/// χ² quantile: the x with P(χ²_ν ≤ x) = q, for 0 < q < 1 and ν > 0
+/// (bisection on [`inc_gamma_p`], 200 steps at most). `None` outside.
+pub fn chi2_quantile(q: f64, nu: f64) -> Option<f64> {
+    if !(q > 0.0 && q < 1.0 && nu > 0.0 && nu.is_finite()) {
+        return None;
+    }
+    let cdf = |x: f64| inc_gamma_p(0.5 * nu, 0.5 * x);
+    let mut hi = nu.max(1.0);
+    while cdf(hi) < q {
+        hi *= 2.0;
+        if hi > 1e12 {
+            return None;
+        }
+    }
+    let mut lo = 0.0;
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if cdf(mid) < q {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-13 * hi {
+            break;
+        }
+    }
+    Some(0.5 * (lo + hi))
 }
 
 #[cfg(test)]

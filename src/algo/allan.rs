@@ -1,0 +1,371 @@
+//! Overlapping Allan variance of rate data (SEEDS.md §0.1, IEEE Std 952
+//! Annex C, NIST SP 1065 §5.2.4), its confidence intervals, and the IEEE 952
+//! noise terms read from the curve.
+//!
+//! - [`oavar`]: batch, f64, over a slice: the host and log-analysis path.
+//! - [`stream`]: fixed-capacity streaming over integer samples with exact
+//!   integer sums, for the board.
+//! - [`edf`] / [`AdevPoint::interval`]: equivalent degrees of freedom
+//!   (SP 1065 Table 5, "simple" formulas) and χ² confidence intervals.
+//! - [`noise_terms`]: angle random walk, bias instability, rate random walk,
+//!   quantisation and rate ramp, each with its unit.
+
+pub mod stream;
+
+use crate::algo::stats::chi2_quantile;
+
+/// Why an Allan variance could not be computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AllanError {
+    /// Cluster size m = 0, or τ0 not finite and positive.
+    BadTau,
+    /// Fewer than 2m samples: no term exists for this τ (documented
+    /// skip: callers list the τ they could not compute).
+    TooShort,
+    /// A sample is NaN or infinite.
+    NonFinite,
+    /// The phase scratch buffer is shorter than the data plus one.
+    Scratch,
+    /// An integer sample is outside ±2²⁰ (streaming path; sums must stay
+    /// exact in i32/u64).
+    SampleRange,
+    /// A capacity, size or setting does not fit the const bounds.
+    Capacity,
+}
+
+/// One point of an Allan deviation curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdevPoint {
+    /// Cluster size m (τ = m·τ0).
+    pub m: u32,
+    /// τ, seconds.
+    pub tau_s: f64,
+    /// Allan variance, (input unit)², e.g. (°/s)².
+    pub avar: f64,
+    /// Number of terms summed (N − 2m + 1 for N rate samples).
+    pub terms: u64,
+    /// Number of rate samples the point was computed from.
+    pub samples: u64,
+}
+
+impl AdevPoint {
+    /// Allan deviation, input unit (e.g. °/s).
+    pub fn adev(&self) -> f64 {
+        libm::sqrt(self.avar)
+    }
+
+    /// Two-sided confidence interval of the deviation at `confidence`
+    /// (e.g. 0.683), from the EDF for the given noise type: `(lo, hi)`.
+    pub fn interval(&self, noise: NoiseType, confidence: f64) -> Option<(f64, f64)> {
+        let e = edf(noise, self.samples + 1, self.m as u64)?;
+        let p = 0.5 * (1.0 - confidence);
+        let lo = chi2_quantile(1.0 - p, e)?;
+        let hi = chi2_quantile(p, e)?;
+        Some((
+            libm::sqrt(self.avar * e / lo),
+            libm::sqrt(self.avar * e / hi),
+        ))
+    }
+}
+
+/// Power-law noise type of the rate data, by the exponent α of its
+/// spectrum S_y(f) ∝ f^α (SP 1065 §4). Gyro names in brackets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NoiseType {
+    /// α = 2, white phase (angle quantisation).
+    WhitePm,
+    /// α = 1, flicker phase.
+    FlickerPm,
+    /// α = 0, white frequency (angle random walk).
+    WhiteFm,
+    /// α = −1, flicker frequency (bias instability).
+    FlickerFm,
+    /// α = −2, random-walk frequency (rate random walk).
+    RandomWalkFm,
+}
+
+impl NoiseType {
+    /// Dominant noise type from the local log–log slope μ of σ(τ)
+    /// (σ ∝ τ^μ: −1 for PM, −½ white FM, 0 flicker FM, +½ RWFM).
+    pub fn from_adev_slope(mu: f64) -> Self {
+        if mu < -0.75 {
+            NoiseType::WhitePm
+        } else if mu < -0.25 {
+            NoiseType::WhiteFm
+        } else if mu < 0.25 {
+            NoiseType::FlickerFm
+        } else {
+            NoiseType::RandomWalkFm
+        }
+    }
+}
+
+/// Equivalent degrees of freedom of the overlapping AVAR, SP 1065 Table 5
+/// ("simple" formulas, after Howe, Allan and Barnes), with `n_phase` phase
+/// points (rate samples + 1) and cluster size `m`. `None` if undefined.
+pub fn edf(noise: NoiseType, n_phase: u64, m: u64) -> Option<f64> {
+    let n = n_phase as f64;
+    let m_f = m as f64;
+    if m == 0 || n_phase < 2 * m + 1 || n_phase < 4 {
+        return None;
+    }
+    let e = match noise {
+        NoiseType::WhitePm => (n + 1.0) * (n - 2.0 * m_f) / (2.0 * (n - m_f)),
+        NoiseType::FlickerPm => libm::exp(libm::sqrt(
+            libm::log((n - 1.0) / (2.0 * m_f)) * libm::log((2.0 * m_f + 1.0) * (n - 1.0) / 4.0),
+        )),
+        NoiseType::WhiteFm => {
+            (3.0 * (n - 1.0) / (2.0 * m_f) - 2.0 * (n - 2.0) / n) * 4.0 * m_f * m_f
+                / (4.0 * m_f * m_f + 5.0)
+        }
+        NoiseType::FlickerFm => {
+            if m == 1 {
+                2.0 * (n - 2.0) / (2.3 * n - 4.9)
+            } else {
+                5.0 * n * n / (4.0 * m_f * (n + 3.0 * m_f))
+            }
+        }
+        NoiseType::RandomWalkFm => {
+            (n - 2.0) / m_f * ((n - 1.0) * (n - 1.0) - 3.0 * m_f * (n - 1.0) + 4.0 * m_f * m_f)
+                / ((n - 3.0) * (n - 3.0))
+        }
+    };
+    (e.is_finite() && e > 0.0).then_some(e)
+}
+
+/// Overlapping Allan variance of `rate` at cluster size `m` (τ = m·τ0), f64.
+///
+/// The mean rate is removed first (it cancels in every term), then the
+/// angle θ is accumulated into `phase` (length ≥ `rate.len() + 1`) and
+/// `σ² = Σ (θ[k+2m] − 2θ[k+m] + θ[k])² / (2 m² τ0² (N − 2m + 1))`.
+/// Removing the mean keeps θ small, so the second difference keeps its
+/// digits even at large bias and 10⁷ samples.
+pub fn oavar(
+    rate: &[f64],
+    tau0_s: f64,
+    m: usize,
+    phase: &mut [f64],
+) -> Result<AdevPoint, AllanError> {
+    fill_phase(rate, phase)?;
+    oavar_phase(&phase[..rate.len() + 1], tau0_s, m)
+}
+
+/// Phase (angle in units of rate·τ0, mean rate removed) of `rate` into
+/// `phase[..=rate.len()]`.
+pub fn fill_phase(rate: &[f64], phase: &mut [f64]) -> Result<(), AllanError> {
+    if phase.len() < rate.len() + 1 {
+        return Err(AllanError::Scratch);
+    }
+    let mut mean = 0.0;
+    for &w in rate {
+        if !w.is_finite() {
+            return Err(AllanError::NonFinite);
+        }
+        mean += w;
+    }
+    mean /= rate.len().max(1) as f64;
+    let mut x = 0.0;
+    phase[0] = 0.0;
+    for (p, &w) in phase[1..].iter_mut().zip(rate) {
+        x += w - mean;
+        *p = x;
+    }
+    Ok(())
+}
+
+/// Overlapping AVAR from phase filled by [`fill_phase`] (θ in rate units ×
+/// samples; `phase.len()` = rate samples + 1).
+pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
+    if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {
+        return Err(AllanError::BadTau);
+    }
+    let n = phase.len().saturating_sub(1);
+    if n < 2 * m {
+        return Err(AllanError::TooShort);
+    }
+    let terms = phase.len() - 2 * m;
+    // Equal-length views (no bounds checks in the loop) and four
+    // independent accumulators let the host vectorise it.
+    let x0 = &phase[..terms];
+    let x1 = &phase[m..m + terms];
+    let x2 = &phase[2 * m..2 * m + terms];
+    let mut acc = [0.0f64; 4];
+    let chunks = terms / 4;
+    for c in 0..chunks {
+        for l in 0..4 {
+            let k = 4 * c + l;
+            let d = x2[k] - 2.0 * x1[k] + x0[k];
+            acc[l] += d * d;
+        }
+    }
+    for k in 4 * chunks..terms {
+        let d = x2[k] - 2.0 * x1[k] + x0[k];
+        acc[0] += d * d;
+    }
+    let s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    let mf = m as f64;
+    Ok(AdevPoint {
+        m: m as u32,
+        tau_s: mf * tau0_s,
+        avar: s / (2.0 * mf * mf * terms as f64),
+        terms: terms as u64,
+        samples: n as u64,
+    })
+}
+
+/// Non-overlapping Allan variance (SP 1065 eq. 6), for the published
+/// NBS14 check. Same phase input as [`oavar_phase`].
+pub fn avar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
+    if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {
+        return Err(AllanError::BadTau);
+    }
+    let n = phase.len().saturating_sub(1);
+    if n < 2 * m {
+        return Err(AllanError::TooShort);
+    }
+    let mut s = 0.0;
+    let mut terms = 0u64;
+    let mut k = 0;
+    while k + 2 * m < phase.len() {
+        let d = phase[k + 2 * m] - 2.0 * phase[k + m] + phase[k];
+        s += d * d;
+        terms += 1;
+        k += m;
+    }
+    let mf = m as f64;
+    Ok(AdevPoint {
+        m: m as u32,
+        tau_s: mf * tau0_s,
+        avar: s / (2.0 * mf * mf * terms as f64),
+        terms,
+        samples: n as u64,
+    })
+}
+
+/// Octave cluster sizes 1, 2, 4, … with at least one term for `n` samples.
+pub fn octave_ms(n: usize) -> impl Iterator<Item = usize> {
+    (0..usize::BITS)
+        .map(|j| 1usize << j)
+        .take_while(move |&m| n >= 2 * m)
+}
+
+/// Which IEEE 952 term a [`NoiseTerm`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TermKind {
+    /// Quantisation noise Q, σ = √3·Q/τ; unit arc-seconds (″).
+    Quantisation,
+    /// Angle random walk N, σ = N/√τ; unit °/√h.
+    AngleRandomWalk,
+    /// Bias instability B, flat floor σ = 0.664·B; unit °/h.
+    BiasInstability,
+    /// Rate random walk K, σ = K·√(τ/3); unit °/h/√h.
+    RateRandomWalk,
+    /// Rate ramp R, σ = R·τ/√2; unit °/h².
+    RateRamp,
+}
+
+impl TermKind {
+    /// Unit of the reported value.
+    pub fn unit(self) -> &'static str {
+        match self {
+            TermKind::Quantisation => "arcsec",
+            TermKind::AngleRandomWalk => "deg/sqrt(h)",
+            TermKind::BiasInstability => "deg/h",
+            TermKind::RateRandomWalk => "deg/h/sqrt(h)",
+            TermKind::RateRamp => "deg/h^2",
+        }
+    }
+
+    /// Log–log slope of σ(τ) where this term dominates.
+    pub fn slope(self) -> f64 {
+        match self {
+            TermKind::Quantisation => -1.0,
+            TermKind::AngleRandomWalk => -0.5,
+            TermKind::BiasInstability => 0.0,
+            TermKind::RateRandomWalk => 0.5,
+            TermKind::RateRamp => 1.0,
+        }
+    }
+
+    /// The term's value (in [`TermKind::unit`]) if it alone made σ at τ
+    /// (σ in °/s, τ in s). Over the curve the smallest of these bounds the
+    /// term from above: every other term only adds variance.
+    fn alone_at(self, sigma_dps: f64, tau_s: f64) -> f64 {
+        match self {
+            TermKind::Quantisation => sigma_dps * tau_s / libm::sqrt(3.0) * 3600.0,
+            TermKind::AngleRandomWalk => sigma_dps * libm::sqrt(tau_s) * 60.0,
+            TermKind::BiasInstability => sigma_dps / 0.664 * 3600.0,
+            TermKind::RateRandomWalk => sigma_dps * libm::sqrt(3.0 / tau_s) * 3600.0 * 60.0,
+            TermKind::RateRamp => sigma_dps * libm::sqrt(2.0) / tau_s * 3600.0 * 3600.0,
+        }
+    }
+}
+
+/// One IEEE 952 noise term read from an ADEV curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseTerm {
+    /// Which term.
+    pub kind: TermKind,
+    /// Value in `kind.unit()`.
+    pub value: f64,
+    /// τ (s) where it was read.
+    pub tau_s: f64,
+    /// True when the curve's local slope there matches the term's slope
+    /// (within ±0.15), so the term is *visible*; otherwise `value` is only
+    /// an upper bound.
+    pub visible: bool,
+}
+
+/// IEEE 952 terms from an ADEV curve in °/s (points sorted by τ).
+///
+/// Each term is read where its own asymptote touches the curve from below
+/// (the minimum over τ of the value that term alone would need), and is
+/// marked visible only if the local log–log slope there is the term's.
+/// This is the standard graphical reading, made mechanical; it needs no
+/// fit and never reports a term larger than the curve allows.
+pub fn noise_terms(points: &[AdevPoint], out: &mut [Option<NoiseTerm>; 5]) {
+    const KINDS: [TermKind; 5] = [
+        TermKind::Quantisation,
+        TermKind::AngleRandomWalk,
+        TermKind::BiasInstability,
+        TermKind::RateRandomWalk,
+        TermKind::RateRamp,
+    ];
+    for (slot, kind) in out.iter_mut().zip(KINDS) {
+        *slot = None;
+        let mut best: Option<(usize, f64)> = None;
+        for (i, p) in points.iter().enumerate() {
+            let v = kind.alone_at(p.adev(), p.tau_s);
+            if v.is_finite() && best.is_none_or(|(_, b)| v < b) {
+                best = Some((i, v));
+            }
+        }
+        let Some((i, value)) = best else { continue };
+        let slope = local_slope(points, i);
+        *slot = Some(NoiseTerm {
+            kind,
+            value,
+            tau_s: points[i].tau_s,
+            visible: slope.is_some_and(|s| libm::fabs(s - kind.slope()) <= 0.15),
+        });
+    }
+}
+
+/// Log–log slope of σ(τ) around point `i` (central where possible).
+pub fn local_slope(points: &[AdevPoint], i: usize) -> Option<f64> {
+    let a = i.saturating_sub(1);
+    let b = (i + 1).min(points.len().checked_sub(1)?);
+    if a == b {
+        return None;
+    }
+    let (pa, pb) = (points[a], points[b]);
+    let s =
+        (libm::log(pb.adev()) - libm::log(pa.adev())) / (libm::log(pb.tau_s) - libm::log(pa.tau_s));
+    s.is_finite().then_some(s)
+}
+
+#[cfg(test)]
+mod tests;
