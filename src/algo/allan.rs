@@ -27,7 +27,7 @@ pub enum AllanError {
     NonFinite,
     /// The phase scratch buffer is shorter than the data plus one.
     Scratch,
-    /// An integer sample is outside ±2²⁰ (streaming path; sums must stay
+    /// An integer sample has |w| ≥ 2²⁰ (streaming path; sums must stay
     /// exact in i32/u64).
     SampleRange,
     /// A capacity, size or setting does not fit the const bounds.

@@ -170,6 +170,12 @@ pub struct DavarStep<const T: usize> {
     pub avar: [f32; T],
 }
 
+/// d² exactly: |d| < 2³¹ because |w| < 2²⁰ and m ≤ 2¹⁰ (one `smull`).
+#[inline(always)]
+fn sq(d: i32) -> u128 {
+    (d as i64 * d as i64) as u64 as u128
+}
+
 /// Edge of the window: the sliding sums of the term that starts (tail) or
 /// ends (head) there, per τ.
 #[derive(Clone, Copy, Debug)]
@@ -189,6 +195,10 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     n: u64,
     /// Power of bins 1..=15 of each stored frame (frame f in slot f % FRAMES).
     frames: [[f32; BINS]; FRAMES],
+    /// Each frame's energy e (bins 1..=15) and e·ln e, kept when the frame
+    /// is stored, so a hop's temporal entropy is K additions and one ln.
+    energy: [f32; FRAMES],
+    eloge: [f32; FRAMES],
     head: Edge<T>,
     tail: Edge<T>,
     acc: [u128; T],
@@ -200,6 +210,9 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     t: u64,
     /// Change located at the last hop (ChangeAware).
     change: Option<u64>,
+    /// Threshold for each frame count 0..FRAMES, computed once: the χ²
+    /// quantile is soft-float f64 work that must stay out of the hot path.
+    thresholds: [f32; FRAMES],
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T> {
@@ -238,6 +251,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             ring: [0; CAP],
             n: 0,
             frames: [[0.0; BINS]; FRAMES],
+            energy: [0.0; FRAMES],
+            eloge: [0.0; FRAMES],
             head: edge,
             tail: edge,
             acc: [0; T],
@@ -247,7 +262,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             started: false,
             t: 0,
             change: None,
+            thresholds: [0.0; FRAMES],
         };
+        for k in 0..FRAMES {
+            d.thresholds[k] = d.quantile_for(k);
+        }
         d.threshold = d.calibrate(d.len);
         Ok(d)
     }
@@ -277,8 +296,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.calibrate_frames(len as usize / SEG)
     }
 
-    /// Threshold for `frames` STFT frames.
+    /// Threshold for `frames` STFT frames (table lookup).
     fn calibrate_frames(&self, frames: usize) -> f32 {
+        self.thresholds[frames.min(FRAMES - 1)]
+    }
+
+    /// Threshold for `frames` STFT frames, computed.
+    fn quantile_for(&self, frames: usize) -> f32 {
         let p_fa = match self.cfg.threshold {
             Threshold::Fixed(v) => return v,
             Threshold::Auto { p_fa } => p_fa as f64,
@@ -301,7 +325,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         }
     }
 
-    /// Add one sample (integer, |w| ≤ 2²⁰; quantise rates with
+    /// Add one sample (integer, |w| < 2²⁰; quantise rates with
     /// [`crate::algo::allan::stream::quantise`]). Once λ2 samples have
     /// arrived, returns the time t (sample index) of the window now centred
     /// λ2/2 samples back; [`Davar::estimate`] then gives its values. A
@@ -361,30 +385,21 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if k < 4 {
             return;
         }
-        let mut en = [0.0f32; FRAMES];
-        let mut tot = 0.0f32;
-        for (i, f) in (f_lo..f_hi).enumerate() {
-            let p: f32 = self.frames[f as usize % FRAMES].iter().sum();
-            en[i] = p;
-            tot += p;
-        }
-        if !(tot > 0.0) {
+        let Some(deficit) = self.deficit(f_lo, f_hi) else {
             self.change = None;
             return;
-        }
-        let mut h = 0.0f32;
-        for &p in &en[..k] {
-            if p > 0.0 {
-                let q = p / tot;
-                h -= q * lnf(q);
-            }
-        }
-        let deficit = lnf(k as f32) - h;
+        };
         self.entropy = deficit;
         self.threshold = self.calibrate_frames(k);
         if !(deficit > self.threshold) {
             self.change = None;
             return;
+        }
+        let mut en = [0.0f32; FRAMES];
+        let mut tot = 0.0f32;
+        for (i, s) in Self::slots(f_lo, f_hi).enumerate() {
+            en[i] = self.energy[s];
+            tot += en[i];
         }
         // Two-segment scale model: minimise j·ln(mean_left) +
         // (k − j)·ln(mean_right) over the split j (one ln per side).
@@ -468,8 +483,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 self.head.a[j] += x - mid;
                 self.head.b[j] += mid - old;
                 if pos >= s + 2 * m {
-                    let d = self.head.a[j] as i64 - self.head.b[j] as i64;
-                    self.acc[j] += (d * d) as u128;
+                    let d = self.head.a[j] - self.head.b[j];
+                    self.acc[j] += sq(d);
                 }
             }
         }
@@ -487,8 +502,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
                 self.head.a[j] += x - mid;
                 self.head.b[j] += mid - old;
-                let d = self.head.a[j] as i64 - self.head.b[j] as i64;
-                self.acc[j] += (d * d) as u128;
+                let d = self.head.a[j] - self.head.b[j];
+                self.acc[j] += sq(d);
             }
             self.head.pos = e + 1;
         }
@@ -496,8 +511,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             let e = self.head.pos - 1;
             for j in 0..T {
                 let m = 1u64 << j;
-                let d = self.head.a[j] as i64 - self.head.b[j] as i64;
-                self.acc[j] -= (d * d) as u128;
+                let d = self.head.a[j] - self.head.b[j];
+                self.acc[j] -= sq(d);
                 let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
                 self.head.a[j] -= x - mid;
                 self.head.b[j] -= mid - old;
@@ -513,8 +528,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             let s = self.tail.pos;
             for j in 0..T {
                 let m = 1u64 << j;
-                let d = self.tail.a[j] as i64 - self.tail.b[j] as i64;
-                self.acc[j] -= (d * d) as u128;
+                let d = self.tail.a[j] - self.tail.b[j];
+                self.acc[j] -= sq(d);
                 let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
                 self.tail.b[j] += x1 - x0;
                 self.tail.a[j] += x2 - x1;
@@ -528,8 +543,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
                 self.tail.b[j] -= x1 - x0;
                 self.tail.a[j] -= x2 - x1;
-                let d = self.tail.a[j] as i64 - self.tail.b[j] as i64;
-                self.acc[j] += (d * d) as u128;
+                let d = self.tail.a[j] - self.tail.b[j];
+                self.acc[j] += sq(d);
             }
             self.tail.pos = s;
         }
@@ -544,9 +559,42 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         }
         let spec = microfft::real::rfft_32(&mut x);
         let slot = (first / SEG as u64) as usize % FRAMES;
+        let mut e = 0.0f32;
         for (p, c) in self.frames[slot].iter_mut().zip(spec[1..].iter()) {
             *p = c.re * c.re + c.im * c.im;
+            e += *p;
         }
+        self.energy[slot] = e;
+        self.eloge[slot] = if e > 0.0 { e * lnf(e) } else { 0.0 };
+    }
+
+    /// Slots of frames `f_lo..f_hi` (contiguous, wrapping): one u64
+    /// division per hop instead of one per frame.
+    fn slots(f_lo: u64, f_hi: u64) -> impl Iterator<Item = usize> {
+        let first = (f_lo % FRAMES as u64) as usize;
+        (0..(f_hi - f_lo) as usize).map(move |i| {
+            let s = first + i;
+            if s >= FRAMES {
+                s - FRAMES
+            } else {
+                s
+            }
+        })
+    }
+
+    /// Temporal entropy deficit D = ln K − H over frames `f_lo..f_hi`, with
+    /// H = ln Σe − Σ(e ln e)/Σe; `None` if the frames hold no energy.
+    fn deficit(&self, f_lo: u64, f_hi: u64) -> Option<f32> {
+        let (mut tot, mut sum_eloge) = (0.0f32, 0.0f32);
+        for s in Self::slots(f_lo, f_hi) {
+            tot += self.energy[s];
+            sum_eloge += self.eloge[s];
+        }
+        if !(tot > 0.0) {
+            return None;
+        }
+        let h = lnf(tot) - sum_eloge / tot;
+        Some(lnf((f_hi - f_lo) as f32) - h)
     }
 
     /// Entropy of the window [t − L/2, t + L/2) and the eq. 4 update.
@@ -560,30 +608,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             return;
         }
         let score = match self.cfg.entropy {
-            EntropyKind::Temporal => {
-                let mut tot = 0.0f32;
-                let mut en = [0.0f32; FRAMES];
-                for (i, f) in (f_lo..f_hi).enumerate() {
-                    let p: f32 = self.frames[f as usize % FRAMES].iter().sum();
-                    en[i] = p;
-                    tot += p;
-                }
-                if !(tot > 0.0) {
-                    return;
-                }
-                let mut h = 0.0f32;
-                for &p in &en[..k] {
-                    if p > 0.0 {
-                        let q = p / tot;
-                        h -= q * lnf(q);
-                    }
-                }
-                lnf(k as f32) - h
-            }
+            EntropyKind::Temporal => match self.deficit(f_lo, f_hi) {
+                Some(d) => d,
+                None => return,
+            },
             EntropyKind::Spectral => {
                 let mut bins = [0.0f32; BINS];
-                for f in f_lo..f_hi {
-                    for (b, p) in bins.iter_mut().zip(self.frames[f as usize % FRAMES].iter()) {
+                for f in Self::slots(f_lo, f_hi) {
+                    for (b, p) in bins.iter_mut().zip(self.frames[f].iter()) {
                         *b += p;
                     }
                 }

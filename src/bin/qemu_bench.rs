@@ -1,7 +1,9 @@
 //! Cortex-M4 cost benchmark, run under `qemu-system-arm -icount shift=0`
 //! (`cargo xtask bench`). Prints executed instructions per fused 3-axis
-//! sample for every fusion method with N = 4. SysTick counts core clocks;
-//! the instructions-per-tick ratio is calibrated on a loop of known length.
+//! sample for every fusion method with N = 4, per input sample for
+//! streaming ADEV (10 octave τ) and E-DAVAR at λ2 = 256, 1024 and 4096, and
+//! the RAM per axis of each. SysTick counts core clocks; the
+//! instructions-per-tick ratio is calibrated on a loop of known length.
 #![no_std]
 #![no_main]
 
@@ -11,6 +13,10 @@ use core::sync::atomic::Ordering;
 use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
 
+use gyro_array::algo::allan::stream::StreamAdev;
+use gyro_array::algo::davar::{
+    Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold,
+};
 use gyro_array::algo::fusion::{AxisState, Fusion};
 use gyro_array::board::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
 use gyro_array::checks::methods;
@@ -82,5 +88,94 @@ fn main() -> ! {
         );
         ok &= per_sample > 0.0;
     }
+
+    // Noise samples for the Allan benches: WARM samples of white noise to
+    // fill the windows, then ALLAN_SAMPLES measured ones with one variance
+    // step (×4) in the middle, so the E-DAVAR window really moves. The same
+    // input for every λ2.
+    let mut samples = [0i16; WARM + ALLAN_SAMPLES];
+    for (i, x) in samples.iter_mut().enumerate() {
+        let s = if i >= WARM + ALLAN_SAMPLES / 2 { 200.0 } else { 100.0 };
+        *x = (s * rng.gaussian()) as i16;
+    }
+    let per = |ticks: u64, n: usize| ticks as f32 * ipt / n as f32;
+    let loop_ticks = {
+        let t0 = t.now();
+        for &x in &samples[WARM..] {
+            black_box(x as i32);
+        }
+        t.now() - t0
+    };
+
+    let Ok(mut adev) = StreamAdev::<10, 1024>::new() else {
+        exit(false)
+    };
+    let t0 = t.now();
+    for &x in &samples[WARM..] {
+        ok &= adev.push(black_box(x as i32)).is_ok();
+    }
+    let ticks = (t.now() - t0).saturating_sub(loop_ticks);
+    defmt::info!(
+        "bench allan stream (10 octave tau): {=u32} instructions per sample, {=usize} B RAM per axis",
+        per(ticks, ALLAN_SAMPLES) as u32,
+        core::mem::size_of::<StreamAdev<10, 1024>>()
+    );
+
+    ok &= bench_davar::<256, 9>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+    ok &= bench_davar::<1024, 33>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+    ok &= bench_davar::<4096, 129>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+    ok &= bench_davar::<1024, 33>(&t, ipt, &samples, loop_ticks, Placement::Centred);
     exit(ok)
+}
+
+const ALLAN_SAMPLES: usize = 8192;
+const WARM: usize = 4096;
+/// E-DAVAR τ grid: m = 1 … 64 at every λ2 (2^7 ≤ λ1 = λ2/2 at λ2 = 256).
+const DAVAR_TAUS: usize = 7;
+
+/// Instructions per sample of E-DAVAR with λ2 = CAP, λ1 = λ2/2, after the
+/// window has filled.
+#[inline(never)]
+fn bench_davar<const CAP: usize, const FRAMES: usize>(
+    t: &Ticks,
+    ipt: f32,
+    samples: &[i16],
+    loop_ticks: u64,
+    placement: Placement,
+) -> bool {
+    let cfg = DavarConfig {
+        lambda1: (CAP / 2) as u16,
+        lambda2: CAP as u16,
+        l_init: CAP as u16,
+        delta_l: (CAP / 16) as u16,
+        step: StepMode::Constant,
+        entropy: EntropyKind::Temporal,
+        threshold: Threshold::Auto { p_fa: 0.01 },
+        placement,
+    };
+    let Ok(mut d) = Davar::<CAP, FRAMES, DAVAR_TAUS>::new(cfg) else {
+        return false;
+    };
+    let mut ok = true;
+    for &x in &samples[WARM - CAP..WARM] {
+        ok &= d.push(x as i32).is_ok();
+    }
+    let t0 = t.now();
+    for &x in &samples[WARM..] {
+        ok &= d.push(black_box(x as i32)).is_ok();
+    }
+    let ticks = (t.now() - t0).saturating_sub(loop_ticks);
+    let name = match placement {
+        Placement::ChangeAware => "change-aware",
+        Placement::Centred => "centred",
+    };
+    defmt::info!(
+        "bench e-davar {=str} lambda2 = {=usize} (7 octave tau): {=u32} instructions per sample, {=usize} B RAM per axis",
+        name,
+        CAP,
+        (ticks as f32 * ipt / ALLAN_SAMPLES as f32) as u32,
+        core::mem::size_of::<Davar<CAP, FRAMES, DAVAR_TAUS>>()
+    );
+    let est = d.estimate();
+    ok && est.avar[0] > 0.0
 }

@@ -8,12 +8,13 @@
 //! so after 10⁷ (or 10¹⁵) samples the result still equals a from-scratch
 //! recompute bit for bit: there is no drift to bound.
 //!
-//! Range: |sample| ≤ 2²⁰ and m ≤ 2¹⁰ keep |a|, |b| ≤ 2³⁰ and (a − b)² < 2⁶³.
+//! Range: |sample| < 2²⁰ and m ≤ 2¹⁰ keep |a|, |b| < 2³⁰, |a − b| < 2³¹.
 
 use super::{AdevPoint, AllanError};
 
-/// Largest accepted |sample|.
-pub const SAMPLE_MAX: i32 = 1 << 20;
+/// Largest accepted |sample| (2²⁰ − 1: sums of 2¹⁰ samples then differ by
+/// less than 2³¹, so differences and squares stay in one `smull`).
+pub const SAMPLE_MAX: i32 = (1 << 20) - 1;
 
 /// Quantise a rate to integer steps of `lsb` (same unit). Saturating input
 /// or NaN gives an error rather than a silently clipped sample.
@@ -87,8 +88,8 @@ impl<const T: usize, const RING: usize> StreamAdev<T, RING> {
             self.a[j] += w - mid;
             self.b[j] += mid - old;
             if self.n + 1 >= 2 * m as u64 {
-                let d = self.a[j] as i64 - self.b[j] as i64;
-                self.acc[j] += (d * d) as u128;
+                let d = self.a[j] - self.b[j];
+                self.acc[j] += (d as i64 * d as i64) as u64 as u128;
             }
         }
         self.ring[self.n as usize & (RING - 1)] = w;
