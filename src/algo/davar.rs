@@ -334,6 +334,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if !(-SAMPLE_MAX..=SAMPLE_MAX).contains(&w) {
             return Err(AllanError::SampleRange);
         }
+        // No window reaches before n + 1 − λ2 after this sample: move the
+        // tail there first, while the sample the new one evicts (when
+        // CAP = λ2) is still in the ring.
+        if self.started {
+            let floor = self.n + 1 - self.cfg.lambda2 as u64;
+            if self.tail.pos < floor {
+                self.move_tail(floor);
+            }
+        }
         self.ring[self.n as usize & (CAP - 1)] = w;
         self.n += 1;
         if self.n.is_multiple_of(SEG as u64) {

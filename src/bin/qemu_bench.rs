@@ -14,9 +14,7 @@ use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
 
 use gyro_array::algo::allan::stream::StreamAdev;
-use gyro_array::algo::davar::{
-    Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold,
-};
+use gyro_array::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
 use gyro_array::algo::fusion::{AxisState, Fusion};
 use gyro_array::board::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
 use gyro_array::checks::methods;
@@ -95,7 +93,11 @@ fn main() -> ! {
     // input for every λ2.
     let mut samples = [0i16; WARM + ALLAN_SAMPLES];
     for (i, x) in samples.iter_mut().enumerate() {
-        let s = if i >= WARM + ALLAN_SAMPLES / 2 { 200.0 } else { 100.0 };
+        let s = if i >= WARM + ALLAN_SAMPLES / 2 {
+            200.0
+        } else {
+            100.0
+        };
         *x = (s * rng.gaussian()) as i16;
     }
     let per = |ticks: u64, n: usize| ticks as f32 * ipt / n as f32;

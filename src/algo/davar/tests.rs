@@ -209,3 +209,43 @@ fn change_aware_window_is_exact_and_avoids_the_change() {
     c.lambda1 = 500;
     assert_eq!(D::new(c).err(), Some(DavarError::Lambda));
 }
+
+#[test]
+fn ring_of_exactly_lambda2_stays_exact() {
+    let mut rng = Rng::new(5);
+    let w: Vec<i32> = (0..3000)
+        .map(|i| {
+            let sine = if i >= 2000 {
+                10240.0 * (2.0 * core::f32::consts::PI * 0.5 * (i - 2000) as f32 / 1000.0).sin()
+            } else {
+                0.0
+            };
+            (5120.0 + sine + 23.0 * rng.gaussian()).round() as i32
+        })
+        .collect();
+    let cfg = DavarConfig {
+        lambda1: 256,
+        lambda2: 512,
+        l_init: 512,
+        delta_l: 32,
+        step: StepMode::Constant,
+        entropy: EntropyKind::Temporal,
+        threshold: Threshold::Auto { p_fa: 0.01 },
+        placement: Placement::ChangeAware,
+    };
+    let mut d = Davar::<512, 17, 7>::new(cfg).unwrap();
+    for (i, &x) in w.iter().enumerate() {
+        if let Some(t) = d.push(x).unwrap() {
+            if i % 37 == 0 {
+                let st = d.estimate();
+                let (s, e) = d.edges(t);
+                let want = batch(&w, s as usize, e as usize, 1);
+                let got = st.avar[0] as f64;
+                assert!(
+                    ((got - want) / want).abs() < 1e-5,
+                    "i={i} t={t} {got} vs {want}"
+                );
+            }
+        }
+    }
+}
