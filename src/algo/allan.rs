@@ -50,6 +50,12 @@ pub struct AdevPoint {
 }
 
 impl AdevPoint {
+    /// At least 10 clusters of m samples went into the point (N ≥ 10·m).
+    /// Beyond that a point rests on a handful of independent differences.
+    pub fn reliable(&self) -> bool {
+        self.samples >= 10 * self.m as u64
+    }
+
     /// Allan deviation, input unit (e.g. °/s).
     pub fn adev(&self) -> f64 {
         libm::sqrt(self.avar)
@@ -186,25 +192,12 @@ pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, Al
         return Err(AllanError::TooShort);
     }
     let terms = phase.len() - 2 * m;
-    // Equal-length views (no bounds checks in the loop) and four
-    // independent accumulators let the host vectorise it.
-    let x0 = &phase[..terms];
-    let x1 = &phase[m..m + terms];
-    let x2 = &phase[2 * m..2 * m + terms];
-    let mut acc = [0.0f64; 4];
-    let chunks = terms / 4;
-    for c in 0..chunks {
-        for l in 0..4 {
-            let k = 4 * c + l;
-            let d = x2[k] - 2.0 * x1[k] + x0[k];
-            acc[l] += d * d;
-        }
-    }
-    for k in 4 * chunks..terms {
-        let d = x2[k] - 2.0 * x1[k] + x0[k];
-        acc[0] += d * d;
-    }
-    let s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    let l = second_diff_sq(
+        &phase[..terms],
+        &phase[m..m + terms],
+        &phase[2 * m..2 * m + terms],
+    );
+    let s: f64 = l.iter().sum();
     let mf = m as f64;
     Ok(AdevPoint {
         m: m as u32,
@@ -213,6 +206,132 @@ pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, Al
         terms: terms as u64,
         samples: n as u64,
     })
+}
+
+/// Overlapping AVAR at every octave m = 1, 2, 4, … that fits, in one
+/// sweep over `phase` (from [`fill_phase`]); writes `out[j]` for m = 2ʲ and
+/// returns how many were written. Same sums as [`oavar_phase`], up to the
+/// order of additions.
+pub fn oavar_octave_phase(phase: &[f64], tau0_s: f64, out: &mut [AdevPoint]) -> usize {
+    let mut sums = OctaveSums::new(phase.len());
+    sums.add_range(phase, 0, phase.len());
+    sums.finish(tau0_s, out)
+}
+
+/// Partial sums of the octave OADEV sweep. Split the term index range
+/// among threads (host) with [`OctaveSums::add_range`], [`OctaveSums::merge`]
+/// the parts, then [`OctaveSums::finish`].
+///
+/// The sweep goes block by block and, inside a block, τ by τ: τ j reads θ
+/// at offsets 0, m and 2m, and τ j + 1 reads 0, 2m and 4m, so two of its
+/// three streams are still in cache. Memory is read about once for all τ
+/// whose offsets fit in the cache, instead of once per τ.
+#[derive(Clone, Debug)]
+pub struct OctaveSums {
+    phase_len: usize,
+    count: usize,
+    acc: [[f64; LANES]; OctaveSums::MAX_J],
+}
+
+impl OctaveSums {
+    const MAX_J: usize = 48;
+    const BLOCK: usize = 2048;
+
+    /// Sums for phase data of `phase_len` points (rate samples + 1).
+    pub fn new(phase_len: usize) -> Self {
+        let n = phase_len.saturating_sub(1);
+        Self {
+            phase_len,
+            count: octave_ms(n).count().min(Self::MAX_J),
+            acc: [[0.0; LANES]; Self::MAX_J],
+        }
+    }
+
+    /// Add the terms with index k in `from..to` (clipped to each τ's count).
+    /// `phase` must be the whole series (`phase_len` points).
+    pub fn add_range(&mut self, phase: &[f64], from: usize, to: usize) {
+        if phase.len() != self.phase_len {
+            return;
+        }
+        let mut k0 = from;
+        while k0 < to {
+            let k1 = (k0 + Self::BLOCK).min(to);
+            for (j, a) in self.acc.iter_mut().enumerate().take(self.count) {
+                let m = 1usize << j;
+                let terms = self.phase_len - 2 * m;
+                if k0 >= terms {
+                    break;
+                }
+                let len = k1.min(terms) - k0;
+                let l = second_diff_sq(
+                    &phase[k0..k0 + len],
+                    &phase[k0 + m..k0 + m + len],
+                    &phase[k0 + 2 * m..k0 + 2 * m + len],
+                );
+                for q in 0..LANES {
+                    a[q] += l[q];
+                }
+            }
+            k0 = k1;
+        }
+    }
+
+    /// Add another part's sums (same `phase_len`).
+    pub fn merge(&mut self, other: &OctaveSums) {
+        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
+            for q in 0..LANES {
+                a[q] += b[q];
+            }
+        }
+    }
+
+    /// Write the curve (`out[j]` for m = 2ʲ); returns the number of points.
+    pub fn finish(&self, tau0_s: f64, out: &mut [AdevPoint]) -> usize {
+        if !(tau0_s > 0.0) || !tau0_s.is_finite() {
+            return 0;
+        }
+        let count = self.count.min(out.len());
+        let n = self.phase_len.saturating_sub(1);
+        for (j, (o, a)) in out.iter_mut().zip(self.acc.iter()).take(count).enumerate() {
+            let m = 1usize << j;
+            let terms = self.phase_len - 2 * m;
+            let mf = m as f64;
+            *o = AdevPoint {
+                m: m as u32,
+                tau_s: mf * tau0_s,
+                avar: a.iter().sum::<f64>() / (2.0 * mf * mf * terms as f64),
+                terms: terms as u64,
+                samples: n as u64,
+            };
+        }
+        count
+    }
+}
+
+/// Independent partial sums (lanes) of the second-difference kernel.
+const LANES: usize = 8;
+
+/// Σ (x2 − 2·x1 + x0)² over equal-length slices, in [`LANES`] partial sums.
+/// Exact chunks and independent lanes let the compiler use SIMD without
+/// reassociating anything itself (the result is deterministic).
+#[inline]
+fn second_diff_sq(x0: &[f64], x1: &[f64], x2: &[f64]) -> [f64; LANES] {
+    let mut l = [0.0f64; LANES];
+    let c0 = x0.chunks_exact(LANES);
+    let c1 = x1.chunks_exact(LANES);
+    let c2 = x2.chunks_exact(LANES);
+    let (r0, r1, r2) = (c0.remainder(), c1.remainder(), c2.remainder());
+    for ((a, b), c) in c0.zip(c1).zip(c2) {
+        for q in 0..LANES {
+            let d = c[q] - 2.0 * b[q] + a[q];
+            l[q] += d * d;
+        }
+    }
+    for ((a, b), c) in r0.iter().zip(r1).zip(r2) {
+        let d = c - 2.0 * b + a;
+        l[0] += d * d;
+    }
+    l
 }
 
 /// Non-overlapping Allan variance (SP 1065 eq. 6), for the published
@@ -325,7 +444,9 @@ pub struct NoiseTerm {
 /// (the minimum over τ of the value that term alone would need), and is
 /// marked visible only if the local log–log slope there is the term's.
 /// This is the standard graphical reading, made mechanical; it needs no
-/// fit and never reports a term larger than the curve allows.
+/// fit and never reports a term larger than the curve allows. Points from
+/// fewer than 10 clusters ([`AdevPoint::reliable`]) are skipped: their
+/// scatter would make the minimum read low.
 pub fn noise_terms(points: &[AdevPoint], out: &mut [Option<NoiseTerm>; 5]) {
     const KINDS: [TermKind; 5] = [
         TermKind::Quantisation,
@@ -338,6 +459,9 @@ pub fn noise_terms(points: &[AdevPoint], out: &mut [Option<NoiseTerm>; 5]) {
         *slot = None;
         let mut best: Option<(usize, f64)> = None;
         for (i, p) in points.iter().enumerate() {
+            if !p.reliable() {
+                continue;
+            }
             let v = kind.alone_at(p.adev(), p.tau_s);
             if v.is_finite() && best.is_none_or(|(_, b)| v < b) {
                 best = Some((i, v));

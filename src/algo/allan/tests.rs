@@ -226,3 +226,47 @@ fn noise_terms_recover_arw_and_rrw() {
     // White noise alone has no visible bias instability floor.
     assert!(t[0].is_some_and(|q| !q.visible));
 }
+
+#[test]
+fn noise_terms_recover_the_emulated_icm42688() {
+    // 4 h at 100 Hz of the chip model: N and B must come back; K is below
+    // the bias-instability hump at every reliable τ, so it must be reported
+    // as an upper bound that is still above the true value.
+    let p = crate::emu::NoiseParams::ICM42688;
+    let mut rng = crate::emu::Rng::new(2024);
+    let mut ax = crate::emu::noise::AxisNoise::default();
+    let n = 4 * 3600 * 100;
+    let y: Vec<f64> = (0..n)
+        .map(|_| ax.step(&p, &mut rng, 0.0, 0.01) as f64)
+        .collect();
+    let mut phase = vec![0.0; n + 1];
+    fill_phase(&y, &mut phase).unwrap();
+    let mut pts = [AdevPoint {
+        m: 0,
+        tau_s: 0.0,
+        avar: 0.0,
+        terms: 0,
+        samples: 0,
+    }; 40];
+    let c = oavar_octave_phase(&phase, 0.01, &mut pts);
+    let mut t = [None; 5];
+    noise_terms(&pts[..c], &mut t);
+    let (arw, bi, rrw) = (t[1].unwrap(), t[2].unwrap(), t[3].unwrap());
+    assert!(
+        arw.visible && rel(arw.value, p.arw_deg_rt_h as f64) < 0.03,
+        "{arw:?}"
+    );
+    assert!(
+        bi.visible && rel(bi.value, p.bias_instability_deg_h as f64) < 0.1,
+        "{bi:?}"
+    );
+    assert!(
+        !rrw.visible && rrw.value > p.rrw_deg_h_rt_h as f64,
+        "{rrw:?}"
+    );
+    // The one-sweep octave curve equals the per-τ one.
+    for q in &pts[..c] {
+        let single = oavar_phase(&phase, 0.01, q.m as usize).unwrap();
+        assert!(rel(q.avar, single.avar) < 1e-12);
+    }
+}

@@ -1,0 +1,124 @@
+//! Allan deviation report of a recorded rate log: octave OADEV with 68 %
+//! confidence intervals (EDF for the noise type read from the local
+//! slope) and the IEEE Std 952 noise terms with their units.
+//!
+//! `cargo run -p host-tests --profile host --bin allan-report -- [FILE TAU0_S]`
+//!
+//! FILE holds one rate sample (°/s) per line. Without FILE, the report runs
+//! on 4 h at 100 Hz of the emulated ICM-42688-P noise model and compares
+//! the terms it reads with the model's settings.
+
+use gyro_array::algo::allan::{
+    edf, fill_phase, local_slope, noise_terms, oavar_octave_phase, AdevPoint, NoiseType,
+};
+use gyro_array::emu::noise::AxisNoise;
+use gyro_array::emu::{NoiseParams, Rng};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let (rate, tau0, model) = match (args.get(1), args.get(2)) {
+        (Some(path), Some(t)) => {
+            let text = std::fs::read_to_string(path).unwrap_or_else(|e| {
+                eprintln!("allan-report: {path}: {e}");
+                std::process::exit(2)
+            });
+            let mut rate = Vec::new();
+            for (i, l) in text.lines().enumerate() {
+                let l = l.trim();
+                if l.is_empty() || l.starts_with('#') {
+                    continue;
+                }
+                match l.parse::<f64>() {
+                    Ok(v) if v.is_finite() => rate.push(v),
+                    _ => {
+                        eprintln!("allan-report: {path}:{}: not a finite number: {l:?}", i + 1);
+                        std::process::exit(2)
+                    }
+                }
+            }
+            let tau0: f64 = t.parse().unwrap_or_else(|_| {
+                eprintln!("allan-report: TAU0_S must be a number of seconds");
+                std::process::exit(2)
+            });
+            (rate, tau0, None)
+        }
+        _ => {
+            let p = NoiseParams::ICM42688;
+            let fs = 100.0f32;
+            let n = (4.0 * 3600.0 * fs) as usize;
+            let mut rng = Rng::new(2024);
+            let mut ax = AxisNoise::default();
+            let rate = (0..n)
+                .map(|_| ax.step(&p, &mut rng, 0.0, 1.0 / fs) as f64)
+                .collect();
+            (rate, 1.0 / fs as f64, Some(p))
+        }
+    };
+    if rate.len() < 3 {
+        eprintln!("allan-report: need at least 3 samples");
+        std::process::exit(2);
+    }
+    let mut phase = vec![0.0; rate.len() + 1];
+    fill_phase(&rate, &mut phase).expect("finite, checked above");
+    let blank = AdevPoint {
+        m: 0,
+        tau_s: 0.0,
+        avar: 0.0,
+        terms: 0,
+        samples: 0,
+    };
+    let mut pts = [blank; 64];
+    let count = oavar_octave_phase(&phase, tau0, &mut pts);
+    let pts = &pts[..count];
+    println!(
+        "{} samples at tau0 = {tau0} s ({:.2} h)",
+        rate.len(),
+        rate.len() as f64 * tau0 / 3600.0
+    );
+    println!(
+        "{:>12} {:>13} {:>13} {:>13} {:>8} {:>12}",
+        "tau (s)", "ADEV (deg/s)", "68% lo", "68% hi", "EDF", "noise"
+    );
+    for (i, p) in pts.iter().enumerate() {
+        let noise = local_slope(pts, i).map_or(NoiseType::WhiteFm, NoiseType::from_adev_slope);
+        let e = edf(noise, p.samples + 1, p.m as u64).unwrap_or(f64::NAN);
+        let (lo, hi) = p.interval(noise, 0.683).unwrap_or((f64::NAN, f64::NAN));
+        println!(
+            "{:>12.4} {:>13.6e} {:>13.6e} {:>13.6e} {:>8.1} {:>12}{}",
+            p.tau_s,
+            p.adev(),
+            lo,
+            hi,
+            e,
+            format!("{noise:?}"),
+            if p.reliable() {
+                ""
+            } else {
+                "  (< 10 clusters: not used for terms)"
+            }
+        );
+    }
+    let mut terms = [None; 5];
+    noise_terms(pts, &mut terms);
+    println!("IEEE Std 952 terms (read where each asymptote touches the curve):");
+    for t in terms.iter().flatten() {
+        println!(
+            "  {:<17} {:>12.4} {:<14} at tau = {:>9.2} s  {}",
+            format!("{:?}", t.kind),
+            t.value,
+            t.kind.unit(),
+            t.tau_s,
+            if t.visible {
+                "visible"
+            } else {
+                "not visible: upper bound only"
+            }
+        );
+    }
+    if let Some(p) = model {
+        println!(
+            "model settings: N = {} deg/sqrt(h), B = {} deg/h, K = {} deg/h/sqrt(h)",
+            p.arw_deg_rt_h, p.bias_instability_deg_h, p.rrw_deg_h_rt_h
+        );
+    }
+}

@@ -1,0 +1,168 @@
+//! Host speed: overlapping ADEV at octave τ over 10⁷ rate samples, ours
+//! (f64 batch path, `gyro_array::algo::allan`) against allantools on the
+//! same data, in one run; prints both times and the ratio.
+//!
+//! `cargo run -p host-tests --profile host --bin allan-speed`
+//!
+//! allantools is installed on first use into `target/allan-venv` (PyPI);
+//! this benchmark is the only thing that needs Python, and CI does not run
+//! it. Each side is timed on its best of 3 runs, from data in memory to
+//! the finished curve; both curves are compared to 1e-9.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Instant;
+
+use gyro_array::algo::allan::{fill_phase, oavar_octave_phase, AdevPoint, OctaveSums};
+use gyro_array::emu::Rng;
+
+const N: usize = 10_000_000;
+
+fn ours(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usize {
+    fill_phase(rate, phase).expect("finite data");
+    oavar_octave_phase(&phase[..rate.len() + 1], 1.0, out)
+}
+
+/// The same sweep with the term range split between two threads.
+fn ours_2threads(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usize {
+    fill_phase(rate, phase).expect("finite data");
+    let phase = &phase[..rate.len() + 1];
+    let half = phase.len() / 2;
+    let mut a = OctaveSums::new(phase.len());
+    let mut b = OctaveSums::new(phase.len());
+    std::thread::scope(|s| {
+        s.spawn(|| a.add_range(phase, 0, half));
+        b.add_range(phase, half, phase.len());
+    });
+    a.merge(&b);
+    a.finish(1.0, out)
+}
+
+const PY: &str = r#"
+import sys, time, numpy as np, allantools
+y = np.fromfile(sys.argv[1], dtype='<f8')
+best = 1e9
+for _ in range(3):
+    t0 = time.perf_counter()
+    taus, dev, err, n = allantools.oadev(y, rate=1.0, data_type='freq', taus='octave')
+    best = min(best, time.perf_counter() - t0)
+print(best)
+for t, d in zip(taus, dev):
+    print(int(t), repr(float(d)))
+"#;
+
+fn main() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let target = root.join("target");
+    let venv = target.join("allan-venv");
+    let py = venv.join("bin/python3");
+    if !py.exists() {
+        eprintln!("allan-speed: installing allantools into {}", venv.display());
+        let ok = Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .status()
+            .is_ok_and(|s| s.success())
+            && Command::new(&py)
+                .args([
+                    "-m",
+                    "pip",
+                    "install",
+                    "-q",
+                    "allantools==2024.6",
+                    "numpy",
+                    "scipy",
+                ])
+                .status()
+                .is_ok_and(|s| s.success());
+        if !ok {
+            eprintln!("allan-speed: cannot install allantools (needs python3-venv and PyPI)");
+            std::process::exit(1);
+        }
+    }
+
+    // White + random-walk rate noise around a 95 °/s bias.
+    let mut rng = Rng::new(11);
+    let mut rw = 0.0f64;
+    let rate: Vec<f64> = (0..N)
+        .map(|_| {
+            rw += 1e-4 * rng.gaussian() as f64;
+            95.0 + 0.1 * rng.gaussian() as f64 + rw
+        })
+        .collect();
+    let data = target.join("allan-speed.f64");
+    let bytes: Vec<u8> = rate.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(&data, bytes).expect("write data");
+
+    let mut phase = vec![0.0; N + 1];
+    let blank = AdevPoint {
+        m: 0,
+        tau_s: 0.0,
+        avar: 0.0,
+        terms: 0,
+        samples: 0,
+    };
+    let mut out = [blank; 64];
+    let mut best = f64::MAX;
+    let mut best2 = f64::MAX;
+    let mut out2 = [blank; 64];
+    let mut count = 0;
+    for _ in 0..3 {
+        let t0 = Instant::now();
+        count = ours(&rate, &mut phase, &mut out);
+        best = best.min(t0.elapsed().as_secs_f64());
+        let t0 = Instant::now();
+        let c2 = ours_2threads(&rate, &mut phase, &mut out2);
+        best2 = best2.min(t0.elapsed().as_secs_f64());
+        assert_eq!(c2, count);
+    }
+    let curve = &out[..count];
+    let split_diff = curve
+        .iter()
+        .zip(&out2)
+        .map(|(a, b)| ((a.avar - b.avar) / a.avar).abs())
+        .fold(0.0, f64::max);
+
+    let out = Command::new(&py)
+        .args(["-c", PY])
+        .arg(&data)
+        .output()
+        .expect("run python");
+    if !out.status.success() {
+        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+        std::process::exit(1);
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut lines = text.lines();
+    let theirs: f64 = lines
+        .next()
+        .and_then(|l| l.trim().parse().ok())
+        .expect("time");
+    let mut worst = 0.0f64;
+    let mut compared = 0;
+    for l in lines {
+        let mut it = l.split_whitespace();
+        let (Some(m), Some(d)) = (it.next(), it.next()) else {
+            continue;
+        };
+        let (m, d): (u32, f64) = (m.parse().expect("m"), d.parse().expect("dev"));
+        if let Some(p) = curve.iter().find(|p| p.m == m) {
+            worst = worst.max((p.adev() - d).abs() / d);
+            compared += 1;
+        }
+    }
+    println!(
+        "OADEV, octave tau, {N} samples ({} tau), best of 3, same run:\n  \
+         allantools {theirs:.3} s\n  ours, 1 thread  {best:.3} s: {:.1}x faster\n  \
+         ours, 2 threads {best2:.3} s: {:.1}x faster\n  \
+         curves agree with allantools to {worst:.1e} (relative, {compared} tau); \
+         split sums agree to {split_diff:.1e}",
+        curve.len(),
+        theirs / best,
+        theirs / best2,
+    );
+    let _ = std::fs::remove_file(&data);
+    if worst > 1e-9 || compared != curve.len() {
+        std::process::exit(1);
+    }
+}
