@@ -54,6 +54,70 @@ impl Default for Digest {
     }
 }
 
+/// Digest of the Allan path on seeded integer data: streaming OADEV (10
+/// octave τ, every 997th sample) and two E-DAVARs (change-aware temporal,
+/// centred spectral) over a variance step, every 16th step's surface row.
+/// Exercises the integer sums, the soft-float f64 output, microfft and the
+/// entropies, so host and Cortex-M4 must agree bit for bit.
+pub fn allan_digest() -> u64 {
+    use crate::algo::allan::stream::StreamAdev;
+    use crate::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
+    let mut d = Digest::new();
+    let mut rng = Rng::new(77);
+    let Ok(mut adev) = StreamAdev::<10, 1024>::new() else {
+        return 0;
+    };
+    let cfg = |entropy, placement| DavarConfig {
+        lambda1: 256,
+        lambda2: 512,
+        l_init: 512,
+        delta_l: 32,
+        step: StepMode::Constant,
+        entropy,
+        threshold: Threshold::Auto { p_fa: 0.01 },
+        placement,
+    };
+    let (Ok(mut a), Ok(mut b)) = (
+        Davar::<512, 17, 7>::new(cfg(EntropyKind::Temporal, Placement::ChangeAware)),
+        Davar::<512, 17, 7>::new(cfg(EntropyKind::Spectral, Placement::Centred)),
+    ) else {
+        return 0;
+    };
+    for i in 0..6000u32 {
+        let s = if (2000..4000).contains(&i) {
+            300.0
+        } else {
+            150.0
+        };
+        let x = (s * rng.gaussian()) as i32 + 4000;
+        let _ = adev.push(x);
+        if i % 997 == 996 {
+            for j in 0..10 {
+                if let Ok(p) = adev.point(j, 1.0 / 1024.0, 0.001) {
+                    let bits = p.avar.to_bits();
+                    d.word(bits as u32);
+                    d.word((bits >> 32) as u32);
+                }
+            }
+        }
+        for dv in [&mut a, &mut b] {
+            if let Ok(Some(t)) = dv.push(x) {
+                if t % 16 == 0 {
+                    let e = dv.estimate();
+                    d.word(e.t as u32);
+                    d.word(e.len as u32);
+                    d.f32(e.entropy);
+                    d.f32(e.threshold);
+                    for v in e.avar {
+                        d.f32(v);
+                    }
+                }
+            }
+        }
+    }
+    d.0
+}
+
 /// Every fusion method the evaluation compares, N = 4.
 pub fn methods() -> [(&'static str, Method); 7] {
     let grubbs = Some(GrubbsConfig::default());
@@ -304,6 +368,10 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
     check(
         "pipeline: saturated gyro is flagged and excluded",
         saturation_is_flagged(),
+    );
+    check(
+        "allan: streaming OADEV and E-DAVAR bit-identical to the golden digest",
+        allan_digest() == golden::ALLAN,
     );
     tally
 }

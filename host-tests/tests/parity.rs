@@ -7,6 +7,7 @@ use gyro_array::checks;
 fn host_runs_the_on_target_suite() {
     let fusion = checks::fusion_digest();
     let pipeline = checks::pipeline_digest();
+    let allan = checks::allan_digest();
     if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/vectors/digests.in");
         let text = std::fs::read_to_string(path).unwrap();
@@ -16,6 +17,8 @@ fn host_runs_the_on_target_suite() {
                 out += &format!("pub const FUSION: u64 = {fusion:#018x};\n");
             } else if line.starts_with("pub const PIPELINE") {
                 out += &format!("pub const PIPELINE: u64 = {pipeline:#018x};\n");
+            } else if line.starts_with("pub const ALLAN") {
+                out += &format!("pub const ALLAN: u64 = {allan:#018x};\n");
             } else {
                 out += line;
                 out += "\n";
@@ -32,7 +35,9 @@ fn host_runs_the_on_target_suite() {
             failed.push(name.to_string());
         }
     });
-    println!("fusion digest {fusion:#018x}, pipeline digest {pipeline:#018x}");
+    println!(
+        "fusion digest {fusion:#018x}, pipeline digest {pipeline:#018x}, allan digest {allan:#018x}"
+    );
     assert_eq!(fail, 0, "failed: {failed:?}");
-    assert!(pass >= 11);
+    assert!(pass >= 12);
 }
