@@ -25,6 +25,7 @@ use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{Config, Icm42688};
 use gyro_array::drivers::Gyro;
+use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
@@ -101,6 +102,11 @@ fn main() -> ! {
         pipe.mark_init_failed(4);
     }
 
+    // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
+    let Ok(mut noise) = NoiseTracker::<1024, 33, 9>::new(tracker::config(1024)) else {
+        panic!("noise tracker configuration");
+    };
+
     let mut tick = dp.TIM2.counter_hz(&mut rcc);
     if tick.start(FS_HZ.Hz()).is_err() {
         panic!("sampling timer");
@@ -128,6 +134,7 @@ fn main() -> ! {
                 );
             }
         }
+        noise.push(&out);
         if out.seq % 1000 == 0 {
             for f in out.fused.iter().flatten() {
                 defmt::info!(
@@ -136,6 +143,20 @@ fn main() -> ! {
                     f.rate_dps,
                     f.weights
                 );
+            }
+            for a in 0..3 {
+                if let Some(e) = noise.estimate(a) {
+                    defmt::info!(
+                        "seq {} axis {}: E-DAVAR L={} D={=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
+                        out.seq,
+                        a,
+                        e.len,
+                        e.entropy,
+                        noise.sigma_dps(a, 0),
+                        noise.sigma_dps(a, 4),
+                        noise.sigma_dps(a, 8)
+                    );
+                }
             }
         }
     }

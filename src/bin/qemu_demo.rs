@@ -18,14 +18,13 @@ use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
 use embedded_hal_bus::spi::RefCellDevice;
 
-use gyro_array::algo::allan::stream::quantise;
-use gyro_array::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::board::qemu::exit;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{board_array, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
+use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
@@ -33,20 +32,8 @@ const SAMPLES: u32 = 3000;
 /// mps2-an386 core clock.
 const CORE_HZ: u32 = 25_000_000;
 
-/// E-DAVAR input resolution, °/s (range ±2048 °/s).
-const DAVAR_LSB: f32 = 1.0 / 512.0;
 /// E-DAVAR per axis: λ2 = 512 samples, 17 STFT frames, τ = 1 … 64 ms.
-type AxisDavar = Davar<512, 17, 7>;
-const DAVAR: DavarConfig = DavarConfig {
-    lambda1: 256,
-    lambda2: 512,
-    l_init: 512,
-    delta_l: 32,
-    step: StepMode::Constant,
-    entropy: EntropyKind::Temporal,
-    threshold: Threshold::Auto { p_fa: 0.01 },
-    placement: Placement::ChangeAware,
-};
+type Tracker = NoiseTracker<512, 17, 7>;
 
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
@@ -102,9 +89,7 @@ fn main() -> ! {
         }
     }
 
-    let mk = || AxisDavar::new(DAVAR).unwrap_or_else(|_| exit(false));
-    let mut davar = [mk(), mk(), mk()];
-    let mut davar_skipped = 0u32;
+    let mut noise = Tracker::new(tracker::config(512)).unwrap_or_else(|_| exit(false));
     let mut sigma_x_1ms = f32::NAN;
 
     let _ticks = {
@@ -174,19 +159,10 @@ fn main() -> ! {
                 excluded_at = Some(n);
             }
         }
-        for (a, f) in out.fused.iter().enumerate() {
-            // A missing or unquantisable fused value is a documented skip.
-            match f.map(|f| quantise(f.rate_dps, DAVAR_LSB)) {
-                Some(Ok(q)) => {
-                    let _ = davar[a].push(q);
-                }
-                _ => davar_skipped += 1,
-            }
-        }
+        noise.push(&out);
         if n % 500 == 499 {
-            for (a, d) in davar.iter().enumerate() {
-                let e = d.estimate();
-                let s = |j: usize| gyro_array::algo::math::sqrtf(e.avar[j]) * DAVAR_LSB;
+            for a in 0..3 {
+                let Some(e) = noise.estimate(a) else { continue };
                 defmt::info!(
                     "seq {} axis {}: E-DAVAR t={}ms L={} D={=f32} (D0 {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
                     out.seq,
@@ -195,14 +171,12 @@ fn main() -> ! {
                     e.len,
                     e.entropy,
                     e.threshold,
-                    s(0),
-                    s(3),
-                    s(6)
+                    noise.sigma_dps(a, 0),
+                    noise.sigma_dps(a, 3),
+                    noise.sigma_dps(a, 6)
                 );
-                if a == 0 {
-                    sigma_x_1ms = s(0);
-                }
             }
+            sigma_x_1ms = noise.sigma_dps(0, 0);
             let truth = bus.borrow().chips[0].true_rate_dps();
             for (a, f) in out.fused.iter().enumerate() {
                 match f {
@@ -253,7 +227,7 @@ fn main() -> ! {
     defmt::info!(
         "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} axis-samples skipped",
         sigma_x_1ms,
-        davar_skipped
+        noise.skipped()
     );
     pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
     pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
