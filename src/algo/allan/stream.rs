@@ -30,26 +30,41 @@ pub fn quantise(rate: f32, lsb: f32) -> Result<i32, AllanError> {
     Ok(r as i32)
 }
 
-/// Streaming OADEV at `T` octave τ (m = 1, 2, …, 2^(T−1)) with a ring of
-/// `RING` samples (a power of two, ≥ 2^T). RAM: 4·RING + 24·T bytes.
+/// Streaming OADEV at `T` cluster sizes (octaves m = 1, 2, …, 2^(T−1) by
+/// [`StreamAdev::new`], or any list by [`StreamAdev::with_ms`]) with a ring
+/// of `RING` samples (a power of two, ≥ 2·max m). RAM: 4·RING + 28·T bytes.
 #[derive(Clone, Debug)]
 pub struct StreamAdev<const T: usize, const RING: usize> {
     ring: [i32; RING],
     n: u64,
+    ms: [u32; T],
     a: [i32; T],
     b: [i32; T],
     acc: [u128; T],
 }
 
 impl<const T: usize, const RING: usize> StreamAdev<T, RING> {
-    /// Check the capacities: 1 ≤ T ≤ 11, RING a power of two ≥ 2^T.
+    /// Octave τ: m = 2ʲ for j < T. Needs 1 ≤ T ≤ 11 and RING ≥ 2^T.
     pub fn new() -> Result<Self, AllanError> {
-        if T == 0 || T > 11 || !RING.is_power_of_two() || RING < (1 << T) {
+        let mut ms = [0u32; T];
+        for (j, m) in ms.iter_mut().enumerate() {
+            *m = 1u32.checked_shl(j as u32).unwrap_or(0);
+        }
+        Self::with_ms(ms)
+    }
+
+    /// Any list of cluster sizes, 1 ≤ m ≤ 1024 (sums of m samples stay below
+    /// 2³⁰), with RING a power of two ≥ 2·max m.
+    pub fn with_ms(ms: [u32; T]) -> Result<Self, AllanError> {
+        let ok_m = ms.iter().all(|&m| (1..=1024).contains(&m));
+        let max = ms.iter().copied().max().unwrap_or(0) as usize;
+        if T == 0 || !ok_m || !RING.is_power_of_two() || RING < 2 * max {
             return Err(AllanError::Capacity);
         }
         Ok(Self {
             ring: [0; RING],
             n: 0,
+            ms,
             a: [0; T],
             b: [0; T],
             acc: [0; T],
@@ -79,7 +94,7 @@ impl<const T: usize, const RING: usize> StreamAdev<T, RING> {
             return Err(AllanError::SampleRange);
         }
         for j in 0..T {
-            let m = 1usize << j;
+            let m = self.ms[j] as usize;
             // w enters a; the sample m back (counting w) moves from a to b;
             // the one 2m back leaves b. Read before w is stored, so a ring
             // of 2m samples is enough.
@@ -97,13 +112,13 @@ impl<const T: usize, const RING: usize> StreamAdev<T, RING> {
         Ok(())
     }
 
-    /// The point at octave `j` (m = 2ʲ), scaled by `lsb` (sample unit → rate
-    /// unit) with sample period `tau0_s`.
+    /// The point for the `j`-th cluster size (m = 2ʲ for [`StreamAdev::new`]),
+    /// scaled by `lsb` (sample unit → rate unit) with sample period `tau0_s`.
     pub fn point(&self, j: usize, lsb: f64, tau0_s: f64) -> Result<AdevPoint, AllanError> {
         if j >= T {
             return Err(AllanError::Capacity);
         }
-        let m = 1u64 << j;
+        let m = self.ms[j] as u64;
         if self.n < 2 * m {
             return Err(AllanError::TooShort);
         }

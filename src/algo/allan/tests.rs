@@ -270,3 +270,28 @@ fn noise_terms_recover_the_emulated_icm42688() {
         assert!(rel(q.avar, single.avar) < 1e-12);
     }
 }
+
+#[test]
+fn streaming_arbitrary_tau_list_matches_batch() {
+    let mut rng = crate::emu::Rng::new(8);
+    let ms = [1u32, 3, 10, 100, 333, 1000];
+    let mut s = StreamAdev::<6, 2048>::with_ms(ms).unwrap();
+    let w: Vec<i32> = (0..50_000)
+        .map(|_| (300.0 * rng.gaussian()) as i32 - 7000)
+        .collect();
+    for &x in &w {
+        s.push(x).unwrap();
+    }
+    let wf: Vec<f64> = w.iter().map(|&x| x as f64).collect();
+    let mut phase = vec![0.0; wf.len() + 1];
+    fill_phase(&wf, &mut phase).unwrap();
+    for (j, &m) in ms.iter().enumerate() {
+        let p = s.point(j, 1.0, 1.0).unwrap();
+        assert_eq!(p.avar, exact_avar(&w, m as usize), "m={m}");
+        let b = oavar_phase(&phase, 1.0, m as usize).unwrap();
+        assert!(rel(p.avar, b.avar) < 1e-10, "m={m}");
+    }
+    assert!(StreamAdev::<2, 1024>::with_ms([3, 1025]).is_err());
+    assert!(StreamAdev::<2, 1024>::with_ms([0, 4]).is_err());
+    assert!(StreamAdev::<2, 512>::with_ms([3, 300]).is_err());
+}
