@@ -334,6 +334,25 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if !(-SAMPLE_MAX..=SAMPLE_MAX).contains(&w) {
             return Err(AllanError::SampleRange);
         }
+        // Fast path, the common case: no hop at this sample and both edges
+        // slide by one. One fused pass per τ, before the sample is stored.
+        let half2 = self.cfg.lambda2 as u64 / 2;
+        if self.started {
+            let t = self.n + 1 - half2;
+            let hop = t.is_multiple_of(SEG as u64) && self.cfg.lambda1 < self.cfg.lambda2;
+            let (s, e) = self.edges(t);
+            let frame_done = (self.n + 1).is_multiple_of(SEG as u64);
+            if !hop && s == self.tail.pos + 1 && e == self.head.pos + 1 {
+                self.slide(w);
+                self.ring[self.n as usize & (CAP - 1)] = w;
+                self.n += 1;
+                if frame_done {
+                    self.store_frame();
+                }
+                self.t = t;
+                return Ok(Some(t));
+            }
+        }
         // No window reaches before n + 1 − λ2 after this sample: move the
         // tail there first, while the sample the new one evicts (when
         // CAP = λ2) is still in the ring.
@@ -348,7 +367,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if self.n.is_multiple_of(SEG as u64) {
             self.store_frame();
         }
-        let half2 = self.cfg.lambda2 as u64 / 2;
         if self.n < 2 * half2 {
             return Ok(None);
         }
@@ -399,6 +417,16 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             return;
         };
         self.entropy = deficit;
+        // A change is a fixed instant. Once it is within λ2/4 of t it was
+        // located from a span with at least a quarter on its near side, so
+        // keep it until it leaves the span: re-locating would only jitter
+        // it by a split stride and make both edges jump back and forth.
+        if let Some(c) = self.change {
+            if c.abs_diff(t) <= half2 / 2 {
+                self.threshold = self.calibrate_frames(k);
+                return;
+            }
+        }
         self.threshold = self.calibrate_frames(k);
         if !(deficit > self.threshold) {
             self.change = None;
@@ -411,10 +439,18 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             tot += en[i];
         }
         // Two-segment scale model: minimise j·ln(mean_left) +
-        // (k − j)·ln(mean_right) over the split j (one ln per side).
+        // (k − j)·ln(mean_right) over the split j (one ln per side). Splits
+        // are tried every `stride` frames, at most SPLITS of them, so a hop
+        // costs the same at any λ2; the location error stays ≤ λ2/SPLITS.
+        const SPLITS: usize = 32;
+        let stride = k.div_ceil(SPLITS);
         let (mut best, mut best_j, mut left) = (f32::INFINITY, 0, 0.0f32);
-        for j in 1..k {
-            left += en[j - 1];
+        let mut j0 = 0;
+        for j in (stride..k).step_by(stride) {
+            for &e in &en[j0..j] {
+                left += e;
+            }
+            j0 = j;
             let right = tot - left;
             if !(left > 0.0 && right > 0.0) {
                 continue;
@@ -501,62 +537,88 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.started = true;
     }
 
+    /// Slide both edges by one sample while `w` (not yet stored) arrives:
+    /// per τ, the term ending at the new head is added and the term starting
+    /// at the old tail removed, as one signed delta on the exact sum.
+    fn slide(&mut self, w: i32) {
+        let n = self.n;
+        let (e, s) = (self.head.pos, self.tail.pos);
+        // Index n is the arriving sample.
+        let r = |d: &Self, i: u64| if i == n { w } else { d.w(i) };
+        let xh = r(self, e);
+        let x0 = self.w(s);
+        for j in 0..T {
+            let m = 1u64 << j;
+            let (mid, old) = (self.w(e - m), self.w(e - 2 * m));
+            self.head.a[j] += xh - mid;
+            self.head.b[j] += mid - old;
+            let dh = self.head.a[j] - self.head.b[j];
+            let dt = self.tail.a[j] - self.tail.b[j];
+            let (x1, x2) = (self.w(s + m), r(self, s + 2 * m));
+            self.tail.b[j] += x1 - x0;
+            self.tail.a[j] += x2 - x1;
+            // |d| < 2³¹, so d² < 2⁶² and the delta fits an i64; the sum is
+            // non-negative, so the wrapping add is exact.
+            let delta = (dh as i64 * dh as i64) - (dt as i64 * dt as i64);
+            self.acc[j] = self.acc[j].wrapping_add(delta as i128 as u128);
+        }
+        self.head.pos = e + 1;
+        self.tail.pos = s + 1;
+    }
+
     /// Move the head (exclusive end) to `to`, adding or removing the terms
-    /// that end there.
+    /// that end there. τ is the outer loop so that each τ's sums and exact
+    /// total stay in registers across a long jump.
     fn move_head(&mut self, to: u64) {
-        while self.head.pos < to {
-            let e = self.head.pos;
-            for j in 0..T {
-                let m = 1u64 << j;
+        let from = self.head.pos;
+        for j in 0..T {
+            let m = 1u64 << j;
+            let (mut a, mut b, mut acc) = (self.head.a[j], self.head.b[j], self.acc[j]);
+            let mut e = from;
+            while e < to {
                 let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
-                self.head.a[j] += x - mid;
-                self.head.b[j] += mid - old;
-                let d = self.head.a[j] - self.head.b[j];
-                self.acc[j] += sq(d);
+                a += x - mid;
+                b += mid - old;
+                acc += sq(a - b);
+                e += 1;
             }
-            self.head.pos = e + 1;
-        }
-        while self.head.pos > to {
-            let e = self.head.pos - 1;
-            for j in 0..T {
-                let m = 1u64 << j;
-                let d = self.head.a[j] - self.head.b[j];
-                self.acc[j] -= sq(d);
+            while e > to {
+                e -= 1;
+                acc -= sq(a - b);
                 let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
-                self.head.a[j] -= x - mid;
-                self.head.b[j] -= mid - old;
+                a -= x - mid;
+                b -= mid - old;
             }
-            self.head.pos = e;
+            (self.head.a[j], self.head.b[j], self.acc[j]) = (a, b, acc);
         }
+        self.head.pos = to;
     }
 
     /// Move the tail (first sample) to `to`, removing or adding the terms
-    /// that start there.
+    /// that start there (τ outer, as in [`Davar::move_head`]).
     fn move_tail(&mut self, to: u64) {
-        while self.tail.pos < to {
-            let s = self.tail.pos;
-            for j in 0..T {
-                let m = 1u64 << j;
-                let d = self.tail.a[j] - self.tail.b[j];
-                self.acc[j] -= sq(d);
+        let from = self.tail.pos;
+        for j in 0..T {
+            let m = 1u64 << j;
+            let (mut a, mut b, mut acc) = (self.tail.a[j], self.tail.b[j], self.acc[j]);
+            let mut s = from;
+            while s < to {
+                acc -= sq(a - b);
                 let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
-                self.tail.b[j] += x1 - x0;
-                self.tail.a[j] += x2 - x1;
+                b += x1 - x0;
+                a += x2 - x1;
+                s += 1;
             }
-            self.tail.pos = s + 1;
-        }
-        while self.tail.pos > to {
-            let s = self.tail.pos - 1;
-            for j in 0..T {
-                let m = 1u64 << j;
+            while s > to {
+                s -= 1;
                 let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
-                self.tail.b[j] -= x1 - x0;
-                self.tail.a[j] -= x2 - x1;
-                let d = self.tail.a[j] - self.tail.b[j];
-                self.acc[j] += sq(d);
+                b -= x1 - x0;
+                a -= x2 - x1;
+                acc += sq(a - b);
             }
-            self.tail.pos = s;
+            (self.tail.a[j], self.tail.b[j], self.acc[j]) = (a, b, acc);
         }
+        self.tail.pos = to;
     }
 
     /// FFT of the frame that just completed; keep the power of bins 1..=15.
