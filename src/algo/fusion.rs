@@ -125,7 +125,7 @@ impl SeedConfig {
 pub struct AdaptiveConfig {
     /// EWMA factor of the squared residuals once warmed up (1/64).
     pub alpha: f32,
-    /// Samples averaged plainly before the EWMA takes over.
+    /// Samples averaged plainly before the EWMA takes over (≥ 1).
     pub warmup: u16,
     /// Gate: a gyro further than `gate_k` residual sigmas from the median is
     /// rejected for this sample.
@@ -220,7 +220,11 @@ pub struct AxisState<const N: usize> {
     var: [f32; N],
     last: [f32; N],
     frozen: [u8; N],
+    /// Noise updates counted up to `warmup` (then frozen: not needed).
     n_upd: [u16; N],
+    /// Gyros whose noise estimate has had `warmup` updates (n_upd ≥ warmup),
+    /// kept as a mask so the per-sample "all warm" test is one AND.
+    warm: u8,
 }
 
 impl<const N: usize> Default for AxisState<N> {
@@ -235,6 +239,7 @@ impl<const N: usize> Default for AxisState<N> {
             last: [f32::NAN; N],
             frozen: [0; N],
             n_upd: [0; N],
+            warm: 0,
         }
     }
 }
@@ -292,7 +297,9 @@ fn weighted<const N: usize>(y: &[f32; N], r: &[f32; N], m: u8) -> Option<(f32, [
         sr += if on { r[i] } else { 0.0 };
         sy += if on { r[i] * (y[i] - y0) } else { 0.0 };
     }
-    if !(sr > 0.0) || !sr.is_finite() {
+    // One compare pair instead of a compare plus an is_finite bit test:
+    // false for NaN, ≤ 0 and +∞ alike.
+    if !(sr > 0.0 && sr < f32::INFINITY) {
         return None;
     }
     let mut w = [0.0; N];
@@ -336,7 +343,8 @@ impl<const N: usize> Fusion<N> {
                     && a.gate_k.is_finite()
                     && a.var_floor > 0.0
                     && a.var_floor.is_finite()
-                    && a.frozen_after >= 2;
+                    && a.frozen_after >= 2
+                    && a.warmup >= 1;
                 if !ok {
                     return Err(ConfigError::Parameter);
                 }
@@ -364,7 +372,7 @@ impl<const N: usize> Fusion<N> {
         y: &[f32; N],
         offered: u8,
     ) -> Result<Fused<N>, FuseError> {
-        let offered = offered & (((1u16 << N) - 1) as u8);
+        let offered = offered & full::<N>();
         let mut valid = 0u8;
         for i in 0..N {
             if !has(offered, i) {
@@ -612,40 +620,54 @@ fn floor(v: f32, lo: f32) -> f32 {
     }
 }
 
-/// Median of the masked values. Each value's rank in a stable sort is
-/// counted branch-free on integer keys (N² integer compares, unrolled for
-/// small N); on the Cortex-M4 this is far cheaper than an insertion sort's
-/// data-dependent loops or float compares (`vcmp` + `vmrs` each).
+/// Median of the masked values: an odd–even transposition sort (N rounds,
+/// fully unrolled for the const N) of order-preserving integer keys, with
+/// gyros outside `m` keyed last. On the Cortex-M4 integer compare-exchanges
+/// are far cheaper than float compares (`vcmp` + `vmrs`) or an insertion
+/// sort's data-dependent loops.
 fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
-    // Order-preserving integer key of a finite f32 (sign-magnitude to two's
-    // complement); gyros outside `m` sort last.
-    let mut key = [i32::MAX; N];
+    // Sign-magnitude to two's complement: an involution on the bits.
+    let key = |b: i32| b ^ (((b >> 31) as u32) >> 1) as i32;
+    let mut k = [i32::MAX; N];
     for i in 0..N {
-        let b = y[i].to_bits() as i32;
-        let k = b ^ (((b >> 31) as u32) >> 1) as i32;
-        key[i] = if has(m, i) { k } else { i32::MAX };
+        k[i] = if has(m, i) {
+            key(y[i].to_bits() as i32)
+        } else {
+            i32::MAX
+        };
+    }
+    if N == 4 && m == full::<N>() {
+        // The board's array, all in: the middle pair of four keys is
+        // (max of the two minima, min of the two maxima), 6 min/max.
+        let (a, b) = (k[0].min(k[1]), k[0].max(k[1]));
+        let (c, d) = (k[2].min(k[3]), k[2].max(k[3]));
+        let (lo, hi) = (a.max(c), b.min(d));
+        let f = |j: i32| f32::from_bits(key(j) as u32);
+        return 0.5 * (f(lo) + f(hi));
+    }
+    for round in 0..N {
+        let mut i = round % 2;
+        while i + 1 < N {
+            let (a, b) = (k[i], k[i + 1]);
+            k[i] = a.min(b);
+            k[i + 1] = a.max(b);
+            i += 2;
+        }
     }
     let n = m.count_ones() as usize;
-    let (lo, hi) = ((n.saturating_sub(1)) / 2, n / 2);
-    let (mut a, mut b) = (0.0f32, 0.0f32);
-    for i in 0..N {
-        let mut rank = 0usize;
-        for j in 0..N {
-            rank += if j < i {
-                key[j] <= key[i]
-            } else {
-                key[j] < key[i]
-            } as usize;
-        }
-        let on = has(m, i);
-        a = if on && rank == lo { y[i] } else { a };
-        b = if on && rank == hi { y[i] } else { b };
-    }
+    let (lo, hi) = (n.saturating_sub(1) / 2, n / 2);
+    let at = |j: usize| f32::from_bits(key(k.get(j).copied().unwrap_or(0)) as u32);
     if lo == hi {
-        a
+        at(lo)
     } else {
-        0.5 * (a + b)
+        0.5 * (at(lo) + at(hi))
     }
+}
+
+/// All N gyros.
+#[inline(always)]
+fn full<const N: usize>() -> u8 {
+    ((1u16 << N) - 1) as u8
 }
 
 fn adaptive<const N: usize>(
@@ -658,9 +680,36 @@ fn adaptive<const N: usize>(
     if valid == 0 {
         return None;
     }
-    // Lane loops below are select-style (see `mean_of`).
-    // Frozen outputs: bit-identical for `frozen_after` samples while some
-    // other gyro moves. A stuck chip is caught before it drifts away.
+    // Each phase is inlined twice: once for the common case where its mask
+    // is every gyro (a constant, so the mask tests fold away) and once for
+    // the general mask. Same arithmetic in the same order either way.
+    let active = if valid == full::<N>() {
+        frozen_check(c, st, y, full::<N>())
+    } else {
+        frozen_check(c, st, y, valid)
+    };
+    if active == 0 {
+        out.rejected |= valid;
+        return None;
+    }
+    if active == full::<N>() {
+        adaptive_active(c, st, y, valid, full::<N>(), out)
+    } else {
+        adaptive_active(c, st, y, valid, active, out)
+    }
+}
+
+/// Frozen outputs: bit-identical for `frozen_after` samples while some
+/// other gyro moves. A stuck chip is caught before it drifts away. Returns
+/// the gyros of `valid` that are not frozen. Lane loops here and below are
+/// select-style (see `mean_of`).
+#[inline(always)]
+fn frozen_check<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+) -> u8 {
     let mut moving = 0u8;
     for i in 0..N {
         let on = has(valid, i);
@@ -681,16 +730,24 @@ fn adaptive<const N: usize>(
             active &= !(((has(valid, i) && frozen) as u8) << i);
         }
     }
+    active
+}
+
+/// Weights, median gate, noise update and the fused value over `active`.
+#[inline(always)]
+fn adaptive_active<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    active: u8,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
     let n = active.count_ones();
-    if n == 0 {
-        out.rejected |= valid;
-        return None;
-    }
     // Current weights: inverse variance once warmed up, equal before.
-    let mut all_warm = true;
+    let all_warm = active & !st.warm == 0;
     let mut v = [0.0f32; N];
     for i in 0..N {
-        all_warm &= !has(active, i) || st.n_upd[i] >= c.warmup;
         v[i] = floor(st.var[i], c.var_floor);
     }
     let mut w = [0.0f32; N];
@@ -715,24 +772,49 @@ fn adaptive<const N: usize>(
             let off = e * e > k2 * (v[i] + v_med);
             good &= !(((has(active, i) && off) as u8) << i);
         }
-        if good.count_ones() < 2 {
-            // Everybody disagrees: nothing to single out, fall back.
+        if good & good.wrapping_sub(1) == 0 {
+            // Fewer than two left (one AND, no popcount): everybody
+            // disagrees, nothing to single out; fall back.
             good = active;
             out.fallback = true;
         }
     }
     out.rejected |= valid & !good;
-    // Noise update. Each gyro is compared with the weighted mean of the
-    // *other* good gyros, x₋ᵢ, whose variance V₋ᵢ = 1/Σ_{j≠i} w_j is known
-    // from the current estimates, so E[(y_i − x₋ᵢ)²] − V₋ᵢ = σ_i². Sums are
-    // taken about the median to keep precision at high rates.
+    if good == full::<N>() {
+        update_and_fuse(c, st, y, full::<N>(), full::<N>(), all_warm, med, &v, &w, out)
+    } else {
+        update_and_fuse(c, st, y, active, good, all_warm, med, &v, &w, out)
+    }
+}
+
+/// Noise update and inverse-variance fusion over `good` (⊆ `active`).
+///
+/// Each gyro is compared with the weighted mean of the *other* good gyros,
+/// x₋ᵢ, whose variance V₋ᵢ = 1/Σ_{j≠i} w_j is known from the current
+/// estimates, so E[(y_i − x₋ᵢ)²] − V₋ᵢ = σ_i². Sums are taken about the
+/// median to keep precision at high rates.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn update_and_fuse<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    active: u8,
+    good: u8,
+    all_warm: bool,
+    med: f32,
+    v: &[f32; N],
+    w: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
     let (mut sw, mut swy) = (0.0f32, 0.0f32);
     for i in 0..N {
         let on = has(good, i);
         sw += if on { w[i] } else { 0.0 };
         swy += if on { w[i] * (y[i] - med) } else { 0.0 };
     }
-    if good.count_ones() >= 2 {
+    // At least two good gyros (one AND, no popcount).
+    if good & good.wrapping_sub(1) != 0 {
         for i in 0..N {
             let inside = has(good, i);
             let wo = if inside { sw - w[i] } else { sw };
@@ -747,23 +829,26 @@ fn adaptive<const N: usize>(
             let e = (y[i] - med) - wyo / wo;
             let v_others = if all_warm { 1.0 / wo } else { 0.0 };
             let mut e2 = e * e;
-            let was_warm = st.n_upd[i] >= c.warmup;
+            let was_warm = has(st.warm, i);
             // Clip, so one spike moves the estimate by at most gate_k².
             let cap = c.gate_k * c.gate_k * (v[i] + v_others);
             if was_warm && e2 > cap {
                 e2 = cap;
             }
-            st.n_upd[i] = st.n_upd[i].saturating_add(1);
+            // Plain average until `warmup` updates, then the EWMA; the count
+            // stops once warm (it is only needed until then).
             let a = if was_warm {
                 c.alpha
             } else {
+                st.n_upd[i] += 1;
+                st.warm |= ((st.n_upd[i] >= c.warmup) as u8) << i;
                 1.0 / st.n_upd[i] as f32
             };
             st.var[i] += a * (e2 - v_others - st.var[i]);
         }
     }
     // Inverse-variance weights over the good set.
-    weighted(y, &w, good).or_else(|| {
+    weighted(y, w, good).or_else(|| {
         out.fallback = true;
         Some(mean_of(y, good))
     })
