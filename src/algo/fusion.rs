@@ -205,6 +205,8 @@ pub struct Fusion<const N: usize> {
     method: Method,
     /// T(n, α) for n = 0..=N (0 where undefined).
     grubbs_t: [f32; MAX_GYROS + 1],
+    /// 1/t² of eq. 14 for each memory lag (0 where t = 0: skipped).
+    inv_t2: [f32; MAX_MEMORY],
 }
 
 /// Running state of one axis.
@@ -212,8 +214,8 @@ pub struct Fusion<const N: usize> {
 pub struct AxisState<const N: usize> {
     k: u32,
     // Memory weighting: ring of r_i(u) and of 1/((r_i(u) − r̄_i(u))² + ε).
-    ring_r: [[f32; N]; MAX_MEMORY],
-    ring_inv: [[f32; N]; MAX_MEMORY],
+    /// r_i(u) / ((r_i(u) − r̄_i(u))² + ε) per epoch u (eq. 14 without t²).
+    ring: [[f32; N]; MAX_MEMORY],
     head: usize,
     rbar: [f32; N],
     // Adaptive: noise variance estimates, last input, frozen counters.
@@ -231,8 +233,7 @@ impl<const N: usize> Default for AxisState<N> {
     fn default() -> Self {
         Self {
             k: 0,
-            ring_r: [[0.0; N]; MAX_MEMORY],
-            ring_inv: [[0.0; N]; MAX_MEMORY],
+            ring: [[0.0; N]; MAX_MEMORY],
             head: 0,
             rbar: [0.0; N],
             var: [0.0; N],
@@ -351,7 +352,21 @@ impl<const N: usize> Fusion<N> {
             }
             Method::Mean | Method::Zhang => {}
         }
-        Ok(Self { method, grubbs_t })
+        let mut inv_t2 = [0.0f32; MAX_MEMORY];
+        if let Method::Seed(SeedConfig {
+            memory: Some(mc), ..
+        }) = method
+        {
+            for (lag, v) in inv_t2.iter_mut().enumerate() {
+                let t = (lag + mc.lag0 as usize) as f32;
+                *v = if t == 0.0 { 0.0 } else { 1.0 / (t * t) };
+            }
+        }
+        Ok(Self {
+            method,
+            grubbs_t,
+            inv_t2,
+        })
     }
 
     /// The configured method.
@@ -434,6 +449,24 @@ impl<const N: usize> Fusion<N> {
     }
 
     fn seed(
+        &self,
+        c: &SeedConfig,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        m: u8,
+        out: &mut Fused<N>,
+    ) -> Option<(f32, [f32; N])> {
+        // Inlined twice: for all gyros (a constant mask, so the mask tests
+        // fold away and the loops unroll) and for the general mask.
+        if m == full::<N>() {
+            self.seed_masked(c, st, y, full::<N>(), out)
+        } else {
+            self.seed_masked(c, st, y, m, out)
+        }
+    }
+
+    #[inline(always)]
+    fn seed_masked(
         &self,
         c: &SeedConfig,
         st: &mut AxisState<N>,
@@ -563,7 +596,7 @@ impl<const N: usize> Fusion<N> {
         }
         // Eq. 13–16: limited memory.
         let r = match c.memory {
-            Some(mc) => memory_weights(&mc, st, &r, m),
+            Some(mc) => memory_weights(&mc, &self.inv_t2, st, &r, m),
             None => r,
         };
         weighted(y, &r, m).or_else(|| {
@@ -579,6 +612,7 @@ impl<const N: usize> Fusion<N> {
 /// 1/k cancel in eq. 16 and are left out.
 fn memory_weights<const N: usize>(
     mc: &MemoryConfig,
+    inv_t2: &[f32; MAX_MEMORY],
     st: &mut AxisState<N>,
     r: &[f32; N],
     m: u8,
@@ -586,24 +620,26 @@ fn memory_weights<const N: usize>(
     let kf = st.k as f32;
     st.head = (st.head + 1) % MAX_MEMORY;
     for i in 0..N {
-        if m & (1 << i) != 0 {
-            st.rbar[i] += (r[i] - st.rbar[i]) / kf;
-        }
+        let on = has(m, i);
+        st.rbar[i] = if on {
+            st.rbar[i] + (r[i] - st.rbar[i]) / kf
+        } else {
+            st.rbar[i]
+        };
         let dev = r[i] - st.rbar[i];
-        st.ring_r[st.head][i] = if m & (1 << i) != 0 { r[i] } else { 0.0 };
-        st.ring_inv[st.head][i] = 1.0 / (dev * dev + mc.eps);
+        let ri = if on { r[i] } else { 0.0 };
+        // Kept as one product: (r·∂′)·(1/t²) rounds exactly as r·∂′·(1/t²).
+        st.ring[st.head][i] = ri * (1.0 / (dev * dev + mc.eps));
     }
     let mut big_r = [0.0f32; N];
     let len = mc.len.min(st.k as usize);
-    for lag in 0..len {
-        let t = (lag + mc.lag0 as usize) as f32;
-        if t == 0.0 {
+    for (lag, &it2) in inv_t2.iter().enumerate().take(len) {
+        if it2 == 0.0 {
             continue;
         }
-        let inv_t2 = 1.0 / (t * t);
         let u = (st.head + MAX_MEMORY - lag) % MAX_MEMORY;
         for i in 0..N {
-            big_r[i] += st.ring_r[u][i] * st.ring_inv[u][i] * inv_t2;
+            big_r[i] += st.ring[u][i] * it2;
         }
     }
     big_r

@@ -60,7 +60,7 @@ fn main() -> ! {
     let overhead = t.now() - t0;
 
     let mut ok = true;
-    for (name, m) in methods().into_iter().filter(|(n, _)| *n == "adaptive") {
+    for (name, m) in methods() {
         let Ok(fusion) = Fusion::<4>::new(m) else {
             exit(false)
         };
@@ -87,6 +87,53 @@ fn main() -> ! {
         ok &= per_sample > 0.0;
     }
 
+    // Noise samples for the Allan benches: WARM samples of white noise to
+    // fill the windows, then ALLAN_SAMPLES measured ones: stationary, and
+    // again with one variance step (×4) in the middle so the E-DAVAR window
+    // really moves. The same input for every λ2.
+    let mut steady = [0i16; WARM + ALLAN_SAMPLES];
+    for x in steady.iter_mut() {
+        *x = (100.0 * rng.gaussian()) as i16;
+    }
+    let mut samples = steady;
+    let per = |ticks: u64, n: usize| ticks as f32 * ipt / n as f32;
+    let loop_ticks = {
+        let t0 = t.now();
+        for &x in &samples[WARM..] {
+            black_box(x as i32);
+        }
+        t.now() - t0
+    };
+
+    let Ok(mut adev) = StreamAdev::<10, 1024>::new() else {
+        exit(false)
+    };
+    let t0 = t.now();
+    for &x in &samples[WARM..] {
+        ok &= adev.push(black_box(x as i32)).is_ok();
+    }
+    let ticks = (t.now() - t0).saturating_sub(loop_ticks);
+    defmt::info!(
+        "bench allan stream (10 octave tau): {=u32} instructions per sample, {=usize} B RAM per axis",
+        per(ticks, ALLAN_SAMPLES) as u32,
+        core::mem::size_of::<StreamAdev<10, 1024>>()
+    );
+
+    for (input, step) in [("stationary", false), ("one variance step", true)] {
+        for (x, s) in samples.iter_mut().zip(steady.iter()) {
+            *x = *s;
+        }
+        if step {
+            for x in samples[WARM + ALLAN_SAMPLES / 2..].iter_mut() {
+                *x *= 2;
+            }
+        }
+        defmt::info!("e-davar input: {=str}", input);
+        ok &= bench_davar::<256, 9>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+        ok &= bench_davar::<1024, 33>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+        ok &= bench_davar::<4096, 129>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
+        ok &= bench_davar::<1024, 33>(&t, ipt, &samples, loop_ticks, Placement::Centred);
+    }
     exit(ok)
 }
 
