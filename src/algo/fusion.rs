@@ -528,45 +528,11 @@ impl<const N: usize> Fusion<N> {
             let nrow = if g.include_diagonal { n } else { n - 1 };
             let t = self.grubbs_t[nrow.min(MAX_GYROS)];
             if t > 0.0 {
-                let t2 = t * t;
-                for i in 0..N {
-                    if !has(m, i) {
-                        continue;
-                    }
-                    let inrow = |j: usize| g.include_diagonal || j != i;
-                    let (mut s1, mut s2) = (0.0f32, 0.0f32);
-                    for j in 0..N {
-                        if !has(m, j) || !inrow(j) {
-                            continue;
-                        }
-                        s1 += s[i][j];
-                    }
-                    let mean = s1 / nrow as f32;
-                    for j in 0..N {
-                        if !has(m, j) || !inrow(j) {
-                            continue;
-                        }
-                        let e = s[i][j] - mean;
-                        s2 += e * e;
-                    }
-                    let dof = match g.std {
-                        StdKind::Population => nrow as f32,
-                        StdKind::Sample => nrow as f32 - 1.0,
-                    };
-                    let var = s2 / dof;
-                    if !(var > 0.0) {
-                        continue;
-                    }
-                    // T_ij ≥ T  ⇔  (s_ij − s̄)² ≥ T²·σ² (no division, no sqrt).
-                    for j in 0..N {
-                        if !has(m, j) || !inrow(j) {
-                            continue;
-                        }
-                        let e = s[i][j] - mean;
-                        if e * e >= t2 * var {
-                            s[i][j] = 0.0;
-                        }
-                    }
+                // The diagonal choice as a const, so the row tests fold.
+                if g.include_diagonal {
+                    grubbs_rows::<N, true>(&mut s, m, nrow, t * t, g.std);
+                } else {
+                    grubbs_rows::<N, false>(&mut s, m, nrow, t * t, g.std);
                 }
             }
         }
@@ -606,6 +572,51 @@ impl<const N: usize> Fusion<N> {
     }
 }
 
+/// Grubbs rejection (eq. 10–12) on every row of the support matrix: an
+/// element whose statistic |s_ij − s̄_i|/σ_i reaches T is set to 0. `DIAG`:
+/// the row includes s_ii = 1 (then it has `nrow` = n elements).
+#[inline(always)]
+fn grubbs_rows<const N: usize, const DIAG: bool>(
+    s: &mut [[f32; N]; N],
+    m: u8,
+    nrow: usize,
+    t2: f32,
+    std: StdKind,
+) {
+    let dof = match std {
+        StdKind::Population => nrow as f32,
+        StdKind::Sample => nrow as f32 - 1.0,
+    };
+    for i in 0..N {
+        if !has(m, i) {
+            continue;
+        }
+        let inrow = |j: usize| has(m, j) && (DIAG || j != i);
+        let (mut s1, mut s2) = (0.0f32, 0.0f32);
+        for j in 0..N {
+            s1 += if inrow(j) { s[i][j] } else { 0.0 };
+        }
+        let mean = s1 / nrow as f32;
+        for j in 0..N {
+            let e = s[i][j] - mean;
+            s2 += if inrow(j) { e * e } else { 0.0 };
+        }
+        let var = s2 / dof;
+        if !(var > 0.0) {
+            continue;
+        }
+        // T_ij ≥ T  ⇔  (s_ij − s̄)² ≥ T²·σ² (no division, no sqrt). Both
+        // sides are non-negative and finite, so their bit patterns order
+        // like the values: an integer compare replaces `vcmp` + `vmrs`.
+        let thr = (t2 * var).to_bits();
+        for j in 0..N {
+            let e = s[i][j] - mean;
+            let out = inrow(j) && (e * e).to_bits() >= thr;
+            s[i][j] = if out { 0.0 } else { s[i][j] };
+        }
+    }
+}
+
 /// Eq. 13–16 with our consistent indexing: `R_i(k) = Σ_u r_i(u)·∂_i(u;k)`
 /// over the last `len` epochs, `∂ = 1 / (t² ((r_i(u) − r̄_i(u))² + ε))`,
 /// `t = k − u + lag0`; r̄ is the running mean since start (eq. 13). μ and
@@ -633,10 +644,9 @@ fn memory_weights<const N: usize>(
     }
     let mut big_r = [0.0f32; N];
     let len = mc.len.min(st.k as usize);
+    // A skipped lag (t = 0) has 1/t² = 0 in the table: adding r·0 = ±0
+    // leaves the sums unchanged, so no branch is needed.
     for (lag, &it2) in inv_t2.iter().enumerate().take(len) {
-        if it2 == 0.0 {
-            continue;
-        }
         let u = (st.head + MAX_MEMORY - lag) % MAX_MEMORY;
         for i in 0..N {
             big_r[i] += st.ring[u][i] * it2;
@@ -817,7 +827,18 @@ fn adaptive_active<const N: usize>(
     }
     out.rejected |= valid & !good;
     if good == full::<N>() {
-        update_and_fuse(c, st, y, full::<N>(), full::<N>(), all_warm, med, &v, &w, out)
+        update_and_fuse(
+            c,
+            st,
+            y,
+            full::<N>(),
+            full::<N>(),
+            all_warm,
+            med,
+            &v,
+            &w,
+            out,
+        )
     } else {
         update_and_fuse(c, st, y, active, good, all_warm, med, &v, &w, out)
     }
