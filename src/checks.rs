@@ -10,7 +10,8 @@ use core::cell::RefCell;
 use embedded_hal_bus::spi::RefCellDevice;
 
 use crate::algo::fusion::{
-    AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, SeedConfig,
+    AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
+    SeedConfig,
 };
 use crate::drivers::adxrs453::{self, Adxrs453};
 use crate::drivers::icm42688::{self, Config, Icm42688};
@@ -118,8 +119,11 @@ pub fn allan_digest() -> u64 {
     d.0
 }
 
+/// `k` of the seed-scaled variant (chosen in `fusion-eval`, see README).
+pub const SCALED_K: f32 = 11.0;
+
 /// Every fusion method the evaluation compares, N = 4.
-pub fn methods() -> [(&'static str, Method); 7] {
+pub fn methods() -> [(&'static str, Method); 8] {
     let grubbs = Some(GrubbsConfig::default());
     let seed = |clamp, g, m| {
         Method::Seed(SeedConfig {
@@ -127,6 +131,7 @@ pub fn methods() -> [(&'static str, Method); 7] {
             clamp_negative: clamp,
             grubbs: g,
             memory: m,
+            normaliser: Normaliser::Instant,
         })
     };
     [
@@ -138,6 +143,18 @@ pub fn methods() -> [(&'static str, Method); 7] {
         (
             "seed-full",
             seed(true, grubbs, Some(MemoryConfig::default())),
+        ),
+        (
+            "seed-scaled",
+            Method::Seed(SeedConfig {
+                clamp_negative: true,
+                grubbs,
+                normaliser: Normaliser::Running {
+                    k: SCALED_K,
+                    alpha: 1.0 / 64.0,
+                },
+                ..SeedConfig::SUPPORT
+            }),
         ),
         ("adaptive", Method::Adaptive(AdaptiveConfig::default())),
     ]

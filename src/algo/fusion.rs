@@ -93,6 +93,27 @@ impl Default for MemoryConfig {
     }
 }
 
+/// The scale d_ij is divided by in the support function (eq. 4–5).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Normaliser {
+    /// Eq. 4: this sample's mean pairwise distance. Scale-free: the
+    /// supports, and so the weights, stay just as random however well the
+    /// chips agree (measured in `fusion-eval`).
+    Instant,
+    /// Ours: `k` times a running (EWMA factor `alpha`) estimate of the
+    /// array's spread, the median absolute deviation from the median (one
+    /// faulty gyro cannot inflate it). Healthy chips then sit near d* = 0
+    /// and get near-equal weights, while a gyro `1.72·k` spreads away
+    /// (d* = e − 1) gets no support at all.
+    Running {
+        /// Multiple of the running spread.
+        k: f32,
+        /// EWMA factor of the spread.
+        alpha: f32,
+    },
+}
+
 /// The seed's method and its readings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -107,6 +128,8 @@ pub struct SeedConfig {
     pub grubbs: Option<GrubbsConfig>,
     /// Memory weighting (eq. 13–16), if enabled.
     pub memory: Option<MemoryConfig>,
+    /// Scale of the normalised distance.
+    pub normaliser: Normaliser,
 }
 
 impl SeedConfig {
@@ -116,6 +139,7 @@ impl SeedConfig {
         clamp_negative: false,
         grubbs: None,
         memory: None,
+        normaliser: Normaliser::Instant,
     };
 }
 
@@ -218,6 +242,8 @@ pub struct AxisState<const N: usize> {
     ring: [[f32; N]; MAX_MEMORY],
     head: usize,
     rbar: [f32; N],
+    /// Running spread for [`Normaliser::Running`].
+    spread: f32,
     // Adaptive: noise variance estimates, last input, frozen counters.
     var: [f32; N],
     last: [f32; N],
@@ -236,6 +262,7 @@ impl<const N: usize> Default for AxisState<N> {
             ring: [[0.0; N]; MAX_MEMORY],
             head: 0,
             rbar: [0.0; N],
+            spread: 0.0,
             var: [0.0; N],
             last: [f32::NAN; N],
             frozen: [0; N],
@@ -326,6 +353,11 @@ impl<const N: usize> Fusion<N> {
                     }
                     for (n, t) in grubbs_t.iter_mut().enumerate() {
                         *t = grubbs_critical(n, g.alpha as f64, g.two_sided).unwrap_or(0.0) as f32;
+                    }
+                }
+                if let Normaliser::Running { k, alpha } = c.normaliser {
+                    if !(k > 0.0 && k.is_finite() && alpha > 0.0 && alpha < 1.0) {
+                        return Err(ConfigError::Parameter);
                     }
                 }
                 if let Some(m) = c.memory {
@@ -503,7 +535,18 @@ impl<const N: usize> Fusion<N> {
             Denominator::MSquaredMinus1 => nf * nf - 1.0,
             Denominator::OrderedPairs => nf * (nf - 1.0),
         };
-        let scale = sum / denom;
+        let scale = match c.normaliser {
+            Normaliser::Instant => sum / denom,
+            Normaliser::Running { k, alpha } => {
+                let mad = mad(y, m);
+                st.spread = if st.spread > 0.0 {
+                    st.spread + alpha * (mad - st.spread)
+                } else {
+                    mad
+                };
+                k * st.spread
+            }
+        };
         // Eq. 5–6: support matrix. All-equal inputs give 0/0 in eq. 4; we
         // take d* = 0 (full support), which is the limit for equal values.
         let mut s = [[1.0f32; N]; N];
@@ -708,6 +751,16 @@ fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
     } else {
         0.5 * (at(lo) + at(hi))
     }
+}
+
+/// Median absolute deviation from the median over the masked values.
+fn mad<const N: usize>(y: &[f32; N], m: u8) -> f32 {
+    let med = median(y, m);
+    let mut dev = [0.0f32; N];
+    for i in 0..N {
+        dev[i] = (y[i] - med).abs();
+    }
+    median(&dev, m)
 }
 
 /// All N gyros.

@@ -3,12 +3,13 @@ use super::*;
 use crate::emu::Rng;
 
 /// Every method in the reading we ship (supports clamped at 0).
-fn all_methods() -> [Method; 6] {
+fn all_methods() -> [Method; 7] {
     let full = SeedConfig {
         denominator: Denominator::MSquaredMinus1,
         clamp_negative: true,
         grubbs: Some(GrubbsConfig::default()),
         memory: Some(MemoryConfig::default()),
+        normaliser: Normaliser::Instant,
     };
     [
         Method::Mean,
@@ -23,6 +24,15 @@ fn all_methods() -> [Method; 6] {
             ..SeedConfig::SUPPORT
         }),
         Method::Seed(full),
+        Method::Seed(SeedConfig {
+            clamp_negative: true,
+            grubbs: Some(GrubbsConfig::default()),
+            normaliser: Normaliser::Running {
+                k: 11.0,
+                alpha: 1.0 / 64.0,
+            },
+            ..SeedConfig::SUPPORT
+        }),
         Method::Adaptive(AdaptiveConfig::default()),
     ]
 }
@@ -304,4 +314,22 @@ fn adaptive_learns_noise_and_rejects_outliers_and_frozen_outputs() {
         }
     }
     assert_eq!(rejected_at, Some(3));
+}
+
+#[test]
+fn running_normaliser_settings_are_checked() {
+    let m = |k, alpha| {
+        Method::Seed(SeedConfig {
+            normaliser: Normaliser::Running { k, alpha },
+            ..SeedConfig::SUPPORT
+        })
+    };
+    assert!(Fusion::<4>::new(m(11.0, 0.01)).is_ok());
+    for (k, a) in [(0.0, 0.01), (f32::NAN, 0.01), (11.0, 0.0), (11.0, 1.0)] {
+        assert_eq!(
+            Fusion::<4>::new(m(k, a)).err(),
+            Some(ConfigError::Parameter),
+            "{k} {a}"
+        );
+    }
 }
