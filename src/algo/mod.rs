@@ -4,4 +4,5 @@ pub mod allan;
 pub mod davar;
 pub mod fusion;
 pub mod math;
+pub mod qualify;
 pub mod stats;
