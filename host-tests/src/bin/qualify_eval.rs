@@ -13,6 +13,7 @@
 //! λ of the reverse-arrangement test before and after detrending by a
 //! polynomial, by a db4 wavelet approximation and by EMD (MASM), with
 //! skewness, kurtosis and the AIC order of an AR model.
+#![allow(clippy::needless_range_loop)]
 
 use gyro_array::algo::allan::{fill_phase, local_slope, oavar_octave_phase, AdevPoint};
 use gyro_array::algo::qualify::hurst::{
@@ -22,7 +23,7 @@ use gyro_array::algo::qualify::moments::{mean_var, skew_kurtosis};
 use gyro_array::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB5};
 use gyro_array::emu::Rng;
 
-#[allow(clippy::needless_range_loop)] // Durbin–Levinson indexes several arrays
+
 fn fgn(h: f64, n: usize, rng: &mut Rng) -> Vec<f64> {
     let gam = |k: f64| {
         0.5 * ((k + 1.0).abs().powf(2.0 * h) - 2.0 * k.abs().powf(2.0 * h)
