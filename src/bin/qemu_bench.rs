@@ -134,7 +134,28 @@ fn main() -> ! {
         ok &= bench_davar::<4096, 129>(&t, ipt, &samples, loop_ticks, Placement::ChangeAware);
         ok &= bench_davar::<1024, 33>(&t, ipt, &samples, loop_ticks, Placement::Centred);
     }
+    ok &= bench_selftest(&t, ipt, &mut rng);
     exit(ok)
+}
+
+/// Instructions of the noise-health self-test on one 2048-sample block.
+/// Not inlined: its 8 KB block must not sit in main's frame (the stack
+/// also holds the E-DAVAR benches' windows).
+#[inline(never)]
+fn bench_selftest(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
+    let mut block = [0.0f32; gyro_array::pipeline::selftest::BLOCK];
+    for v in block.iter_mut() {
+        *v = 0.09 * rng.gaussian();
+    }
+    let t0 = t.now();
+    let h = gyro_array::pipeline::selftest::noise_health(black_box(&block));
+    let ticks = t.now() - t0;
+    defmt::info!(
+        "bench self-test (2048 samples, trend + Hurst + normality): {=u32} instructions, {=usize} B block buffer per gyro",
+        (ticks as f32 * ipt) as u32,
+        core::mem::size_of_val(&block)
+    );
+    h.is_ok_and(|h| h.stationary)
 }
 
 const ALLAN_SAMPLES: usize = 8192;

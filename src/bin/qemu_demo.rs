@@ -5,6 +5,8 @@
 //! E-DAVAR (change-aware, λ2 = 512) tracks the noise of each fused axis
 //! and logs its window length, entropy deficit and σ(τ) every 500 samples
 //! (z slews in a 20 °/s sine, so its long-τ σ and deficit show the motion).
+//! Before that, a noise-health self-test takes 2048 samples of every gyro
+//! while the board is still and checks trend, long memory and normality.
 //! The run fails (exit code 1) unless the stuck gyro is excluded within
 //! 20 samples, every bit error is caught, every sample is accounted for,
 //! and E-DAVAR's σ(1 ms) on x matches the fused noise (0.02–0.1 °/s).
@@ -24,6 +26,7 @@ use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{board_array, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
+use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -49,7 +52,7 @@ fn main() -> ! {
         base_dps: [0.5, -0.2, 10.0],
         sine_dps: [0.0, 0.0, 20.0],
         sine_hz: 0.5,
-        sine_start_s: 2.0,
+        sine_start_s: 4.5,
     };
     let cs: [CsLine; 5] = Default::default();
     let bus = RefCell::new(EmuBus::new(board_array(profile, 1), &cs));
@@ -86,6 +89,44 @@ fn main() -> ! {
         Err(e) => {
             defmt::error!("gyro 4: ADXRS453 init failed: {}", e);
             pipe.mark_init_failed(4);
+        }
+    }
+
+    // Noise-health self-test while the board is still: one block per gyro
+    // (x for the ICM-42688-P, z for the ADXRS453), read back to back.
+    let mut self_test_ok = true;
+    {
+        let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
+        #[allow(clippy::needless_range_loop)] // sample i of every gyro's block
+        for i in 0..selftest::BLOCK {
+            bus.borrow_mut().advance(dt);
+            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+            for (g, gyro) in gyros.iter_mut().enumerate() {
+                let axis = if g == 4 { 2 } else { 0 };
+                blocks[g][i] = gyro.read().map_or(f32::NAN, |r| r.rate_dps[axis]);
+            }
+        }
+        for (g, b) in blocks.iter().enumerate() {
+            match selftest::noise_health(b) {
+                Ok(h) => {
+                    defmt::info!(
+                        "self-test gyro {}: std {=f32} dps, lambda {=f32} (stationary {}), H {=f32}, skew {=f32}, kurt {=f32} (normal {})",
+                        g,
+                        h.std_dps,
+                        h.lambda,
+                        h.stationary,
+                        h.hurst,
+                        h.skewness,
+                        h.kurtosis,
+                        h.normal
+                    );
+                    self_test_ok &= h.stationary && h.normal;
+                }
+                Err(e) => {
+                    defmt::error!("self-test gyro {}: {}", g, e);
+                    self_test_ok = false;
+                }
+            }
         }
     }
 
@@ -230,6 +271,15 @@ fn main() -> ! {
         noise.skipped()
     );
     pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
+    defmt::info!(
+        "noise-health self-test: {}",
+        if self_test_ok {
+            "all gyros pass"
+        } else {
+            "FAILED"
+        }
+    );
+    pass &= self_test_ok;
     pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
     defmt::info!("demo {}", if pass { "PASS" } else { "FAIL" });
     exit(pass)

@@ -78,3 +78,12 @@ pub fn instructions_per_tick(t: &Ticks) -> f32 {
     let ticks = t.now() - t0;
     (2 * ITER) as f32 / ticks as f32
 }
+
+/// A hard fault (a stack overflow into the statics, a bad access) ends the
+/// QEMU run as a failure instead of looping forever in the default handler.
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
+unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
+    defmt::error!("hard fault at pc {=u32:#010x}", ef.pc());
+    exit(false)
+}

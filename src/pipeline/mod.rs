@@ -5,6 +5,7 @@
 //! read error and overrun is counted, and every health change is reported in
 //! [`Output::health_changed`] for the firmware to log.
 
+pub mod selftest;
 pub mod tracker;
 
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};

@@ -23,7 +23,6 @@ use gyro_array::algo::qualify::moments::{mean_var, skew_kurtosis};
 use gyro_array::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB5};
 use gyro_array::emu::Rng;
 
-
 fn fgn(h: f64, n: usize, rng: &mut Rng) -> Vec<f64> {
     let gam = |k: f64| {
         0.5 * ((k + 1.0).abs().powf(2.0 * h) - 2.0 * k.abs().powf(2.0 * h)

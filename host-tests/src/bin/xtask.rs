@@ -98,7 +98,10 @@ fn build_qemu(bin: &str) -> PathBuf {
 /// Run a firmware image in QEMU and decode its defmt stream to stdout; true
 /// when QEMU's semihosting exit code and defmt-print both report success.
 fn qemu(elf: &Path, icount: bool) -> bool {
-    let mut q = Command::new("qemu-system-arm");
+    // A firmware that hangs (a fault loop, a stack overflow) must fail
+    // the run, not stall CI: coreutils' `timeout` kills QEMU after 300 s.
+    let mut q = Command::new("timeout");
+    q.args(["300", "qemu-system-arm"]);
     q.args([
         "-cpu",
         "cortex-m4",
