@@ -129,3 +129,14 @@ rho, sig2 = burg(ar, order=4)
 print("/// statsmodels burg(ar, order=4): phi, sigma^2.")
 arr("BURG_PHI", "f64", rho)
 print("pub const BURG_SIGMA2: f64 = %.17e;" % sig2)
+
+# --- EMD: three tones and a ramp, 1000 samples (signal written out) ---
+from PyEMD import EMD
+t = np.arange(1000.0)
+emd_sig = (0.5 * np.sin(2 * np.pi * t / 20) + np.sin(2 * np.pi * t / 97 + 0.3)
+           + 2 * np.sin(2 * np.pi * t / 400 + 1.0) + 0.002 * t)
+arr("EMD_SIGNAL", "f64", emd_sig)
+imfs = EMD().emd(emd_sig)
+print("/// PyEMD %s EMD().emd(signal): rows (IMFs, then the residue)." % getattr(__import__("PyEMD"), "__version__", "?"))
+print("pub const EMD_ROWS: usize = %d;" % imfs.shape[0])
+arr("EMD_OUT", "f64", imfs.ravel())

@@ -8,6 +8,7 @@
 //! returns a typed [`QualifyError`] for input it cannot handle.
 
 pub mod ar;
+pub mod emd;
 pub mod hurst;
 pub mod moments;
 pub mod trend;

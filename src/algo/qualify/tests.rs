@@ -347,3 +347,87 @@ fn wavelet_bad_input_is_typed() {
     assert!(out.iter().all(|v| (v - 2.5).abs() < 1e-9));
     let _ = Layout::new(64, 8, 2).unwrap();
 }
+
+#[test]
+fn emd_matches_pyemd() {
+    use super::emd::{emd, work_len, EmdConfig};
+    let x = v::EMD_SIGNAL;
+    let n = x.len();
+    let cfg = EmdConfig::default();
+    let mut out = vec![0.0; (cfg.max_imfs + 1) * n];
+    let mut work = vec![0.0; work_len(n)];
+    let mut idx = vec![0u32; n];
+    let d = emd(x, &cfg, &mut out, &mut work, &mut idx).unwrap();
+    let rows = d.imfs + d.residue as usize;
+    println!(
+        "ours: {} IMFs + residue {} (sifts {:?}); PyEMD rows {}",
+        d.imfs,
+        d.residue,
+        &d.sifts[..d.imfs],
+        v::EMD_ROWS
+    );
+    assert_eq!(rows, v::EMD_ROWS, "row count");
+    for r in 0..rows {
+        let a = &out[r * n..(r + 1) * n];
+        let b = &v::EMD_OUT[r * n..(r + 1) * n];
+        let (ma, mb) = (
+            a.iter().sum::<f64>() / n as f64,
+            b.iter().sum::<f64>() / n as f64,
+        );
+        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+        for (p, q) in a.iter().zip(b) {
+            sab += (p - ma) * (q - mb);
+            saa += (p - ma) * (p - ma);
+            sbb += (q - mb) * (q - mb);
+        }
+        let corr = sab / (saa * sbb).sqrt();
+        println!("row {r}: correlation {corr:.6}");
+        assert!(corr >= 0.99, "row {r}: correlation {corr}");
+    }
+    // The rows add back up to the signal.
+    for i in 0..n {
+        let s: f64 = (0..rows).map(|r| out[r * n + i]).sum();
+        assert!((s - x[i]).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn emd_edge_cases_are_defined() {
+    use super::emd::{emd, masm, trend_start, work_len, EmdConfig};
+    let cfg = EmdConfig::default();
+    let n = 200;
+    let mut out = vec![0.0; (cfg.max_imfs + 1) * n];
+    let mut work = vec![0.0; work_len(n)];
+    let mut idx = vec![0u32; n];
+    // Monotone: no IMF, the signal is the residue.
+    let ramp: Vec<f64> = (0..n).map(|i| i as f64 * 0.1).collect();
+    let d = emd(&ramp, &cfg, &mut out, &mut work, &mut idx).unwrap();
+    assert_eq!((d.imfs, d.residue), (0, true));
+    assert_eq!(&out[..n], &ramp[..]);
+    // All zero: nothing at all.
+    let d = emd(&vec![0.0; n], &cfg, &mut out, &mut work, &mut idx).unwrap();
+    assert_eq!((d.imfs, d.residue), (0, false));
+    assert_eq!(
+        emd(&[1.0, 2.0], &cfg, &mut out, &mut work, &mut idx).err(),
+        Some(QualifyError::TooShort)
+    );
+    let mut bad = ramp.clone();
+    bad[3] = f64::NAN;
+    assert_eq!(
+        emd(&bad, &cfg, &mut out, &mut work, &mut idx).err(),
+        Some(QualifyError::NonFinite)
+    );
+    assert_eq!(
+        emd(&ramp, &cfg, &mut out[..10], &mut work, &mut idx).err(),
+        Some(QualifyError::Buffer)
+    );
+    // MASM of zero-mean modes is ~0; a trend mode shows up.
+    let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).sin()).collect();
+    let mut modes = x.clone();
+    modes.extend((0..n).map(|i| 1.0 + i as f64 * 0.01));
+    let mut acc = vec![0.0; n];
+    let mut h = [0.0; 2];
+    masm(&modes, n, 2, &mut acc, &mut h);
+    assert!(h[0].abs() < 0.05 && h[1].abs() > 0.5, "{h:?}");
+    assert_eq!(trend_start(&h, 0.2), Some(2));
+}
