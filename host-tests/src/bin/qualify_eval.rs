@@ -17,13 +17,16 @@
 
 use gyro_array::algo::allan::{fill_phase, local_slope, oavar_octave_phase, AdevPoint};
 use gyro_array::algo::qualify::ar::select_order;
-use gyro_array::algo::qualify::emd::{emd, masm, trend_start, work_len, EmdConfig};
+use gyro_array::algo::qualify::emd::{masm, work_len, EmdConfig};
 use gyro_array::algo::qualify::hurst::{
-    frac_diff, frac_order, frac_weights, hurst_mrs, hurst_rs, octave_windows, Convention,
+    frac_diff, frac_weights, hurst_mrs, hurst_rs, octave_windows, Convention,
 };
 use gyro_array::algo::qualify::moments::{mean_var, skew_kurtosis};
+use gyro_array::algo::qualify::pipeline::{
+    detrend_emd, detrend_wavelet, prewhiten, Estimator, PrewhitenConfig,
+};
 use gyro_array::algo::qualify::trend::{detrend_poly, reverse_arrangement};
-use gyro_array::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB4, DB5};
+use gyro_array::algo::qualify::wavelet::{DB4, DB5};
 use gyro_array::emu::Rng;
 
 fn fgn(h: f64, n: usize, rng: &mut Rng) -> Vec<f64> {
@@ -86,22 +89,30 @@ fn mean_slope(p: &[AdevPoint]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-/// Difference with order q (full-length filter), then db5 5-level
-/// BayesShrink: (differenced, denoised).
-fn whiten(x: &[f64], q: f64) -> (Vec<f64>, Vec<f64>) {
+/// The library's pre-whitening with H and the convention given: returns
+/// (differenced, denoised) so the eval can show both.
+fn whiten(x: &[f64], h: f64, conv: Convention, est: Estimator) -> (Vec<f64>, Vec<f64>, f64) {
     let n = x.len();
-    let mut h = vec![0.0; n];
-    frac_weights(q, &mut h);
-    let mut f = vec![0.0; n];
-    frac_diff(x, &h, &mut f).expect("finite");
-    let mut c = vec![0.0; n + 64];
-    let mut s = vec![0.0; 2 * (n + 16)];
-    let lay = wavedec(&DB5, &f, 5, &mut c, &mut s).expect("levels fit");
-    let mut tmp = vec![0.0; n];
-    bayes_shrink(&mut c, &lay, &mut tmp).expect("buffers");
+    let cfg = PrewhitenConfig {
+        estimator: est,
+        convention: conv,
+        filter_len: n,
+        wavelet: DB5,
+        levels: 5,
+    };
     let mut out = vec![0.0; n];
-    waverec(&DB5, &c, &lay, &mut out, &mut s).expect("buffers");
-    (f, out)
+    let mut scratch = vec![0.0; 6 * n + 64];
+    let r = prewhiten(x, &cfg, &mut out, &mut scratch).expect("long enough");
+    assert!(
+        (r.hurst - h).abs() < 1e-12,
+        "the pipeline estimates the same H"
+    );
+    // The differenced series, recomputed for its ADEV.
+    let mut w = vec![0.0; n];
+    frac_weights(r.q, &mut w);
+    let mut f = vec![0.0; n];
+    frac_diff(x, &w, &mut f).expect("finite");
+    (f, out, r.q)
 }
 
 fn seed002(seed: u64) {
@@ -134,14 +145,26 @@ fn seed002(seed: u64) {
             "H_MRS+0.5",
             h_mrs,
             Convention::Fbm,
+            Estimator::ModifiedRs,
         ),
-        ("q = H_MRS − 0.5", "H_MRS−0.5", h_mrs, Convention::Fgn),
-        ("q = H_RS − 0.5", "H_RS−0.5", h_rs, Convention::Fgn),
+        (
+            "q = H_MRS − 0.5",
+            "H_MRS−0.5",
+            h_mrs,
+            Convention::Fgn,
+            Estimator::ModifiedRs,
+        ),
+        (
+            "q = H_RS − 0.5",
+            "H_RS−0.5",
+            h_rs,
+            Convention::Fgn,
+            Estimator::Rs,
+        ),
     ];
     let mut slopes = Vec::new();
-    for (name, short, h, conv) in variants {
-        let q = frac_order(h, conv);
-        let (f, out) = whiten(&x, q);
+    for (name, short, h, conv, est) in variants {
+        let (f, out, q) = whiten(&x, h, conv, est);
         let (_, k) = skew_kurtosis(&f).expect("not constant");
         let af = adev(&f);
         let sl = mean_slope(&af);
@@ -267,35 +290,31 @@ fn seed003(seed: u64) {
     detrend_poly(&mut cub, 3).expect("long enough");
     describe("cubic detrend", &cub);
     // Wavelet: the trend is the db4 level-8 approximation.
-    let mut c = vec![0.0; n + 200];
-    let mut s = vec![0.0; 2 * (n + 16)];
-    let lay = wavedec(&DB4, &x, 8, &mut c, &mut s).expect("levels fit");
-    for b in 1..=lay.levels {
-        for v in &mut c[lay.band(b)] {
-            *v = 0.0;
-        }
-    }
+    let mut wav = x.clone();
     let mut trend = vec![0.0; n];
-    waverec(&DB4, &c, &lay, &mut trend, &mut s).expect("buffers");
-    let wav: Vec<f64> = x.iter().zip(&trend).map(|(a, b)| a - b).collect();
+    let mut s = vec![0.0; 4 * n + 1024];
+    detrend_wavelet(&mut wav, &DB4, 8, &mut trend, &mut s).expect("levels fit");
     describe("db4 wavelet, level-8 trend", &wav);
     // EMD + MASM.
     let cfg = EmdConfig::default();
     let mut out = vec![0.0; (cfg.max_imfs + 1) * n];
-    let mut work = vec![0.0; work_len(n)];
+    let mut work = vec![0.0; work_len(n) + n];
     let mut idx = vec![0u32; n];
-    let d = emd(&x, &cfg, &mut out, &mut work, &mut idx).expect("EMD");
+    let mut emd_d = vec![0.0; n];
+    let (d, m) = detrend_emd(
+        &x,
+        &cfg,
+        MASM_THRESHOLD,
+        &mut emd_d,
+        &mut out,
+        &mut work,
+        &mut idx,
+    )
+    .expect("EMD");
     let rows = d.imfs + d.residue as usize;
     let mut h = vec![0.0; rows];
     let mut acc = vec![0.0; n];
     masm(&out, n, rows, &mut acc, &mut h);
-    let m = trend_start(&h, MASM_THRESHOLD).unwrap_or(rows + 1);
-    let mut emd_d = vec![0.0; n];
-    for r in 0..(m - 1).min(rows) {
-        for (a, v) in emd_d.iter_mut().zip(&out[r * n..(r + 1) * n]) {
-            *a += v;
-        }
-    }
     describe(&format!("EMD, trend from mode {m}"), &emd_d);
     println!(
         "  EMD: {} IMFs + residue; MASM h_m = {:?}; trend = modes ≥ {m} (first |h_m| > {MASM_THRESHOLD})",

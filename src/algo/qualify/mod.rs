@@ -11,6 +11,7 @@ pub mod ar;
 pub mod emd;
 pub mod hurst;
 pub mod moments;
+pub mod pipeline;
 pub mod trend;
 pub mod wavelet;
 

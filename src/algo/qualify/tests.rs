@@ -431,3 +431,41 @@ fn emd_edge_cases_are_defined() {
     assert!(h[0].abs() < 0.05 && h[1].abs() > 0.5, "{h:?}");
     assert_eq!(trend_start(&h, 0.2), Some(2));
 }
+
+#[test]
+fn pipelines_run_and_refuse_bad_settings() {
+    use super::pipeline::{detrend_wavelet, prewhiten, Estimator, PrewhitenConfig};
+    let x = fgn(0.8, 1024, 7);
+    let cfg = PrewhitenConfig {
+        estimator: Estimator::Rs,
+        convention: Convention::Fgn,
+        filter_len: 1024,
+        wavelet: DB5,
+        levels: 5,
+    };
+    let mut out = vec![0.0; 1024];
+    let mut s = vec![0.0; 6 * 1024 + 64];
+    let r = prewhiten(&x, &cfg, &mut out, &mut s).unwrap();
+    assert!(r.q > 0.0 && r.q < 0.5 && r.std[2] < r.std[1], "{r:?}");
+    let bad = PrewhitenConfig {
+        filter_len: 0,
+        ..cfg
+    };
+    assert_eq!(
+        prewhiten(&x, &bad, &mut out, &mut s).err(),
+        Some(QualifyError::Parameter)
+    );
+    assert_eq!(
+        prewhiten(&[1.0; 1024], &cfg, &mut out, &mut s).err(),
+        Some(QualifyError::Constant)
+    );
+    // A wavelet trend of a ramp plus a tone takes the ramp.
+    let mut y: Vec<f64> = (0..1024)
+        .map(|i| i as f64 * 0.01 + (i as f64 * 0.9).sin())
+        .collect();
+    let mut trend = vec![0.0; 1024];
+    let mut s2 = vec![0.0; 4 * 1024 + 1024];
+    detrend_wavelet(&mut y, &DB4, 6, &mut trend, &mut s2).unwrap();
+    let mid = trend[512];
+    assert!((mid - 5.12).abs() < 0.2, "{mid}");
+}
