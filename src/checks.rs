@@ -122,6 +122,72 @@ pub fn allan_digest() -> u64 {
 /// `k` of the seed-scaled variant (chosen in `fusion-eval`, see README).
 pub const SCALED_K: f32 = 11.0;
 
+/// Digest of the noise-qualification path in f32 (the board's types) on
+/// seeded data: the noise-health self-test, a db5 decomposition with
+/// BayesShrink, an EMD and a Burg AR(4) fit. Host and Cortex-M4 must agree
+/// bit for bit.
+pub fn qualify_digest() -> u64 {
+    use crate::algo::qualify::ar::burg;
+    use crate::algo::qualify::emd::{emd, work_len, EmdConfig};
+    use crate::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB5};
+    use crate::pipeline::selftest::{noise_health, BLOCK};
+    const N: usize = 512;
+    let mut d = Digest::new();
+    let mut rng = Rng::new(2718);
+    let mut block = [0.0f32; BLOCK];
+    for (i, v) in block.iter_mut().enumerate() {
+        *v = 0.1 * rng.gaussian() + 1e-5 * i as f32;
+    }
+    match noise_health(&block) {
+        Ok(h) => {
+            for v in [h.std_dps, h.lambda, h.hurst, h.skewness, h.kurtosis] {
+                d.f32(v);
+            }
+        }
+        Err(_) => d.word(0xdead),
+    }
+    let mut x = [0.0f32; N];
+    for (i, v) in x.iter_mut().enumerate() {
+        let t = i as f32;
+        *v = libm::sinf(t * 0.31) + 0.5 * libm::sinf(t * 0.05) + 0.2 * rng.gaussian();
+    }
+    let mut c = [0.0f32; N + 64];
+    let mut s = [0.0f32; 2 * (N + 16)];
+    if let Ok(lay) = wavedec(&DB5, &x, 5, &mut c, &mut s) {
+        let mut tmp = [0.0f32; N];
+        let _ = bayes_shrink(&mut c, &lay, &mut tmp);
+        let _ = waverec(&DB5, &c, &lay, &mut tmp, &mut s);
+        for v in tmp {
+            d.f32(v);
+        }
+    }
+    let cfg = EmdConfig {
+        max_imfs: 6,
+        ..EmdConfig::default()
+    };
+    let mut rows = [0.0f32; 7 * N];
+    let mut work = [0.0f32; 13 * N + 32];
+    let mut idx = [0u32; N];
+    debug_assert!(work.len() >= work_len(N));
+    match emd(&x, &cfg, &mut rows, &mut work, &mut idx) {
+        Ok(dec) => {
+            d.word(dec.imfs as u32);
+            for v in &rows[..(dec.imfs + dec.residue as usize) * N] {
+                d.f32(*v);
+            }
+        }
+        Err(_) => d.word(0xbeef),
+    }
+    let mut sc = [0.0f32; 2 * N];
+    if let Ok(m) = burg(&x, 4, &mut sc) {
+        for v in &m.phi[..4] {
+            d.f32(*v);
+        }
+        d.f32(m.sigma2);
+    }
+    d.0
+}
+
 /// Every fusion method the evaluation compares, N = 4.
 pub fn methods() -> [(&'static str, Method); 8] {
     let grubbs = Some(GrubbsConfig::default());
@@ -389,6 +455,10 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
     check(
         "allan: streaming OADEV and E-DAVAR bit-identical to the golden digest",
         allan_digest() == golden::ALLAN,
+    );
+    check(
+        "qualify: self-test, wavelets, EMD and AR in f32 bit-identical to the golden digest",
+        qualify_digest() == golden::QUALIFY,
     );
     tally
 }
