@@ -22,9 +22,11 @@ use stm32f4xx_hal::{
 };
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::algo::qualify::QualifyError;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{Config, Icm42688};
 use gyro_array::drivers::Gyro;
+use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -111,6 +113,29 @@ fn main() -> ! {
     if tick.start(FS_HZ.Hz()).is_err() {
         panic!("sampling timer");
     }
+    // Noise-health self-test (the board must be still): 2048 samples of
+    // every gyro at the sampling rate, then trend, Hurst and normality.
+    // The blocks (40 KB) live only for the test.
+    {
+        let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
+        let mut results = [Err(QualifyError::TooShort); 5];
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        let ok = selftest::run(
+            &mut gyros,
+            |g| if g == 4 { 2 } else { 0 },
+            || {
+                let _ = nb::block!(tick.wait());
+            },
+            &mut blocks,
+            &mut results,
+        );
+        if ok {
+            defmt::info!("noise-health self-test: all gyros pass");
+        } else {
+            defmt::warn!("noise-health self-test: FAILED (see above)");
+        }
+    }
+
     let period = SYSCLK_HZ / FS_HZ;
     let mut last = cortex_m::peripheral::DWT::cycle_count();
     loop {

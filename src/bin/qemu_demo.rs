@@ -21,6 +21,7 @@ use defmt_semihosting as _;
 use embedded_hal_bus::spi::RefCellDevice;
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::qemu::exit;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{Config, Icm42688};
@@ -94,41 +95,18 @@ fn main() -> ! {
 
     // Noise-health self-test while the board is still: one block per gyro
     // (x for the ICM-42688-P, z for the ADXRS453), read back to back.
-    let mut self_test_ok = true;
-    {
-        let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
-        #[allow(clippy::needless_range_loop)] // sample i of every gyro's block
-        for i in 0..selftest::BLOCK {
-            bus.borrow_mut().advance(dt);
-            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-            for (g, gyro) in gyros.iter_mut().enumerate() {
-                let axis = if g == 4 { 2 } else { 0 };
-                blocks[g][i] = gyro.read().map_or(f32::NAN, |r| r.rate_dps[axis]);
-            }
-        }
-        for (g, b) in blocks.iter().enumerate() {
-            match selftest::noise_health(b) {
-                Ok(h) => {
-                    defmt::info!(
-                        "self-test gyro {}: std {=f32} dps, lambda {=f32} (stationary {}), H {=f32}, skew {=f32}, kurt {=f32} (normal {})",
-                        g,
-                        h.std_dps,
-                        h.lambda,
-                        h.stationary,
-                        h.hurst,
-                        h.skewness,
-                        h.kurtosis,
-                        h.normal
-                    );
-                    self_test_ok &= h.stationary && h.normal;
-                }
-                Err(e) => {
-                    defmt::error!("self-test gyro {}: {}", g, e);
-                    self_test_ok = false;
-                }
-            }
-        }
-    }
+    let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
+    let mut results = [Err(QualifyError::TooShort); 5];
+    let self_test_ok = {
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        selftest::run(
+            &mut gyros,
+            |g| if g == 4 { 2 } else { 0 },
+            || bus.borrow_mut().advance(dt),
+            &mut blocks,
+            &mut results,
+        )
+    };
 
     let mut noise = Tracker::new(tracker::config(512)).unwrap_or_else(|_| exit(false));
     let mut sigma_x_1ms = f32::NAN;

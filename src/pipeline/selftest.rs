@@ -7,6 +7,7 @@ use crate::algo::qualify::hurst::{hurst_rs, octave_windows};
 use crate::algo::qualify::moments::{mean_var, skew_kurtosis};
 use crate::algo::qualify::trend::reverse_arrangement;
 use crate::algo::qualify::QualifyError;
+use crate::drivers::Gyro;
 
 /// Samples per self-test block.
 pub const BLOCK: usize = 2048;
@@ -60,6 +61,54 @@ pub fn noise_health(block: &[f32]) -> Result<NoiseHealth, QualifyError> {
         kurtosis,
         normal: skewness.abs() <= 5.0 * se_s && (kurtosis - 3.0).abs() <= 5.0 * se_k,
     })
+}
+
+/// The self-test mode: `tick` waits for the next sample period (and moves
+/// an emulated bus's time), then every gyro is read once; gyro g's axis is
+/// `axis(g)` (its first one). A read error leaves NaN, which the analysis
+/// reports as `NonFinite`. Results are logged with defmt when enabled;
+/// returns whether every gyro is stationary and normal.
+pub fn run<const N: usize>(
+    gyros: &mut [&mut dyn Gyro; N],
+    axis: impl Fn(usize) -> usize,
+    mut tick: impl FnMut(),
+    blocks: &mut [[f32; BLOCK]; N],
+    results: &mut [Result<NoiseHealth, QualifyError>; N],
+) -> bool {
+    for i in 0..BLOCK {
+        tick();
+        for (g, gyro) in gyros.iter_mut().enumerate() {
+            blocks[g][i] = gyro.read().map_or(f32::NAN, |r| r.rate_dps[axis(g).min(2)]);
+        }
+    }
+    let mut ok = true;
+    for (g, (b, r)) in blocks.iter().zip(results.iter_mut()).enumerate() {
+        *r = noise_health(b);
+        match r {
+            Ok(h) => {
+                #[cfg(feature = "defmt")]
+                defmt::info!(
+                    "self-test gyro {}: std {=f32} dps, lambda {=f32} (stationary {}), H {=f32}, skew {=f32}, kurt {=f32} (normal {})",
+                    g,
+                    h.std_dps,
+                    h.lambda,
+                    h.stationary,
+                    h.hurst,
+                    h.skewness,
+                    h.kurtosis,
+                    h.normal
+                );
+                ok &= h.stationary && h.normal;
+            }
+            Err(_e) => {
+                #[cfg(feature = "defmt")]
+                defmt::error!("self-test gyro {}: {}", g, _e);
+                ok = false;
+            }
+        }
+        let _ = g;
+    }
+    ok
 }
 
 #[cfg(test)]
