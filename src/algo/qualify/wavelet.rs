@@ -260,19 +260,35 @@ pub fn waverec<F: Real>(
     Ok(())
 }
 
-/// Median of |v| (sorts `tmp` in place; insertion sort, bounded n²).
+/// Median of |v| (heap-sorts `tmp` in place: O(n log n) whatever the data,
+/// no recursion, so long host logs and board blocks alike stay bounded).
 fn median_abs<F: Real>(v: &[F], tmp: &mut [F]) -> F {
     let n = v.len();
     for (t, x) in tmp.iter_mut().zip(v) {
         *t = x.abs();
     }
     let t = &mut tmp[..n];
-    for i in 1..n {
-        let mut j = i;
-        while j > 0 && t[j - 1] > t[j] {
-            t.swap(j - 1, j);
-            j -= 1;
+    let sift = |t: &mut [F], mut root: usize, end: usize| loop {
+        let mut child = 2 * root + 1;
+        if child >= end {
+            break;
         }
+        if child + 1 < end && t[child] < t[child + 1] {
+            child += 1;
+        }
+        if t[root] < t[child] {
+            t.swap(root, child);
+            root = child;
+        } else {
+            break;
+        }
+    };
+    for start in (0..n / 2).rev() {
+        sift(t, start, n);
+    }
+    for end in (1..n).rev() {
+        t.swap(0, end);
+        sift(t, 0, end);
     }
     if n % 2 == 1 {
         t[n / 2]
