@@ -82,6 +82,7 @@ pub fn run<const N: usize>(
         }
     }
     let mut ok = true;
+    #[allow(unused_variables)] // g is only logged with defmt
     for (g, (b, r)) in blocks.iter().zip(results.iter_mut()).enumerate() {
         *r = noise_health(b);
         match r {
@@ -106,7 +107,6 @@ pub fn run<const N: usize>(
                 ok = false;
             }
         }
-        let _ = g;
     }
     ok
 }

@@ -82,11 +82,9 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
     let mut i = 0;
     while i < n {
         if s[i] == zero {
-            let st = i;
             while i < n && s[i] == zero {
                 i += 1;
             }
-            let _ = st;
             nz += 1;
         } else {
             i += 1;
@@ -312,8 +310,6 @@ fn spline<F: Real>(t: &[F], z: &[F], out: &mut [F], m2: &mut [F]) -> bool {
     let zero = F::of(0.0);
     // Unknowns M_1..M_{k−2}; rows i = 1..k−2: a M_{i−1} + b M_i + c M_{i+1} = r.
     let rows = k - 2;
-    let mut a = [zero; 2];
-    let _ = &mut a;
     for r in 0..rows {
         let i = r + 1;
         let (h0, h1) = (h(i - 1), h(i));
