@@ -35,7 +35,7 @@ pub enum AllanError {
 }
 
 /// One point of an Allan deviation curve.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AdevPoint {
     /// Cluster size m (τ = m·τ0).
     pub m: u32,
@@ -50,6 +50,21 @@ pub struct AdevPoint {
 }
 
 impl AdevPoint {
+    /// The point for cluster size `m` from the sum of squared second
+    /// differences of the phase (in rate units × samples): σ² =
+    /// Σd² / (2 m² · terms). Every path (batch, octave sweep, streaming)
+    /// builds its points here.
+    pub fn from_sum(m: usize, tau0_s: f64, sum_sq: f64, terms: u64, samples: u64) -> Self {
+        let mf = m as f64;
+        Self {
+            m: m as u32,
+            tau_s: mf * tau0_s,
+            avar: sum_sq / (2.0 * mf * mf * terms as f64),
+            terms,
+            samples,
+        }
+    }
+
     /// At least 10 clusters of m samples went into the point (N ≥ 10·m).
     /// Beyond that a point rests on a handful of independent differences.
     pub fn reliable(&self) -> bool {
@@ -158,6 +173,19 @@ pub fn oavar(
     oavar_phase(&phase[..rate.len() + 1], tau0_s, m)
 }
 
+/// Overlapping AVAR of `rate` at every octave τ that fits, into `out`
+/// (one sweep, see [`oavar_octave_phase`]); `phase` is scratch of
+/// `rate.len() + 1`. Returns the number of points.
+pub fn oavar_octave(
+    rate: &[f64],
+    tau0_s: f64,
+    phase: &mut [f64],
+    out: &mut [AdevPoint],
+) -> Result<usize, AllanError> {
+    fill_phase(rate, phase)?;
+    Ok(oavar_octave_phase(&phase[..rate.len() + 1], tau0_s, out))
+}
+
 /// Phase (angle in units of rate·τ0, mean rate removed) of `rate` into
 /// `phase[..=rate.len()]`.
 pub fn fill_phase(rate: &[f64], phase: &mut [f64]) -> Result<(), AllanError> {
@@ -184,13 +212,7 @@ pub fn fill_phase(rate: &[f64], phase: &mut [f64]) -> Result<(), AllanError> {
 /// Overlapping AVAR from phase filled by [`fill_phase`] (θ in rate units ×
 /// samples; `phase.len()` = rate samples + 1).
 pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
-    if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {
-        return Err(AllanError::BadTau);
-    }
-    let n = phase.len().saturating_sub(1);
-    if n < 2 * m {
-        return Err(AllanError::TooShort);
-    }
+    let n = check_cluster(phase, tau0_s, m)?;
     let terms = phase.len() - 2 * m;
     let l = second_diff_sq(
         &phase[..terms],
@@ -198,14 +220,19 @@ pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, Al
         &phase[2 * m..2 * m + terms],
     );
     let s: f64 = l.iter().sum();
-    let mf = m as f64;
-    Ok(AdevPoint {
-        m: m as u32,
-        tau_s: mf * tau0_s,
-        avar: s / (2.0 * mf * mf * terms as f64),
-        terms: terms as u64,
-        samples: n as u64,
-    })
+    Ok(AdevPoint::from_sum(m, tau0_s, s, terms as u64, n as u64))
+}
+
+/// Check m and τ0 against phase data; the number of rate samples.
+fn check_cluster(phase: &[f64], tau0_s: f64, m: usize) -> Result<usize, AllanError> {
+    if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {
+        return Err(AllanError::BadTau);
+    }
+    let n = phase.len().saturating_sub(1);
+    if n < 2 * m {
+        return Err(AllanError::TooShort);
+    }
+    Ok(n)
 }
 
 /// Overlapping AVAR at every octave m = 1, 2, 4, … that fits, in one
@@ -294,15 +321,8 @@ impl OctaveSums {
         let n = self.phase_len.saturating_sub(1);
         for (j, (o, a)) in out.iter_mut().zip(self.acc.iter()).take(count).enumerate() {
             let m = 1usize << j;
-            let terms = self.phase_len - 2 * m;
-            let mf = m as f64;
-            *o = AdevPoint {
-                m: m as u32,
-                tau_s: mf * tau0_s,
-                avar: a.iter().sum::<f64>() / (2.0 * mf * mf * terms as f64),
-                terms: terms as u64,
-                samples: n as u64,
-            };
+            let terms = (self.phase_len - 2 * m) as u64;
+            *o = AdevPoint::from_sum(m, tau0_s, a.iter().sum::<f64>(), terms, n as u64);
         }
         count
     }
@@ -337,13 +357,7 @@ fn second_diff_sq(x0: &[f64], x1: &[f64], x2: &[f64]) -> [f64; LANES] {
 /// Non-overlapping Allan variance (SP 1065 eq. 6), for the published
 /// NBS14 check. Same phase input as [`oavar_phase`].
 pub fn avar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
-    if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {
-        return Err(AllanError::BadTau);
-    }
-    let n = phase.len().saturating_sub(1);
-    if n < 2 * m {
-        return Err(AllanError::TooShort);
-    }
+    let n = check_cluster(phase, tau0_s, m)?;
     let mut s = 0.0;
     let mut terms = 0u64;
     let mut k = 0;
@@ -353,14 +367,7 @@ pub fn avar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, All
         terms += 1;
         k += m;
     }
-    let mf = m as f64;
-    Ok(AdevPoint {
-        m: m as u32,
-        tau_s: mf * tau0_s,
-        avar: s / (2.0 * mf * mf * terms as f64),
-        terms,
-        samples: n as u64,
-    })
+    Ok(AdevPoint::from_sum(m, tau0_s, s, terms, n as u64))
 }
 
 /// Octave cluster sizes 1, 2, 4, … with at least one term for `n` samples.

@@ -8,9 +8,7 @@
 //! on 4 h at 100 Hz of the emulated ICM-42688-P noise model and compares
 //! the terms it reads with the model's settings.
 
-use gyro_array::algo::allan::{
-    edf, fill_phase, local_slope, noise_terms, oavar_octave_phase, AdevPoint, NoiseType,
-};
+use gyro_array::algo::allan::{edf, local_slope, noise_terms, oavar_octave, AdevPoint, NoiseType};
 use gyro_array::emu::noise::AxisNoise;
 use gyro_array::emu::{NoiseParams, Rng};
 
@@ -59,16 +57,8 @@ fn main() {
         std::process::exit(2);
     }
     let mut phase = vec![0.0; rate.len() + 1];
-    fill_phase(&rate, &mut phase).expect("finite, checked above");
-    let blank = AdevPoint {
-        m: 0,
-        tau_s: 0.0,
-        avar: 0.0,
-        terms: 0,
-        samples: 0,
-    };
-    let mut pts = [blank; 64];
-    let count = oavar_octave_phase(&phase, tau0, &mut pts);
+    let mut pts = [AdevPoint::default(); 64];
+    let count = oavar_octave(&rate, tau0, &mut phase, &mut pts).expect("finite, checked above");
     let pts = &pts[..count];
     println!(
         "{} samples at tau0 = {tau0} s ({:.2} h)",

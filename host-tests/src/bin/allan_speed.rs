@@ -13,14 +13,13 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use gyro_array::algo::allan::{fill_phase, oavar_octave_phase, AdevPoint, OctaveSums};
+use gyro_array::algo::allan::{fill_phase, oavar_octave, AdevPoint, OctaveSums};
 use gyro_array::emu::Rng;
 
 const N: usize = 10_000_000;
 
 fn ours(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usize {
-    fill_phase(rate, phase).expect("finite data");
-    oavar_octave_phase(&phase[..rate.len() + 1], 1.0, out)
+    oavar_octave(rate, 1.0, phase, out).expect("finite data")
 }
 
 /// The same sweep with the term range split between two threads.
@@ -95,17 +94,10 @@ fn main() {
     std::fs::write(&data, bytes).expect("write data");
 
     let mut phase = vec![0.0; N + 1];
-    let blank = AdevPoint {
-        m: 0,
-        tau_s: 0.0,
-        avar: 0.0,
-        terms: 0,
-        samples: 0,
-    };
-    let mut out = [blank; 64];
+    let mut out = [AdevPoint::default(); 64];
     let mut best = f64::MAX;
     let mut best2 = f64::MAX;
-    let mut out2 = [blank; 64];
+    let mut out2 = [AdevPoint::default(); 64];
     let mut count = 0;
     for _ in 0..3 {
         let t0 = Instant::now();

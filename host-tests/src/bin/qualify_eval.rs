@@ -15,7 +15,7 @@
 //! skewness, kurtosis and the AIC order of an AR model.
 #![allow(clippy::needless_range_loop)]
 
-use gyro_array::algo::allan::{fill_phase, local_slope, oavar_octave_phase, AdevPoint};
+use gyro_array::algo::allan::{local_slope, oavar_octave, AdevPoint};
 use gyro_array::algo::qualify::ar::select_order;
 use gyro_array::algo::qualify::emd::{masm, work_len, EmdConfig};
 use gyro_array::algo::qualify::hurst::{
@@ -66,16 +66,8 @@ fn std(x: &[f64]) -> f64 {
 
 fn adev(x: &[f64]) -> Vec<AdevPoint> {
     let mut phase = vec![0.0; x.len() + 1];
-    fill_phase(x, &mut phase).expect("finite");
-    let blank = AdevPoint {
-        m: 0,
-        tau_s: 0.0,
-        avar: 0.0,
-        terms: 0,
-        samples: 0,
-    };
-    let mut pts = vec![blank; 32];
-    let c = oavar_octave_phase(&phase, 1.0, &mut pts);
+    let mut pts = vec![AdevPoint::default(); 32];
+    let c = oavar_octave(x, 1.0, &mut phase, &mut pts).expect("finite");
     pts.truncate(c);
     pts
 }

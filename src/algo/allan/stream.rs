@@ -123,15 +123,11 @@ impl<const T: usize, const RING: usize> StreamAdev<T, RING> {
             return Err(AllanError::TooShort);
         }
         let terms = self.n - 2 * m + 1;
-        let mf = m as f64;
-        // Σ(Σ-differences)² counts sums, not means: divide by m² twice over.
-        let avar = self.acc[j] as f64 * lsb * lsb / (2.0 * mf * mf * terms as f64);
-        Ok(AdevPoint {
-            m: m as u32,
-            tau_s: mf * tau0_s,
-            avar,
-            terms,
-            samples: self.n,
-        })
+        // The differences of m-sample sums are second differences of the
+        // phase in samples; scale to the rate unit.
+        let sum_sq = self.acc[j] as f64 * lsb * lsb;
+        Ok(AdevPoint::from_sum(
+            m as usize, tau0_s, sum_sq, terms, self.n,
+        ))
     }
 }

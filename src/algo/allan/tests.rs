@@ -240,15 +240,8 @@ fn noise_terms_recover_the_emulated_icm42688() {
         .map(|_| ax.step(&p, &mut rng, 0.0, 0.01) as f64)
         .collect();
     let mut phase = vec![0.0; n + 1];
-    fill_phase(&y, &mut phase).unwrap();
-    let mut pts = [AdevPoint {
-        m: 0,
-        tau_s: 0.0,
-        avar: 0.0,
-        terms: 0,
-        samples: 0,
-    }; 40];
-    let c = oavar_octave_phase(&phase, 0.01, &mut pts);
+    let mut pts = [AdevPoint::default(); 40];
+    let c = oavar_octave(&y, 0.01, &mut phase, &mut pts).unwrap();
     let mut t = [None; 5];
     noise_terms(&pts[..c], &mut t);
     let (arw, bi, rrw) = (t[1].unwrap(), t[2].unwrap(), t[3].unwrap());
