@@ -294,6 +294,21 @@ fn has(m: u8, i: usize) -> bool {
     m & (1 << i) != 0
 }
 
+/// Call `f(i, j)` for every pair i < j of gyros in `m`, in order.
+#[inline(always)]
+fn each_pair<const N: usize>(m: u8, mut f: impl FnMut(usize, usize)) {
+    for i in 0..N {
+        if !has(m, i) {
+            continue;
+        }
+        for j in (i + 1)..N {
+            if has(m, j) {
+                f(i, j);
+            }
+        }
+    }
+}
+
 /// First masked value: the reference the sums are taken about, so that
 /// constant input comes back exactly and large rates lose no precision.
 fn first<const N: usize>(y: &[f32; N], m: u8) -> f32 {
@@ -457,20 +472,12 @@ impl<const N: usize> Fusion<N> {
             return None;
         }
         let mut r = [0.0f32; N];
-        for i in 0..N {
-            if !has(m, i) {
-                continue;
-            }
-            for j in (i + 1)..N {
-                if !has(m, j) {
-                    continue;
-                }
-                let d = y[i] - y[j];
-                let s = expf(-d * d);
-                r[i] += s;
-                r[j] += s;
-            }
-        }
+        each_pair::<N>(m, |i, j| {
+            let d = y[i] - y[j];
+            let s = expf(-d * d);
+            r[i] += s;
+            r[j] += s;
+        });
         if m.count_ones() == 1 {
             return Some(mean_of(y, m));
         }
@@ -516,20 +523,12 @@ impl<const N: usize> Fusion<N> {
         // Eq. 3–4: distances and their normaliser over ordered pairs.
         let mut d = [[0.0f32; N]; N];
         let mut sum = 0.0;
-        for i in 0..N {
-            if !has(m, i) {
-                continue;
-            }
-            for j in (i + 1)..N {
-                if !has(m, j) {
-                    continue;
-                }
-                let dij = (y[i] - y[j]).abs();
-                d[i][j] = dij;
-                d[j][i] = dij;
-                sum += 2.0 * dij;
-            }
-        }
+        each_pair::<N>(m, |i, j| {
+            let dij = (y[i] - y[j]).abs();
+            d[i][j] = dij;
+            d[j][i] = dij;
+            sum += 2.0 * dij;
+        });
         let nf = n as f32;
         let denom = match c.denominator {
             Denominator::MSquaredMinus1 => nf * nf - 1.0,
@@ -552,19 +551,11 @@ impl<const N: usize> Fusion<N> {
         let mut s = [[1.0f32; N]; N];
         if scale > 0.0 && scale.is_finite() {
             let inv = 1.0 / scale;
-            for i in 0..N {
-                if !has(m, i) {
-                    continue;
-                }
-                for j in (i + 1)..N {
-                    if !has(m, j) {
-                        continue;
-                    }
-                    let v = 1.0 - lnf(1.0 + d[i][j] * inv);
-                    s[i][j] = v;
-                    s[j][i] = v;
-                }
-            }
+            each_pair::<N>(m, |i, j| {
+                let v = 1.0 - lnf(1.0 + d[i][j] * inv);
+                s[i][j] = v;
+                s[j][i] = v;
+            });
         }
         // Eq. 10–12: Grubbs on each row; zeroing breaks symmetry, as printed.
         if let Some(g) = c.grubbs {
