@@ -176,6 +176,23 @@ fn sq(d: i32) -> u128 {
     (d as i64 * d as i64) as u64 as u128
 }
 
+/// Sample i of a ring of CAP (a power of two) samples. A free function so
+/// that closures can borrow the ring alone while the sums are updated.
+#[inline(always)]
+fn ring_at<const CAP: usize>(ring: &[i32; CAP], i: u64) -> i32 {
+    ring[i as usize & (CAP - 1)]
+}
+
+/// How the sums of the term starting at k, b = Σ w[k..k+m) and
+/// a = Σ w[k+m..k+2m), change when the term moves to k + 1: (Δb, Δa).
+/// Both window edges move terms this way (the head's term starts at
+/// its position − 2m, the tail's at its position).
+#[inline(always)]
+fn shift(w: impl Fn(u64) -> i32, k: u64, m: u64) -> (i32, i32) {
+    let (x0, x1, x2) = (w(k), w(k + m), w(k + 2 * m));
+    (x1 - x0, x2 - x1)
+}
+
 /// Edge of the window: the sliding sums of the term that starts (tail) or
 /// ends (head) there, per τ.
 #[derive(Clone, Copy, Debug)]
@@ -288,7 +305,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
 
     #[inline(always)]
     fn w(&self, i: u64) -> i32 {
-        self.ring[i as usize & (CAP - 1)]
+        ring_at(&self.ring, i)
     }
 
     /// Threshold for a window of `len` samples (see the module docs).
@@ -543,7 +560,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     fn slide(&mut self, w: i32) {
         let n = self.n;
         let (e, s) = (self.head.pos, self.tail.pos);
-        // Index n is the arriving sample.
+        // The same term moves as [`shift`], written out: this is the
+        // per-sample hot path, the samples at e and s are shared by every
+        // τ, and only index n (the arriving sample) needs a test.
         let r = |d: &Self, i: u64| if i == n { w } else { d.w(i) };
         let xh = r(self, e);
         let x0 = self.w(s);
@@ -571,23 +590,25 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// total stay in registers across a long jump.
     fn move_head(&mut self, to: u64) {
         let from = self.head.pos;
+        let ring = &self.ring;
+        let w = |i: u64| ring_at(ring, i);
         for j in 0..T {
             let m = 1u64 << j;
             let (mut a, mut b, mut acc) = (self.head.a[j], self.head.b[j], self.acc[j]);
             let mut e = from;
             while e < to {
-                let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
-                a += x - mid;
-                b += mid - old;
+                let (db, da) = shift(w, e - 2 * m, m);
+                a += da;
+                b += db;
                 acc += sq(a - b);
                 e += 1;
             }
             while e > to {
                 e -= 1;
                 acc -= sq(a - b);
-                let (x, mid, old) = (self.w(e), self.w(e - m), self.w(e - 2 * m));
-                a -= x - mid;
-                b -= mid - old;
+                let (db, da) = shift(w, e - 2 * m, m);
+                a -= da;
+                b -= db;
             }
             (self.head.a[j], self.head.b[j], self.acc[j]) = (a, b, acc);
         }
@@ -598,22 +619,24 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// that start there (τ outer, as in [`Davar::move_head`]).
     fn move_tail(&mut self, to: u64) {
         let from = self.tail.pos;
+        let ring = &self.ring;
+        let w = |i: u64| ring_at(ring, i);
         for j in 0..T {
             let m = 1u64 << j;
             let (mut a, mut b, mut acc) = (self.tail.a[j], self.tail.b[j], self.acc[j]);
             let mut s = from;
             while s < to {
                 acc -= sq(a - b);
-                let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
-                b += x1 - x0;
-                a += x2 - x1;
+                let (db, da) = shift(w, s, m);
+                b += db;
+                a += da;
                 s += 1;
             }
             while s > to {
                 s -= 1;
-                let (x0, x1, x2) = (self.w(s), self.w(s + m), self.w(s + 2 * m));
-                b -= x1 - x0;
-                a -= x2 - x1;
+                let (db, da) = shift(w, s, m);
+                b -= db;
+                a -= da;
                 acc += sq(a - b);
             }
             (self.tail.a[j], self.tail.b[j], self.acc[j]) = (a, b, acc);
