@@ -140,3 +140,46 @@ pub fn quantise(dps: f32, lsb_per_dps: f32) -> i16 {
         c as i16
     }
 }
+
+/// Fractional Gaussian noise with Hurst exponent `h` (0 < h < 1), unit
+/// variance, by Hosking's exact method (Durbin–Levinson on the fGn
+/// autocovariance), into `x`; `phi` and `prev` are scratch of `x.len()`.
+/// `gauss` supplies one N(0, 1) draw per sample, in order. O(n²): meant
+/// for blocks of a few thousand samples (the long-memory test data of
+/// seed 002).
+pub fn fgn_hosking(
+    h: f64,
+    mut gauss: impl FnMut() -> f64,
+    x: &mut [f64],
+    phi: &mut [f64],
+    prev: &mut [f64],
+) {
+    let n = x.len().min(phi.len()).min(prev.len());
+    if n == 0 {
+        return;
+    }
+    let gam = |k: f64| {
+        0.5 * (libm::pow(libm::fabs(k + 1.0), 2.0 * h) - 2.0 * libm::pow(libm::fabs(k), 2.0 * h)
+            + libm::pow(libm::fabs(k - 1.0), 2.0 * h))
+    };
+    let mut v = 1.0;
+    x[0] = gauss();
+    for t in 1..n {
+        let mut s = 0.0;
+        for j in 0..t - 1 {
+            s += phi[j] * gam((t - 1 - j) as f64);
+        }
+        let kappa = (gam(t as f64) - s) / v;
+        prev[..t - 1].copy_from_slice(&phi[..t - 1]);
+        for j in 0..t - 1 {
+            phi[j] = prev[j] - kappa * prev[t - 2 - j];
+        }
+        phi[t - 1] = kappa;
+        v *= 1.0 - kappa * kappa;
+        let mut p = 0.0;
+        for j in 0..t {
+            p += phi[j] * x[t - 1 - j];
+        }
+        x[t] = p + libm::sqrt(v) * gauss();
+    }
+}

@@ -27,36 +27,12 @@ use gyro_array::algo::qualify::pipeline::{
 };
 use gyro_array::algo::qualify::trend::{detrend_poly, reverse_arrangement};
 use gyro_array::algo::qualify::wavelet::{DB4, DB5};
+use gyro_array::emu::noise::fgn_hosking;
 use gyro_array::emu::Rng;
 
 fn fgn(h: f64, n: usize, rng: &mut Rng) -> Vec<f64> {
-    let gam = |k: f64| {
-        0.5 * ((k + 1.0).abs().powf(2.0 * h) - 2.0 * k.abs().powf(2.0 * h)
-            + (k - 1.0).abs().powf(2.0 * h))
-    };
-    let mut x = vec![0.0; n];
-    let mut phi = vec![0.0; n];
-    let mut old = vec![0.0; n];
-    let mut v = 1.0;
-    x[0] = rng.gaussian() as f64;
-    for t in 1..n {
-        let mut s = 0.0;
-        for j in 0..t - 1 {
-            s += phi[j] * gam((t - 1 - j) as f64);
-        }
-        let kappa = (gam(t as f64) - s) / v;
-        old[..t - 1].copy_from_slice(&phi[..t - 1]);
-        for j in 0..t - 1 {
-            phi[j] = old[j] - kappa * old[t - 2 - j];
-        }
-        phi[t - 1] = kappa;
-        v *= 1.0 - kappa * kappa;
-        let mut p = 0.0;
-        for j in 0..t {
-            p += phi[j] * x[t - 1 - j];
-        }
-        x[t] = p + v.sqrt() * rng.gaussian() as f64;
-    }
+    let (mut x, mut phi, mut prev) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    fgn_hosking(h, || rng.gaussian() as f64, &mut x, &mut phi, &mut prev);
     x
 }
 

@@ -50,39 +50,11 @@ fn rs_statistic_matches_nolds_exactly() {
 /// fGn by Hosking's method, as the script (Box–Muller on Park–Miller).
 fn fgn(h: f64, n: usize, seed: u64) -> Vec<f64> {
     let u = park_miller(seed, 2 * n);
-    let g: Vec<f64> = (0..n)
-        .map(|i| (-2.0 * u[2 * i].ln()).sqrt() * (2.0 * core::f64::consts::PI * u[2 * i + 1]).cos())
-        .collect();
-    let gam = |k: f64| {
-        0.5 * ((k + 1.0).abs().powf(2.0 * h) - 2.0 * k.abs().powf(2.0 * h)
-            + (k - 1.0).abs().powf(2.0 * h))
-    };
-    let mut x = vec![0.0; n];
-    let mut phi = vec![0.0; n];
-    let mut v = 1.0;
-    x[0] = g[0];
-    for t in 1..n {
-        let kappa = if t > 1 {
-            let mut s = 0.0;
-            for j in 0..t - 1 {
-                s += phi[j] * gam((t - 1 - j) as f64);
-            }
-            (gam(t as f64) - s) / v
-        } else {
-            gam(1.0) / v
-        };
-        let old: Vec<f64> = phi[..t - 1].to_vec();
-        for j in 0..t - 1 {
-            phi[j] = old[j] - kappa * old[t - 2 - j];
-        }
-        phi[t - 1] = kappa;
-        v *= 1.0 - kappa * kappa;
-        let mut s = 0.0;
-        for j in 0..t {
-            s += phi[j] * x[t - 1 - j];
-        }
-        x[t] = s + v.sqrt() * g[t];
-    }
+    let mut g = (0..n).map(|i| {
+        (-2.0 * u[2 * i].ln()).sqrt() * (2.0 * core::f64::consts::PI * u[2 * i + 1]).cos()
+    });
+    let (mut x, mut phi, mut prev) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    crate::emu::noise::fgn_hosking(h, || g.next().unwrap_or(0.0), &mut x, &mut phi, &mut prev);
     x
 }
 
