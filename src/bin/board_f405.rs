@@ -177,9 +177,9 @@ fn main() -> ! {
                         a,
                         e.len,
                         e.entropy,
-                        noise.sigma_dps(a, 0),
-                        noise.sigma_dps(a, 4),
-                        noise.sigma_dps(a, 8)
+                        tracker::sigma_dps(&e, 0),
+                        tracker::sigma_dps(&e, 4),
+                        tracker::sigma_dps(&e, 8)
                     );
                 }
             }

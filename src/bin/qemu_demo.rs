@@ -190,12 +190,14 @@ fn main() -> ! {
                     e.len,
                     e.entropy,
                     e.threshold,
-                    noise.sigma_dps(a, 0),
-                    noise.sigma_dps(a, 3),
-                    noise.sigma_dps(a, 6)
+                    tracker::sigma_dps(&e, 0),
+                    tracker::sigma_dps(&e, 3),
+                    tracker::sigma_dps(&e, 6)
                 );
+                if a == 0 {
+                    sigma_x_1ms = tracker::sigma_dps(&e, 0);
+                }
             }
-            sigma_x_1ms = noise.sigma_dps(0, 0);
             let truth = bus.borrow().chips[0].true_rate_dps();
             for (a, f) in out.fused.iter().enumerate() {
                 match f {

@@ -61,15 +61,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         self.axes.get(axis).map(Davar::estimate)
     }
 
-    /// σ(τ = 2ʲ samples) of `axis`, °/s (0 before the window has filled).
-    pub fn sigma_dps(&self, axis: usize, j: usize) -> f32 {
-        self.estimate(axis)
-            .and_then(|e| e.avar.get(j).copied())
-            .map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)
-    }
-
     /// Axis-samples skipped so far.
     pub fn skipped(&self) -> u32 {
         self.skipped
     }
+}
+
+/// σ(τ = 2ʲ samples) of a surface row from [`NoiseTracker::estimate`], °/s
+/// (0 before the window has filled, NaN for j out of range). Takes the row
+/// so that logging several τ converts the sums once.
+pub fn sigma_dps<const T: usize>(e: &DavarStep<T>, j: usize) -> f32 {
+    e.avar.get(j).map_or(f32::NAN, |&v| sqrtf(v) * LSB_DPS)
 }
