@@ -11,6 +11,31 @@ fn white(seed: u64, n: usize, sigma: impl Fn(usize) -> f32) -> Vec<i32> {
         .collect()
 }
 
+/// White noise whose σ doubles over samples 2000..3500 of 6000.
+fn step_signal(seed: u64) -> Vec<i32> {
+    white(seed, 6000, |i| {
+        if (2000..3500).contains(&i) {
+            2.0
+        } else {
+            1.0
+        }
+    })
+}
+
+/// The paper's window limits (400, 800), ΔL = 64, temporal entropy.
+fn paper_window(p_fa: f32, placement: Placement) -> DavarConfig {
+    DavarConfig {
+        lambda1: 400,
+        lambda2: 800,
+        l_init: 800,
+        delta_l: 64,
+        step: StepMode::Constant,
+        entropy: EntropyKind::Temporal,
+        threshold: Threshold::Auto { p_fa },
+        placement,
+    }
+}
+
 /// Independent f64 oracle: batch OADEV over the samples [s, e).
 fn batch(w: &[i32], s: usize, e: usize, m: usize) -> f64 {
     let y: Vec<f64> = w[s..e].iter().map(|&x| x as f64).collect();
@@ -59,21 +84,8 @@ fn fixed_window_equals_batch_oadev() {
 fn adaptive_window_stays_exact_while_it_moves() {
     // A variance step makes the window shrink and grow; every estimate must
     // still equal the batch OADEV over exactly its window.
-    let w = white(
-        2,
-        6000,
-        |i| if (2000..3500).contains(&i) { 2.0 } else { 1.0 },
-    );
-    let cfg = DavarConfig {
-        lambda1: 400,
-        lambda2: 800,
-        l_init: 800,
-        delta_l: 64,
-        step: StepMode::Constant,
-        entropy: EntropyKind::Temporal,
-        threshold: Threshold::Auto { p_fa: 0.05 },
-        placement: Placement::Centred,
-    };
+    let w = step_signal(2);
+    let cfg = paper_window(0.05, Placement::Centred);
     assert!(check_against_batch(cfg, &w, 61) > 50);
     // ...and it did move.
     let mut d = D::new(cfg).unwrap();
@@ -170,21 +182,8 @@ fn bad_settings_are_typed() {
 
 #[test]
 fn change_aware_window_is_exact_and_avoids_the_change() {
-    let w = white(
-        4,
-        6000,
-        |i| if (2000..3500).contains(&i) { 2.0 } else { 1.0 },
-    );
-    let cfg = DavarConfig {
-        lambda1: 400,
-        lambda2: 800,
-        l_init: 800,
-        delta_l: 64,
-        step: StepMode::Constant,
-        entropy: EntropyKind::Temporal,
-        threshold: Threshold::Auto { p_fa: 0.01 },
-        placement: Placement::ChangeAware,
-    };
+    let w = step_signal(4);
+    let cfg = paper_window(0.01, Placement::ChangeAware);
     assert!(check_against_batch(cfg, &w, 53) > 50);
     // Windows must not reach more than 64 samples (two frames of location
     // error) across a change on both sides; count the exceptions.
