@@ -20,6 +20,7 @@ use crate::emu::{
     board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model,
     NoiseParams, RateProfile, Rng,
 };
+use crate::pipeline::startup::start_array;
 use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
 
 /// Golden digests (generated on the host, checked on both sides).
@@ -285,14 +286,13 @@ fn run_board_array(
         Method::Adaptive(AdaptiveConfig::default()),
     )
     .ok()?;
-    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-        if g.init(&mut delay, Config::default()).is_err() {
-            pipe.mark_init_failed(i);
-        }
-    }
-    if g4.init(&mut delay).is_err() {
-        pipe.mark_init_failed(4);
-    }
+    start_array(
+        [&mut g0, &mut g1, &mut g2, &mut g3],
+        &mut g4,
+        &mut delay,
+        None,
+        &mut pipe,
+    );
     for n in 0..samples {
         bus.borrow_mut().advance(1e-3);
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];

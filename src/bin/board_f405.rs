@@ -24,9 +24,10 @@ use stm32f4xx_hal::{
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{Config, Icm42688};
+use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
 use gyro_array::pipeline::selftest;
+use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -87,22 +88,13 @@ fn main() -> ! {
     ) else {
         panic!("pipeline configuration");
     };
-    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-        match g
-            .init(&mut delay, Config::default())
-            .and_then(|_| g.self_test(&mut delay, 200))
-        {
-            Ok(st) => defmt::info!("gyro {}: ICM-42688-P ok, self-test ratio {}", i, st.ratio()),
-            Err(e) => {
-                defmt::error!("gyro {}: init failed: {}", i, e);
-                pipe.mark_init_failed(i);
-            }
-        }
-    }
-    if let Err(e) = g4.init(&mut delay) {
-        defmt::error!("gyro 4: ADXRS453 init failed: {}", e);
-        pipe.mark_init_failed(4);
-    }
+    start_array(
+        [&mut g0, &mut g1, &mut g2, &mut g3],
+        &mut g4,
+        &mut delay,
+        Some(200),
+        &mut pipe,
+    );
 
     // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
     let Ok(mut noise) = NoiseTracker::<1024, 33, 9>::new(tracker::config(1024)) else {

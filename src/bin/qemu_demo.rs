@@ -24,10 +24,11 @@ use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::qemu::exit;
 use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{Config, Icm42688};
+use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{board_array, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
 use gyro_array::pipeline::selftest;
+use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -73,28 +74,14 @@ fn main() -> ! {
         Method::Adaptive(AdaptiveConfig::default()),
     )
     .unwrap_or_else(|_| exit(false));
-    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-        match g
-            .init(&mut delay, Config::default())
-            .and_then(|_| g.self_test(&mut delay, 20))
-        {
-            Ok(st) => defmt::info!("gyro {}: ICM-42688-P ok, self-test ratio {}", i, st.ratio()),
-            Err(e) => {
-                defmt::error!("gyro {}: ICM-42688-P init failed: {}", i, e);
-                pipe.mark_init_failed(i);
-            }
-        }
-    }
-    match g4.init(&mut delay) {
-        Ok(()) => defmt::info!("gyro 4: ADXRS453 ok (CHK passed, PID 0x52xx) on z"),
-        Err(e) => {
-            defmt::error!("gyro 4: ADXRS453 init failed: {}", e);
-            pipe.mark_init_failed(4);
-        }
-    }
+    start_array(
+        [&mut g0, &mut g1, &mut g2, &mut g3],
+        &mut g4,
+        &mut delay,
+        Some(20),
+        &mut pipe,
+    );
 
-    // Noise-health self-test while the board is still: one block per gyro
-    // (x for the ICM-42688-P, z for the ADXRS453), read back to back.
     let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
     let mut results = [Err(QualifyError::TooShort); 5];
     let self_test_ok = {

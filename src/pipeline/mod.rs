@@ -6,6 +6,7 @@
 //! [`Output::health_changed`] for the firmware to log.
 
 pub mod selftest;
+pub mod startup;
 pub mod tracker;
 
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};
