@@ -281,7 +281,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             change: None,
             thresholds: [0.0; FRAMES],
         };
-        for k in 0..FRAMES {
+        for k in d.tabulated() {
             d.thresholds[k] = d.quantile_for(k);
         }
         d.threshold = d.calibrate(d.len);
@@ -315,7 +315,21 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
 
     /// Threshold for `frames` STFT frames (table lookup).
     fn calibrate_frames(&self, frames: usize) -> f32 {
-        self.thresholds[frames.min(FRAMES - 1)]
+        let f = frames.min(FRAMES - 1);
+        if self.tabulated().contains(&f) {
+            self.thresholds[f]
+        } else {
+            self.quantile_for(f)
+        }
+    }
+
+    /// Frame counts a window of λ1..=λ2 samples can hold (one frame is lost
+    /// to alignment at most): only these thresholds are tabulated, so the
+    /// soft-float χ² quantiles at start-up are the ones that can be used.
+    fn tabulated(&self) -> core::ops::RangeInclusive<usize> {
+        let lo = (self.cfg.lambda1 as usize / SEG).saturating_sub(1);
+        let hi = (self.cfg.lambda2 as usize / SEG + 1).min(FRAMES - 1);
+        lo..=hi
     }
 
     /// Threshold for `frames` STFT frames, computed.
