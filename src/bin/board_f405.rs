@@ -141,16 +141,7 @@ fn main() -> ! {
         }
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
         let out = pipe.step(&mut gyros);
-        for i in 0..5 {
-            if out.health_changed & (1 << i) != 0 {
-                defmt::warn!(
-                    "seq {}: gyro {} health flags {=u8:#06b}",
-                    out.seq,
-                    i,
-                    pipe.health()[i].flags
-                );
-            }
-        }
+        pipe.log_health_changes(&out);
         noise.push(&out);
         if out.seq % 1000 == 0 {
             for f in out.fused.iter().flatten() {

@@ -148,18 +148,7 @@ fn main() -> ! {
 
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
         let out = pipe.step(&mut gyros);
-        if out.health_changed != 0 {
-            for i in 0..5 {
-                if out.health_changed & (1 << i) != 0 {
-                    defmt::warn!(
-                        "seq {}: gyro {} health flags now {=u8:#06b}",
-                        out.seq,
-                        i,
-                        pipe.health()[i].flags
-                    );
-                }
-            }
-        }
+        pipe.log_health_changes(&out);
         if let (Some(_), None) = (stuck_at, excluded_at) {
             if out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
                 excluded_at = Some(n);

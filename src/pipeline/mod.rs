@@ -147,6 +147,22 @@ impl<const N: usize> Pipeline<N> {
         &self.health
     }
 
+    /// Log (defmt) the new health flags of every gyro whose health changed
+    /// in `out`, as the firmware must.
+    #[cfg(feature = "defmt")]
+    pub fn log_health_changes(&self, out: &Output<N>) {
+        for i in 0..N {
+            if out.health_changed & (1 << i) != 0 {
+                defmt::warn!(
+                    "seq {}: gyro {} health flags now {=u8:#06b}",
+                    out.seq,
+                    i,
+                    self.health[i].flags
+                );
+            }
+        }
+    }
+
     /// The fusion settings.
     pub fn fusion(&self) -> &Fusion<N> {
         &self.fusion
