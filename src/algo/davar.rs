@@ -1,57 +1,71 @@
 //! Dynamic Allan variance (DAVAR, Galleani–Tavella, SEEDS.md §0.2) and its
-//! entropy-adaptive window (E-DAVAR, seed 000), streaming in fixed memory.
+//! adaptive window (E-DAVAR, seed 000), streaming in fixed memory with a
+//! bounded cost for every single sample.
 //!
-//! # Reading of the paper (SEEDS.md seed 000, ambiguities 1–8)
-//! - The estimate for time `t` uses the window of `L(t)` samples centred at
-//!   `t` (ambiguity 8: Fig. 2 reacts ~300 s early, which only a centred
-//!   window does). Streaming, this means a fixed latency of λ2/2 samples:
-//!   when sample `n` arrives, the estimate for `t = n − λ2/2` is produced.
-//! - The window slides by one sample; L changes once per STFT hop (every
-//!   [`SEG`] samples) by the clipped rule of eq. 4 ("tentative, then
-//!   clip"), with a constant or proportional step ([`StepMode`]).
-//! - τ grid: octaves m = 1, 2, …, 2^(T−1); 2^T ≤ λ1 so that every τ exists
-//!   in every window.
-//! - STFT: rectangular frames of [`SEG`] = 32 samples aligned to the sample
-//!   count, FFT by microfft; DC (the frame mean) and Nyquist are dropped, so
-//!   bins 1..=15 remain. Only frames wholly inside the window count.
+//! # Time grid and cost
+//! The window moves in whole frames of [`SEG`] = 32 samples: every 32
+//! samples (one *hop*) a window is placed and one estimate is published,
+//! carrying the time `t` it describes and its edges. Between hops nothing
+//! new is known about the window length (the paper's rule also changes L
+//! once per STFT hop), and at λ ≥ 256 a 32-sample step of the centre is
+//! below the estimate's own resolution.
 //!
-//! # Entropies ([`EntropyKind`])
-//! - `Spectral` (faithful, eq. 1–3): p over the 15 frequency bins of the
-//!   window's summed STFT power, entropy normalised by ln 15. The paper
-//!   shrinks the window when E > E0. For white noise p is flat whatever the
-//!   variance, so this hardly reacts to a variance step (SEEDS ambiguity 2);
-//!   `davar-eval` measures it.
-//! - `Temporal` (ours): p over the K frames of the window by frame energy
-//!   (the time marginal of the same STFT). A variance step makes frame
-//!   energies uneven, so the entropy *drops*; the score fed to eq. 4 is the
-//!   deficit D = ln K − E ≥ 0, and the window shrinks when D > D0.
+//! Each arriving sample completes one Allan term per τ (the one that ends
+//! there); its square is added, exactly, to the sum of the 32-term *block*
+//! its start belongs to. A window [s, e) with frame-aligned edges is then
+//! whole blocks plus one block prefix per τ (kept as the prefix's terms
+//! arrive), so placing a window anywhere in the span costs T × (blocks)
+//! integer additions, however far its edges jump. The worst sample is the
+//! hop's, and it is bounded: there is no catch-up when the window flips
+//! around a change or first fills (the old sliding design cost up to
+//! 500 000 instructions there).
 //!
-//! # Automatic threshold ([`Threshold::Auto`])
-//! Under stationary white noise each frame energy is σ²·χ²_ν/ν with ν = 30
-//! (15 complex bins), and to second order D ≈ Σ(x_k − 1)²/(2K) with
-//! x_k = K·p_k, i.e. D ≈ χ²_{K−1}/(K·ν). D0 is its (1 − p_fa) quantile, so
-//! a stationary window triggers a shrink with probability ≈ p_fa. For the
-//! spectral entropy the roles of time and frequency swap (B = 15 bins, each
-//! a sum of K frames: ν = 2K), and E0 is the matching quantile of E on the
-//! side the paper's rule uses (E > E0 shrinks). The thresholds depend on K,
-//! so they are recomputed whenever the window length changes.
+//! Sums are exact integers: |w| < 2²⁰ and m ≤ 2¹⁰ give |d| < 2³¹, d² < 2⁶²,
+//! so one term fits a u64, a 32-term block a u64 plus a 3-bit carry, and a
+//! window sum a u128. Nothing is subtracted, so nothing can drift.
 //!
-//! Sums are exact integers, as in [`crate::algo::allan::stream`]: moving a
-//! window edge adds or removes one exact term per τ, and no drift exists.
-//! Frame sums for the entropies are f32 and are recomputed from the stored
-//! frames at every hop, so they cannot drift either.
+//! # Placements
+//! - [`Placement::Centred`] (the paper, eq. 1–4): the window is centred on
+//!   t, its length L moves by ΔL per hop by the entropy rule of eq. 4.
+//!   Entropies ([`EntropyKind`]): `Spectral` (faithful, eq. 1–3, over the
+//!   STFT bins 1..=15 of the window, normalised by ln 15) or `Temporal`
+//!   (ours: over the frames' energies; score = deficit D = ln K − E).
+//! - [`Placement::Segmented`] (ours, the default): the λ2 span around t is
+//!   segmented by binary segmentation of the frames' τ = 1 energies (the
+//!   per-block sums of squared first differences, whose mean is 62·σ²(τ0)
+//!   in any noise type) under a scaled-χ² model, and the window is the
+//!   segment that holds t, widened to λ1 where it is shorter. Several
+//!   changes per span are found; the test's effective degrees of freedom ν
+//!   are learnt from the data (see [`Davar::nu`]), so coloured noise does not
+//!   raise false alarms the way a white-noise threshold does.
+//!
+//! # Reading of the paper (SEEDS.md seed 000)
+//! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
+//!   window around t (Fig. 2 reacts ~300 s early, which only a centred
+//!   window does). Streaming, this means a latency of about λ2/2.
+//! - λ1, λ2 are rounded to whole frames: λ2 down (the memory bound), λ1 up
+//!   (the shortest window), but never above λ2's rounding.
+//! - Eq. 4's step: [`StepMode`]. Thresholds: [`Threshold`].
 
 use crate::algo::allan::stream::SAMPLE_MAX;
 use crate::algo::allan::AllanError;
 use crate::algo::math::lnf;
 use crate::algo::stats::chi2_quantile;
 
-/// STFT frame length (samples).
+/// Frame (block, STFT hop) length, samples.
 pub const SEG: usize = 32;
-/// Frequency bins used per frame (1..=15).
+/// Frequency bins used per STFT frame (1..=15).
 pub const BINS: usize = SEG / 2 - 1;
+/// Splits tried per binary-segmentation level (a stride keeps the cost of a
+/// hop independent of λ2).
+const SPLITS: usize = 32;
+/// Memory of the ν estimate, frames.
+const NU_FRAMES: f32 = 256.0;
+/// Prior for ν before enough frames are seen: 32 first differences of white
+/// noise (lag-1 correlation −½ gives ν = 32²/(32 + 62/4) ≈ 21.6).
+const NU_WHITE: f32 = 21.6;
 
-/// Which entropy drives the window.
+/// Which entropy drives the centred window (eq. 1–4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum EntropyKind {
@@ -71,29 +85,27 @@ pub enum StepMode {
     Proportional,
 }
 
-/// How the window sits around its time t.
+/// How the window is placed around its time t.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Placement {
     /// Centred on t, length L(t) from eq. 4 (the paper).
     Centred,
-    /// Ours: the temporal-entropy deficit over the whole λ2 span around t
-    /// detects a change; the frame-energy split that maximises the
-    /// two-segment likelihood locates it (to one frame), and the window is
-    /// the longest one inside the span that does not straddle it (length
-    /// λ2/2..λ2). With no change detected the window is the full λ2.
-    /// Needs λ1 ≤ λ2/2.
-    ChangeAware,
+    /// Ours: the segment of the λ2 span that holds t (binary segmentation
+    /// of the frames' τ0 energies), at least λ1 long.
+    Segmented,
 }
 
-/// Where the threshold E0 (or D0) comes from.
+/// Where the threshold comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Threshold {
-    /// A fixed value (the paper: 0.2, chosen by hand from past data).
+    /// A fixed value: E0 or D0 for [`Placement::Centred`] (the paper: 0.2),
+    /// the likelihood-ratio threshold for [`Placement::Segmented`].
     Fixed(f32),
-    /// Calibrated from the stationary distribution for this window and
-    /// frame size, at false-alarm probability `p_fa` per hop.
+    /// Calibrated at false-alarm probability `p_fa` per hop on stationary
+    /// input: for Centred from the χ² law of the entropy under white noise;
+    /// for Segmented, Bonferroni over the splits of a χ²₁ likelihood ratio.
     Auto {
         /// Probability that a stationary window shrinks at one hop.
         p_fa: f32,
@@ -104,27 +116,26 @@ pub enum Threshold {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DavarConfig {
-    /// Shortest window λ1, samples.
+    /// Shortest window λ1, samples (rounded up to frames).
     pub lambda1: u16,
-    /// Longest window λ2, samples (also the latency ×2).
+    /// Longest window λ2, samples (rounded down to frames; latency ≈ λ2/2).
     pub lambda2: u16,
-    /// Initial window length.
+    /// Initial window length (Centred).
     pub l_init: u16,
-    /// Length step ΔL per hop, samples (even; 0 is refused). Unused when
-    /// λ1 = λ2, which is plain fixed-window DAVAR.
+    /// Length step ΔL per hop, samples (Centred; even, > 0 when λ1 < λ2).
     pub delta_l: u16,
-    /// Step rule.
+    /// Step rule (Centred).
     pub step: StepMode,
-    /// Entropy driving the window.
+    /// Entropy driving the window (Centred).
     pub entropy: EntropyKind,
-    /// Threshold E0 / D0.
+    /// Threshold.
     pub threshold: Threshold,
     /// Window placement.
     pub placement: Placement,
 }
 
 impl DavarConfig {
-    /// Fixed-window DAVAR of `len` samples.
+    /// Fixed-window DAVAR of `len` samples (rounded down to frames).
     pub const fn fixed(len: u16) -> Self {
         Self {
             lambda1: len,
@@ -137,118 +148,126 @@ impl DavarConfig {
             placement: Placement::Centred,
         }
     }
+
+    /// Our adaptive window: segmented placement between `lambda1` and
+    /// `lambda2`, false-alarm probability 1 % per hop.
+    pub const fn segmented(lambda1: u16, lambda2: u16) -> Self {
+        Self {
+            lambda1,
+            lambda2,
+            l_init: lambda2,
+            delta_l: 2,
+            step: StepMode::Constant,
+            entropy: EntropyKind::Temporal,
+            threshold: Threshold::Auto { p_fa: 0.01 },
+            placement: Placement::Segmented,
+        }
+    }
 }
 
 /// Error building a DAVAR.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum DavarError {
-    /// λ1 > λ2, l_init outside [λ1, λ2], or λ1 > λ2/2 with
-    /// [`Placement::ChangeAware`].
+    /// λ1 > λ2, l_init outside [λ1, λ2], or λ2 shorter than two frames.
     Lambda,
-    /// λ2 over the capacity `CAP`, or λ1 below 2^T (the largest τ), or a
-    /// capacity that is not a power of two.
+    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 1, λ1 below 2^T (the
+    /// largest τ's term span), T outside 1..=11, or CAP not a power of two.
     Capacity,
-    /// ΔL = 0 (or odd) on an adaptive window.
+    /// ΔL = 0 (or odd) on an adaptive centred window.
     DeltaL,
     /// Threshold not finite, or p_fa outside (0, 1).
     Threshold,
 }
 
-/// One output step: the t–τ–σ surface is the sequence of these.
+/// One published row of the t–τ–σ surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DavarStep<const T: usize> {
-    /// Sample index of the window centre (the estimate's time).
+    /// Sample index of the time this estimate describes.
     pub t: u64,
-    /// Window length L(t), samples.
+    /// Window [start, end) in sample indices; `t` lies inside it.
+    pub start: u64,
+    /// End of the window (exclusive).
+    pub end: u64,
+    /// Window length, samples.
     pub len: u16,
-    /// Last entropy (normalised spectral E, or temporal deficit D).
-    pub entropy: f32,
-    /// Threshold in force (E0 or D0).
+    /// Score of the last hop: entropy E or deficit D (Centred), or the
+    /// likelihood ratio ν·LR of the best split of the span (Segmented).
+    /// Always finite (0 before a score exists).
+    pub score: f32,
+    /// Threshold the score was compared with.
     pub threshold: f32,
     /// Allan variance at τ = 2ʲ·τ0 in (sample unit)²; multiply by lsb².
     pub avar: [f32; T],
 }
 
-/// d² exactly: |d| < 2³¹ because |w| < 2²⁰ and m ≤ 2¹⁰ (one `smull`).
-#[inline(always)]
-fn sq(d: i32) -> u128 {
-    (d as i64 * d as i64) as u64 as u128
-}
-
-/// Sample i of a ring of CAP (a power of two) samples. A free function so
-/// that closures can borrow the ring alone while the sums are updated.
-#[inline(always)]
-fn ring_at<const CAP: usize>(ring: &[i32; CAP], i: u64) -> i32 {
-    ring[i as usize & (CAP - 1)]
-}
-
-/// How the sums of the term starting at k, b = Σ w[k..k+m) and
-/// a = Σ w[k+m..k+2m), change when the term moves to k + 1: (Δb, Δa).
-/// Both window edges move terms this way (the head's term starts at
-/// its position − 2m, the tail's at its position).
-#[inline(always)]
-fn shift(w: impl Fn(u64) -> i32, k: u64, m: u64) -> (i32, i32) {
-    let (x0, x1, x2) = (w(k), w(k + m), w(k + 2 * m));
-    (x1 - x0, x2 - x1)
-}
-
-/// Edge of the window: the sliding sums of the term that starts (tail) or
-/// ends (head) there, per τ.
+/// Exact window sums of one published hop.
 #[derive(Clone, Copy, Debug)]
-struct Edge<const T: usize> {
-    pos: u64,
-    a: [i32; T],
-    b: [i32; T],
+struct Published<const T: usize> {
+    t: u64,
+    start: u64,
+    end: u64,
+    acc: [u128; T],
 }
 
-/// Fixed-capacity DAVAR / E-DAVAR for one axis. `CAP` (power of two ≥ λ2)
-/// samples of ring, `FRAMES` (≥ CAP/SEG + 1) stored STFT frames, `T` octave
-/// τ. RAM ≈ 4·CAP + 64·FRAMES + 40·T bytes.
+/// Fixed-capacity DAVAR / E-DAVAR for one axis: `CAP` (power of two ≥ λ2)
+/// samples of ring, `FRAMES` (≥ CAP/32 + 1) blocks, `T` octave τ.
+/// RAM ≈ 4·CAP + FRAMES·(17·T + 68) bytes.
 #[derive(Clone, Debug)]
 pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     cfg: DavarConfig,
     ring: [i32; CAP],
     n: u64,
-    /// Power of bins 1..=15 of each stored frame (frame f in slot f % FRAMES).
+    /// Sliding sums of the newest term per τ: b = Σ w[n−2m..n−m),
+    /// a = Σ w[n−m..n).
+    a: [i32; T],
+    b: [i32; T],
+    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
+    /// and the prefix a window ending in this block needs.
+    lo: [[u64; T]; FRAMES],
+    hi: [[u8; T]; FRAMES],
+    pre: [[u64; T]; FRAMES],
+    /// STFT power of bins 1..=15 per frame, its energy and e·ln e
+    /// (Centred windows only).
     frames: [[f32; BINS]; FRAMES],
-    /// Each frame's energy e (bins 1..=15) and e·ln e, kept when the frame
-    /// is stored, so a hop's temporal entropy is K additions and one ln.
     energy: [f32; FRAMES],
     eloge: [f32; FRAMES],
-    head: Edge<T>,
-    tail: Edge<T>,
-    acc: [u128; T],
+    /// Frames in the span (λ2 rounded down) and the shortest window.
+    span: usize,
+    min_frames: usize,
+    /// Centred: current length in samples (eq. 4 state).
     len: u16,
-    entropy: f32,
+    score: f32,
     threshold: f32,
-    started: bool,
-    /// Time of the current window.
-    t: u64,
-    /// Change located at the last hop (ChangeAware).
-    change: Option<u64>,
-    /// Threshold for each frame count 0..FRAMES, computed once: the χ²
-    /// quantile is soft-float f64 work that must stay out of the hot path.
+    /// Running mean of r² = ((x₁ − x₀)/(x₁ + x₀))² over consecutive τ0
+    /// frame energies, and how many went in.
+    r2: f32,
+    r2_count: u32,
+    /// Threshold per frame count (Centred: K frames in the window;
+    /// Segmented: a segment of K frames).
     thresholds: [f32; FRAMES],
+    last: Option<Published<T>>,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T> {
     /// Check the settings against the capacities.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
         let (l1, l2) = (cfg.lambda1 as usize, cfg.lambda2 as usize);
-        if l1 > l2 || !(l1..=l2).contains(&(cfg.l_init as usize)) {
+        if l1 > l2 || !(l1..=l2).contains(&(cfg.l_init as usize)) || l2 < 2 * SEG {
             return Err(DavarError::Lambda);
         }
-        if cfg.placement == Placement::ChangeAware && 2 * l1 > l2 {
-            return Err(DavarError::Lambda);
-        }
-        if !CAP.is_power_of_two() || l2 > CAP || FRAMES * SEG < CAP + SEG || T == 0 {
+        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 1 {
             return Err(DavarError::Capacity);
         }
-        if T > 11 || (1usize << T) > l1 {
+        let span = l2 / SEG;
+        let min_frames = l1.div_ceil(SEG).min(span);
+        if T == 0 || T > 11 || (1usize << T) > min_frames * SEG {
             return Err(DavarError::Capacity);
         }
-        if l1 < l2 && (cfg.delta_l == 0 || cfg.delta_l % 2 == 1) {
+        if cfg.placement == Placement::Centred
+            && min_frames < span
+            && (cfg.delta_l == 0 || cfg.delta_l % 2 == 1)
+        {
             return Err(DavarError::DeltaL);
         }
         match cfg.threshold {
@@ -258,34 +277,53 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             }
             _ => {}
         }
-        let edge = Edge {
-            pos: 0,
-            a: [0; T],
-            b: [0; T],
-        };
         let mut d = Self {
             cfg,
             ring: [0; CAP],
             n: 0,
+            a: [0; T],
+            b: [0; T],
+            lo: [[0; T]; FRAMES],
+            hi: [[0; T]; FRAMES],
+            pre: [[0; T]; FRAMES],
             frames: [[0.0; BINS]; FRAMES],
             energy: [0.0; FRAMES],
             eloge: [0.0; FRAMES],
-            head: edge,
-            tail: edge,
-            acc: [0; T],
-            len: cfg.l_init & !1,
-            entropy: f32::NAN,
-            threshold: f32::NAN,
-            started: false,
-            t: 0,
-            change: None,
+            span,
+            min_frames,
+            len: cfg.l_init,
+            score: 0.0,
+            threshold: 0.0,
+            r2: 0.0,
+            r2_count: 0,
             thresholds: [0.0; FRAMES],
+            last: None,
         };
-        for k in d.tabulated() {
+        // Soft-float χ² quantiles, once: only the frame counts that can
+        // occur are tabulated.
+        let lo = match cfg.placement {
+            Placement::Centred => min_frames.saturating_sub(1),
+            Placement::Segmented => 2,
+        };
+        for k in lo..=span {
             d.thresholds[k] = d.quantile_for(k);
         }
-        d.threshold = d.calibrate(d.len);
+        d.threshold = d.thresholds[span];
         Ok(d)
+    }
+
+    /// Forget every sample (after a gap in the input), keeping the settings
+    /// and the tabulated thresholds.
+    pub fn reset(&mut self) {
+        self.n = 0;
+        self.a = [0; T];
+        self.b = [0; T];
+        self.len = self.cfg.l_init;
+        self.score = 0.0;
+        self.threshold = self.thresholds[self.span];
+        self.r2 = 0.0;
+        self.r2_count = 0;
+        self.last = None;
     }
 
     /// The settings.
@@ -293,9 +331,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         &self.cfg
     }
 
-    /// Current window length.
+    /// Length of the window last published (samples), or of the span
+    /// before the first one.
     pub fn len(&self) -> u16 {
-        self.len
+        self.last
+            .map_or((self.span * SEG) as u16, |p| (p.end - p.start) as u16)
     }
 
     /// Always false: a window is never empty (for clippy's `len` rule).
@@ -303,36 +343,35 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         false
     }
 
+    /// Samples between an estimate's time and the sample that published it
+    /// (the price of a window around t): about λ2/2.
+    pub fn latency(&self) -> u64 {
+        (SEG * self.span).div_ceil(2) as u64 + 1
+    }
+
+    /// Effective degrees of freedom of one frame's τ0 energy, learnt from
+    /// the data: for two independent scaled-χ²_ν frames x₀, x₁,
+    /// E[((x₁ − x₀)/(x₁ + x₀))²] = 1/(ν + 1), whatever the scale, so slow
+    /// variance changes do not bias it. White noise gives ≈ 21.6, random
+    /// walk ≈ 32; the prior is white until 32 frames were seen.
+    pub fn nu(&self) -> f32 {
+        if self.r2_count < 32 || !(self.r2 > 0.0) {
+            return NU_WHITE;
+        }
+        (1.0 / self.r2 - 1.0).clamp(2.0, 2.0 * SEG as f32)
+    }
+
     #[inline(always)]
     fn w(&self, i: u64) -> i32 {
-        ring_at(&self.ring, i)
+        self.ring[i as usize & (CAP - 1)]
     }
 
-    /// Threshold for a window of `len` samples (see the module docs).
-    fn calibrate(&self, len: u16) -> f32 {
-        self.calibrate_frames(len as usize / SEG)
+    #[inline(always)]
+    fn slot(block: u64) -> usize {
+        (block % FRAMES as u64) as usize
     }
 
-    /// Threshold for `frames` STFT frames (table lookup).
-    fn calibrate_frames(&self, frames: usize) -> f32 {
-        let f = frames.min(FRAMES - 1);
-        if self.tabulated().contains(&f) {
-            self.thresholds[f]
-        } else {
-            self.quantile_for(f)
-        }
-    }
-
-    /// Frame counts a window of λ1..=λ2 samples can hold (one frame is lost
-    /// to alignment at most): only these thresholds are tabulated, so the
-    /// soft-float χ² quantiles at start-up are the ones that can be used.
-    fn tabulated(&self) -> core::ops::RangeInclusive<usize> {
-        let lo = (self.cfg.lambda1 as usize / SEG).saturating_sub(1);
-        let hi = (self.cfg.lambda2 as usize / SEG + 1).min(FRAMES - 1);
-        lo..=hi
-    }
-
-    /// Threshold for `frames` STFT frames, computed.
+    /// Threshold for `frames` frames (see [`Threshold`]).
     fn quantile_for(&self, frames: usize) -> f32 {
         let p_fa = match self.cfg.threshold {
             Threshold::Fixed(v) => return v,
@@ -340,13 +379,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         };
         let k = frames.max(2) as f64;
         let b = BINS as f64;
-        match self.cfg.entropy {
-            EntropyKind::Temporal => {
-                // D ≈ χ²_{K−1} / (K ν), ν = 2·BINS.
+        match (self.cfg.placement, self.cfg.entropy) {
+            (Placement::Segmented, _) => {
+                // Bonferroni over the k − 1 splits of a k-frame segment.
+                chi2_quantile(1.0 - p_fa / (k - 1.0), 1.0).unwrap_or(10.0) as f32
+            }
+            (Placement::Centred, EntropyKind::Temporal) => {
+                // D ≈ χ²_{K−1} / (K ν), ν = 2·BINS (white noise).
                 let q = chi2_quantile(1.0 - p_fa, k - 1.0).unwrap_or(k);
                 (q / (k * 2.0 * b)) as f32
             }
-            EntropyKind::Spectral => {
+            (Placement::Centred, EntropyKind::Spectral) => {
                 // Deficit ≈ χ²_{B−1}/(B·2K); E = 1 − deficit/ln B, and the
                 // paper's rule shrinks on *large* E: use the upper quantile
                 // of E, i.e. the lower quantile of the deficit.
@@ -357,305 +400,204 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     }
 
     /// Add one sample (integer, |w| < 2²⁰; quantise rates with
-    /// [`crate::algo::allan::stream::quantise`]). Once λ2 samples have
-    /// arrived, returns the time t (sample index) of the window now centred
-    /// λ2/2 samples back; [`Davar::estimate`] then gives its values. A
-    /// refused sample leaves the state unchanged.
+    /// [`crate::algo::allan::stream::quantise`]). Once per hop, from the
+    /// moment the span is full, a new estimate is published and its time t
+    /// returned ([`Davar::estimate`] gives it). A refused sample leaves the
+    /// state unchanged.
     pub fn push(&mut self, w: i32) -> Result<Option<u64>, AllanError> {
         if !(-SAMPLE_MAX..=SAMPLE_MAX).contains(&w) {
             return Err(AllanError::SampleRange);
         }
-        // Fast path, the common case: no hop at this sample and both edges
-        // slide by one. One fused pass per τ, before the sample is stored.
-        let half2 = self.cfg.lambda2 as u64 / 2;
-        if self.started {
-            let t = self.n + 1 - half2;
-            let hop = t.is_multiple_of(SEG as u64) && self.cfg.lambda1 < self.cfg.lambda2;
-            let (s, e) = self.edges(t);
-            let frame_done = (self.n + 1).is_multiple_of(SEG as u64);
-            if !hop && s == self.tail.pos + 1 && e == self.head.pos + 1 {
-                self.slide(w);
-                self.ring[self.n as usize & (CAP - 1)] = w;
-                self.n += 1;
-                if frame_done {
-                    self.store_frame();
+        let n = self.n;
+        // Per τ, the term that ends at this sample: start k = n + 1 − 2m.
+        for j in 0..T {
+            let m = 1u64 << j;
+            let mid = if n >= m { self.w(n - m) } else { 0 };
+            let old = if n >= 2 * m { self.w(n - 2 * m) } else { 0 };
+            self.a[j] += w - mid;
+            self.b[j] += mid - old;
+            if n + 1 >= 2 * m {
+                let k = n + 1 - 2 * m;
+                let d = self.a[j] - self.b[j];
+                let sq = (d as i64 * d as i64) as u64;
+                let (s, off) = (Self::slot(k / SEG as u64), k % SEG as u64);
+                if off == 0 {
+                    self.lo[s][j] = sq;
+                    self.hi[s][j] = 0;
+                } else {
+                    let (v, c) = self.lo[s][j].overflowing_add(sq);
+                    self.lo[s][j] = v;
+                    self.hi[s][j] += c as u8;
                 }
-                self.t = t;
-                return Ok(Some(t));
+                // The prefix of 1 + ((−2m) mod 32) terms: what a window
+                // whose last term starts in this block needs.
+                if off == (SEG as u64 - (2 * m) % SEG as u64) % SEG as u64 {
+                    self.pre[s][j] = self.lo[s][j];
+                }
             }
         }
-        // No window reaches before n + 1 − λ2 after this sample: move the
-        // tail there first, while the sample the new one evicts (when
-        // CAP = λ2) is still in the ring.
-        if self.started {
-            let floor = self.n + 1 - self.cfg.lambda2 as u64;
-            if self.tail.pos < floor {
-                self.move_tail(floor);
+        self.ring[n as usize & (CAP - 1)] = w;
+        self.n = n + 1;
+        let n = self.n;
+        let centred_adaptive =
+            self.cfg.placement == Placement::Centred && self.min_frames < self.span;
+        if n.is_multiple_of(SEG as u64) {
+            if centred_adaptive {
+                self.store_frame();
             }
-        }
-        self.ring[self.n as usize & (CAP - 1)] = w;
-        self.n += 1;
-        if self.n.is_multiple_of(SEG as u64) {
-            self.store_frame();
-        }
-        if self.n < 2 * half2 {
             return Ok(None);
         }
-        let t = self.n - half2;
-        self.t = t;
-        if !self.started {
-            if self.cfg.placement == Placement::ChangeAware {
-                self.len = self.cfg.lambda2;
-            }
-            self.start(t);
-        } else {
-            if t.is_multiple_of(SEG as u64) && self.cfg.lambda1 < self.cfg.lambda2 {
-                match self.cfg.placement {
-                    Placement::Centred => self.adapt(t),
-                    Placement::ChangeAware => self.locate(t),
-                }
-            }
-            let (s, e) = self.edges(t);
-            self.len = (e - s) as u16;
-            self.move_head(e);
-            self.move_tail(s);
+        // Hop one sample after a frame boundary: the τ0 terms of the last
+        // frame end on the first sample of the next.
+        if n % SEG as u64 != 1 || n < (self.span * SEG) as u64 + 1 {
+            return Ok(None);
         }
+        let c = n / SEG as u64; // frames 0..c are complete
+        self.learn_nu(c);
+        let first = c - self.span as u64;
+        let (lo, hi) = match self.cfg.placement {
+            Placement::Centred => self.centred(first, centred_adaptive),
+            Placement::Segmented => self.segment(first),
+        };
+        let t = SEG as u64 * first + (SEG * self.span / 2) as u64;
+        self.publish(t, first + lo as u64, first + hi as u64);
         Ok(Some(t))
     }
 
-    /// Window [s, e) for time t.
-    fn edges(&self, t: u64) -> (u64, u64) {
-        let half2 = self.cfg.lambda2 as u64 / 2;
-        match (self.cfg.placement, self.change) {
-            (Placement::Centred, _) => (t - self.len as u64 / 2, t + self.len as u64 / 2),
-            (Placement::ChangeAware, None) => (t - half2, t + half2),
-            (Placement::ChangeAware, Some(c)) if c <= t => (c.max(t - half2), t + half2),
-            (Placement::ChangeAware, Some(c)) => (t - half2, c.min(t + half2)),
-        }
+    /// τ0 energy of frame f (Σ of its 32 squared first differences).
+    fn x0(&self, f: u64) -> f32 {
+        self.lo[Self::slot(f)][0] as f32
     }
 
-    /// ChangeAware: detect and locate one change in the λ2 span around t.
-    fn locate(&mut self, t: u64) {
-        let half2 = self.cfg.lambda2 as u64 / 2;
-        let f_lo = (t - half2).div_ceil(SEG as u64);
-        let f_hi = (t + half2) / SEG as u64;
-        let k = f_hi.saturating_sub(f_lo) as usize;
-        if k < 4 {
+    fn learn_nu(&mut self, c: u64) {
+        if c < 2 {
             return;
         }
-        let Some(deficit) = self.deficit(f_lo, f_hi) else {
-            self.change = None;
-            return;
-        };
-        self.entropy = deficit;
-        // A change is a fixed instant. Once it is within λ2/4 of t it was
-        // located from a span with at least a quarter on its near side, so
-        // keep it until it leaves the span: re-locating would only jitter
-        // it by a split stride and make both edges jump back and forth.
-        if let Some(c) = self.change {
-            if c.abs_diff(t) <= half2 / 2 {
-                self.threshold = self.calibrate_frames(k);
-                return;
-            }
-        }
-        self.threshold = self.calibrate_frames(k);
-        if !(deficit > self.threshold) {
-            self.change = None;
+        let (x0, x1) = (self.x0(c - 2), self.x0(c - 1));
+        let s = x0 + x1;
+        if !(s > 0.0) {
             return;
         }
-        let mut en = [0.0f32; FRAMES];
-        let mut tot = 0.0f32;
-        for (i, s) in Self::slots(f_lo, f_hi).enumerate() {
-            en[i] = self.energy[s];
-            tot += en[i];
-        }
-        // Two-segment scale model: minimise j·ln(mean_left) +
-        // (k − j)·ln(mean_right) over the split j (one ln per side). Splits
-        // are tried every `stride` frames, at most SPLITS of them, so a hop
-        // costs the same at any λ2; the location error stays ≤ λ2/SPLITS.
-        const SPLITS: usize = 32;
-        let stride = k.div_ceil(SPLITS);
-        let (mut best, mut best_j, mut left) = (f32::INFINITY, 0, 0.0f32);
-        let mut j0 = 0;
-        for j in (stride..k).step_by(stride) {
-            for &e in &en[j0..j] {
-                left += e;
-            }
-            j0 = j;
-            let right = tot - left;
-            if !(left > 0.0 && right > 0.0) {
-                continue;
-            }
-            let (jf, rf) = (j as f32, (k - j) as f32);
-            let cost = jf * lnf(left / jf) + rf * lnf(right / rf);
-            if cost < best {
-                best = cost;
-                best_j = j;
-            }
-        }
-        self.change = (best_j > 0).then_some((f_lo + best_j as u64) * SEG as u64);
+        let r = (x1 - x0) / s;
+        self.r2_count = self.r2_count.saturating_add(1);
+        let k = (self.r2_count as f32).min(NU_FRAMES);
+        self.r2 += (r * r - self.r2) / k;
     }
 
-    /// The current window's step of the t–τ–σ surface (computed on demand:
-    /// the u128 → float conversions are not part of the per-sample cost).
-    pub fn estimate(&self) -> DavarStep<T> {
-        let t = self.t;
-        let mut avar = [0.0f32; T];
-        for j in 0..T {
+    /// Sum the exact window sums of frames [f0, f1) and keep them.
+    fn publish(&mut self, t: u64, f0: u64, f1: u64) {
+        let (s, e) = (f0 * SEG as u64, f1 * SEG as u64);
+        let mut acc = [0u128; T];
+        for (j, a) in acc.iter_mut().enumerate() {
             let m = 1u64 << j;
-            let terms = (self.head.pos - self.tail.pos + 1).saturating_sub(2 * m);
+            // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
+            let q = (e - 2 * m) / SEG as u64;
+            let mut sum = self.pre[Self::slot(q)][j] as u128;
+            for f in f0..q {
+                let sl = Self::slot(f);
+                sum += ((self.hi[sl][j] as u128) << 64) | self.lo[sl][j] as u128;
+            }
+            *a = sum;
+        }
+        self.last = Some(Published {
+            t,
+            start: s,
+            end: e,
+            acc,
+        });
+    }
+
+    /// The last published row of the t–τ–σ surface; `None` until the span
+    /// has filled. The u128 → float conversions happen here, on demand.
+    pub fn estimate(&self) -> Option<DavarStep<T>> {
+        let p = self.last?;
+        let len = p.end - p.start;
+        let mut avar = [0.0f32; T];
+        for (j, v) in avar.iter_mut().enumerate() {
+            let m = 1u64 << j;
+            let terms = (len + 1).saturating_sub(2 * m);
             if terms > 0 {
                 let mf = m as f64;
-                avar[j] = (self.acc[j] as f64 / (2.0 * mf * mf * terms as f64)) as f32;
+                *v = (p.acc[j] as f64 / (2.0 * mf * mf * terms as f64)) as f32;
             }
         }
-        DavarStep {
-            t,
-            len: self.len,
-            entropy: self.entropy,
+        Some(DavarStep {
+            t: p.t,
+            start: p.start,
+            end: p.end,
+            len: len as u16,
+            score: self.score,
             threshold: self.threshold,
             avar,
-        }
+        })
     }
 
-    /// Build the first window, centred on `t`, from scratch.
-    fn start(&mut self, t: u64) {
-        let half = self.len as u64 / 2;
-        let s = t - half;
-        self.tail.pos = s;
-        self.head.pos = s;
-        // Head sums for the (empty) window ending at s: the 2m samples
-        // before s may not exist (s can be 0), so start both edges at s with
-        // zero sums and let the head sweep forward; terms are only added
-        // once the head has 2m samples inside the window.
-        self.head.a = [0; T];
-        self.head.b = [0; T];
-        self.tail.a = [0; T];
-        self.tail.b = [0; T];
-        self.acc = [0; T];
-        // Tail sums of the term starting at s: b = w[s..s+m), a = w[s+m..s+2m).
-        for j in 0..T {
-            let m = 1u64 << j;
-            for i in 0..m {
-                self.tail.b[j] += self.w(s + i);
-                self.tail.a[j] += self.w(s + m + i);
+    /// Segmented placement: binary segmentation of frames `first..first +
+    /// span` toward t's frame; returns the window [lo, hi) in span frames.
+    fn segment(&mut self, first: u64) -> (usize, usize) {
+        let k = self.span;
+        let mut x = [0.0f32; FRAMES];
+        for (i, v) in x.iter_mut().take(k).enumerate() {
+            *v = self.x0(first + i as u64);
+        }
+        let nu = self.nu();
+        let ft = k / 2; // frame that starts at (or holds) t
+        let (mut lo, mut hi) = (0usize, k);
+        let mut top = true;
+        while hi - lo >= 4 {
+            let Some((j, lr)) = best_split(&x[lo..hi]) else {
+                break;
+            };
+            let stat = nu * lr;
+            let th = self.thresholds[hi - lo];
+            if top {
+                self.score = stat;
+                self.threshold = th;
+                top = false;
+            }
+            if !(stat > th) {
+                break;
+            }
+            if lo + j <= ft {
+                lo += j;
+            } else {
+                hi = lo + j;
             }
         }
-        let mut pos = s;
-        while pos < t + half {
-            pos += 1;
-            // Head at pos: the window is [s, pos); sums over the last 2m
-            // samples inside it (samples before s count as 0 here, and the
-            // term is only used when pos − 2m ≥ s).
-            for j in 0..T {
-                let m = 1u64 << j;
-                let x = self.w(pos - 1);
-                let mid = if pos > s + m { self.w(pos - 1 - m) } else { 0 };
-                let old = if pos > s + 2 * m {
-                    self.w(pos - 1 - 2 * m)
-                } else {
-                    0
-                };
-                self.head.a[j] += x - mid;
-                self.head.b[j] += mid - old;
-                if pos >= s + 2 * m {
-                    let d = self.head.a[j] - self.head.b[j];
-                    self.acc[j] += sq(d);
-                }
+        // Widen to λ1, one frame at a time, toward the neighbour whose
+        // energy is closer (in ratio) to the segment's mean.
+        let seg_mean = x[lo..hi].iter().sum::<f32>() / (hi - lo) as f32;
+        while hi - lo < self.min_frames {
+            let left = (lo > 0).then(|| ratio_gap(x[lo - 1], seg_mean));
+            let right = (hi < k).then(|| ratio_gap(x[hi], seg_mean));
+            match (left, right) {
+                (Some(l), Some(r)) if l <= r => lo -= 1,
+                (Some(_), None) => lo -= 1,
+                _ => hi += 1,
             }
         }
-        self.head.pos = pos;
-        self.started = true;
+        (lo, hi)
     }
 
-    /// Slide both edges by one sample while `w` (not yet stored) arrives:
-    /// per τ, the term ending at the new head is added and the term starting
-    /// at the old tail removed, as one signed delta on the exact sum.
-    fn slide(&mut self, w: i32) {
-        let n = self.n;
-        let (e, s) = (self.head.pos, self.tail.pos);
-        // The same term moves as [`shift`], written out: this is the
-        // per-sample hot path, the samples at e and s are shared by every
-        // τ, and only index n (the arriving sample) needs a test.
-        let r = |d: &Self, i: u64| if i == n { w } else { d.w(i) };
-        let xh = r(self, e);
-        let x0 = self.w(s);
-        for j in 0..T {
-            let m = 1u64 << j;
-            let (mid, old) = (self.w(e - m), self.w(e - 2 * m));
-            self.head.a[j] += xh - mid;
-            self.head.b[j] += mid - old;
-            let dh = self.head.a[j] - self.head.b[j];
-            let dt = self.tail.a[j] - self.tail.b[j];
-            let (x1, x2) = (self.w(s + m), r(self, s + 2 * m));
-            self.tail.b[j] += x1 - x0;
-            self.tail.a[j] += x2 - x1;
-            // |d| < 2³¹, so d² < 2⁶² and the delta fits an i64; the sum is
-            // non-negative, so the wrapping add is exact.
-            let delta = (dh as i64 * dh as i64) - (dt as i64 * dt as i64);
-            self.acc[j] = self.acc[j].wrapping_add(delta as i128 as u128);
+    /// Centred placement: eq. 4 (when adaptive), then the window of the
+    /// current length around t, in frames of the span.
+    fn centred(&mut self, first: u64, adaptive: bool) -> (usize, usize) {
+        let (k, min_frames) = (self.span, self.min_frames);
+        let frames_of = move |len: u16| -> usize {
+            // Whole frames of the span's parity, so the window is centred.
+            let mut f = (len as usize / SEG).clamp(min_frames, k);
+            if (k - f) % 2 == 1 {
+                f = if f < k { f + 1 } else { f - 1 };
+            }
+            f
+        };
+        if adaptive {
+            let f = frames_of(self.len);
+            let lo = first + ((k - f) / 2) as u64;
+            self.adapt(lo, lo + f as u64);
         }
-        self.head.pos = e + 1;
-        self.tail.pos = s + 1;
-    }
-
-    /// Move the head (exclusive end) to `to`, adding or removing the terms
-    /// that end there. τ is the outer loop so that each τ's sums and exact
-    /// total stay in registers across a long jump.
-    fn move_head(&mut self, to: u64) {
-        let from = self.head.pos;
-        let ring = &self.ring;
-        let w = |i: u64| ring_at(ring, i);
-        for j in 0..T {
-            let m = 1u64 << j;
-            let (mut a, mut b, mut acc) = (self.head.a[j], self.head.b[j], self.acc[j]);
-            let mut e = from;
-            while e < to {
-                let (db, da) = shift(w, e - 2 * m, m);
-                a += da;
-                b += db;
-                acc += sq(a - b);
-                e += 1;
-            }
-            while e > to {
-                e -= 1;
-                acc -= sq(a - b);
-                let (db, da) = shift(w, e - 2 * m, m);
-                a -= da;
-                b -= db;
-            }
-            (self.head.a[j], self.head.b[j], self.acc[j]) = (a, b, acc);
-        }
-        self.head.pos = to;
-    }
-
-    /// Move the tail (first sample) to `to`, removing or adding the terms
-    /// that start there (τ outer, as in [`Davar::move_head`]).
-    fn move_tail(&mut self, to: u64) {
-        let from = self.tail.pos;
-        let ring = &self.ring;
-        let w = |i: u64| ring_at(ring, i);
-        for j in 0..T {
-            let m = 1u64 << j;
-            let (mut a, mut b, mut acc) = (self.tail.a[j], self.tail.b[j], self.acc[j]);
-            let mut s = from;
-            while s < to {
-                acc -= sq(a - b);
-                let (db, da) = shift(w, s, m);
-                b += db;
-                a += da;
-                s += 1;
-            }
-            while s > to {
-                s -= 1;
-                let (db, da) = shift(w, s, m);
-                b -= db;
-                a -= da;
-                acc += sq(a - b);
-            }
-            (self.tail.a[j], self.tail.b[j], self.acc[j]) = (a, b, acc);
-        }
-        self.tail.pos = to;
+        let f = frames_of(self.len);
+        ((k - f) / 2, (k + f) / 2)
     }
 
     /// FFT of the frame that just completed; keep the power of bins 1..=15.
@@ -666,7 +608,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             *v = self.w(first + i as u64) as f32;
         }
         let spec = microfft::real::rfft_32(&mut x);
-        let slot = (first / SEG as u64) as usize % FRAMES;
+        let slot = Self::slot(first / SEG as u64);
         let mut e = 0.0f32;
         for (p, c) in self.frames[slot].iter_mut().zip(spec[1..].iter()) {
             *p = c.re * c.re + c.im * c.im;
@@ -676,53 +618,29 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.eloge[slot] = if e > 0.0 { e * lnf(e) } else { 0.0 };
     }
 
-    /// Slots of frames `f_lo..f_hi` (contiguous, wrapping): one u64
-    /// division per hop instead of one per frame.
-    fn slots(f_lo: u64, f_hi: u64) -> impl Iterator<Item = usize> {
-        let first = (f_lo % FRAMES as u64) as usize;
-        (0..(f_hi - f_lo) as usize).map(move |i| {
-            let s = first + i;
-            if s >= FRAMES {
-                s - FRAMES
-            } else {
-                s
-            }
-        })
-    }
-
-    /// Temporal entropy deficit D = ln K − H over frames `f_lo..f_hi`, with
-    /// H = ln Σe − Σ(e ln e)/Σe; `None` if the frames hold no energy.
-    fn deficit(&self, f_lo: u64, f_hi: u64) -> Option<f32> {
-        let (mut tot, mut sum_eloge) = (0.0f32, 0.0f32);
-        for s in Self::slots(f_lo, f_hi) {
-            tot += self.energy[s];
-            sum_eloge += self.eloge[s];
-        }
-        if !(tot > 0.0) {
-            return None;
-        }
-        let h = lnf(tot) - sum_eloge / tot;
-        Some(lnf((f_hi - f_lo) as f32) - h)
-    }
-
-    /// Entropy of the window [t − L/2, t + L/2) and the eq. 4 update.
-    fn adapt(&mut self, t: u64) {
-        let half = self.len as u64 / 2;
-        let (s, e) = (t - half, t + half);
-        let f_lo = s.div_ceil(SEG as u64);
-        let f_hi = e / SEG as u64; // exclusive
-        let k = f_hi.saturating_sub(f_lo) as usize;
+    /// Entropy of frames [f_lo, f_hi) and the eq. 4 update of the length.
+    fn adapt(&mut self, f_lo: u64, f_hi: u64) {
+        let k = (f_hi - f_lo) as usize;
         if k < 2 {
             return;
         }
+        let slots = (f_lo..f_hi).map(Self::slot);
         let score = match self.cfg.entropy {
-            EntropyKind::Temporal => match self.deficit(f_lo, f_hi) {
-                Some(d) => d,
-                None => return,
-            },
+            EntropyKind::Temporal => {
+                let (mut tot, mut sum_eloge) = (0.0f32, 0.0f32);
+                for s in slots {
+                    tot += self.energy[s];
+                    sum_eloge += self.eloge[s];
+                }
+                if !(tot > 0.0) {
+                    return;
+                }
+                // D = ln K − H, H = ln Σe − Σ(e ln e)/Σe.
+                lnf(k as f32) - (lnf(tot) - sum_eloge / tot)
+            }
             EntropyKind::Spectral => {
                 let mut bins = [0.0f32; BINS];
-                for f in Self::slots(f_lo, f_hi) {
+                for f in slots {
                     for (b, p) in bins.iter_mut().zip(self.frames[f].iter()) {
                         *b += p;
                     }
@@ -741,8 +659,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 h / lnf(BINS as f32)
             }
         };
-        self.entropy = score;
-        let th = self.threshold;
+        let th = self.thresholds[k.min(FRAMES - 1)];
+        self.score = score;
+        self.threshold = th;
         let dl = self.cfg.delta_l as f32;
         let step = match self.cfg.step {
             StepMode::Constant => {
@@ -763,14 +682,54 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 r.clamp(-1.0, 1.0) * dl
             }
         };
-        // Even lengths keep the window centred on a whole sample.
         let tentative = (self.len as f32 - step) as i32 & !1;
-        let new_len = tentative.clamp(self.cfg.lambda1 as i32, self.cfg.lambda2 as i32) as u16 & !1;
-        if new_len != self.len {
-            self.len = new_len;
-            self.threshold = self.calibrate(new_len);
-        }
+        self.len = tentative.clamp(self.cfg.lambda1 as i32, self.cfg.lambda2 as i32) as u16;
     }
+}
+
+/// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
+fn ratio_gap(a: f32, b: f32) -> f32 {
+    let (a, b) = (a.max(f32::MIN_POSITIVE), b.max(f32::MIN_POSITIVE));
+    if a > b {
+        a / b
+    } else {
+        b / a
+    }
+}
+
+/// Best single split j (1..len) of frame energies `x` under a scale model:
+/// LR = n ln x̄ − j ln x̄_left − (n − j) ln x̄_right (≥ 0); ν·LR is
+/// asymptotically χ²₁ for one known split. At most [`SPLITS`] splits are
+/// tried. `None` when the segment holds no energy.
+fn best_split(x: &[f32]) -> Option<(usize, f32)> {
+    let n = x.len();
+    let tot: f32 = x.iter().sum();
+    if !(tot > 0.0) || n < 2 {
+        return None;
+    }
+    let nf = n as f32;
+    let base = nf * lnf(tot / nf);
+    let stride = n.div_ceil(SPLITS).max(1);
+    let (mut best, mut best_j) = (0.0f32, 0usize);
+    let (mut left, mut j0) = (0.0f32, 0usize);
+    let mut j = stride;
+    while j < n {
+        for &e in &x[j0..j] {
+            left += e;
+        }
+        j0 = j;
+        let right = tot - left;
+        if left > 0.0 && right > 0.0 {
+            let (jf, rf) = (j as f32, (n - j) as f32);
+            let lr = base - jf * lnf(left / jf) - rf * lnf(right / rf);
+            if lr > best {
+                best = lr;
+                best_j = j;
+            }
+        }
+        j += stride;
+    }
+    (best_j > 0).then_some((best_j, best))
 }
 
 #[cfg(test)]

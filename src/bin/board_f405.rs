@@ -153,13 +153,15 @@ fn main() -> ! {
                 );
             }
             for a in 0..3 {
-                if let Some(e) = noise.estimate(a) {
+                if let Some(d) = noise.estimate(a) {
+                    let e = d.step;
                     defmt::info!(
-                        "seq {} axis {}: E-DAVAR L={} D={=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
+                        "seq {} axis {}: E-DAVAR for seq {} L={} score {=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
                         out.seq,
                         a,
+                        d.seq,
                         e.len,
-                        e.entropy,
+                        e.score,
                         tracker::sigma_dps(&e, 0),
                         tracker::sigma_dps(&e, 4),
                         tracker::sigma_dps(&e, 8)

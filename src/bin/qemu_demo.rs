@@ -157,14 +157,15 @@ fn main() -> ! {
         noise.push(&out);
         if n % 500 == 499 {
             for a in 0..3 {
-                let Some(e) = noise.estimate(a) else { continue };
+                let Some(d) = noise.estimate(a) else { continue };
+                let e = d.step;
                 defmt::info!(
-                    "seq {} axis {}: E-DAVAR t={}ms L={} D={=f32} (D0 {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
+                    "seq {} axis {}: E-DAVAR for seq {} L={} score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
                     out.seq,
                     a,
-                    e.t,
+                    d.seq,
                     e.len,
-                    e.entropy,
+                    e.score,
                     e.threshold,
                     tracker::sigma_dps(&e, 0),
                     tracker::sigma_dps(&e, 3),
@@ -222,9 +223,9 @@ fn main() -> ! {
         _ => pass = false,
     }
     defmt::info!(
-        "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} axis-samples skipped",
+        "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts",
         sigma_x_1ms,
-        noise.skipped()
+        noise.restarts()
     );
     pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
     defmt::info!(

@@ -4,9 +4,7 @@
 
 use super::Output;
 use crate::algo::allan::stream::quantise;
-use crate::algo::davar::{
-    Davar, DavarConfig, DavarError, DavarStep, EntropyKind, Placement, StepMode, Threshold,
-};
+use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep};
 use crate::algo::math::sqrtf;
 
 /// Input resolution of the tracker, °/s: ±2048 °/s fits the |w| < 2²⁰
@@ -14,25 +12,35 @@ use crate::algo::math::sqrtf;
 /// noise, far below any MEMS gyro's.
 pub const LSB_DPS: f32 = 1.0 / 512.0;
 
-/// The change-aware E-DAVAR (temporal entropy, automatic threshold) for a
-/// window of up to `lambda2` samples, λ1 = λ2/2.
+/// The segmented E-DAVAR (1 % false alarms per hop) for a window of up to
+/// `lambda2` samples, λ1 = λ2/2.
 pub const fn config(lambda2: u16) -> DavarConfig {
-    DavarConfig {
-        lambda1: lambda2 / 2,
-        lambda2,
-        l_init: lambda2,
-        delta_l: lambda2 / 16,
-        step: StepMode::Constant,
-        entropy: EntropyKind::Temporal,
-        threshold: Threshold::Auto { p_fa: 0.01 },
-        placement: Placement::ChangeAware,
-    }
+    DavarConfig::segmented(lambda2 / 2, lambda2)
 }
 
 /// E-DAVAR on the three fused axes.
+///
+/// Allan variances need contiguous samples: an axis whose sample is missing
+/// (no fused value, a value that cannot be quantised, or a gap in the
+/// sequence numbers from an overrun) restarts its window, counted in
+/// [`NoiseTracker::restarts`], rather than splicing across the gap. Each
+/// axis remembers the sequence number of its window's first sample, so every
+/// estimate is reported with the sequence number it describes.
 pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
     axes: [Davar<CAP, FRAMES, T>; 3],
-    skipped: u32,
+    /// Per axis, the sequence number of sample 0 of its E-DAVAR.
+    origin: [Option<u32>; 3],
+    last_seq: Option<u32>,
+    restarts: u32,
+}
+
+/// One estimate with the sequence number of the sample it describes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Described<const T: usize> {
+    /// Sequence number of the sample at the estimate's time t.
+    pub seq: u32,
+    /// The surface row (window, score, Allan variances).
+    pub step: DavarStep<T>,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FRAMES, T> {
@@ -40,35 +48,62 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
         Ok(Self {
             axes: [Davar::new(cfg)?, Davar::new(cfg)?, Davar::new(cfg)?],
-            skipped: 0,
+            origin: [None; 3],
+            last_seq: None,
+            restarts: 0,
         })
     }
 
-    /// Feed one pipeline output. An axis without a fused value, or one that
-    /// cannot be quantised (non-finite, beyond ±2048 °/s), is a documented
-    /// skip: it is counted and that axis's window simply does not advance.
+    /// Feed one pipeline output.
     pub fn push<const N: usize>(&mut self, out: &Output<N>) {
-        for (d, f) in self.axes.iter_mut().zip(out.fused.iter()) {
-            match f.map(|f| quantise(f.rate_dps, LSB_DPS)) {
-                Some(Ok(q)) if d.push(q).is_ok() => {}
-                _ => self.skipped += 1,
+        let contiguous = self.last_seq.is_some_and(|s| out.seq == s.wrapping_add(1));
+        self.last_seq = Some(out.seq);
+        for ((d, f), origin) in self
+            .axes
+            .iter_mut()
+            .zip(out.fused.iter())
+            .zip(self.origin.iter_mut())
+        {
+            if origin.is_some() && !contiguous {
+                d.reset();
+                *origin = None;
+                self.restarts += 1;
+            }
+            let q = f.map(|f| quantise(f.rate_dps, LSB_DPS));
+            match q {
+                Some(Ok(q)) if d.push(q).is_ok() => {
+                    origin.get_or_insert(out.seq);
+                }
+                _ => {
+                    if origin.is_some() {
+                        d.reset();
+                        *origin = None;
+                        self.restarts += 1;
+                    }
+                }
             }
         }
     }
 
-    /// The current surface row of `axis` (0 = x).
-    pub fn estimate(&self, axis: usize) -> Option<DavarStep<T>> {
-        self.axes.get(axis).map(Davar::estimate)
+    /// The last published surface row of `axis` (0 = x) with the sequence
+    /// number it describes: `None` until the axis's window has filled.
+    pub fn estimate(&self, axis: usize) -> Option<Described<T>> {
+        let step = self.axes.get(axis)?.estimate()?;
+        let origin = (*self.origin.get(axis)?)?;
+        Some(Described {
+            seq: origin.wrapping_add(step.t as u32),
+            step,
+        })
     }
 
-    /// Axis-samples skipped so far.
-    pub fn skipped(&self) -> u32 {
-        self.skipped
+    /// Window restarts so far (summed over axes).
+    pub fn restarts(&self) -> u32 {
+        self.restarts
     }
 }
 
 /// σ(τ = 2ʲ samples) of a surface row from [`NoiseTracker::estimate`], °/s
-/// (0 before the window has filled, NaN for j out of range). Takes the row
+/// (NaN for j out of range). Takes the row
 /// so that logging several τ converts the sums once.
 pub fn sigma_dps<const T: usize>(e: &DavarStep<T>, j: usize) -> f32 {
     e.avar.get(j).map_or(f32::NAN, |&v| sqrtf(v) * LSB_DPS)

@@ -23,7 +23,7 @@ fn step_signal(seed: u64) -> Vec<i32> {
 }
 
 /// The paper's window limits (400, 800), ΔL = 64, temporal entropy.
-fn paper_window(p_fa: f32, placement: Placement) -> DavarConfig {
+fn paper_window(p_fa: f32) -> DavarConfig {
     DavarConfig {
         lambda1: 400,
         lambda2: 800,
@@ -32,7 +32,7 @@ fn paper_window(p_fa: f32, placement: Placement) -> DavarConfig {
         step: StepMode::Constant,
         entropy: EntropyKind::Temporal,
         threshold: Threshold::Auto { p_fa },
-        placement,
+        placement: Placement::Centred,
     }
 }
 
@@ -44,97 +44,191 @@ fn batch(w: &[i32], s: usize, e: usize, m: usize) -> f64 {
     oavar_phase(&phase, 1.0, m).unwrap().avar
 }
 
-fn check_against_batch(cfg: DavarConfig, w: &[i32], every: usize) -> usize {
+/// Every published estimate equals the batch OADEV over exactly its window
+/// (every τ), holds its time inside the window, and arrives `latency`
+/// samples after that time. Returns the windows seen.
+fn check_against_batch(cfg: DavarConfig, w: &[i32]) -> Vec<(u64, u64, u64)> {
     let mut d = D::new(cfg).unwrap();
-    let mut checked = 0;
+    let mut seen = Vec::new();
     for (i, &x) in w.iter().enumerate() {
         let Some(t) = d.push(x).unwrap() else {
             continue;
         };
-        if i % every != 0 {
-            continue;
-        }
-        let st = d.estimate();
+        let st = d.estimate().unwrap();
         assert_eq!(st.t, t);
-        let (s, e) = d.edges(t);
-        let (s, e) = (s as usize, e as usize);
-        assert_eq!(e - s, st.len as usize);
+        assert_eq!(i as u64 + 1 - t, d.latency());
+        assert!(st.start <= t && t < st.end, "{st:?}");
+        assert!(st.end as usize <= i + 1);
+        assert_eq!((st.end - st.start) as u16, st.len);
+        assert!(st.score.is_finite() && st.threshold.is_finite());
         for j in 0..8 {
-            let want = batch(w, s, e, 1 << j);
+            let want = batch(w, st.start as usize, st.end as usize, 1 << j);
             let got = st.avar[j] as f64;
             assert!(
                 ((got - want) / want).abs() < 1e-6,
-                "t={t} L={} m={}: {got} vs {want}",
-                st.len,
+                "t={t} [{}, {}) m={}: {got} vs {want}",
+                st.start,
+                st.end,
                 1 << j
             );
         }
-        checked += 1;
+        seen.push((t, st.start, st.end));
     }
-    checked
+    seen
 }
 
 #[test]
 fn fixed_window_equals_batch_oadev() {
     let w = white(1, 3000, |_| 1.0);
-    assert!(check_against_batch(DavarConfig::fixed(400), &w, 97) > 20);
+    let seen = check_against_batch(DavarConfig::fixed(400), &w);
+    // 400 rounds down to 12 frames; one estimate per hop.
+    assert!(seen.len() > 70);
+    assert!(seen.iter().all(|&(_, s, e)| e - s == 384));
 }
 
 #[test]
-fn adaptive_window_stays_exact_while_it_moves() {
-    // A variance step makes the window shrink and grow; every estimate must
-    // still equal the batch OADEV over exactly its window.
-    let w = step_signal(2);
-    let cfg = paper_window(0.05, Placement::Centred);
-    assert!(check_against_batch(cfg, &w, 61) > 50);
-    // ...and it did move.
-    let mut d = D::new(cfg).unwrap();
-    let (mut lo, mut hi) = (u16::MAX, 0);
-    for &x in &w {
-        if d.push(x).unwrap().is_some() {
-            lo = lo.min(d.len());
-            hi = hi.max(d.len());
-        }
+fn nothing_is_published_before_the_span_fills() {
+    let mut d = D::new(DavarConfig::segmented(256, 800)).unwrap();
+    assert!(d.estimate().is_none());
+    for (i, x) in white(9, 800, |_| 1.0).into_iter().enumerate() {
+        assert_eq!(d.push(x).unwrap(), None, "sample {i}");
+        assert!(d.estimate().is_none());
     }
-    assert!(lo == 400 && hi == 800, "{lo}..{hi}");
+    // 25 frames of span: the first hop is one sample after frame 25 ends.
+    assert_eq!(d.push(0).unwrap(), Some(400));
 }
 
 #[test]
-fn auto_threshold_false_alarm_rate() {
-    // Stationary white noise: the temporal score exceeds D0 at about p_fa
-    // of the hops (the χ² approximation is second order; allow 0.4–2.5×).
-    for p_fa in [0.05f32, 0.2] {
-        let cfg = DavarConfig {
-            lambda1: 512,
-            lambda2: 512,
-            l_init: 512,
-            delta_l: 2,
-            step: StepMode::Constant,
-            entropy: EntropyKind::Temporal,
-            threshold: Threshold::Auto { p_fa },
-            placement: Placement::Centred,
-        };
-        let mut d = D::new(cfg).unwrap();
-        let (th, mut hits, mut hops) = (d.calibrate(512), 0, 0);
-        let w = white(3, 200_000, |_| 1.0);
-        for (i, &x) in w.iter().enumerate() {
-            if let Some(t) = d.push(x).unwrap() {
-                // Fixed windows do not adapt; score the window directly.
-                if t % (SEG as u64 * 16) == 0 && i > 0 {
-                    d.cfg.lambda1 = 510;
-                    d.adapt(t);
-                    d.cfg.lambda1 = 512;
-                    d.len = 512;
-                    hits += (d.entropy > th) as u32;
-                    hops += 1;
-                }
+fn centred_adaptive_window_stays_exact_while_it_moves() {
+    let w = step_signal(2);
+    let seen = check_against_batch(paper_window(0.05), &w);
+    let lens: Vec<u64> = seen.iter().map(|&(_, s, e)| e - s).collect();
+    let (lo, hi) = (lens.iter().min().unwrap(), lens.iter().max().unwrap());
+    // 400 rounds up to 13 frames (odd, like the 25-frame span).
+    assert!(*lo == 416 && *hi == 800, "{lo}..{hi}");
+}
+
+#[test]
+fn segmented_window_is_exact_and_avoids_the_change() {
+    let w = step_signal(4);
+    let cfg = DavarConfig::segmented(256, 1024);
+    let seen = check_against_batch(cfg, &w);
+    // Windows must not reach more than two frames across a change on both
+    // sides; count the exceptions near the changes.
+    let (mut bad, mut total) = (0, 0);
+    for &(t, s, e) in &seen {
+        for c in [2000u64, 3500] {
+            if t.abs_diff(c) < 400 {
+                total += 1;
+                bad += (s + 64 < c && c + 64 < e) as u32;
             }
         }
-        let rate = hits as f32 / hops as f32;
-        assert!(
-            rate > 0.4 * p_fa && rate < 2.5 * p_fa,
-            "p_fa={p_fa}: measured {rate} over {hops} hops"
-        );
+    }
+    assert!(bad * 20 < total, "{bad} of {total} windows straddle a change");
+}
+
+#[test]
+fn segmented_finds_two_changes_in_one_span() {
+    // σ 1 → 2 → 1 with the high part 320 samples long, inside one 1024 span:
+    // at its middle the window must be the high part alone (±2 frames).
+    let w = white(6, 4000, |i| if (2000..2320).contains(&i) { 2.0 } else { 1.0 });
+    let mut hits = 0;
+    for seed in 0..10 {
+        let w: Vec<i32> = if seed == 0 {
+            w.clone()
+        } else {
+            white(6 + seed, 4000, |i| {
+                if (2000..2320).contains(&i) {
+                    2.0
+                } else {
+                    1.0
+                }
+            })
+        };
+        let seen = check_against_batch(DavarConfig::segmented(256, 1024), &w);
+        let &(_, s, e) = seen.iter().min_by_key(|&&(t, _, _)| t.abs_diff(2160)).unwrap();
+        hits += (s.abs_diff(2000) <= 64 && e.abs_diff(2320) <= 64) as u32;
+    }
+    assert!(hits >= 8, "{hits} of 10");
+}
+
+#[test]
+fn segmented_respects_lambda1() {
+    // Changes every 160 samples, λ1 = 512: no window may be shorter.
+    let w = white(3, 6000, |i| if (i / 160) % 2 == 0 { 1.0 } else { 2.0 });
+    let seen = check_against_batch(DavarConfig::segmented(512, 1024), &w);
+    assert!(seen.iter().all(|&(_, s, e)| e - s >= 512));
+}
+
+/// Fraction of hops whose window is shorter than the span.
+fn shortened(cfg: DavarConfig, w: &[i32]) -> f64 {
+    let mut d = D::new(cfg).unwrap();
+    let (mut short, mut hops) = (0, 0);
+    for &x in w {
+        if d.push(x).unwrap().is_some() {
+            hops += 1;
+            short += (d.len() < 1024) as u32;
+        }
+    }
+    short as f64 / hops as f64
+}
+
+#[test]
+fn segmented_rarely_shortens_on_stationary_coloured_noise() {
+    let n = 200_000;
+    let cfg = DavarConfig::segmented(256, 1024);
+    // White.
+    let w = white(11, n, |_| 1.0);
+    let white_rate = shortened(cfg, &w);
+    // Random walk plus white: the first differences are white, so the frame
+    // energies stay χ²-like; ν is learnt (≈ 32 instead of 21.6).
+    let mut rng = Rng::new(12);
+    let mut acc = 0.0f32;
+    let rw: Vec<i32> = (0..n)
+        .map(|_| {
+            acc += 30.0 * rng.gaussian();
+            (acc + 50.0 * rng.gaussian()).round() as i32
+        })
+        .collect();
+    let rw_rate = shortened(cfg, &rw);
+    assert!(white_rate < 0.05, "white: {white_rate}");
+    assert!(rw_rate < 0.05, "random walk: {rw_rate}");
+}
+
+#[test]
+fn nu_is_learnt_from_the_noise_type() {
+    let mut d = D::new(DavarConfig::segmented(256, 1024)).unwrap();
+    for x in white(13, 100_000, |_| 1.0) {
+        d.push(x).unwrap();
+    }
+    let white_nu = d.nu();
+    let mut d = D::new(DavarConfig::segmented(256, 1024)).unwrap();
+    let mut rng = Rng::new(14);
+    let mut acc = 0i32;
+    for _ in 0..100_000 {
+        acc += (100.0 * rng.gaussian()).round() as i32;
+        d.push(acc.clamp(-SAMPLE_MAX, SAMPLE_MAX)).unwrap();
+    }
+    let rw_nu = d.nu();
+    // Theory: 21.6 (white, lag-1 correlation −½ of the differences) and 32.
+    assert!((white_nu - 21.6).abs() < 2.5, "white ν {white_nu}");
+    assert!((rw_nu - 32.0).abs() < 4.0, "random-walk ν {rw_nu}");
+}
+
+#[test]
+fn reset_forgets_everything() {
+    let w = step_signal(7);
+    let cfg = DavarConfig::segmented(256, 1024);
+    let mut a = D::new(cfg).unwrap();
+    for &x in &w[..2500] {
+        a.push(x).unwrap();
+    }
+    a.reset();
+    assert!(a.estimate().is_none());
+    let mut b = D::new(cfg).unwrap();
+    for &x in &w[2500..] {
+        assert_eq!(a.push(x).unwrap(), b.push(x).unwrap());
+        assert_eq!(a.estimate(), b.estimate());
     }
 }
 
@@ -160,6 +254,14 @@ fn bad_settings_are_typed() {
     assert_eq!(bad(|c| c.l_init = 100), Some(DavarError::Lambda));
     assert_eq!(
         bad(|c| {
+            c.lambda1 = 40;
+            c.lambda2 = 40;
+            c.l_init = 40
+        }),
+        Some(DavarError::Lambda)
+    );
+    assert_eq!(
+        bad(|c| {
             c.lambda2 = 2048;
             c.l_init = 2048
         }),
@@ -175,76 +277,52 @@ fn bad_settings_are_typed() {
         bad(|c| c.threshold = Threshold::Auto { p_fa: 1.0 }),
         Some(DavarError::Threshold)
     );
+    assert_eq!(
+        Davar::<1024, 32, 8>::new(ok).err(),
+        Some(DavarError::Capacity)
+    );
     let mut d = D::new(ok).unwrap();
     assert_eq!(d.push(1 << 21), Err(AllanError::SampleRange));
     assert_eq!(d.push(0), Ok(None));
 }
 
 #[test]
-fn change_aware_window_is_exact_and_avoids_the_change() {
-    let w = step_signal(4);
-    let cfg = paper_window(0.01, Placement::ChangeAware);
-    assert!(check_against_batch(cfg, &w, 53) > 50);
-    // Windows must not reach more than 64 samples (two frames of location
-    // error) across a change on both sides; count the exceptions.
-    let mut d = D::new(cfg).unwrap();
-    let (mut bad, mut total) = (0, 0);
-    for &x in &w {
-        if let Some(t) = d.push(x).unwrap() {
-            let (s, e) = d.edges(t);
-            for c in [2000u64, 3500] {
-                if t.abs_diff(c) < 400 {
-                    total += 1;
-                    bad += (s + 64 < c && c + 64 < e) as u32;
-                }
-            }
-        }
-    }
-    assert!(
-        bad * 20 < total,
-        "{bad} of {total} windows straddle a change"
-    );
-    let mut c = cfg;
-    c.lambda1 = 500;
-    assert_eq!(D::new(c).err(), Some(DavarError::Lambda));
-}
-
-#[test]
-fn ring_of_exactly_lambda2_stays_exact() {
+fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
+    // Large offset, a big sine and full-scale samples: the block carries and
+    // the u128 window sums must stay exact.
     let mut rng = Rng::new(5);
-    let w: Vec<i32> = (0..3000)
+    let w: Vec<i32> = (0..6000)
         .map(|i| {
-            let sine = if i >= 2000 {
-                10240.0 * (2.0 * core::f32::consts::PI * 0.5 * (i - 2000) as f32 / 1000.0).sin()
+            if (3000..3400).contains(&i) {
+                if i % 2 == 0 {
+                    SAMPLE_MAX
+                } else {
+                    -SAMPLE_MAX
+                }
             } else {
-                0.0
-            };
-            (5120.0 + sine + 23.0 * rng.gaussian()).round() as i32
+                let sine = 10240.0 * (2.0 * core::f32::consts::PI * 0.5 * i as f32 / 1000.0).sin();
+                (5120.0 + sine + 23.0 * rng.gaussian()).round() as i32
+            }
         })
         .collect();
-    let cfg = DavarConfig {
-        lambda1: 256,
-        lambda2: 512,
-        l_init: 512,
-        delta_l: 32,
-        step: StepMode::Constant,
-        entropy: EntropyKind::Temporal,
-        threshold: Threshold::Auto { p_fa: 0.01 },
-        placement: Placement::ChangeAware,
-    };
-    let mut d = Davar::<512, 17, 7>::new(cfg).unwrap();
-    for (i, &x) in w.iter().enumerate() {
-        if let Some(t) = d.push(x).unwrap() {
-            if i % 37 == 0 {
-                let st = d.estimate();
-                let (s, e) = d.edges(t);
-                let want = batch(&w, s as usize, e as usize, 1);
-                let got = st.avar[0] as f64;
+    let mut d = Davar::<512, 17, 9>::new(DavarConfig::segmented(512, 512)).unwrap();
+    let mut checked = 0;
+    for &x in &w {
+        if d.push(x).unwrap().is_some() {
+            let st = d.estimate().unwrap();
+            for j in [0, 4, 8] {
+                let want = batch(&w, st.start as usize, st.end as usize, 1 << j);
+                let got = st.avar[j] as f64;
                 assert!(
-                    ((got - want) / want).abs() < 1e-5,
-                    "i={i} t={t} {got} vs {want}"
+                    ((got - want) / want).abs() < 1e-6,
+                    "[{}, {}) m={}: {got} vs {want}",
+                    st.start,
+                    st.end,
+                    1 << j
                 );
             }
+            checked += 1;
         }
     }
+    assert!(checked > 150);
 }
