@@ -56,11 +56,11 @@ use crate::algo::stats::chi2_quantile;
 pub const SEG: usize = 32;
 /// Frequency bins used per STFT frame (1..=15).
 pub const BINS: usize = SEG / 2 - 1;
-/// Splits tried per binary-segmentation level (a stride keeps the cost of a
-/// hop independent of λ2).
-const SPLITS: usize = 32;
-/// Memory of the ν estimate, frames.
-const NU_FRAMES: f32 = 256.0;
+/// Most cells of the segmentation (frames are grouped beyond this, so a
+/// hop's work does not grow with λ2).
+const CELLS: usize = 32;
+/// Memory of the lag-correlation estimates, frames.
+const RHO_FRAMES: f32 = 32.0;
 /// Prior for ν before enough frames are seen: 32 first differences of white
 /// noise (lag-1 correlation −½ gives ν = 32²/(32 + 62/4) ≈ 21.6).
 const NU_WHITE: f32 = 21.6;
@@ -239,14 +239,38 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     len: u16,
     score: f32,
     threshold: f32,
-    /// Running mean of r² = ((x₁ − x₀)/(x₁ + x₀))² over consecutive τ0
-    /// frame energies, and how many went in.
-    r2: f32,
-    r2_count: u32,
+    /// Σd², Σd·d₋₁, Σd·d₋₂ of the τ0 differences d over the current frame
+    /// (exact), the last two d, and the running lag-1, lag-2 correlations.
+    lag: [i64; 3],
+    dprev: [i32; 2],
+    rho: [f32; 2],
     /// Threshold per frame count (Centred: K frames in the window;
     /// Segmented: a segment of K frames).
     thresholds: [f32; FRAMES],
     last: Option<Published<T>>,
+    /// ln n for n = 0..FRAMES (ln 0 unused).
+    ln_n: [f32; FRAMES],
+    dp: Segmentation,
+}
+
+/// Optimal partitioning of one span (Segmented placement), computed one
+/// row per sample over the hop after the span completed.
+#[derive(Clone, Debug)]
+struct Segmentation {
+    /// First frame of the span being segmented, if any.
+    first: Option<u64>,
+    /// Frames per cell and cells.
+    group: usize,
+    cells: usize,
+    /// Prefix sums of the cells' τ0 energies.
+    sum: [f32; CELLS + 1],
+    /// Optimal cost of cells 0..j and the start of its last segment.
+    cost: [f32; CELLS + 1],
+    arg: [u8; CELLS + 1],
+    /// Next row to compute (1..=cells; cells + 1 when done).
+    row: usize,
+    nu: f32,
+    beta: f32,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T> {
@@ -256,7 +280,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if l1 > l2 || !(l1..=l2).contains(&(cfg.l_init as usize)) || l2 < 2 * SEG {
             return Err(DavarError::Lambda);
         }
-        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 1 {
+        // Segmented windows are published one hop after their span (the
+        // segmentation runs meanwhile), so they need one more block.
+        let extra = (cfg.placement == Placement::Segmented) as usize;
+        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 1 + extra {
             return Err(DavarError::Capacity);
         }
         let span = l2 / SEG;
@@ -294,11 +321,27 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             len: cfg.l_init,
             score: 0.0,
             threshold: 0.0,
-            r2: 0.0,
-            r2_count: 0,
+            lag: [0; 3],
+            dprev: [0; 2],
+            rho: [-0.5, 0.0],
             thresholds: [0.0; FRAMES],
             last: None,
+            ln_n: [0.0; FRAMES],
+            dp: Segmentation {
+                first: None,
+                group: span.div_ceil(CELLS),
+                cells: span.div_ceil(span.div_ceil(CELLS)),
+                sum: [0.0; CELLS + 1],
+                cost: [0.0; CELLS + 1],
+                arg: [0; CELLS + 1],
+                row: 0,
+                nu: NU_WHITE,
+                beta: 0.0,
+            },
         };
+        for (i, v) in d.ln_n.iter_mut().enumerate().skip(1) {
+            *v = libm::logf(i as f32);
+        }
         // Soft-float χ² quantiles, once: only the frame counts that can
         // occur are tabulated.
         let lo = match cfg.placement {
@@ -321,9 +364,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.len = self.cfg.l_init;
         self.score = 0.0;
         self.threshold = self.thresholds[self.span];
-        self.r2 = 0.0;
-        self.r2_count = 0;
+        self.lag = [0; 3];
+        self.dprev = [0; 2];
+        self.rho = [-0.5, 0.0];
         self.last = None;
+        self.dp.first = None;
+        self.dp.row = 0;
     }
 
     /// The settings.
@@ -346,19 +392,24 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// Samples between an estimate's time and the sample that published it
     /// (the price of a window around t): about λ2/2.
     pub fn latency(&self) -> u64 {
-        (SEG * self.span).div_ceil(2) as u64 + 1
+        let hop = match self.cfg.placement {
+            Placement::Centred => 0,
+            Placement::Segmented => SEG as u64,
+        };
+        (SEG * self.span).div_ceil(2) as u64 + 1 + hop
     }
 
-    /// Effective degrees of freedom of one frame's τ0 energy, learnt from
-    /// the data: for two independent scaled-χ²_ν frames x₀, x₁,
-    /// E[((x₁ − x₀)/(x₁ + x₀))²] = 1/(ν + 1), whatever the scale, so slow
-    /// variance changes do not bias it. White noise gives ≈ 21.6, random
-    /// walk ≈ 32; the prior is white until 32 frames were seen.
+    /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
+    /// 32 first differences d: for Gaussian d, ν = 2E[x]²/Var x =
+    /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
+    /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
+    /// change, however frequent, does not bias them. White noise: ρ₁ = −½,
+    /// ν = 21.6 (the prior); random walk: ρ = 0, ν = 32; quantisation of
+    /// an angle (blue rate noise): ρ₁ = −⅔, ρ₂ = ⅙, ν ≈ 16.7.
     pub fn nu(&self) -> f32 {
-        if self.r2_count < 32 || !(self.r2 > 0.0) {
-            return NU_WHITE;
-        }
-        (1.0 / self.r2 - 1.0).clamp(2.0, 2.0 * SEG as f32)
+        let [r1, r2] = self.rho;
+        let s = SEG as f32;
+        s * s / (s + 2.0 * (s - 1.0) * r1 * r1 + 2.0 * (s - 2.0) * r2 * r2)
     }
 
     #[inline(always)]
@@ -381,7 +432,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         let b = BINS as f64;
         match (self.cfg.placement, self.cfg.entropy) {
             (Placement::Segmented, _) => {
-                // Bonferroni over the k − 1 splits of a k-frame segment.
+                // Penalty per change: the χ²₁ likelihood ratio of one split,
+                // Bonferroni over the k − 1 splits of a k-frame span.
                 chi2_quantile(1.0 - p_fa / (k - 1.0), 1.0).unwrap_or(10.0) as f32
             }
             (Placement::Centred, EntropyKind::Temporal) => {
@@ -436,32 +488,60 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 }
             }
         }
+        if n >= 1 {
+            // τ0 difference d = w[n] − w[n−1] (|d| < 2²¹: products fit).
+            let d = self.a[0] - self.b[0];
+            let [p1, p2] = self.dprev;
+            self.lag[0] += d as i64 * d as i64;
+            self.lag[1] += d as i64 * p1 as i64;
+            self.lag[2] += d as i64 * p2 as i64;
+            self.dprev = [d, p1];
+        }
         self.ring[n as usize & (CAP - 1)] = w;
         self.n = n + 1;
         let n = self.n;
         let centred_adaptive =
             self.cfg.placement == Placement::Centred && self.min_frames < self.span;
-        if n.is_multiple_of(SEG as u64) {
-            if centred_adaptive {
+        let hop = n % SEG as u64 == 1;
+        if !hop {
+            if n.is_multiple_of(SEG as u64) && centred_adaptive {
                 self.store_frame();
+            }
+            if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
+                self.dp_row();
             }
             return Ok(None);
         }
         // Hop one sample after a frame boundary: the τ0 terms of the last
         // frame end on the first sample of the next.
-        if n % SEG as u64 != 1 || n < (self.span * SEG) as u64 + 1 {
+        if n < (self.span * SEG) as u64 + 1 {
             return Ok(None);
         }
         let c = n / SEG as u64; // frames 0..c are complete
-        self.learn_nu(c);
+        self.learn_nu();
         let first = c - self.span as u64;
-        let (lo, hi) = match self.cfg.placement {
-            Placement::Centred => self.centred(first, centred_adaptive),
-            Placement::Segmented => self.segment(first),
-        };
-        let t = SEG as u64 * first + (SEG * self.span / 2) as u64;
-        self.publish(t, first + lo as u64, first + hi as u64);
-        Ok(Some(t))
+        let half = (SEG * self.span / 2) as u64;
+        match self.cfg.placement {
+            Placement::Centred => {
+                let (lo, hi) = self.centred(first, centred_adaptive);
+                let t = SEG as u64 * first + half;
+                self.publish(t, first + lo as u64, first + hi as u64);
+                Ok(Some(t))
+            }
+            Placement::Segmented => {
+                let done = self.dp.first.map(|prev| {
+                    while self.dp.row <= self.dp.cells {
+                        self.dp_row();
+                    }
+                    let (lo, hi) = self.segment_window(prev);
+                    let t = SEG as u64 * prev + half;
+                    self.publish(t, prev + lo as u64, prev + hi as u64);
+                    t
+                });
+                self.dp_start(first);
+                Ok(done)
+            }
+        }
     }
 
     /// τ0 energy of frame f (Σ of its 32 squared first differences).
@@ -469,19 +549,16 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.lo[Self::slot(f)][0] as f32
     }
 
-    fn learn_nu(&mut self, c: u64) {
-        if c < 2 {
-            return;
+    /// Fold the frame's lag sums into the running correlations.
+    fn learn_nu(&mut self) {
+        let [s0, s1, s2] = self.lag;
+        self.lag = [0; 3];
+        if s0 > 0 {
+            let s0 = s0 as f32;
+            for (r, s) in self.rho.iter_mut().zip([s1, s2]) {
+                *r += (s as f32 / s0 - *r) / RHO_FRAMES;
+            }
         }
-        let (x0, x1) = (self.x0(c - 2), self.x0(c - 1));
-        let s = x0 + x1;
-        if !(s > 0.0) {
-            return;
-        }
-        let r = (x1 - x0) / s;
-        self.r2_count = self.r2_count.saturating_add(1);
-        let k = (self.r2_count as f32).min(NU_FRAMES);
-        self.r2 += (r * r - self.r2) / k;
     }
 
     /// Sum the exact window sums of frames [f0, f1) and keep them.
@@ -532,40 +609,78 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         })
     }
 
-    /// Segmented placement: binary segmentation of frames `first..first +
-    /// span` toward t's frame; returns the window [lo, hi) in span frames.
-    fn segment(&mut self, first: u64) -> (usize, usize) {
-        let k = self.span;
+    /// Start segmenting the span of frames `first..first + span`: snapshot
+    /// the cells' energies and compute the first row.
+    fn dp_start(&mut self, first: u64) {
+        let (g, k) = (self.dp.group, self.span);
+        let mut acc = 0.0f32;
+        self.dp.sum[0] = 0.0;
+        for cell in 0..self.dp.cells {
+            for f in cell * g..((cell + 1) * g).min(k) {
+                acc += self.x0(first + f as u64);
+            }
+            self.dp.sum[cell + 1] = acc;
+        }
+        self.dp.first = Some(first);
+        self.dp.nu = self.nu();
+        self.dp.beta = self.thresholds[k];
+        self.dp.cost[0] = -self.dp.beta;
+        self.dp.row = 1;
+        self.dp_row();
+    }
+
+    /// One row of the optimal partitioning (Jackson et al. 2005): the best
+    /// cost of cells 0..j over the start i of its last segment, with the
+    /// scaled-χ² (Gamma) segment cost ν·n·ln(mean) and a penalty β per
+    /// segment. At most 32 cells per row, one `lnf` per cell.
+    fn dp_row(&mut self) {
+        let j = self.dp.row;
+        let (g, k) = (self.dp.group, self.span);
+        let frames = |c: usize| (c * g).min(k);
+        let (nu, sj, nj) = (self.dp.nu, self.dp.sum[j], frames(j));
+        let (mut best, mut arg) = (f32::INFINITY, 0u8);
+        for i in 0..j {
+            let nf = nj - frames(i);
+            // Frame energies of integer samples are 0 or ≥ 1: the floor
+            // only guards an all-zero segment.
+            let s = (sj - self.dp.sum[i]).max(0.5);
+            let c = self.dp.cost[i] + nu * nf as f32 * (lnf(s) - self.ln_n[nf]);
+            if c < best {
+                best = c;
+                arg = i as u8;
+            }
+        }
+        self.dp.cost[j] = best + self.dp.beta;
+        self.dp.arg[j] = arg;
+        self.dp.row = j + 1;
+    }
+
+    /// The finished segmentation's segment that holds t, widened to λ1;
+    /// returns the window [lo, hi) in frames of the span at `first`.
+    fn segment_window(&mut self, first: u64) -> (usize, usize) {
+        let (g, k, cells) = (self.dp.group, self.span, self.dp.cells);
+        let ft = k / 2; // frame that starts at (or holds) t
+        let (mut j, mut seg) = (cells, (0, cells));
+        while j > 0 {
+            let i = self.dp.arg[j] as usize;
+            if i * g <= ft {
+                seg = (i, j);
+                break;
+            }
+            j = i;
+        }
+        // Score: what the segmentation gained over one segment (> 0 iff a
+        // change was placed), against the penalty per change.
+        let one = self.dp.nu * k as f32 * (lnf(self.dp.sum[cells].max(0.5)) - self.ln_n[k]);
+        self.score = (one - self.dp.cost[cells]).max(0.0);
+        self.threshold = self.dp.beta;
+        let (mut lo, mut hi) = (seg.0 * g, (seg.1 * g).min(k));
+        // Widen to λ1, one frame at a time, toward the neighbour whose
+        // energy is closer (in ratio) to the segment's mean.
         let mut x = [0.0f32; FRAMES];
         for (i, v) in x.iter_mut().take(k).enumerate() {
             *v = self.x0(first + i as u64);
         }
-        let nu = self.nu();
-        let ft = k / 2; // frame that starts at (or holds) t
-        let (mut lo, mut hi) = (0usize, k);
-        let mut top = true;
-        while hi - lo >= 4 {
-            let Some((j, lr)) = best_split(&x[lo..hi]) else {
-                break;
-            };
-            let stat = nu * lr;
-            let th = self.thresholds[hi - lo];
-            if top {
-                self.score = stat;
-                self.threshold = th;
-                top = false;
-            }
-            if !(stat > th) {
-                break;
-            }
-            if lo + j <= ft {
-                lo += j;
-            } else {
-                hi = lo + j;
-            }
-        }
-        // Widen to λ1, one frame at a time, toward the neighbour whose
-        // energy is closer (in ratio) to the segment's mean.
         let seg_mean = x[lo..hi].iter().sum::<f32>() / (hi - lo) as f32;
         while hi - lo < self.min_frames {
             let left = (lo > 0).then(|| ratio_gap(x[lo - 1], seg_mean));
@@ -695,41 +810,6 @@ fn ratio_gap(a: f32, b: f32) -> f32 {
     } else {
         b / a
     }
-}
-
-/// Best single split j (1..len) of frame energies `x` under a scale model:
-/// LR = n ln x̄ − j ln x̄_left − (n − j) ln x̄_right (≥ 0); ν·LR is
-/// asymptotically χ²₁ for one known split. At most [`SPLITS`] splits are
-/// tried. `None` when the segment holds no energy.
-fn best_split(x: &[f32]) -> Option<(usize, f32)> {
-    let n = x.len();
-    let tot: f32 = x.iter().sum();
-    if !(tot > 0.0) || n < 2 {
-        return None;
-    }
-    let nf = n as f32;
-    let base = nf * lnf(tot / nf);
-    let stride = n.div_ceil(SPLITS).max(1);
-    let (mut best, mut best_j) = (0.0f32, 0usize);
-    let (mut left, mut j0) = (0.0f32, 0usize);
-    let mut j = stride;
-    while j < n {
-        for &e in &x[j0..j] {
-            left += e;
-        }
-        j0 = j;
-        let right = tot - left;
-        if left > 0.0 && right > 0.0 {
-            let (jf, rf) = (j as f32, (n - j) as f32);
-            let lr = base - jf * lnf(left / jf) - rf * lnf(right / rf);
-            if lr > best {
-                best = lr;
-                best_j = j;
-            }
-        }
-        j += stride;
-    }
-    (best_j > 0).then_some((best_j, best))
 }
 
 #[cfg(test)]

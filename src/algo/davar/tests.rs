@@ -2,7 +2,7 @@ use super::*;
 use crate::algo::allan::{fill_phase, oavar_phase};
 use crate::emu::Rng;
 
-type D = Davar<1024, 33, 8>;
+type D = Davar<1024, 34, 8>;
 
 fn white(seed: u64, n: usize, sigma: impl Fn(usize) -> f32) -> Vec<i32> {
     let mut rng = Rng::new(seed);
@@ -94,7 +94,11 @@ fn nothing_is_published_before_the_span_fills() {
         assert_eq!(d.push(x).unwrap(), None, "sample {i}");
         assert!(d.estimate().is_none());
     }
-    // 25 frames of span: the first hop is one sample after frame 25 ends.
+    // 25 frames of span: its segmentation runs over the hop after frame 25
+    // ends, and the window is published one hop later.
+    for i in 800..832 {
+        assert_eq!(d.push(0).unwrap(), None, "sample {i}");
+    }
     assert_eq!(d.push(0).unwrap(), Some(400));
 }
 
@@ -305,7 +309,7 @@ fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
             }
         })
         .collect();
-    let mut d = Davar::<512, 17, 9>::new(DavarConfig::segmented(512, 512)).unwrap();
+    let mut d = Davar::<512, 18, 9>::new(DavarConfig::segmented(512, 512)).unwrap();
     let mut checked = 0;
     for &x in &w {
         if d.push(x).unwrap().is_some() {
