@@ -218,6 +218,9 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     cfg: DavarConfig,
     ring: [i32; CAP],
     n: u64,
+    /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
+    /// is not a power of two is a library call on the Cortex-M4).
+    cur_slot: usize,
     /// Sliding sums of the newest term per τ: b = Σ w[n−2m..n−m),
     /// a = Σ w[n−m..n).
     a: [i32; T],
@@ -308,6 +311,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             cfg,
             ring: [0; CAP],
             n: 0,
+            cur_slot: 0,
             a: [0; T],
             b: [0; T],
             lo: [[0; T]; FRAMES],
@@ -359,6 +363,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// and the tabulated thresholds.
     pub fn reset(&mut self) {
         self.n = 0;
+        self.cur_slot = 0;
         self.a = [0; T];
         self.b = [0; T];
         self.len = self.cfg.l_init;
@@ -422,6 +427,32 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         (block % FRAMES as u64) as usize
     }
 
+    /// Slot of block n/32 − back (back < FRAMES).
+    #[inline(always)]
+    fn back_slot(&self, back: usize) -> usize {
+        if self.cur_slot >= back {
+            self.cur_slot - back
+        } else {
+            self.cur_slot + FRAMES - back
+        }
+    }
+
+    /// Slot of an older block f (within FRAMES of the newest).
+    #[inline(always)]
+    fn slot_of(&self, f: u64) -> usize {
+        self.back_slot((self.n / SEG as u64 - f) as usize)
+    }
+
+    /// The next slot after `s`.
+    #[inline(always)]
+    fn next(s: usize) -> usize {
+        if s + 1 == FRAMES {
+            0
+        } else {
+            s + 1
+        }
+    }
+
     /// Threshold for `frames` frames (see [`Threshold`]).
     fn quantile_for(&self, frames: usize) -> f32 {
         let p_fa = match self.cfg.threshold {
@@ -461,30 +492,57 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             return Err(AllanError::SampleRange);
         }
         let n = self.n;
-        // Per τ, the term that ends at this sample: start k = n + 1 − 2m.
+        // Index arithmetic in usize (32 bits on the board): the ring masks
+        // and block offsets only need n modulo CAP and 32.
+        let nu = n as usize;
+        let r = nu % SEG;
+        let warm = n >= 1u64 << T; // every τ's term exists
+                                   // Per τ, the term that ends at this sample: start k = n + 1 − 2m,
+                                   // in block n/32 − back, at offset (r + 1 − 2m) mod 32.
         for j in 0..T {
-            let m = 1u64 << j;
-            let mid = if n >= m { self.w(n - m) } else { 0 };
-            let old = if n >= 2 * m { self.w(n - 2 * m) } else { 0 };
-            self.a[j] += w - mid;
-            self.b[j] += mid - old;
-            if n + 1 >= 2 * m {
-                let k = n + 1 - 2 * m;
-                let d = self.a[j] - self.b[j];
+            let m = 1usize << j;
+            let (mid, old) = if warm {
+                (
+                    self.ring[nu.wrapping_sub(m) & (CAP - 1)],
+                    self.ring[nu.wrapping_sub(2 * m) & (CAP - 1)],
+                )
+            } else {
+                (
+                    if n >= m as u64 {
+                        self.w(n - m as u64)
+                    } else {
+                        0
+                    },
+                    if n >= 2 * m as u64 {
+                        self.w(n - 2 * m as u64)
+                    } else {
+                        0
+                    },
+                )
+            };
+            let a = self.a[j] + w - mid;
+            let b = self.b[j] + mid - old;
+            self.a[j] = a;
+            self.b[j] = b;
+            if warm || n + 1 >= 2 * m as u64 {
+                let d = a - b;
                 let sq = (d as i64 * d as i64) as u64;
-                let (s, off) = (Self::slot(k / SEG as u64), k % SEG as u64);
+                let back = (2 * m).saturating_sub(r + 1).div_ceil(SEG);
+                let s = self.back_slot(back);
+                let off = (r + 1 + SEG * 64 - 2 * m) % SEG;
+                let (lo, hi, pre) = (&mut self.lo[s][j], &mut self.hi[s][j], &mut self.pre[s][j]);
                 if off == 0 {
-                    self.lo[s][j] = sq;
-                    self.hi[s][j] = 0;
+                    *lo = sq;
+                    *hi = 0;
                 } else {
-                    let (v, c) = self.lo[s][j].overflowing_add(sq);
-                    self.lo[s][j] = v;
-                    self.hi[s][j] += c as u8;
+                    let (v, c) = lo.overflowing_add(sq);
+                    *lo = v;
+                    *hi += c as u8;
                 }
                 // The prefix of 1 + ((−2m) mod 32) terms: what a window
                 // whose last term starts in this block needs.
-                if off == (SEG as u64 - (2 * m) % SEG as u64) % SEG as u64 {
-                    self.pre[s][j] = self.lo[s][j];
+                if off == (SEG - (2 * m) % SEG) % SEG {
+                    *pre = *lo;
                 }
             }
         }
@@ -500,6 +558,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.ring[n as usize & (CAP - 1)] = w;
         self.n = n + 1;
         let n = self.n;
+        if n.is_multiple_of(SEG as u64) {
+            self.cur_slot = if self.cur_slot + 1 == FRAMES {
+                0
+            } else {
+                self.cur_slot + 1
+            };
+        }
         let centred_adaptive =
             self.cfg.placement == Placement::Centred && self.min_frames < self.span;
         let hop = n % SEG as u64 == 1;
@@ -545,8 +610,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     }
 
     /// τ0 energy of frame f (Σ of its 32 squared first differences).
-    fn x0(&self, f: u64) -> f32 {
-        self.lo[Self::slot(f)][0] as f32
+    /// τ0 energies of frames `first..` into `x`.
+    fn x0_into(&self, first: u64, x: &mut [f32]) {
+        let mut sl = self.slot_of(first);
+        for v in x.iter_mut() {
+            *v = self.lo[sl][0] as f32;
+            sl = Self::next(sl);
+        }
     }
 
     /// Fold the frame's lag sums into the running correlations.
@@ -569,12 +639,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             let m = 1u64 << j;
             // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
             let q = (e - 2 * m) / SEG as u64;
-            let mut sum = self.pre[Self::slot(q)][j] as u128;
-            for f in f0..q {
-                let sl = Self::slot(f);
+            let mut sl = self.slot_of(f0);
+            let mut sum = 0u128;
+            for _ in f0..q {
                 sum += ((self.hi[sl][j] as u128) << 64) | self.lo[sl][j] as u128;
+                sl = Self::next(sl);
             }
-            *a = sum;
+            *a = sum + self.pre[sl][j] as u128;
         }
         self.last = Some(Published {
             t,
@@ -613,11 +684,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// the cells' energies and compute the first row.
     fn dp_start(&mut self, first: u64) {
         let (g, k) = (self.dp.group, self.span);
+        let mut x = [0.0f32; FRAMES];
+        self.x0_into(first, &mut x[..k]);
         let mut acc = 0.0f32;
         self.dp.sum[0] = 0.0;
         for cell in 0..self.dp.cells {
-            for f in cell * g..((cell + 1) * g).min(k) {
-                acc += self.x0(first + f as u64);
+            for v in &x[cell * g..((cell + 1) * g).min(k)] {
+                acc += v;
             }
             self.dp.sum[cell + 1] = acc;
         }
@@ -678,9 +751,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean.
         let mut x = [0.0f32; FRAMES];
-        for (i, v) in x.iter_mut().take(k).enumerate() {
-            *v = self.x0(first + i as u64);
-        }
+        self.x0_into(first, &mut x[..k]);
         let seg_mean = x[lo..hi].iter().sum::<f32>() / (hi - lo) as f32;
         while hi - lo < self.min_frames {
             let left = (lo > 0).then(|| ratio_gap(x[lo - 1], seg_mean));

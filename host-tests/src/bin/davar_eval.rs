@@ -40,17 +40,20 @@ enum Kind {
     Paper,
 }
 
-/// A scenario class: a generator of (signal, true σ²(τ0) per sample).
+/// A signal and its true σ²(τ0) per sample.
+type Signal = (Vec<i32>, Vec<f64>);
+
+/// A scenario class: a generator of signals by seed.
 struct Class {
     name: String,
     kind: Kind,
     lambda: (u16, u16),
     n: usize,
-    gen: Box<dyn Fn(u64) -> (Vec<i32>, Vec<f64>)>,
+    gen: Box<dyn Fn(u64) -> Signal>,
 }
 
 /// White noise with variance v(t): truth σ²_A(τ0) = (v(t) + v(t+1))/2.
-fn white_class(n: usize, v: impl Fn(usize) -> f64 + 'static) -> impl Fn(u64) -> (Vec<i32>, Vec<f64>) {
+fn white_class(n: usize, v: impl Fn(usize) -> f64 + 'static) -> impl Fn(u64) -> Signal {
     move |seed| {
         let mut rng = Rng::new(seed);
         let w = (0..n)
@@ -65,7 +68,7 @@ fn white_class(n: usize, v: impl Fn(usize) -> f64 + 'static) -> impl Fn(u64) -> 
 /// (coefficient φ, innovation variance q): truth σ²_A(τ0) = ½E[(y₁ − y₀)²]
 /// = white + Σ q/(1 + φ) (each AR(1) has variance q/(1 − φ²) and lag-1
 /// covariance φ times that). φ → 1 makes a random walk over the record.
-fn coloured_class(n: usize, white: f64, ar: Vec<(f64, f64)>) -> impl Fn(u64) -> (Vec<i32>, Vec<f64>) {
+fn coloured_class(n: usize, white: f64, ar: Vec<(f64, f64)>) -> impl Fn(u64) -> Signal {
     let truth_v = white + ar.iter().map(|&(phi, q)| q / (1.0 + phi)).sum::<f64>();
     move |seed| {
         let mut rng = Rng::new(seed);
@@ -121,14 +124,21 @@ fn classes() -> Vec<Class> {
             })),
         });
     }
-    for &(l1, l2, every) in &[(400u16, 800u16, 300usize), (512, 1024, 400), (256, 1024, 200)] {
+    for &(l1, l2, every) in &[
+        (400u16, 800u16, 300usize),
+        (512, 1024, 400),
+        (256, 1024, 200),
+    ] {
         let n = 12000;
         v.push(Class {
             name: format!("steps 1/3 every {every}, λ {l1}/{l2}"),
             kind: Kind::Repeated,
             lambda: (l1, l2),
             n,
-            gen: Box::new(white_class(n, move |t| if (t / every) % 2 == 0 { 1.0 } else { 3.0 })),
+            gen: Box::new(white_class(
+                n,
+                move |t| if (t / every) % 2 == 0 { 1.0 } else { 3.0 },
+            )),
         });
     }
     let n = 40000;
@@ -166,7 +176,13 @@ fn classes() -> Vec<Class> {
         kind: Kind::Paper,
         lambda: (400, 800),
         n: 6000,
-        gen: Box::new(white_class(6000, |t| if (1500..4500).contains(&t) { 3.0 } else { 1.0 })),
+        gen: Box::new(white_class(6000, |t| {
+            if (1500..4500).contains(&t) {
+                3.0
+            } else {
+                1.0
+            }
+        })),
     });
     v
 }
@@ -260,7 +276,11 @@ fn parse() -> Result<Args, String> {
                     .ok_or(format!("--seeds: {v:?} is not an integer ≥ 2"))?;
             }
             "--csv" => a.csv = Some(val()?),
-            _ => return Err(format!("unknown argument {k:?} (use --seeds N, --csv PATH)")),
+            _ => {
+                return Err(format!(
+                    "unknown argument {k:?} (use --seeds N, --csv PATH)"
+                ))
+            }
         }
     }
     Ok(a)
@@ -315,7 +335,11 @@ fn main() -> ExitCode {
         );
         for (i, (name, _)) in ms.iter().enumerate() {
             let (m, s) = mean_sd(&errs[i]);
-            let ratios: Vec<f64> = errs[i].iter().zip(&errs[best]).map(|(x, y)| x / y).collect();
+            let ratios: Vec<f64> = errs[i]
+                .iter()
+                .zip(&errs[best])
+                .map(|(x, y)| x / y)
+                .collect();
             let (rm, rs) = mean_sd(&ratios);
             println!(
                 "  {name:<26} {m:>9.4} ± {s:<6.4} {:>8.3} ± {rs:<5.3} {:>9.1} %",

@@ -128,14 +128,21 @@ fn segmented_window_is_exact_and_avoids_the_change() {
             }
         }
     }
-    assert!(bad * 20 < total, "{bad} of {total} windows straddle a change");
+    assert!(
+        bad * 20 < total,
+        "{bad} of {total} windows straddle a change"
+    );
 }
 
 #[test]
 fn segmented_finds_two_changes_in_one_span() {
     // σ 1 → 2 → 1 with the high part 320 samples long, inside one 1024 span:
     // at its middle the window must be the high part alone (±2 frames).
-    let w = white(6, 4000, |i| if (2000..2320).contains(&i) { 2.0 } else { 1.0 });
+    let w = white(
+        6,
+        4000,
+        |i| if (2000..2320).contains(&i) { 2.0 } else { 1.0 },
+    );
     let mut hits = 0;
     for seed in 0..10 {
         let w: Vec<i32> = if seed == 0 {
@@ -150,7 +157,10 @@ fn segmented_finds_two_changes_in_one_span() {
             })
         };
         let seen = check_against_batch(DavarConfig::segmented(256, 1024), &w);
-        let &(_, s, e) = seen.iter().min_by_key(|&&(t, _, _)| t.abs_diff(2160)).unwrap();
+        let &(_, s, e) = seen
+            .iter()
+            .min_by_key(|&&(t, _, _)| t.abs_diff(2160))
+            .unwrap();
         hits += (s.abs_diff(2000) <= 64 && e.abs_diff(2320) <= 64) as u32;
     }
     assert!(hits >= 8, "{hits} of 10");
