@@ -31,13 +31,15 @@
 //!   STFT bins 1..=15 of the window, normalised by ln 15) or `Temporal`
 //!   (ours: over the frames' energies; score = deficit D = ln K − E).
 //! - [`Placement::Segmented`] (ours, the default): the λ2 span around t is
-//!   segmented by binary segmentation of the frames' τ = 1 energies (the
-//!   per-block sums of squared first differences, whose mean is 62·σ²(τ0)
-//!   in any noise type) under a scaled-χ² model, and the window is the
-//!   segment that holds t, widened to λ1 where it is shorter. Several
-//!   changes per span are found; the test's effective degrees of freedom ν
-//!   are learnt from the data (see [`Davar::nu`]), so coloured noise does not
-//!   raise false alarms the way a white-noise threshold does.
+//!   segmented by optimal partitioning (penalised likelihood, dynamic
+//!   programming) of the frames' τ0 energies (the per-block sums of squared
+//!   first differences, whose mean is 62·σ²(τ0) in any noise type) under a
+//!   scaled-χ²_ν model, and the window is the segment that holds t, widened
+//!   to λ1 where it is shorter. Several changes per span are found; ν is
+//!   measured from the data (see [`Davar::nu`]), so coloured noise does not
+//!   raise false alarms the way a white-noise threshold does. The
+//!   partitioning runs one row per sample during the next hop, so these
+//!   estimates come one hop later.
 //!
 //! # Reading of the paper (SEEDS.md seed 000)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
@@ -91,7 +93,7 @@ pub enum StepMode {
 pub enum Placement {
     /// Centred on t, length L(t) from eq. 4 (the paper).
     Centred,
-    /// Ours: the segment of the λ2 span that holds t (binary segmentation
+    /// Ours: the segment of the λ2 span that holds t (optimal partitioning
     /// of the frames' τ0 energies), at least λ1 long.
     Segmented,
 }
@@ -395,7 +397,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     }
 
     /// Samples between an estimate's time and the sample that published it
-    /// (the price of a window around t): about λ2/2.
+    /// (the price of a window around t): about λ2/2, one hop more for
+    /// [`Placement::Segmented`].
     pub fn latency(&self) -> u64 {
         let hop = match self.cfg.placement {
             Placement::Centred => 0,

@@ -2,7 +2,7 @@
 //! (4 × ICM-42688-P, 1 × ADXRS453 on z) over one shared SPI bus, the
 //! pipeline fuses every sample, and faults are injected on a schedule:
 //! gyro 2 sticks at 1.5 s, the ADXRS453 has bit errors from 2.0 s to 2.2 s.
-//! E-DAVAR (change-aware, λ2 = 512) tracks the noise of each fused axis
+//! E-DAVAR (segmented, λ2 = 512) tracks the noise of each fused axis
 //! and logs its window length, entropy deficit and σ(τ) every 500 samples
 //! (z slews in a 20 °/s sine, so its long-τ σ and deficit show the motion).
 //! Before that, a noise-health self-test takes 2048 samples of every gyro
