@@ -58,6 +58,13 @@ use crate::algo::stats::chi2_quantile;
 pub const SEG: usize = 32;
 /// Frequency bins used per STFT frame (1..=15).
 pub const BINS: usize = SEG / 2 - 1;
+/// A change bounds a window only if a segmentation LAG hops earlier put one
+/// at the same place (± one cell): a step stays where it is, while the
+/// change a gradual variance ramp produces moves with the span.
+const LAG: usize = 4;
+/// A change whose likelihood gain exceeds STRONG × β bounds a window
+/// without waiting for confirmation.
+const STRONG: f32 = 3.0;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 32;
@@ -276,6 +283,10 @@ struct Segmentation {
     row: usize,
     nu: f32,
     beta: f32,
+    /// Changes (absolute frames) of the last [`LAG`] segmentations.
+    hist: [[u32; CELLS]; LAG],
+    hist_len: [u8; LAG],
+    hist_at: usize,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T> {
@@ -343,6 +354,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 row: 0,
                 nu: NU_WHITE,
                 beta: 0.0,
+                hist: [[0; CELLS]; LAG],
+                hist_len: [0; LAG],
+                hist_at: 0,
             },
         };
         for (i, v) in d.ln_n.iter_mut().enumerate().skip(1) {
@@ -377,6 +391,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         self.last = None;
         self.dp.first = None;
         self.dp.row = 0;
+        self.dp.hist_len = [0; LAG];
     }
 
     /// The settings.
@@ -736,20 +751,86 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     fn segment_window(&mut self, first: u64) -> (usize, usize) {
         let (g, k, cells) = (self.dp.group, self.span, self.dp.cells);
         let ft = k / 2; // frame that starts at (or holds) t
-        let (mut j, mut seg) = (cells, (0, cells));
-        while j > 0 {
-            let i = self.dp.arg[j] as usize;
-            if i * g <= ft {
-                seg = (i, j);
-                break;
-            }
-            j = i;
+        // Segment bounds (cells), in order, and t's segment.
+        let mut bounds = [0u8; CELLS + 1];
+        let mut nb = 0;
+        let mut j = cells;
+        while j > 0 && nb < CELLS {
+            bounds[nb] = j as u8;
+            nb += 1;
+            j = self.dp.arg[j] as usize;
         }
+        bounds[nb] = 0;
+        bounds[..=nb].reverse(); // 0 = b₀ < b₁ < … < b_nb = cells
+        // Keep the changes that were already there LAG hops ago (the entry
+        // about to be overwritten), and remember this hop's.
+        let at = self.dp.hist_at;
+        let old = self.dp.hist[at];
+        let old_len = self.dp.hist_len[at] as usize;
+        let (mut kept, mut nk) = ([0u8; CELLS + 1], 1);
+        let mut now = 0;
+        let frames = |c: usize| (c * g).min(k);
+        let cost = |i: usize, j: usize| {
+            let nf = frames(j) - frames(i);
+            let sum = (self.dp.sum[j] - self.dp.sum[i]).max(0.5);
+            self.dp.nu * nf as f32 * (lnf(sum) - self.ln_n[nf])
+        };
+        for i in 1..nb {
+            let c = bounds[i];
+            let abs = (first + (c as usize * g) as u64) as u32;
+            self.dp.hist[at][now] = abs;
+            now += 1;
+            // Likelihood gain of this change against merging its two
+            // segments: a strong change is used at once.
+            let (l, r) = (bounds[i - 1] as usize, bounds[i + 1] as usize);
+            let gain = cost(l, r) - cost(l, c as usize) - cost(c as usize, r);
+            let seen = old[..old_len]
+                .iter()
+                .any(|&o| abs.wrapping_sub(o).wrapping_add(g as u32) <= 2 * g as u32);
+            if seen || gain > STRONG * self.dp.beta {
+                kept[nk] = c;
+                nk += 1;
+            }
+        }
+        self.dp.hist_len[at] = now as u8;
+        self.dp.hist_at = (at + 1) % LAG;
+        kept[nk] = cells as u8;
+        let (bounds, nb) = (kept, nk);
+        let b = |i: usize| bounds[i] as usize;
+        let mean = |i: usize| (self.dp.sum[b(i + 1)] - self.dp.sum[b(i)]) / (b(i + 1) - b(i)) as f32;
+        let mut s = 0;
+        while s + 1 < nb && b(s + 1) * g <= ft {
+            s += 1;
+        }
+        let seg = (b(s), b(s + 1));
         // Score: what the segmentation gained over one segment (> 0 iff a
         // change was placed), against the penalty per change.
         let one = self.dp.nu * k as f32 * (lnf(self.dp.sum[cells].max(0.5)) - self.ln_n[k]);
         self.score = (one - self.dp.cost[cells]).max(0.0);
         self.threshold = self.dp.beta;
+        // A monotone run of segments through t's (levels rising or falling
+        // segment after segment) is a gradual change cut into stairs, not
+        // steps: there a window symmetric about t is unbiased to first
+        // order and a one-sided segment is not. Use the widest symmetric
+        // window inside the run.
+        let dir = |i: usize| (mean(i + 1) - mean(i)).signum();
+        if s > 0 && s + 1 < nb && dir(s - 1) == dir(s) {
+            let d = dir(s);
+            let (mut r0, mut r1) = (s - 1, s + 1);
+            while r0 > 0 && dir(r0 - 1) == d {
+                r0 -= 1;
+            }
+            while r1 + 1 < nb && dir(r1) == d {
+                r1 += 1;
+            }
+            let odd = k % 2;
+            let (run_lo, run_hi) = (b(r0) * g, (b(r1 + 1) * g).min(k));
+            let mut h = (ft - run_lo).min(run_hi - ft - odd);
+            if 2 * h + odd < self.min_frames {
+                h = (self.min_frames - odd).div_ceil(2).min(ft);
+            }
+            return (ft - h, (ft + odd + h).min(k));
+        }
         let (mut lo, mut hi) = (seg.0 * g, (seg.1 * g).min(k));
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean.
