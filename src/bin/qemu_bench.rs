@@ -190,6 +190,8 @@ fn bench_davar<const CAP: usize, const FRAMES: usize, const T: usize, const AXES
     let (mut total, mut counted) = (0u64, 0u32);
     let (mut worst, mut worst_at) = (0u64, 0usize);
     let mut published = false;
+    // Mean cost by position in the 32-sample hop (after the first estimate).
+    let mut by_phase = [0u64; 32];
     // White noise generated on the fly (no sample array on the stack),
     // with σ doubled from the middle on when `step`.
     let mut rng = Rng::new(99);
@@ -214,6 +216,7 @@ fn bench_davar<const CAP: usize, const FRAMES: usize, const T: usize, const AXES
         if published {
             total += ticks;
             counted += 1;
+            by_phase[(i + 1) % 32] += ticks;
         }
     }
     let f = |ticks: u64| (ticks as f32 * ipt) as u32;
@@ -229,6 +232,14 @@ fn bench_davar<const CAP: usize, const FRAMES: usize, const T: usize, const AXES
         (worst_at + 1) % 32,
         core::mem::size_of::<Davar<CAP, FRAMES, T>>()
     );
+    if CAP == 1024 {
+        let hops = (counted / 32).max(1) as f32;
+        let p = by_phase.map(|x| (x as f32 * ipt / hops) as u32);
+        defmt::info!(
+            "  mean by hop phase (0 = frame end, 1 = hop, 2.. = one tau each): {=[?]}",
+            p[..]
+        );
+    }
     let est = axes[0].estimate();
     ok && est.is_some_and(|e| e.avar[0] > 0.0)
 }

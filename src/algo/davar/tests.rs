@@ -319,12 +319,16 @@ fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
             }
         })
         .collect();
-    let mut d = Davar::<512, 18, 9>::new(DavarConfig::segmented(512, 512)).unwrap();
+    let mut d = Davar::<512, 18, 8>::new(DavarConfig::segmented(512, 512)).unwrap();
+    assert_eq!(
+        Davar::<512, 18, 9>::new(DavarConfig::segmented(512, 512)).err(),
+        Some(DavarError::Capacity)
+    );
     let mut checked = 0;
     for &x in &w {
         if d.push(x).unwrap().is_some() {
             let st = d.estimate().unwrap();
-            for j in [0, 4, 8] {
+            for j in [0, 4, 7] {
                 let want = batch(&w, st.start as usize, st.end as usize, 1 << j);
                 let got = st.avar[j] as f64;
                 assert!(
@@ -339,4 +343,17 @@ fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
         }
     }
     assert!(checked > 150);
+}
+
+#[test]
+fn ln_fast_accuracy() {
+    // Every 61st f32 bit pattern of the normal positive floats from 0.5 up.
+    let mut worst = 0.0f64;
+    let mut bits = 0.5f32.to_bits();
+    while bits < f32::MAX.to_bits() {
+        let x = f32::from_bits(bits);
+        worst = worst.max((ln_fast(x) as f64 - (x as f64).ln()).abs());
+        bits += 61;
+    }
+    assert!(worst < 8e-5, "{worst}");
 }
