@@ -67,7 +67,7 @@ const LAG: usize = 4;
 const STRONG: f32 = 3.0;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
-const CELLS: usize = 32;
+const CELLS: usize = 16;
 /// Memory of the lag-correlation estimates, frames.
 const RHO_FRAMES: f32 = 32.0;
 /// Prior for ν before enough frames are seen: 32 first differences of white
@@ -180,7 +180,8 @@ impl DavarConfig {
 pub enum DavarError {
     /// λ1 > λ2, l_init outside [λ1, λ2], or λ2 shorter than two frames.
     Lambda,
-    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 2,
+    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 2, `STFT` < FRAMES
+    /// for an adaptive centred window,
     /// λ1 below 2^T (the largest τ's term span), CAP < 2^T + 33, T outside
     /// 1..=11, or CAP not a power of two.
     Capacity,
@@ -221,10 +222,13 @@ struct Published<const T: usize> {
 }
 
 /// Fixed-capacity DAVAR / E-DAVAR for one axis: `CAP` (power of two ≥ λ2)
-/// samples of ring, `FRAMES` (≥ CAP/32 + 1) blocks, `T` octave τ.
-/// RAM ≈ 4·CAP + FRAMES·(17·T + 68) bytes.
+/// samples of ring, `FRAMES` (≥ CAP/32 + 2) blocks, `T` octave τ, and
+/// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
+/// needs them; 0 is enough for the segmented one).
+/// RAM ≈ 4·CAP + FRAMES·(17·T + 8) + 68·STFT bytes.
 #[derive(Clone, Debug)]
-pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
+pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize = FRAMES>
+{
     cfg: DavarConfig,
     ring: [i32; CAP],
     n: u64,
@@ -238,14 +242,14 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize> {
     b: [i32; T],
     /// Per block (terms starting in it) and τ: Σd² as low word + carry,
     /// and the prefix a window ending in this block needs.
-    lo: [[u64; T]; FRAMES],
-    hi: [[u8; T]; FRAMES],
-    pre: [[u64; T]; FRAMES],
+    lo: [[u64; FRAMES]; T],
+    hi: [[u8; FRAMES]; T],
+    pre: [[u64; FRAMES]; T],
     /// STFT power of bins 1..=15 per frame, its energy and e·ln e
     /// (Centred windows only).
-    frames: [[f32; BINS]; FRAMES],
-    energy: [f32; FRAMES],
-    eloge: [f32; FRAMES],
+    frames: [[f32; BINS]; STFT],
+    energy: [f32; STFT],
+    eloge: [f32; STFT],
     /// Frames in the span (λ2 rounded down) and the shortest window.
     span: usize,
     min_frames: usize,
@@ -289,12 +293,14 @@ struct Segmentation {
     nu: f32,
     beta: f32,
     /// Changes (absolute frames) of the last [`LAG`] segmentations.
-    hist: [[u32; CELLS]; LAG],
+    hist: [[u16; CELLS]; LAG],
     hist_len: [u8; LAG],
     hist_at: usize,
 }
 
-impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T> {
+impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
+    Davar<CAP, FRAMES, T, STFT>
+{
     /// Check the settings against the capacities.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
         let (l1, l2) = (cfg.lambda1 as usize, cfg.lambda2 as usize);
@@ -313,11 +319,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if T == 0 || T > 11 || (1usize << T) > min_frames * SEG || (1usize << T) + SEG + 1 > CAP {
             return Err(DavarError::Capacity);
         }
-        if cfg.placement == Placement::Centred
-            && min_frames < span
-            && (cfg.delta_l == 0 || cfg.delta_l % 2 == 1)
-        {
+        let centred_adaptive = cfg.placement == Placement::Centred && min_frames < span;
+        if centred_adaptive && (cfg.delta_l == 0 || cfg.delta_l % 2 == 1) {
             return Err(DavarError::DeltaL);
+        }
+        if centred_adaptive && STFT < FRAMES {
+            return Err(DavarError::Capacity);
         }
         match cfg.threshold {
             Threshold::Fixed(v) if !v.is_finite() => return Err(DavarError::Threshold),
@@ -334,12 +341,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             next: [0; T],
             a: [0; T],
             b: [0; T],
-            lo: [[0; T]; FRAMES],
-            hi: [[0; T]; FRAMES],
-            pre: [[0; T]; FRAMES],
-            frames: [[0.0; BINS]; FRAMES],
-            energy: [0.0; FRAMES],
-            eloge: [0.0; FRAMES],
+            lo: [[0; FRAMES]; T],
+            hi: [[0; FRAMES]; T],
+            pre: [[0; FRAMES]; T],
+            frames: [[0.0; BINS]; STFT],
+            energy: [0.0; STFT],
+            eloge: [0.0; STFT],
             span,
             min_frames,
             len: cfg.l_init,
@@ -586,7 +593,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     /// to add and `a`, `b` hold the sums of the term before it.
     fn add_terms(&mut self, j: usize) {
         let n = self.n;
-        let mask = CAP - 1;
         {
             let m = 1u64 << j;
             if n < 2 * m {
@@ -609,7 +615,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 let (mut lo, mut hi) = if off == 0 {
                     (0u64, 0u8)
                 } else {
-                    (self.lo[slot][j], self.hi[slot][j])
+                    (self.lo[j][slot], self.hi[j][slot])
                 };
                 let mut from = k;
                 if k == 0 {
@@ -618,31 +624,28 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                     a = (mu..m2).map(|i| self.ring[i]).sum();
                     (lo, hi) = add_sq(lo, hi, a - b);
                     if pre_off == 0 {
-                        self.pre[slot][j] = lo;
+                        self.pre[j][slot] = lo;
                     }
                     from = 1;
                 }
-                // Terms from..=end, the prefix recorded on the way: slide
-                // term i − 1 → i with samples i − 1, i − 1 + m, i − 1 + 2m.
+                // Terms from..=end, the prefix recorded on the way.
                 let pre_k = block * SEG as u64 + pre_off as u64;
-                let stop = if (from..=end).contains(&pre_k) { pre_k } else { end };
-                let mut i = (from as usize).wrapping_sub(1);
-                let mut t = from;
-                while t <= end {
-                    let x0 = self.ring[i & mask];
-                    let x1 = self.ring[i.wrapping_add(mu) & mask];
-                    let x2 = self.ring[i.wrapping_add(m2) & mask];
-                    b += x1 - x0;
-                    a += x2 - x1;
-                    (lo, hi) = add_sq(lo, hi, a - b);
-                    if t == stop && stop == pre_k {
-                        self.pre[slot][j] = lo;
+                if from <= end {
+                    let i = (from as usize).wrapping_sub(1);
+                    if (from..=end).contains(&pre_k) {
+                        let n1 = (pre_k - from) as usize + 1;
+                        let i2;
+                        (i2, a, b, lo, hi) = Self::slide(&self.ring, i, n1, mu, a, b, lo, hi);
+                        self.pre[j][slot] = lo;
+                        (_, a, b, lo, hi) =
+                            Self::slide(&self.ring, i2, (end - pre_k) as usize, mu, a, b, lo, hi);
+                    } else {
+                        (_, a, b, lo, hi) =
+                            Self::slide(&self.ring, i, (end - from) as usize + 1, mu, a, b, lo, hi);
                     }
-                    i = i.wrapping_add(1);
-                    t += 1;
                 }
-                self.lo[slot][j] = lo;
-                self.hi[slot][j] = hi;
+                self.lo[j][slot] = lo;
+                self.hi[j][slot] = hi;
                 k = end + 1;
             }
             self.next[j] = k;
@@ -650,8 +653,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             if j == 0 {
                 // τ0 lag sums for ν: d = w[i + 1] − w[i] (|d| < 2²¹, so the
                 // products fit).
-                for i in first_k..=last {
-                    let d = self.w(i + 1) - self.w(i);
+                let mask = CAP - 1;
+                for i in first_k as usize..=last as usize {
+                    let d = self.ring[(i + 1) & mask] - self.ring[i & mask];
                     let [p1, p2] = self.dprev;
                     self.lag[0] += d as i64 * d as i64;
                     self.lag[1] += d as i64 * p1 as i64;
@@ -662,11 +666,39 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         }
     }
 
+    /// `count` terms of τ = m: slide the sums from the term starting at
+    /// i + 1 − 1 = i to the next (samples i, i + m, i + 2m), add each d².
+    /// The per-term hot loop: everything in registers.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn slide(
+        ring: &[i32; CAP],
+        mut i: usize,
+        count: usize,
+        m: usize,
+        mut a: i32,
+        mut b: i32,
+        mut lo: u64,
+        mut hi: u8,
+    ) -> (usize, i32, i32, u64, u8) {
+        let mask = CAP - 1;
+        for _ in 0..count {
+            let x0 = ring[i & mask];
+            let x1 = ring[i.wrapping_add(m) & mask];
+            let x2 = ring[i.wrapping_add(2 * m) & mask];
+            b += x1 - x0;
+            a += x2 - x1;
+            (lo, hi) = add_sq(lo, hi, a - b);
+            i = i.wrapping_add(1);
+        }
+        (i, a, b, lo, hi)
+    }
+
     /// τ0 energies of frames `first..` into `x`.
     fn x0_into(&self, first: u64, x: &mut [f32]) {
         let mut sl = self.slot_of(first);
         for v in x.iter_mut() {
-            *v = self.lo[sl][0] as f32;
+            *v = u64_to_f32(self.lo[0][sl]);
             sl = Self::next(sl);
         }
     }
@@ -691,13 +723,24 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             let m = 1u64 << j;
             // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
             let q = (e - 2 * m) / SEG as u64;
-            let mut sl = self.slot_of(f0);
-            let mut sum = 0u128;
-            for _ in f0..q {
-                sum += ((self.hi[sl][j] as u128) << 64) | self.lo[sl][j] as u128;
-                sl = Self::next(sl);
+            let s0 = self.slot_of(f0);
+            let count = (q - f0) as usize;
+            // The blocks f0..q are slots s0.. (wrapping): at most two
+            // contiguous runs. Low words with their carries counted, high
+            // parts apart: 32-bit-friendly sums, no u128 per block.
+            let first_run = count.min(FRAMES - s0);
+            let (mut lo, mut hi) = (0u64, 0u32);
+            for (l, h) in self.lo[j][s0..s0 + first_run]
+                .iter()
+                .zip(&self.hi[j][s0..s0 + first_run])
+                .chain(self.lo[j][..count - first_run].iter().zip(&self.hi[j][..count - first_run]))
+            {
+                let (v, c) = lo.overflowing_add(*l);
+                lo = v;
+                hi += c as u32 + *h as u32;
             }
-            *a = sum + self.pre[sl][j] as u128;
+            let sq = if s0 + count >= FRAMES { s0 + count - FRAMES } else { s0 + count };
+            *a = (((hi as u128) << 64) | lo as u128) + self.pre[j][sq] as u128;
         }
         self.last = Some(Published {
             t,
@@ -789,62 +832,81 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
     fn segment_window(&mut self, first: u64) -> (usize, usize) {
         let (g, k, cells) = (self.dp.group, self.span, self.dp.cells);
         let ft = k / 2; // frame that starts at (or holds) t
-        // Segment bounds (cells), in order, and t's segment.
-        let mut bounds = [0u8; CELLS + 1];
+        // Frame energies and their prefix sums: the changes are refined
+        // to the frame and every mean below is taken over frames.
+        let mut x = [0.0f32; FRAMES];
+        self.x0_into(first, &mut x[..k]);
+        let mut px = [0.0f32; FRAMES];
+        for i in 0..k {
+            px[i + 1] = px[i] + x[i];
+        }
+        let nu = self.dp.nu;
+        let cost = |i: usize, j: usize| {
+            let nf = j - i;
+            let sum = px[j] - px[i];
+            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - self.ln_n[nf])
+        };
+        // Segment bounds in frames, in order: 0 = b₀ < b₁ < … < b_nb = k.
+        let mut bounds = [0u16; CELLS + 1];
         let mut nb = 0;
         let mut j = cells;
         while j > 0 && nb < CELLS {
-            bounds[nb] = j as u8;
+            bounds[nb] = (j * g).min(k) as u16;
             nb += 1;
             j = self.dp.arg[j] as usize;
         }
         bounds[nb] = 0;
-        bounds[..=nb].reverse(); // 0 = b₀ < b₁ < … < b_nb = cells
+        bounds[..=nb].reverse();
+        // Refine each change to the frame (the cells group g frames): the
+        // best split of its two segments within ± (g − 1) frames.
+        if g > 1 {
+            for i in 1..nb {
+                let (l, c, r) = (bounds[i - 1] as usize, bounds[i] as usize, bounds[i + 1] as usize);
+                let mut best = (cost(l, c) + cost(c, r), c);
+                for p in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
+                    let v = cost(l, p) + cost(p, r);
+                    if v < best.0 {
+                        best = (v, p);
+                    }
+                }
+                bounds[i] = best.1 as u16;
+            }
+        }
         // Keep the changes that were already there LAG hops ago (the entry
-        // about to be overwritten), and remember this hop's.
+        // about to be overwritten), or strong ones, and remember this hop's.
         let at = self.dp.hist_at;
         let old = self.dp.hist[at];
         let old_len = self.dp.hist_len[at] as usize;
-        let (mut kept, mut nk) = ([0u8; CELLS + 1], 1);
-        let mut now = 0;
-        let frames = |c: usize| (c * g).min(k);
-        let cost = |i: usize, j: usize| {
-            let nf = frames(j) - frames(i);
-            let sum = (self.dp.sum[j] - self.dp.sum[i]).max(0.5);
-            self.dp.nu * nf as f32 * (ln_fast(sum) - self.ln_n[nf])
-        };
+        let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
         for i in 1..nb {
-            let c = bounds[i];
-            let abs = (first + (c as usize * g) as u64) as u32;
-            self.dp.hist[at][now] = abs;
-            now += 1;
+            let c = bounds[i] as usize;
+            let abs = (first + c as u64) as u16;
+            self.dp.hist[at][i - 1] = abs;
             // Likelihood gain of this change against merging its two
-            // segments: a strong change is used at once.
+            // segments.
             let (l, r) = (bounds[i - 1] as usize, bounds[i + 1] as usize);
-            let gain = cost(l, r) - cost(l, c as usize) - cost(c as usize, r);
+            let gain = cost(l, r) - cost(l, c) - cost(c, r);
             let seen = old[..old_len]
                 .iter()
-                .any(|&o| abs.wrapping_sub(o).wrapping_add(g as u32) <= 2 * g as u32);
+                .any(|&o| abs.wrapping_sub(o).wrapping_add(1) <= 2);
             if seen || gain > STRONG * self.dp.beta {
-                kept[nk] = c;
+                kept[nk] = c as u16;
                 nk += 1;
             }
         }
-        self.dp.hist_len[at] = now as u8;
+        self.dp.hist_len[at] = nb.saturating_sub(1) as u8;
         self.dp.hist_at = (at + 1) % LAG;
-        kept[nk] = cells as u8;
+        kept[nk] = k as u16;
         let (bounds, nb) = (kept, nk);
         let b = |i: usize| bounds[i] as usize;
-        let mean = |i: usize| (self.dp.sum[b(i + 1)] - self.dp.sum[b(i)]) / (b(i + 1) - b(i)) as f32;
+        let mean = |i: usize| (px[b(i + 1)] - px[b(i)]) / (b(i + 1) - b(i)) as f32;
         let mut s = 0;
-        while s + 1 < nb && b(s + 1) * g <= ft {
+        while s + 1 < nb && b(s + 1) <= ft {
             s += 1;
         }
-        let seg = (b(s), b(s + 1));
         // Score: what the segmentation gained over one segment (> 0 iff a
         // change was placed), against the penalty per change.
-        let one = self.dp.nu * k as f32 * (ln_fast(self.dp.sum[cells].max(0.5)) - self.ln_n[k]);
-        self.score = (one - self.dp.cost[cells]).max(0.0);
+        self.score = (cost(0, k) - self.dp.cost[cells]).max(0.0);
         self.threshold = self.dp.beta;
         // A monotone run of segments through t's (levels rising or falling
         // segment after segment) is a gradual change cut into stairs, not
@@ -862,19 +924,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
                 r1 += 1;
             }
             let odd = k % 2;
-            let (run_lo, run_hi) = (b(r0) * g, (b(r1 + 1) * g).min(k));
+            let (run_lo, run_hi) = (b(r0), b(r1 + 1));
             let mut h = (ft - run_lo).min(run_hi - ft - odd);
             if 2 * h + odd < self.min_frames {
                 h = (self.min_frames - odd).div_ceil(2).min(ft);
             }
             return (ft - h, (ft + odd + h).min(k));
         }
-        let (mut lo, mut hi) = (seg.0 * g, (seg.1 * g).min(k));
+        let (mut lo, mut hi) = (b(s), b(s + 1));
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean.
-        let mut x = [0.0f32; FRAMES];
-        self.x0_into(first, &mut x[..k]);
-        let seg_mean = x[lo..hi].iter().sum::<f32>() / (hi - lo) as f32;
+        let seg_mean = mean(s);
         while hi - lo < self.min_frames {
             let left = (lo > 0).then(|| ratio_gap(x[lo - 1], seg_mean));
             let right = (hi < k).then(|| ratio_gap(x[hi], seg_mean));
@@ -917,13 +977,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         }
         let spec = microfft::real::rfft_32(&mut x);
         let slot = Self::slot(first / SEG as u64);
+        let (Some(frame), Some(energy), Some(eloge)) = (
+            self.frames.get_mut(slot),
+            self.energy.get_mut(slot),
+            self.eloge.get_mut(slot),
+        ) else {
+            return; // STFT < FRAMES is refused for windows that need it
+        };
         let mut e = 0.0f32;
-        for (p, c) in self.frames[slot].iter_mut().zip(spec[1..].iter()) {
+        for (p, c) in frame.iter_mut().zip(spec[1..].iter()) {
             *p = c.re * c.re + c.im * c.im;
             e += *p;
         }
-        self.energy[slot] = e;
-        self.eloge[slot] = if e > 0.0 { e * lnf(e) } else { 0.0 };
+        *energy = e;
+        *eloge = if e > 0.0 { e * lnf(e) } else { 0.0 };
     }
 
     /// Entropy of frames [f_lo, f_hi) and the eq. 4 update of the length.
@@ -932,13 +999,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
         if k < 2 {
             return;
         }
-        let slots = (f_lo..f_hi).map(Self::slot);
+        let s0 = self.slot_of(f_lo);
+        let slots = (0..k).map(move |i| if s0 + i >= FRAMES { s0 + i - FRAMES } else { s0 + i });
         let score = match self.cfg.entropy {
             EntropyKind::Temporal => {
                 let (mut tot, mut sum_eloge) = (0.0f32, 0.0f32);
                 for s in slots {
-                    tot += self.energy[s];
-                    sum_eloge += self.eloge[s];
+                    tot += self.energy.get(s).copied().unwrap_or(0.0);
+                    sum_eloge += self.eloge.get(s).copied().unwrap_or(0.0);
                 }
                 if !(tot > 0.0) {
                     return;
@@ -948,8 +1016,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Davar<CAP, FRAMES, T
             }
             EntropyKind::Spectral => {
                 let mut bins = [0.0f32; BINS];
-                for f in slots {
-                    for (b, p) in bins.iter_mut().zip(self.frames[f].iter()) {
+                for f in slots.filter_map(|s| self.frames.get(s)) {
+                    for (b, p) in bins.iter_mut().zip(f.iter()) {
                         *b += p;
                     }
                 }
@@ -1009,6 +1077,14 @@ fn ln_fast(x: f32) -> f32 {
     let u = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000) - 1.0;
     let p = u * (C[0] + u * (C[1] + u * (C[2] + u * C[3])));
     e as f32 * core::f32::consts::LN_2 + p
+}
+
+/// u64 → f32 as two 32-bit conversions (a u64 conversion is a library
+/// call on the Cortex-M4). Rounds twice, so it can differ from `as f32` in
+/// the last bit; the same on every target.
+#[inline(always)]
+fn u64_to_f32(x: u64) -> f32 {
+    (x >> 32) as u32 as f32 * 4_294_967_296.0 + x as u32 as f32
 }
 
 /// lo + hi·2⁶⁴ += d², exactly (a 32-term block of d² < 2⁶² needs 3 carry

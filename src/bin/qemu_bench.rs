@@ -36,9 +36,40 @@ fn main() -> ! {
     let ipt = instructions_per_tick(&t);
     defmt::info!("calibration: {=f32} instructions per SysTick tick", ipt);
 
+    let mut rng = Rng::new(7);
+    let mut ok = bench_fusion(&t, ipt, &mut rng);
+    ok &= bench_allan(&t, ipt, &mut rng);
+    for (input, step) in [("stationary", false), ("one variance step", true)] {
+        defmt::info!("e-davar input: {=str}", input);
+        let seg = |l2: usize| DavarConfig::segmented((l2 / 2) as u16, l2 as u16);
+        ok &= bench_davar::<256, 10, 7, 0, 1>(&t, ipt, step, seg(256), "segmented");
+        ok &= bench_davar::<1024, 34, 7, 0, 1>(&t, ipt, step, seg(1024), "segmented");
+        ok &= bench_davar::<4096, 130, 7, 0, 1>(&t, ipt, step, seg(4096), "segmented");
+        let centred = DavarConfig {
+            lambda1: 512,
+            lambda2: 1024,
+            l_init: 1024,
+            delta_l: 64,
+            step: StepMode::Constant,
+            entropy: EntropyKind::Temporal,
+            threshold: Threshold::Auto { p_fa: 0.01 },
+            placement: Placement::Centred,
+        };
+        ok &= bench_davar::<1024, 34, 7, 34, 1>(&t, ipt, step, centred, "centred temporal");
+        // The board's tracker: three axes, 9 τ, λ2 = 1024, fed the same
+        // sample (their hops coincide: the worst case).
+        ok &= bench_davar::<1024, 34, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker");
+    }
+    ok &= bench_selftest(&t, ipt, &mut rng);
+    exit(ok)
+}
+
+/// Instructions per fused 3-axis sample of every fusion method (N = 4).
+/// Not inlined: its frames stay out of main's stack.
+#[inline(never)]
+fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
     // Frames: 4 gyros × 3 axes, noise plus occasional spikes on gyro 1.
     let mut frames = [[[0.0f32; 4]; 3]; FRAMES];
-    let mut rng = Rng::new(7);
     for f in frames.iter_mut() {
         for (a, axis) in f.iter_mut().enumerate() {
             for (i, y) in axis.iter_mut().enumerate() {
@@ -87,6 +118,13 @@ fn main() -> ! {
         ok &= per_sample > 0.0;
     }
 
+    ok
+}
+
+/// Streaming ADEV (10 octave τ), instructions per sample.
+#[inline(never)]
+fn bench_allan(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
+    let mut ok = true;
     // Noise samples for the streaming ADEV bench (the E-DAVAR benches make
     // their own, so no large array sits on the stack beside their windows).
     let mut samples = [0i16; ALLAN_SAMPLES];
@@ -116,26 +154,7 @@ fn main() -> ! {
         core::mem::size_of::<StreamAdev<10, 1024>>()
     );
 
-    for (input, step) in [("stationary", false), ("one variance step", true)] {
-        defmt::info!("e-davar input: {=str}", input);
-        let seg = |l2: usize| DavarConfig::segmented((l2 / 2) as u16, l2 as u16);
-        ok &= bench_davar::<256, 10, 7, 1>(&t, ipt, step, seg(256), "segmented");
-        ok &= bench_davar::<1024, 34, 7, 1>(&t, ipt, step, seg(1024), "segmented");
-        ok &= bench_davar::<2048, 66, 7, 1>(&t, ipt, step, seg(2048), "segmented");
-        let centred = DavarConfig {
-            lambda1: 512,
-            lambda2: 1024,
-            l_init: 1024,
-            delta_l: 64,
-            step: StepMode::Constant,
-            entropy: EntropyKind::Temporal,
-            threshold: Threshold::Auto { p_fa: 0.01 },
-            placement: Placement::Centred,
-        };
-        ok &= bench_davar::<1024, 34, 7, 1>(&t, ipt, step, centred, "centred temporal");
-    }
-    ok &= bench_selftest(&t, ipt, &mut rng);
-    exit(ok)
+    ok
 }
 
 /// Instructions of the noise-health self-test on one 2048-sample block.
@@ -168,15 +187,42 @@ const WARM: usize = 4096;
 /// the worst single sample and where it happened (sample index, and its
 /// position in the 32-sample hop: 1 is the hop itself).
 #[inline(never)]
-fn bench_davar<const CAP: usize, const FRAMES: usize, const T: usize, const AXES: usize>(
+fn bench_davar<
+    const CAP: usize,
+    const FRAMES: usize,
+    const T: usize,
+    const STFT: usize,
+    const AXES: usize,
+>(
     t: &Ticks,
     ipt: f32,
     step: bool,
     cfg: DavarConfig,
     name: &str,
 ) -> bool {
-    let mut axes: [Davar<CAP, FRAMES, T>; AXES] =
-        core::array::from_fn(|_| Davar::new(cfg).unwrap_or_else(|_| exit(false)));
+    // One window per axis, each built in place (a λ2 = 4096 window is
+    // 33 KB of the 128 KB stack).
+    let Ok(mut a0) = Davar::<CAP, FRAMES, T, STFT>::new(cfg) else {
+        return false;
+    };
+    if AXES == 1 {
+        return run_davar(t, ipt, step, name, &mut [&mut a0]);
+    }
+    let (Ok(mut a1), Ok(mut a2)) = (Davar::new(cfg), Davar::new(cfg)) else {
+        return false;
+    };
+    run_davar(t, ipt, step, name, &mut [&mut a0, &mut a1, &mut a2])
+}
+
+/// The measurement of [`bench_davar`] over the given axes.
+#[inline(never)]
+fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>(
+    t: &Ticks,
+    ipt: f32,
+    step: bool,
+    name: &str,
+    axes: &mut [&mut Davar<CAP, FRAMES, T, STFT>],
+) -> bool {
     // Cost of the timing itself: two reads back to back.
     let read_pair = {
         let mut least = u64::MAX;
@@ -225,14 +271,14 @@ fn bench_davar<const CAP: usize, const FRAMES: usize, const T: usize, const AXES
         name,
         CAP,
         T,
-        AXES,
+        axes.len(),
         (total as f32 * ipt / counted.max(1) as f32) as u32,
         f(worst),
         worst_at,
         (worst_at + 1) % 32,
-        core::mem::size_of::<Davar<CAP, FRAMES, T>>()
+        core::mem::size_of::<Davar<CAP, FRAMES, T, STFT>>()
     );
-    if CAP == 1024 {
+    if CAP == 1024 && axes.len() == 1 && STFT == 0 {
         let hops = (counted / 32).max(1) as f32;
         let p = by_phase.map(|x| (x as f32 * ipt / hops) as u32);
         defmt::info!(

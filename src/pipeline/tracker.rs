@@ -27,7 +27,7 @@ pub const fn config(lambda2: u16) -> DavarConfig {
 /// axis remembers the sequence number of its window's first sample, so every
 /// estimate is reported with the sequence number it describes.
 pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
-    axes: [Davar<CAP, FRAMES, T>; 3],
+    axes: [Davar<CAP, FRAMES, T, 0>; 3],
     /// Per axis, the sequence number of sample 0 of its E-DAVAR.
     origin: [Option<u32>; 3],
     last_seq: Option<u32>,

@@ -295,6 +295,12 @@ fn bad_settings_are_typed() {
         Davar::<1024, 32, 8>::new(ok).err(),
         Some(DavarError::Capacity)
     );
+    // An adaptive centred window needs the spectra; a segmented one not.
+    assert_eq!(
+        Davar::<1024, 34, 8, 0>::new(ok).err(),
+        Some(DavarError::Capacity)
+    );
+    assert!(Davar::<1024, 34, 8, 0>::new(DavarConfig::segmented(400, 800)).is_ok());
     let mut d = D::new(ok).unwrap();
     assert_eq!(d.push(1 << 21), Err(AllanError::SampleRange));
     assert_eq!(d.push(0), Ok(None));
