@@ -80,8 +80,8 @@ pub fn allan_digest() -> u64 {
         placement,
     };
     let (Ok(mut a), Ok(mut b)) = (
-        Davar::<512, 18, 7>::new(cfg(EntropyKind::Temporal, Placement::Segmented)),
-        Davar::<512, 18, 7>::new(cfg(EntropyKind::Spectral, Placement::Centred)),
+        Davar::<512, 19, 7>::new(cfg(EntropyKind::Temporal, Placement::Segmented)),
+        Davar::<512, 19, 7>::new(cfg(EntropyKind::Spectral, Placement::Centred)),
     ) else {
         return 0;
     };

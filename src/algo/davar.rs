@@ -180,7 +180,7 @@ impl DavarConfig {
 pub enum DavarError {
     /// λ1 > λ2, l_init outside [λ1, λ2], or λ2 shorter than two frames.
     Lambda,
-    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 2, `STFT` < FRAMES
+    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 3, `STFT` < FRAMES
     /// for an adaptive centred window,
     /// λ1 below 2^T (the largest τ's term span), CAP < 2^T + 33, T outside
     /// 1..=11, or CAP not a power of two.
@@ -222,7 +222,7 @@ struct Published<const T: usize> {
 }
 
 /// Fixed-capacity DAVAR / E-DAVAR for one axis: `CAP` (power of two ≥ λ2)
-/// samples of ring, `FRAMES` (≥ CAP/32 + 2) blocks, `T` octave τ, and
+/// samples of ring, `FRAMES` (≥ CAP/32 + 3) blocks, `T` octave τ, and
 /// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
 /// needs them; 0 is enough for the segmented one).
 /// RAM ≈ 4·CAP + FRAMES·(17·T + 8) + 68·STFT bytes.
@@ -243,6 +243,10 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Per block (terms starting in it) and τ: Σd² as low word + carry,
     /// and the prefix a window ending in this block needs.
     lo: [[u64; FRAMES]; T],
+    /// τ0 block sums as f32, once complete (the segmentation's input).
+    x0: [f32; FRAMES],
+    /// Prefix sums of x0 over the span being segmented.
+    px: [f32; FRAMES],
     hi: [[u8; FRAMES]; T],
     pre: [[u64; FRAMES]; T],
     /// STFT power of bins 1..=15 per frame, its energy and e·ln e
@@ -266,6 +270,11 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Segmented: a segment of K frames).
     thresholds: [f32; FRAMES],
     last: Option<Published<T>>,
+    /// The last published window's first block, and per τ the end of its
+    /// whole blocks and their sum (for the next window's update).
+    win_f0: Option<u64>,
+    win_q: [u64; T],
+    win_sum: [u128; T],
     /// Centred: the window placed at the last hop (span's first frame and
     /// window frames), published at the next.
     pending: Option<(u64, usize, usize)>,
@@ -308,8 +317,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             return Err(DavarError::Lambda);
         }
         // Windows are published one hop after their span (the terms and the
-        // segmentation are computed meanwhile), so one more block is kept.
-        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 2 {
+        // segmentation are computed meanwhile), and the blocks that left
+        // since the last window are subtracted from its sums: two more
+        // blocks than the span.
+        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 3 {
             return Err(DavarError::Capacity);
         }
         let span = l2 / SEG;
@@ -342,6 +353,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             a: [0; T],
             b: [0; T],
             lo: [[0; FRAMES]; T],
+            x0: [0.0; FRAMES],
+            px: [0.0; FRAMES],
             hi: [[0; FRAMES]; T],
             pre: [[0; FRAMES]; T],
             frames: [[0.0; BINS]; STFT],
@@ -357,6 +370,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             rho: [-0.5, 0.0],
             thresholds: [0.0; FRAMES],
             last: None,
+            win_f0: None,
+            win_q: [0; T],
+            win_sum: [0; T],
             pending: None,
             ln_n: [0.0; FRAMES],
             dp: Segmentation {
@@ -405,6 +421,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dprev = [0; 2];
         self.rho = [-0.5, 0.0];
         self.last = None;
+        self.win_f0 = None;
         self.pending = None;
         self.dp.first = None;
         self.dp.row = 0;
@@ -646,6 +663,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 }
                 self.lo[j][slot] = lo;
                 self.hi[j][slot] = hi;
+                if j == 0 && end % SEG as u64 == SEG as u64 - 1 {
+                    self.x0[slot] = u64_to_f32(lo);
+                }
                 k = end + 1;
             }
             self.next[j] = k;
@@ -654,14 +674,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // τ0 lag sums for ν: d = w[i + 1] − w[i] (|d| < 2²¹, so the
                 // products fit).
                 let mask = CAP - 1;
+                let ([mut s0, mut s1, mut s2], [mut p1, mut p2]) = (self.lag, self.dprev);
                 for i in first_k as usize..=last as usize {
                     let d = self.ring[(i + 1) & mask] - self.ring[i & mask];
-                    let [p1, p2] = self.dprev;
-                    self.lag[0] += d as i64 * d as i64;
-                    self.lag[1] += d as i64 * p1 as i64;
-                    self.lag[2] += d as i64 * p2 as i64;
-                    self.dprev = [d, p1];
+                    s0 += d as i64 * d as i64;
+                    s1 += d as i64 * p1 as i64;
+                    s2 += d as i64 * p2 as i64;
+                    (p1, p2) = (d, p1);
                 }
+                (self.lag, self.dprev) = ([s0, s1, s2], [p1, p2]);
             }
         }
     }
@@ -694,23 +715,16 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         (i, a, b, lo, hi)
     }
 
-    /// τ0 energies of frames `first..` into `x`.
-    fn x0_into(&self, first: u64, x: &mut [f32]) {
-        let mut sl = self.slot_of(first);
-        for v in x.iter_mut() {
-            *v = u64_to_f32(self.lo[0][sl]);
-            sl = Self::next(sl);
-        }
-    }
-
     /// Fold the frame's lag sums into the running correlations.
     fn learn_nu(&mut self) {
         let [s0, s1, s2] = self.lag;
         self.lag = [0; 3];
         if s0 > 0 {
-            let s0 = s0 as f32;
+            // i64 → f32 in two halves (a library call otherwise).
+            let f = |v: i64| (v >> 32) as i32 as f32 * 4_294_967_296.0 + v as u32 as f32;
+            let s0 = f(s0);
             for (r, s) in self.rho.iter_mut().zip([s1, s2]) {
-                *r += (s as f32 / s0 - *r) / RHO_FRAMES;
+                *r += (f(s) / s0 - *r) / RHO_FRAMES;
             }
         }
     }
@@ -718,30 +732,56 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Sum the exact window sums of frames [f0, f1), keep them, return t.
     fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
         let (s, e) = (f0 * SEG as u64, f1 * SEG as u64);
+        // Slots relative to f0's (blocks within FRAMES of it either way).
+        let s_f0 = self.slot_of(f0);
+        let slot = |b: u64| -> usize {
+            if b >= f0 {
+                let d = (b - f0) as usize; // < FRAMES: b is in or next to the window
+                if s_f0 + d >= FRAMES {
+                    s_f0 + d - FRAMES
+                } else {
+                    s_f0 + d
+                }
+            } else {
+                let d = (f0 - b) as usize;
+                if s_f0 >= d {
+                    s_f0 - d
+                } else {
+                    s_f0 + FRAMES - d
+                }
+            }
+        };
+        let old_f0 = self.win_f0;
         let mut acc = [0u128; T];
         for (j, a) in acc.iter_mut().enumerate() {
             let m = 1u64 << j;
             // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
             let q = (e - 2 * m) / SEG as u64;
-            let s0 = self.slot_of(f0);
-            let count = (q - f0) as usize;
-            // The blocks f0..q are slots s0.. (wrapping): at most two
-            // contiguous runs. Low words with their carries counted, high
-            // parts apart: 32-bit-friendly sums, no u128 per block.
-            let first_run = count.min(FRAMES - s0);
-            let (mut lo, mut hi) = (0u64, 0u32);
-            for (l, h) in self.lo[j][s0..s0 + first_run]
-                .iter()
-                .zip(&self.hi[j][s0..s0 + first_run])
-                .chain(self.lo[j][..count - first_run].iter().zip(&self.hi[j][..count - first_run]))
-            {
-                let (v, c) = lo.overflowing_add(*l);
-                lo = v;
-                hi += c as u32 + *h as u32;
-            }
-            let sq = if s0 + count >= FRAMES { s0 + count - FRAMES } else { s0 + count };
-            *a = (((hi as u128) << 64) | lo as u128) + self.pre[j][sq] as u128;
+            // The whole blocks: from the last window's by the blocks that
+            // entered and left (exact integers, so nothing drifts), or
+            // from scratch when that is shorter.
+            let full = match old_f0 {
+                Some(of0) if f0.abs_diff(of0) + q.abs_diff(self.win_q[j]) < q - f0 => {
+                    let (oq, mut v) = (self.win_q[j], self.win_sum[j]);
+                    if q > oq {
+                        v += self.block_sum(j, slot(oq), q - oq);
+                    } else {
+                        v -= self.block_sum(j, slot(q), oq - q);
+                    }
+                    if f0 > of0 {
+                        v -= self.block_sum(j, slot(of0), f0 - of0);
+                    } else {
+                        v += self.block_sum(j, s_f0, of0 - f0);
+                    }
+                    v
+                }
+                _ => self.block_sum(j, s_f0, q - f0),
+            };
+            self.win_q[j] = q;
+            self.win_sum[j] = full;
+            *a = full + self.pre[j][slot(q)] as u128;
         }
+        self.win_f0 = Some(f0);
         self.last = Some(Published {
             t,
             start: s,
@@ -749,6 +789,30 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             acc,
         });
         t
+    }
+
+    /// Σ of `count` blocks of τ j from slot `s0` on, exactly. They wrap at
+    /// most once: two contiguous runs. Low words with their carries
+    /// counted, high parts apart: 32-bit-friendly sums, no u128 add per
+    /// block.
+    fn block_sum(&self, j: usize, s0: usize, count: u64) -> u128 {
+        let count = count as usize;
+        let first_run = count.min(FRAMES - s0);
+        let (mut lo, mut hi) = (0u64, 0u32);
+        for (l, h) in self.lo[j][s0..s0 + first_run]
+            .iter()
+            .zip(&self.hi[j][s0..s0 + first_run])
+            .chain(
+                self.lo[j][..count - first_run]
+                    .iter()
+                    .zip(&self.hi[j][..count - first_run]),
+            )
+        {
+            let (v, c) = lo.overflowing_add(*l);
+            lo = v;
+            hi += c as u32 + *h as u32;
+        }
+        ((hi as u128) << 64) | lo as u128
     }
 
     /// The last published row of the t–τ–σ surface; `None` until the span
@@ -780,15 +844,21 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// the cells' energies and compute the first row.
     fn dp_start(&mut self, first: u64) {
         let (g, k) = (self.dp.group, self.span);
-        let mut x = [0.0f32; FRAMES];
-        self.x0_into(first, &mut x[..k]);
+        // Prefix sums of the span's τ0 frame energies, kept for
+        // `segment_window`; the cells' sums are read off them.
+        let s0 = self.slot_of(first);
+        let run = k.min(FRAMES - s0);
         let mut acc = 0.0f32;
-        self.dp.sum[0] = 0.0;
-        for cell in 0..self.dp.cells {
-            for v in &x[cell * g..((cell + 1) * g).min(k)] {
-                acc += v;
-            }
-            self.dp.sum[cell + 1] = acc;
+        self.px[0] = 0.0;
+        for (p, &x) in self.px[1..=k]
+            .iter_mut()
+            .zip(self.x0[s0..s0 + run].iter().chain(&self.x0[..k - run]))
+        {
+            acc += x;
+            *p = acc;
+        }
+        for cell in 0..=self.dp.cells {
+            self.dp.sum[cell] = self.px[(cell * g).min(k)];
         }
         self.dp.first = Some(first);
         self.dp.nu = self.nu();
@@ -808,15 +878,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let frames = |c: usize| (c * g).min(k);
         let (nu, sj, nj) = (self.dp.nu, self.dp.sum[j], frames(j));
         let (mut best, mut arg) = (f32::INFINITY, 0u8);
-        let mut fi = 0usize;
-        for (i, (&si, &ci)) in self.dp.sum[..j].iter().zip(&self.dp.cost[..j]).enumerate() {
-            let nf = nj - fi;
-            fi += g;
-            let ln_nf = self.ln_n.get(nf).copied().unwrap_or(0.0);
+        // Segment [i, j) has nf = nj − i·g frames (the last cell may be
+        // short, so j's own frame count is nj): walk nf and ln nf down.
+        let ln_nf = self.ln_n[..=nj].iter().rev().step_by(g);
+        let mut nff = nj as f32;
+        let gf = g as f32;
+        for (i, ((&si, &ci), &ln_nf)) in self.dp.sum[..j]
+            .iter()
+            .zip(&self.dp.cost[..j])
+            .zip(ln_nf)
+            .enumerate()
+        {
             // Frame energies of integer samples are 0 or ≥ 1: the floor
             // only guards an all-zero segment.
             let d = sj - si;
-            let c = ci + nu * nf as f32 * (ln_fast(if d > 0.5 { d } else { 0.5 }) - ln_nf);
+            let c = ci + nu * nff * (ln_fast(if d > 0.5 { d } else { 0.5 }) - ln_nf);
+            nff -= gf;
             if c < best {
                 best = c;
                 arg = i as u8;
@@ -832,19 +909,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     fn segment_window(&mut self, first: u64) -> (usize, usize) {
         let (g, k, cells) = (self.dp.group, self.span, self.dp.cells);
         let ft = k / 2; // frame that starts at (or holds) t
-        // Frame energies and their prefix sums: the changes are refined
-        // to the frame and every mean below is taken over frames.
-        let mut x = [0.0f32; FRAMES];
-        self.x0_into(first, &mut x[..k]);
-        let mut px = [0.0f32; FRAMES];
-        for i in 0..k {
-            px[i + 1] = px[i] + x[i];
-        }
+                        // The span's frame prefix sums (from `dp_start`): the changes are
+                        // refined to the frame and every mean below is taken over frames.
+        let (px, ln_n) = (&self.px, &self.ln_n);
+        let x = |i: usize| px[i + 1] - px[i];
         let nu = self.dp.nu;
         let cost = |i: usize, j: usize| {
             let nf = j - i;
             let sum = px[j] - px[i];
-            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - self.ln_n[nf])
+            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_n[nf])
         };
         // Segment bounds in frames, in order: 0 = b₀ < b₁ < … < b_nb = k.
         let mut bounds = [0u16; CELLS + 1];
@@ -861,7 +934,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // best split of its two segments within ± (g − 1) frames.
         if g > 1 {
             for i in 1..nb {
-                let (l, c, r) = (bounds[i - 1] as usize, bounds[i] as usize, bounds[i + 1] as usize);
+                let (l, c, r) = (
+                    bounds[i - 1] as usize,
+                    bounds[i] as usize,
+                    bounds[i + 1] as usize,
+                );
                 let mut best = (cost(l, c) + cost(c, r), c);
                 for p in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
                     let v = cost(l, p) + cost(p, r);
@@ -936,8 +1013,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // energy is closer (in ratio) to the segment's mean.
         let seg_mean = mean(s);
         while hi - lo < self.min_frames {
-            let left = (lo > 0).then(|| ratio_gap(x[lo - 1], seg_mean));
-            let right = (hi < k).then(|| ratio_gap(x[hi], seg_mean));
+            let left = (lo > 0).then(|| ratio_gap(x(lo - 1), seg_mean));
+            let right = (hi < k).then(|| ratio_gap(x(hi), seg_mean));
             match (left, right) {
                 (Some(l), Some(r)) if l <= r => lo -= 1,
                 (Some(_), None) => lo -= 1,
@@ -1000,7 +1077,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             return;
         }
         let s0 = self.slot_of(f_lo);
-        let slots = (0..k).map(move |i| if s0 + i >= FRAMES { s0 + i - FRAMES } else { s0 + i });
+        let slots = (0..k).map(move |i| {
+            if s0 + i >= FRAMES {
+                s0 + i - FRAMES
+            } else {
+                s0 + i
+            }
+        });
         let score = match self.cfg.entropy {
             EntropyKind::Temporal => {
                 let (mut tot, mut sum_eloge) = (0.0f32, 0.0f32);

@@ -97,7 +97,7 @@ fn main() -> ! {
     );
 
     // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
-    let Ok(mut noise) = NoiseTracker::<1024, 34, 9>::new(tracker::config(1024)) else {
+    let Ok(mut noise) = NoiseTracker::<1024, 35, 9>::new(tracker::config(1024)) else {
         panic!("noise tracker configuration");
     };
 

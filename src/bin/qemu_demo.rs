@@ -38,7 +38,7 @@ const SAMPLES: u32 = 3000;
 const CORE_HZ: u32 = 25_000_000;
 
 /// E-DAVAR per axis: λ2 = 512 samples, 17 STFT frames, τ = 1 … 64 ms.
-type Tracker = NoiseTracker<512, 18, 7>;
+type Tracker = NoiseTracker<512, 19, 7>;
 
 static TICKS: AtomicU32 = AtomicU32::new(0);
 

@@ -27,7 +27,7 @@ use gyro_array::emu::Rng;
 use std::fmt::Write as _;
 use std::process::ExitCode;
 
-type D = Davar<2048, 66, 8>;
+type D = Davar<2048, 67, 8>;
 /// Integer resolution of the generated signals (σ = 1 is 1024 LSB).
 const LSB: f64 = 1.0 / 1024.0;
 

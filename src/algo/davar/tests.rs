@@ -2,7 +2,7 @@ use super::*;
 use crate::algo::allan::{fill_phase, oavar_phase};
 use crate::emu::Rng;
 
-type D = Davar<1024, 34, 8>;
+type D = Davar<1024, 35, 8>;
 
 fn white(seed: u64, n: usize, sigma: impl Fn(usize) -> f32) -> Vec<i32> {
     let mut rng = Rng::new(seed);
@@ -292,15 +292,15 @@ fn bad_settings_are_typed() {
         Some(DavarError::Threshold)
     );
     assert_eq!(
-        Davar::<1024, 32, 8>::new(ok).err(),
+        Davar::<1024, 34, 8>::new(ok).err(),
         Some(DavarError::Capacity)
     );
     // An adaptive centred window needs the spectra; a segmented one not.
     assert_eq!(
-        Davar::<1024, 34, 8, 0>::new(ok).err(),
+        Davar::<1024, 35, 8, 0>::new(ok).err(),
         Some(DavarError::Capacity)
     );
-    assert!(Davar::<1024, 34, 8, 0>::new(DavarConfig::segmented(400, 800)).is_ok());
+    assert!(Davar::<1024, 35, 8, 0>::new(DavarConfig::segmented(400, 800)).is_ok());
     let mut d = D::new(ok).unwrap();
     assert_eq!(d.push(1 << 21), Err(AllanError::SampleRange));
     assert_eq!(d.push(0), Ok(None));
@@ -325,9 +325,9 @@ fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
             }
         })
         .collect();
-    let mut d = Davar::<512, 18, 8>::new(DavarConfig::segmented(512, 512)).unwrap();
+    let mut d = Davar::<512, 19, 8>::new(DavarConfig::segmented(512, 512)).unwrap();
     assert_eq!(
-        Davar::<512, 18, 9>::new(DavarConfig::segmented(512, 512)).err(),
+        Davar::<512, 19, 9>::new(DavarConfig::segmented(512, 512)).err(),
         Some(DavarError::Capacity)
     );
     let mut checked = 0;
