@@ -10,7 +10,10 @@
 //! hops is scored with the nearest estimate. Methods: fixed windows of λ1, λ2
 //! and their midpoint; the paper's E-DAVAR (centred, spectral entropy,
 //! E0 = 0.2, ΔL = 64); the centred window with our temporal entropy and an
-//! automatic threshold; and the default, the segmented window. Targets
+//! automatic threshold; and the default, the segmented window. Where the
+//! class has steps, an oracle that knows the true change points (same
+//! window limits, f64 from the samples) shows what any detector could
+//! reach. Targets
 //! (issue 12): default ≤ 0.92 × the best fixed window on every step, ramp
 //! and repeated-step class, ≤ 1.00 × on every stationary class, ≤ 0.70 × on
 //! the paper's experiment, and the window shortened on ≤ 5 % of the hops on
@@ -50,6 +53,8 @@ struct Class {
     lambda: (u16, u16),
     n: usize,
     gen: Box<dyn Fn(u64) -> Signal>,
+    /// True change points, where the class has steps (for the oracle).
+    changes: Option<Vec<usize>>,
 }
 
 /// White noise with variance v(t): truth σ²_A(τ0) = (v(t) + v(t+1))/2.
@@ -109,6 +114,7 @@ fn classes() -> Vec<Class> {
                 lambda: (l1, l2),
                 n,
                 gen: Box::new(white_class(n, move |t| if t < 4000 { 1.0 } else { r })),
+                changes: Some(vec![4000]),
             });
         }
     }
@@ -122,6 +128,7 @@ fn classes() -> Vec<Class> {
             gen: Box::new(white_class(n, move |t| {
                 1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
             })),
+            changes: None,
         });
     }
     for &(l1, l2, every) in &[
@@ -139,6 +146,7 @@ fn classes() -> Vec<Class> {
                 n,
                 move |t| if (t / every) % 2 == 0 { 1.0 } else { 3.0 },
             )),
+            changes: Some((1..n / every + 1).map(|i| i * every).collect()),
         });
     }
     let n = 40000;
@@ -148,6 +156,7 @@ fn classes() -> Vec<Class> {
         lambda: (256, 1024),
         n,
         gen: Box::new(white_class(n, |_| 1.0)),
+        changes: Some(vec![]),
     });
     // Flicker: AR(1) components one per octave of time constant, equal
     // variance per octave (a 1/f spectrum from 2 to 4096 samples).
@@ -163,6 +172,7 @@ fn classes() -> Vec<Class> {
         lambda: (256, 1024),
         n,
         gen: Box::new(coloured_class(n, 0.3, flicker)),
+        changes: Some(vec![]),
     });
     v.push(Class {
         name: "stationary random walk + white".into(),
@@ -170,6 +180,7 @@ fn classes() -> Vec<Class> {
         lambda: (256, 1024),
         n,
         gen: Box::new(coloured_class(n, 0.3, vec![(1.0 - 1e-9, 0.7)])),
+        changes: Some(vec![]),
     });
     v.push(Class {
         name: "paper: 6000 s, σ² 1/3/1, λ 400/800".into(),
@@ -183,6 +194,7 @@ fn classes() -> Vec<Class> {
                 1.0
             }
         })),
+        changes: Some(vec![1500, 4500]),
     });
     v
 }
@@ -229,6 +241,42 @@ fn run(cfg: DavarConfig, w: &[i32]) -> Run {
             hops.push((s.t as usize, s.avar[0] as f64 * LSB * LSB, s.len));
         }
     }
+    Run { hops }
+}
+
+/// The oracle: at each hop time of `like`, the window is the true segment
+/// that holds t inside the λ2 span (frame-aligned as the estimator's), or
+/// the λ1 window nearest to it when the segment is shorter; σ²(τ0) is
+/// computed in f64 straight from the samples. What a perfect change
+/// detector would get with the same window limits.
+fn oracle(like: &Run, w: &[i32], changes: &[usize], l1: u16, l2: u16) -> Run {
+    let seg = SEG;
+    let k = l2 as usize / seg * seg; // span, samples
+    let min = (l1 as usize).div_ceil(seg).min(k / seg) * seg;
+    let hops = like
+        .hops
+        .iter()
+        .map(|&(t, _, _)| {
+            let (lo, hi) = (t - k / 2, t - k / 2 + k);
+            let s = changes.iter().filter(|&&c| c <= t).max().map_or(lo, |&c| c.max(lo));
+            let e = changes.iter().filter(|&&c| c > t).min().map_or(hi, |&c| c.min(hi));
+            let (mut s, mut e) = (s, e);
+            if e - s < min {
+                // Centre the λ1 window on the segment, inside the span.
+                let mid = (s + e) / 2;
+                s = mid.saturating_sub(min / 2).clamp(lo, hi - min);
+                e = s + min;
+            }
+            let d2: f64 = (s..e - 1)
+                .map(|i| {
+                    let d = (w[i + 1] - w[i]) as f64;
+                    d * d
+                })
+                .sum();
+            let avar = 0.5 * d2 / (e - s - 1) as f64 * LSB * LSB;
+            (t, avar, (e - s) as u16)
+        })
+        .collect();
     Run { hops }
 }
 
@@ -308,11 +356,15 @@ fn main() -> ExitCode {
         // errs[method][seed], short[method] (fraction of hops shortened).
         let mut errs = vec![Vec::new(); ms.len()];
         let mut short = vec![0.0f64; ms.len()];
+        let mut oracle_errs = Vec::new();
         for seed in 1..=seeds {
             let (w, truth) = (class.gen)(seed * 7919 + class.n as u64);
             for (i, (name, cfg)) in ms.iter().enumerate() {
                 let r = run(*cfg, &w);
                 errs[i].push(rms(&r, &truth, a, b));
+                if let (Some(ch), true) = (&class.changes, i == ms.len() - 1) {
+                    oracle_errs.push(rms(&oracle(&r, &w, ch, l1, l2), &truth, a, b));
+                }
                 let full = (l2 as usize / SEG * SEG) as u16;
                 short[i] += r.hops.iter().filter(|h| h.2 < full).count() as f64
                     / r.hops.len() as f64
@@ -347,6 +399,16 @@ fn main() -> ExitCode {
                 100.0 * short[i]
             );
             let _ = rm;
+        }
+        if !oracle_errs.is_empty() {
+            let (m, sd) = mean_sd(&oracle_errs);
+            let ratios: Vec<f64> = oracle_errs.iter().zip(&errs[best]).map(|(x, y)| x / y).collect();
+            let (_, rs) = mean_sd(&ratios);
+            println!(
+                "  {:<26} {m:>9.4} ± {sd:<6.4} {:>8.3} ± {rs:<5.3}",
+                "(oracle: true changes)",
+                m / mean_sd(&errs[best]).0
+            );
         }
         let d = ms.len() - 1;
         let ratio = mean_sd(&errs[d]).0 / mean_sd(&errs[best]).0;
