@@ -258,8 +258,16 @@ fn oracle(like: &Run, w: &[i32], changes: &[usize], l1: u16, l2: u16) -> Run {
         .iter()
         .map(|&(t, _, _)| {
             let (lo, hi) = (t - k / 2, t - k / 2 + k);
-            let s = changes.iter().filter(|&&c| c <= t).max().map_or(lo, |&c| c.max(lo));
-            let e = changes.iter().filter(|&&c| c > t).min().map_or(hi, |&c| c.min(hi));
+            let s = changes
+                .iter()
+                .filter(|&&c| c <= t)
+                .max()
+                .map_or(lo, |&c| c.max(lo));
+            let e = changes
+                .iter()
+                .filter(|&&c| c > t)
+                .min()
+                .map_or(hi, |&c| c.min(hi));
             let (mut s, mut e) = (s, e);
             if e - s < min {
                 // Centre the λ1 window on the segment, inside the span.
@@ -402,7 +410,11 @@ fn main() -> ExitCode {
         }
         if !oracle_errs.is_empty() {
             let (m, sd) = mean_sd(&oracle_errs);
-            let ratios: Vec<f64> = oracle_errs.iter().zip(&errs[best]).map(|(x, y)| x / y).collect();
+            let ratios: Vec<f64> = oracle_errs
+                .iter()
+                .zip(&errs[best])
+                .map(|(x, y)| x / y)
+                .collect();
             let (_, rs) = mean_sd(&ratios);
             println!(
                 "  {:<26} {m:>9.4} ± {sd:<6.4} {:>8.3} ± {rs:<5.3}",
