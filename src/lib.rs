@@ -14,7 +14,7 @@
 //! - [`pipeline`]: the per-sample loop: read every gyro, account for every
 //!   sample, flag and exclude faulty chips, fuse.
 //! - [`board`]: bindings for the QEMU machine and the STM32F405 board
-//!   (firmware builds only).
+//!   (firmware builds only), and the reset record that survives a fault.
 #![cfg_attr(not(test), no_std)]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -24,7 +24,6 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod algo;
-#[cfg(any(feature = "qemu", feature = "board"))]
 pub mod board;
 pub mod checks;
 pub mod drivers;

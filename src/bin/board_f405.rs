@@ -5,6 +5,14 @@
 //! (CS on PC5). TIM2 paces sampling at 1 kHz; the DWT cycle counter measures
 //! the time between ticks, so missed periods are counted as overruns.
 //! Logs go out over RTT (defmt); flash and run with `cargo flash`.
+//!
+//! Faults are contained (`gyro_array::board::persist`): a panic or a hard
+//! fault is recorded in RAM kept across the reset and reported at the next
+//! boot; an MPU guard under the flip-link stack turns an overflow into a
+//! hard fault; the independent watchdog (IWDG, LSI ≈ 32 kHz) resets the
+//! core if the main loop stops completing samples: 2 s while the array
+//! starts and self-tests, then 100 ms nominal (68–188 ms over the LSI's
+//! 17–47 kHz datasheet range) against a 1 ms sample period.
 #![no_std]
 #![no_main]
 
@@ -13,16 +21,18 @@ use core::cell::RefCell;
 use cortex_m_rt::entry;
 use defmt_rtt as _;
 use embedded_hal_bus::spi::RefCellDevice;
-use panic_probe as _;
 use stm32f4xx_hal::{
     pac,
     prelude::*,
     rcc::Config as RccConfig,
     spi::{Mode, Phase, Polarity, Spi},
+    watchdog::IndependentWatchdog,
 };
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
+use gyro_array::board::persist;
+use gyro_array::board::record::Cause;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
@@ -34,11 +44,33 @@ use gyro_array::pipeline::{Pipeline, PipelineConfig};
 const FS_HZ: u32 = 1000;
 const SYSCLK_HZ: u32 = 168_000_000;
 
+/// A start-up step that cannot go on: log it and reset (the record says
+/// the firmware asked; the next boot reports it).
+fn give_up(what: &str) -> ! {
+    defmt::error!("start-up failed: {=str}; resetting", what);
+    persist::record_and_reset(Cause::Requested)
+}
+
 #[entry]
 fn main() -> ! {
+    let record = persist::take();
+    persist::guard_stack();
     let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
-        panic!("peripherals taken twice");
+        give_up("peripherals taken twice")
     };
+    // What ended the last run: our own record, else the reset flags.
+    let csr = dp.RCC.csr().read();
+    match record {
+        Some(r) => defmt::warn!("last run ended by {} (reset {} since power-up)", r, r.boots),
+        None if csr.wdgrstf().bit_is_set() => defmt::warn!("last run ended by the watchdog"),
+        None => defmt::info!("cold start"),
+    }
+    if let Some(msg) = persist::panic_message() {
+        defmt::warn!("last panic: {=[u8]:a}", msg);
+    }
+    dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    watchdog.start(2000.millis());
     let mut rcc = dp
         .RCC
         .freeze(RccConfig::hse(8.MHz()).sysclk(SYSCLK_HZ.Hz()));
@@ -86,7 +118,7 @@ fn main() -> ! {
         PipelineConfig::default(),
         Method::Adaptive(AdaptiveConfig::default()),
     ) else {
-        panic!("pipeline configuration");
+        give_up("pipeline configuration")
     };
     start_array(
         [&mut g0, &mut g1, &mut g2, &mut g3],
@@ -98,12 +130,12 @@ fn main() -> ! {
 
     // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
     let Ok(mut noise) = NoiseTracker::<1024, 35, 9>::new(tracker::config(1024)) else {
-        panic!("noise tracker configuration");
+        give_up("noise tracker configuration")
     };
 
     let mut tick = dp.TIM2.counter_hz(&mut rcc);
     if tick.start(FS_HZ.Hz()).is_err() {
-        panic!("sampling timer");
+        give_up("sampling timer");
     }
     // Noise-health self-test (the board must be still): 2048 samples of
     // every gyro at the sampling rate, then trend, Hurst and normality.
@@ -117,6 +149,7 @@ fn main() -> ! {
             |g| if g == 4 { 2 } else { 0 },
             || {
                 let _ = nb::block!(tick.wait());
+                watchdog.feed();
             },
             &mut blocks,
             &mut results,
@@ -128,6 +161,9 @@ fn main() -> ! {
         }
     }
 
+    let u = persist::stack_usage();
+    defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
+    watchdog.start(100.millis());
     let period = SYSCLK_HZ / FS_HZ;
     let mut last = cortex_m::peripheral::DWT::cycle_count();
     loop {
@@ -143,6 +179,12 @@ fn main() -> ! {
         let out = pipe.step(&mut gyros);
         pipe.log_health_changes(&out);
         noise.push(&out);
+        // A completed sample is the only thing that feeds the watchdog.
+        watchdog.feed();
+        if out.seq % 10_000 == 0 {
+            let u = persist::stack_usage();
+            defmt::info!("seq {}: stack peak {} of {} bytes", out.seq, u.peak, u.size);
+        }
         if out.seq % 1000 == 0 {
             for f in out.fused.iter().flatten() {
                 defmt::info!(

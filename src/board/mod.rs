@@ -1,5 +1,8 @@
-//! Board bindings (firmware builds only): what differs between the QEMU
-//! machine and the real STM32F405 board.
+//! Board bindings: what differs between the QEMU machine and the real
+//! STM32F405 board, and the fault containment both share.
 
+#[cfg(feature = "persist")]
+pub mod persist;
 #[cfg(feature = "qemu")]
 pub mod qemu;
+pub mod record;

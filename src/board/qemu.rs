@@ -59,6 +59,9 @@ impl Ticks {
     }
 }
 
+/// A panic ends the QEMU run as a failure (the `persist` feature replaces
+/// this with record-and-reset, tested by `qemu-faults`).
+#[cfg(not(feature = "persist"))]
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
@@ -79,8 +82,9 @@ pub fn instructions_per_tick(t: &Ticks) -> f32 {
     (2 * ITER) as f32 / ticks as f32
 }
 
-/// A hard fault (a stack overflow into the statics, a bad access) ends the
-/// QEMU run as a failure instead of looping forever in the default handler.
+/// A hard fault (a stack overflow, a bad access) ends the QEMU run as a
+/// failure instead of looping forever in the default handler.
+#[cfg(not(feature = "persist"))]
 #[cortex_m_rt::exception]
 #[allow(unsafe_code)] // cortex-m-rt requires the HardFault handler to be `unsafe fn`.
 unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {

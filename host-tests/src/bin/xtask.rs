@@ -1,19 +1,22 @@
 //! Task runner: `cargo xtask <task>`.
 //!
-//! - `test`: host tests, then the on-target suite and the demo in QEMU
-//!   (each passes or fails by its semihosting exit code), then the board
-//!   firmware build. This is the project's one test command.
+//! - `test`: host tests, then the on-target suite, the demo and the
+//!   fault-containment run in QEMU (each passes or fails by its semihosting
+//!   exit code), then the board firmware build. This is the project's one
+//!   test command.
 //! - `run`: the demo firmware in QEMU, logs decoded by defmt-print.
 //! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`).
 //! - `size`: flash and static RAM of the firmware binaries.
 //!
 //! Missing tools are installed: the rustup target, qemu-system-arm (apt),
-//! defmt-print (cargo, pinned).
+//! defmt-print and flip-link (cargo, pinned).
 use std::path::{Path, PathBuf};
 use std::process::{exit, Command, Stdio};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const DEFMT_PRINT: &str = "1.2.0";
+/// The firmware links through flip-link (.cargo/config.toml).
+const FLIP_LINK: &str = "0.1.12";
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -60,6 +63,15 @@ fn ensure_tools() {
                 "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq qemu-system-arm"
             ))),
             "install qemu-system-arm",
+        );
+    }
+    let v = have("flip-link", "--version").unwrap_or_default();
+    if !v.contains(FLIP_LINK) {
+        must(
+            run(Command::new("cargo")
+                .args(["install", "flip-link", "--locked", "--force", "--version"])
+                .arg(format!("={FLIP_LINK}"))),
+            "install flip-link",
         );
     }
     let v = have("defmt-print", "--version").unwrap_or_default();
@@ -154,6 +166,8 @@ fn main() {
             must(ok, "on-target suite (qemu-tests)");
             let ok = qemu(&build_qemu("qemu-demo"), true);
             must(ok, "demo (qemu-demo)");
+            let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
+            must(ok, "fault containment (qemu-faults)");
             build_board();
             println!("xtask: all checks passed");
         }
@@ -168,6 +182,7 @@ fn main() {
             must(ok, "bench");
         }
         "size" => {
+            ensure_tools();
             size(&build_board());
         }
         _ => {
