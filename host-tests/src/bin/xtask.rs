@@ -7,6 +7,8 @@
 //! - `run`: the demo firmware in QEMU, logs decoded by defmt-print.
 //! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`).
 //! - `size`: flash and static RAM of the firmware binaries.
+//! - `panics`: panic call sites in each release ELF, by the code they come
+//!   from (llvm-objdump and llvm-addr2line).
 //!
 //! Missing tools are installed: the rustup target, qemu-system-arm (apt),
 //! defmt-print and flip-link (cargo, pinned).
@@ -185,8 +187,22 @@ fn main() {
             ensure_tools();
             size(&build_board());
         }
+        "panics" => {
+            ensure_tools();
+            let elfs = [
+                build_qemu("qemu-tests"),
+                build_qemu("qemu-demo"),
+                build_firmware("qemu,persist", "qemu-faults"),
+                build_board(),
+            ];
+            let mut ours_total = 0;
+            for elf in &elfs {
+                ours_total += panics(elf);
+            }
+            println!("panic call sites from this crate, all ELFs: {ours_total}");
+        }
         _ => {
-            eprintln!("usage: cargo xtask <test|run|bench|size>");
+            eprintln!("usage: cargo xtask <test|run|bench|size|panics>");
             exit(2);
         }
     }
@@ -194,6 +210,105 @@ fn main() {
 
 /// Flash (text + rodata + data) and static RAM (data + bss) from the ELF
 /// section headers, without binutils.
+/// Callees that panic (the core library's panic entry points).
+const PANIC_CALLEES: &[&str] = &[
+    "core::panicking::",
+    "core::slice::index::slice_",
+    "core::option::unwrap_failed",
+    "core::option::expect_failed",
+    "core::result::unwrap_failed",
+    "core::cell::panic_already",
+    "core::str::slice_error_fail",
+];
+
+/// Count the calls into the core library's panic entry points in `elf`
+/// and attribute each to the innermost source frame outside the core
+/// library (llvm-addr2line -i walks the inlining chain). Prints a summary
+/// and this crate's sites; returns how many are this crate's.
+fn panics(elf: &Path) -> usize {
+    let dis = Command::new("llvm-objdump")
+        .args(["-d", "--no-show-raw-insn", "--demangle"])
+        .arg(elf)
+        .output()
+        .unwrap_or_else(|e| {
+            eprintln!("xtask: llvm-objdump: {e}");
+            exit(1)
+        });
+    let text = String::from_utf8_lossy(&dis.stdout);
+    let mut sites: Vec<(String, String)> = Vec::new(); // (address, callee)
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        let (Some(addr), Some(op)) = (it.next(), it.next()) else {
+            continue;
+        };
+        if !matches!(op, "bl" | "b" | "b.w" | "blx") {
+            continue;
+        }
+        let Some(callee) = line.split('<').nth(1).and_then(|c| c.split('>').next()) else {
+            continue;
+        };
+        if PANIC_CALLEES.iter().any(|p| callee.starts_with(p)) {
+            let name = callee.rsplit_once("::h").map_or(callee, |(n, _)| n);
+            sites.push((
+                format!("0x{}", addr.trim_end_matches(':')),
+                name.to_string(),
+            ));
+        }
+    }
+    let mut a2l = Command::new("llvm-addr2line");
+    a2l.args(["-a", "-i", "-e"]).arg(elf);
+    for (a, _) in &sites {
+        a2l.arg(a);
+    }
+    let out = a2l.output().unwrap_or_else(|e| {
+        eprintln!("xtask: llvm-addr2line: {e}");
+        exit(1)
+    });
+    let chains = String::from_utf8_lossy(&out.stdout);
+    let root = root().join("src").display().to_string();
+    let mut owner_of: Vec<String> = Vec::new();
+    for line in chains.lines() {
+        if line.starts_with("0x") {
+            owner_of.push(String::new());
+            continue;
+        }
+        let Some(cur) = owner_of.last_mut() else {
+            continue;
+        };
+        // The innermost frame outside the Rust library decides.
+        if cur.is_empty() && !line.starts_with("/rustc/") && !line.starts_with("??") {
+            *cur = line.to_string();
+        }
+    }
+    let mut by: std::collections::BTreeMap<String, usize> = Default::default();
+    let mut ours = Vec::new();
+    for ((_, callee), owner) in sites.iter().zip(&owner_of) {
+        let who = if owner.starts_with(&root) {
+            ours.push(format!("{} ({callee})", owner.trim_start_matches(&root)));
+            "this crate".to_string()
+        } else if owner.is_empty() {
+            "the Rust core library".to_string()
+        } else {
+            owner
+                .split("/registry/src/")
+                .nth(1)
+                .and_then(|r| r.split('/').nth(1))
+                .unwrap_or(owner)
+                .to_string()
+        };
+        *by.entry(who).or_default() += 1;
+    }
+    let name = elf.file_name().unwrap_or_default().to_string_lossy();
+    println!("{name}: {} panic call sites", sites.len());
+    for (who, n) in &by {
+        println!("  {n:>4}  {who}");
+    }
+    for s in &ours {
+        println!("        src{s}");
+    }
+    ours.len()
+}
+
 fn size(elf: &Path) {
     let b = std::fs::read(elf).unwrap_or_else(|e| {
         eprintln!("xtask: {}: {e}", elf.display());
