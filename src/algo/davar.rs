@@ -377,8 +377,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             ln_n: [0.0; FRAMES],
             dp: Segmentation {
                 first: None,
-                group: span.div_ceil(CELLS),
-                cells: span.div_ceil(span.div_ceil(CELLS)),
+                group: span.div_ceil(CELLS).max(1),
+                cells: span.div_ceil(span.div_ceil(CELLS).max(1)),
                 sum: [0.0; CELLS + 1],
                 cost: [0.0; CELLS + 1],
                 arg: [0; CELLS + 1],
@@ -400,9 +400,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             Placement::Segmented => 2,
         };
         for k in lo..=span {
-            d.thresholds[k] = d.quantile_for(k);
+            let q = d.quantile_for(k);
+            if let Some(t) = d.thresholds.get_mut(k) {
+                *t = q;
+            }
         }
-        d.threshold = d.thresholds[span];
+        d.threshold = d.threshold_for(span);
         Ok(d)
     }
 
@@ -416,7 +419,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.b = [0; T];
         self.len = self.cfg.l_init;
         self.score = 0.0;
-        self.threshold = self.thresholds[self.span];
+        self.threshold = self.threshold_for(self.span);
         self.lag = [0; 3];
         self.dprev = [0; 2];
         self.rho = [-0.5, 0.0];
@@ -426,6 +429,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.first = None;
         self.dp.row = 0;
         self.dp.hist_len = [0; LAG];
+    }
+
+    /// The tabulated threshold for `k` frames (every k a window of this
+    /// configuration can have is tabulated at construction).
+    fn threshold_for(&self, k: usize) -> f32 {
+        self.thresholds.get(k).copied().unwrap_or(f32::INFINITY)
     }
 
     /// The settings.
@@ -610,6 +619,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// to add and `a`, `b` hold the sums of the term before it.
     fn add_terms(&mut self, j: usize) {
         let n = self.n;
+        if j >= T {
+            return;
+        }
         {
             let m = 1u64 << j;
             if n < 2 * m {
@@ -628,7 +640,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 let block = k / SEG as u64;
                 let off = (k % SEG as u64) as usize;
                 let end = last.min(block * SEG as u64 + SEG as u64 - 1);
-                let slot = self.slot_of(block);
+                // (Slots are < FRAMES by construction; the `min` lets the
+                // compiler see it, so no index here can panic.)
+                let slot = self.slot_of(block).min(FRAMES - 1);
                 let (mut lo, mut hi) = if off == 0 {
                     (0u64, 0u8)
                 } else {
@@ -637,8 +651,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 let mut from = k;
                 if k == 0 {
                     // First term: its sums from scratch (once per τ).
-                    b = (0..mu).map(|i| self.ring[i]).sum();
-                    a = (mu..m2).map(|i| self.ring[i]).sum();
+                    b = (0..mu).map(|i| self.ring[i & (CAP - 1)]).sum();
+                    a = (mu..m2).map(|i| self.ring[i & (CAP - 1)]).sum();
                     (lo, hi) = add_sq(lo, hi, a - b);
                     if pre_off == 0 {
                         self.pre[j][slot] = lo;
@@ -733,7 +747,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
         let (s, e) = (f0 * SEG as u64, f1 * SEG as u64);
         // Slots relative to f0's (blocks within FRAMES of it either way).
-        let s_f0 = self.slot_of(f0);
+        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
         let slot = |b: u64| -> usize {
             if b >= f0 {
                 let d = (b - f0) as usize; // < FRAMES: b is in or next to the window
@@ -779,7 +793,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             };
             self.win_q[j] = q;
             self.win_sum[j] = full;
-            *a = full + self.pre[j][slot(q)] as u128;
+            *a = full + self.pre[j][slot(q).min(FRAMES - 1)] as u128;
         }
         self.win_f0 = Some(f0);
         self.last = Some(Published {
@@ -796,18 +810,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// counted, high parts apart: 32-bit-friendly sums, no u128 add per
     /// block.
     fn block_sum(&self, j: usize, s0: usize, count: u64) -> u128 {
-        let count = count as usize;
+        let (Some(lo_j), Some(hi_j)) = (self.lo.get(j), self.hi.get(j)) else {
+            return 0;
+        };
+        let count = (count as usize).min(FRAMES);
+        let s0 = s0.min(FRAMES - 1);
         let first_run = count.min(FRAMES - s0);
+        let run = |r: core::ops::Range<usize>| {
+            lo_j.get(r.clone())
+                .unwrap_or(&[])
+                .iter()
+                .zip(hi_j.get(r).unwrap_or(&[]))
+        };
         let (mut lo, mut hi) = (0u64, 0u32);
-        for (l, h) in self.lo[j][s0..s0 + first_run]
-            .iter()
-            .zip(&self.hi[j][s0..s0 + first_run])
-            .chain(
-                self.lo[j][..count - first_run]
-                    .iter()
-                    .zip(&self.hi[j][..count - first_run]),
-            )
-        {
+        for (l, h) in run(s0..s0 + first_run).chain(run(0..count - first_run)) {
             let (v, c) = lo.overflowing_add(*l);
             lo = v;
             hi += c as u32 + *h as u32;
@@ -843,26 +859,27 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Start segmenting the span of frames `first..first + span`: snapshot
     /// the cells' energies and compute the first row.
     fn dp_start(&mut self, first: u64) {
-        let (g, k) = (self.dp.group, self.span);
+        // (span < FRAMES and cells ≤ CELLS by construction; the `min`s let
+        // the compiler see it.)
+        let (g, k) = (self.dp.group, self.span.min(FRAMES - 1));
         // Prefix sums of the span's τ0 frame energies, kept for
         // `segment_window`; the cells' sums are read off them.
-        let s0 = self.slot_of(first);
+        let s0 = self.slot_of(first).min(FRAMES - 1);
         let run = k.min(FRAMES - s0);
         let mut acc = 0.0f32;
         self.px[0] = 0.0;
-        for (p, &x) in self.px[1..=k]
-            .iter_mut()
-            .zip(self.x0[s0..s0 + run].iter().chain(&self.x0[..k - run]))
-        {
+        let xs = self.x0.get(s0..s0 + run).unwrap_or(&[]).iter();
+        let xs = xs.chain(self.x0.get(..k - run).unwrap_or(&[]));
+        for (p, &x) in self.px[1..=k].iter_mut().zip(xs) {
             acc += x;
             *p = acc;
         }
-        for cell in 0..=self.dp.cells {
+        for cell in 0..=self.dp.cells.min(CELLS) {
             self.dp.sum[cell] = self.px[(cell * g).min(k)];
         }
         self.dp.first = Some(first);
         self.dp.nu = self.nu();
-        self.dp.beta = self.thresholds[k];
+        self.dp.beta = self.threshold_for(k);
         self.dp.cost[0] = -self.dp.beta;
         self.dp.row = 1;
         self.dp_row();
@@ -873,8 +890,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// scaled-χ² (Gamma) segment cost ν·n·ln(mean) and a penalty β per
     /// segment. At most 32 cells per row, one `lnf` per cell.
     fn dp_row(&mut self) {
-        let j = self.dp.row;
-        let (g, k) = (self.dp.group, self.span);
+        let j = self.dp.row.min(CELLS);
+        let (g, k) = (self.dp.group.max(1), self.span.min(FRAMES - 1));
         let frames = |c: usize| (c * g).min(k);
         let (nu, sj, nj) = (self.dp.nu, self.dp.sum[j], frames(j));
         let (mut best, mut arg) = (f32::INFINITY, 0u8);
@@ -907,17 +924,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// The finished segmentation's segment that holds t, widened to λ1;
     /// returns the window [lo, hi) in frames of the span at `first`.
     fn segment_window(&mut self, first: u64) -> (usize, usize) {
-        let (g, k, cells) = (self.dp.group, self.span, self.dp.cells);
+        let (g, k) = (self.dp.group.max(1), self.span.min(FRAMES - 1));
+        let cells = self.dp.cells.min(CELLS);
         let ft = k / 2; // frame that starts at (or holds) t
                         // The span's frame prefix sums (from `dp_start`): the changes are
                         // refined to the frame and every mean below is taken over frames.
+                        // Indices come from the segmentation and are in range; `get` keeps
+                        // that from being a panic path if it ever were not.
         let (px, ln_n) = (&self.px, &self.ln_n);
-        let x = |i: usize| px[i + 1] - px[i];
+        let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+        let x = |i: usize| p(i + 1) - p(i);
         let nu = self.dp.nu;
         let cost = |i: usize, j: usize| {
-            let nf = j - i;
-            let sum = px[j] - px[i];
-            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_n[nf])
+            let nf = j.saturating_sub(i);
+            let sum = p(j) - p(i);
+            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
+            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
         };
         // Segment bounds in frames, in order: 0 = b₀ < b₁ < … < b_nb = k.
         let mut bounds = [0u16; CELLS + 1];
@@ -926,24 +948,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         while j > 0 && nb < CELLS {
             bounds[nb] = (j * g).min(k) as u16;
             nb += 1;
-            j = self.dp.arg[j] as usize;
+            j = self.dp.arg.get(j).map_or(0, |&a| a as usize).min(j - 1);
         }
+        let nb = nb.min(CELLS);
         bounds[nb] = 0;
         bounds[..=nb].reverse();
+        let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         // Refine each change to the frame (the cells group g frames): the
         // best split of its two segments within ± (g − 1) frames.
         if g > 1 {
             for i in 1..nb {
-                let (l, c, r) = (
-                    bounds[i - 1] as usize,
-                    bounds[i] as usize,
-                    bounds[i + 1] as usize,
-                );
+                let (l, c, r) = (bd(&bounds, i - 1), bd(&bounds, i), bd(&bounds, i + 1));
                 let mut best = (cost(l, c) + cost(c, r), c);
-                for p in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
-                    let v = cost(l, p) + cost(p, r);
+                for q in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
+                    let v = cost(l, q) + cost(q, r);
                     if v < best.0 {
-                        best = (v, p);
+                        best = (v, q);
                     }
                 }
                 bounds[i] = best.1 as u16;
@@ -951,32 +971,33 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         // Keep the changes that were already there LAG hops ago (the entry
         // about to be overwritten), or strong ones, and remember this hop's.
-        let at = self.dp.hist_at;
+        let at = self.dp.hist_at % LAG;
         let old = self.dp.hist[at];
-        let old_len = self.dp.hist_len[at] as usize;
+        let old_len = (self.dp.hist_len[at] as usize).min(CELLS);
         let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
         for i in 1..nb {
-            let c = bounds[i] as usize;
+            let c = bd(&bounds, i);
             let abs = (first + c as u64) as u16;
-            self.dp.hist[at][i - 1] = abs;
+            self.dp.hist[at][(i - 1).min(CELLS - 1)] = abs;
             // Likelihood gain of this change against merging its two
             // segments.
-            let (l, r) = (bounds[i - 1] as usize, bounds[i + 1] as usize);
+            let (l, r) = (bd(&bounds, i - 1), bd(&bounds, i + 1));
             let gain = cost(l, r) - cost(l, c) - cost(c, r);
             let seen = old[..old_len]
                 .iter()
                 .any(|&o| abs.wrapping_sub(o).wrapping_add(1) <= 2);
             if seen || gain > STRONG * self.dp.beta {
-                kept[nk] = c as u16;
+                kept[nk.min(CELLS)] = c as u16;
                 nk += 1;
             }
         }
         self.dp.hist_len[at] = nb.saturating_sub(1) as u8;
         self.dp.hist_at = (at + 1) % LAG;
-        kept[nk] = k as u16;
-        let (bounds, nb) = (kept, nk);
-        let b = |i: usize| bounds[i] as usize;
-        let mean = |i: usize| (px[b(i + 1)] - px[b(i)]) / (b(i + 1) - b(i)) as f32;
+        let nb = nk.min(CELLS);
+        kept[nb] = k as u16;
+        let b = |i: usize| bd(&kept, i);
+        let mean =
+            |i: usize| (p(b(i + 1)) - p(b(i))) / (b(i + 1).saturating_sub(b(i))).max(1) as f32;
         let mut s = 0;
         while s + 1 < nb && b(s + 1) <= ft {
             s += 1;
@@ -1002,17 +1023,19 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             }
             let odd = k % 2;
             let (run_lo, run_hi) = (b(r0), b(r1 + 1));
-            let mut h = (ft - run_lo).min(run_hi - ft - odd);
+            let mut h = ft
+                .saturating_sub(run_lo)
+                .min(run_hi.saturating_sub(ft + odd));
             if 2 * h + odd < self.min_frames {
-                h = (self.min_frames - odd).div_ceil(2).min(ft);
+                h = self.min_frames.saturating_sub(odd).div_ceil(2).min(ft);
             }
             return (ft - h, (ft + odd + h).min(k));
         }
-        let (mut lo, mut hi) = (b(s), b(s + 1));
+        let (mut lo, mut hi) = (b(s), b(s + 1).max(b(s) + 1));
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean.
         let seg_mean = mean(s);
-        while hi - lo < self.min_frames {
+        while hi - lo < self.min_frames.min(k) {
             let left = (lo > 0).then(|| ratio_gap(x(lo - 1), seg_mean));
             let right = (hi < k).then(|| ratio_gap(x(hi), seg_mean));
             match (left, right) {
@@ -1030,7 +1053,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (k, min_frames) = (self.span, self.min_frames);
         let frames_of = move |len: u16| -> usize {
             // Whole frames of the span's parity, so the window is centred.
-            let mut f = (len as usize / SEG).clamp(min_frames, k);
+            let mut f = (len as usize / SEG).max(min_frames).min(k);
             if (k - f) % 2 == 1 {
                 f = if f < k { f + 1 } else { f - 1 };
             }

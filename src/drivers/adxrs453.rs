@@ -250,8 +250,10 @@ impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
             axes: 1 << self.axis,
             saturated: 0,
         };
-        r.raw[self.axis] = d.rate;
-        r.rate_dps[self.axis] = d.rate as f32 / LSB_PER_DPS;
+        // `axis` is clamped to 0..=2 in `new`; `min` lets the compiler see it.
+        let axis = self.axis.min(2);
+        r.raw[axis] = d.rate;
+        r.rate_dps[axis] = d.rate as f32 / LSB_PER_DPS;
         if d.rate == i16::MAX || d.rate == i16::MIN {
             r.saturated = 1 << self.axis;
         }
