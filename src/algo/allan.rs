@@ -129,7 +129,7 @@ impl NoiseType {
 pub fn edf(noise: NoiseType, n_phase: u64, m: u64) -> Option<f64> {
     let n = n_phase as f64;
     let m_f = m as f64;
-    if m == 0 || n_phase < 2 * m + 1 || n_phase < 4 {
+    if m == 0 || n_phase < 4 || (n_phase - 1) / 2 < m {
         return None;
     }
     let e = match noise {
@@ -229,7 +229,8 @@ fn check_cluster(phase: &[f64], tau0_s: f64, m: usize) -> Result<usize, AllanErr
         return Err(AllanError::BadTau);
     }
     let n = phase.len().saturating_sub(1);
-    if n < 2 * m {
+    // n / 2 < m, not n < 2m: 2m overflows for m ≥ 2⁶³ (found by fuzzing).
+    if n / 2 < m {
         return Err(AllanError::TooShort);
     }
     Ok(n)
@@ -374,7 +375,7 @@ pub fn avar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, All
 pub fn octave_ms(n: usize) -> impl Iterator<Item = usize> {
     (0..usize::BITS)
         .map(|j| 1usize << j)
-        .take_while(move |&m| n >= 2 * m)
+        .take_while(move |&m| n / 2 >= m)
 }
 
 /// Which IEEE 952 term a [`NoiseTerm`] is.
@@ -488,11 +489,13 @@ pub fn noise_terms(points: &[AdevPoint], out: &mut [Option<NoiseTerm>; 5]) {
 /// Log–log slope of σ(τ) around point `i` (central where possible).
 pub fn local_slope(points: &[AdevPoint], i: usize) -> Option<f64> {
     let a = i.saturating_sub(1);
-    let b = (i + 1).min(points.len().checked_sub(1)?);
-    if a == b {
+    let b = i.saturating_add(1).min(points.len().checked_sub(1)?);
+    // i past the end (a ≥ b) has no neighbours (an index out of bounds
+    // before, found by fuzzing).
+    if a >= b {
         return None;
     }
-    let (pa, pb) = (points[a], points[b]);
+    let (pa, pb) = (*points.get(a)?, *points.get(b)?);
     let s =
         (libm::log(pb.adev()) - libm::log(pa.adev())) / (libm::log(pb.tau_s) - libm::log(pa.tau_s));
     s.is_finite().then_some(s)

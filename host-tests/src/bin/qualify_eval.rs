@@ -282,7 +282,7 @@ fn seed003(seed: u64) {
     let rows = d.imfs + d.residue as usize;
     let mut h = vec![0.0; rows];
     let mut acc = vec![0.0; n];
-    masm(&out, n, rows, &mut acc, &mut h);
+    masm(&out, n, rows, &mut acc, &mut h).expect("MASM");
     describe(&format!("EMD, trend from mode {m}"), &emd_d);
     println!(
         "  EMD: {} IMFs + residue; MASM h_m = {:?}; trend = modes ≥ {m} (first |h_m| > {MASM_THRESHOLD})",

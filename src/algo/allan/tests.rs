@@ -288,3 +288,21 @@ fn streaming_arbitrary_tau_list_matches_batch() {
     assert!(StreamAdev::<2, 1024>::with_ms([0, 4]).is_err());
     assert!(StreamAdev::<2, 512>::with_ms([3, 300]).is_err());
 }
+
+#[test]
+fn huge_cluster_sizes_and_stray_indices_are_errors_not_panics() {
+    // Reproducers from fuzzing: 2m overflowed for m ≥ 2⁶³, and local_slope
+    // indexed past the end.
+    let phase = [0.0; 5];
+    for m in [1usize << 63, usize::MAX, 3] {
+        assert_eq!(oavar_phase(&phase, 1.0, m), Err(AllanError::TooShort));
+        assert_eq!(avar_phase(&phase, 1.0, m), Err(AllanError::TooShort));
+    }
+    assert_eq!(edf(NoiseType::WhiteFm, 5, 1 << 63), None);
+    assert_eq!(edf(NoiseType::WhiteFm, 0, 1), None);
+    assert_eq!(octave_ms(usize::MAX).count(), usize::BITS as usize - 1);
+    let p = oavar_phase(&[0.0, 1.0, 3.0, 2.0, 5.0], 1.0, 1).unwrap();
+    assert_eq!(local_slope(&[p, p], 5), None);
+    assert_eq!(local_slope(&[p, p], usize::MAX), None);
+    assert_eq!(local_slope(&[], 0), None);
+}

@@ -550,26 +550,46 @@ fn end_condition<F: Real>(x: &[F], out: &[F], imfs: usize, n: usize, cfg: &EmdCo
 
 /// MASM (eq. 6), reading "standardised mean of the fine-to-coarse partial
 /// sums": h_m = mean(Σ_{i≤m} imf_i) / std(Σ_{i≤m} imf_i), m = 1..imfs.
-/// `acc` is scratch of n. Writes h into `h[..imfs]`.
-pub fn masm<F: Real>(imfs: &[F], n: usize, count: usize, acc: &mut [F], h: &mut [F]) {
-    for v in acc[..n].iter_mut() {
+/// `acc` is scratch of n. Writes h into `h[..count]`.
+///
+/// Errors: `TooShort` for n = 0; `Buffer` when `imfs` holds fewer than
+/// `count` rows of n, or `acc` or `h` is too short (they panicked before).
+pub fn masm<F: Real>(
+    imfs: &[F],
+    n: usize,
+    count: usize,
+    acc: &mut [F],
+    h: &mut [F],
+) -> Result<(), QualifyError> {
+    if n == 0 {
+        return Err(QualifyError::TooShort);
+    }
+    let rows = imfs.chunks_exact(n).take(count);
+    let (Some(acc), Some(h)) = (acc.get_mut(..n), h.get_mut(..count)) else {
+        return Err(QualifyError::Buffer);
+    };
+    if rows.len() < count {
+        return Err(QualifyError::Buffer);
+    }
+    for v in acc.iter_mut() {
         *v = F::of(0.0);
     }
-    for m in 0..count.min(h.len()) {
-        for (a, v) in acc[..n].iter_mut().zip(&imfs[m * n..(m + 1) * n]) {
+    for (row, hm) in rows.zip(h.iter_mut()) {
+        for (a, v) in acc.iter_mut().zip(row) {
             *a += *v;
         }
-        let mean = acc[..n].iter().fold(0.0f64, |s, v| s + v.f64()) / n as f64;
-        let var = acc[..n]
+        let mean = acc.iter().fold(0.0f64, |s, v| s + v.f64()) / n as f64;
+        let var = acc
             .iter()
             .fold(0.0f64, |s, v| s + (v.f64() - mean) * (v.f64() - mean))
             / n as f64;
-        h[m] = F::of(if var > 0.0 {
+        *hm = F::of(if var > 0.0 {
             mean / libm::sqrt(var)
         } else {
             0.0
         });
     }
+    Ok(())
 }
 
 /// The trend starts at the first mode m (1-based) where |h_m| exceeds

@@ -109,7 +109,7 @@ pub fn detrend_wavelet<F: Real>(
     }
     let (c, rest) = scratch.split_at_mut(need);
     let lay = wavedec(w, x, levels, c, rest)?;
-    for b in 1..=lay.levels {
+    for b in 1..=lay.levels() {
         for v in &mut c[lay.band(b)] {
             *v = F::of(0.0);
         }
@@ -140,9 +140,9 @@ pub fn detrend_emd<F: Real>(
     }
     let (w, acc) = work.split_at_mut(work_len(n));
     let d = emd(x, cfg, rows, w, idx)?;
-    let count = d.imfs + d.residue as usize;
     let mut h = [F::of(0.0); 17];
-    masm(rows, n, count, acc, &mut h);
+    let count = (d.imfs + d.residue as usize).min(h.len());
+    masm(rows, n, count, acc, &mut h)?;
     let m = trend_start(&h[..count], threshold).unwrap_or(count + 1);
     for v in detrended[..n].iter_mut() {
         *v = F::of(0.0);

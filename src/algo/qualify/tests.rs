@@ -136,7 +136,7 @@ fn check_wavelet(w: &super::wavelet::Wavelet, lens: &[usize], coeffs: &[f64], ba
     let mut c = vec![0.0; 400];
     let mut scratch = vec![0.0; 700];
     let lay = wavedec(w, x, 5, &mut c, &mut scratch).unwrap();
-    assert_eq!(&lay.lens[..6], lens);
+    assert_eq!(lay.lens(), lens);
     let scale = coeffs.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     for (i, (&a, &b)) in c[..lay.total()].iter().zip(coeffs).enumerate() {
         assert!(
@@ -318,6 +318,31 @@ fn wavelet_bad_input_is_typed() {
     waverec(&DB4, &c, &lay, &mut out, &mut s).unwrap();
     assert!(out.iter().all(|v| (v - 2.5).abs() < 1e-9));
     let _ = Layout::new(64, 8, 2).unwrap();
+    // Short buffers for reconstruction and shrinkage are typed errors, and
+    // a layout of another length cannot be forged (private fields): one
+    // for 1000 samples on 128 coefficients is refused, not indexed.
+    assert_eq!(
+        waverec(&DB4, &c, &lay, &mut out[..10], &mut s),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        waverec(&DB4, &c, &lay, &mut out, &mut s[..10]),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        bayes_shrink(&mut c, &lay, &mut tmp[..3]),
+        Err(QualifyError::Buffer)
+    );
+    let big = Layout::new(1000, 8, 2).unwrap();
+    assert_eq!(
+        bayes_shrink(&mut c, &big, &mut tmp),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        waverec(&DB4, &c, &big, &mut out, &mut s),
+        Err(QualifyError::Buffer)
+    );
+    assert!(big.band(99).is_empty());
 }
 
 #[test]
@@ -399,8 +424,25 @@ fn emd_edge_cases_are_defined() {
     modes.extend((0..n).map(|i| 1.0 + i as f64 * 0.01));
     let mut acc = vec![0.0; n];
     let mut h = [0.0; 2];
-    masm(&modes, n, 2, &mut acc, &mut h);
+    masm(&modes, n, 2, &mut acc, &mut h).unwrap();
     assert!(h[0].abs() < 0.05 && h[1].abs() > 0.5, "{h:?}");
+    // Short buffers are typed errors (they panicked before).
+    assert_eq!(
+        masm(&modes, n, 3, &mut acc, &mut [0.0; 3]),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        masm(&modes, n, 2, &mut acc[..n - 1], &mut h),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        masm(&modes, n, 2, &mut acc, &mut h[..1]),
+        Err(QualifyError::Buffer)
+    );
+    assert_eq!(
+        masm(&modes, 0, 2, &mut acc, &mut h),
+        Err(QualifyError::TooShort)
+    );
     assert_eq!(trend_start(&h, 0.2), Some(2));
 }
 

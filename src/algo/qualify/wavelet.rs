@@ -154,15 +154,15 @@ pub fn idwt<F: Real>(w: &Wavelet, a: &[F], d: &[F], out: &mut [F]) -> Result<usi
 }
 
 /// Where each band of a multilevel decomposition sits in its buffer, in
-/// PyWavelets order: cA_J, cD_J, …, cD_1.
+/// PyWavelets order: cA_J, cD_J, …, cD_1. Only [`Layout::new`] builds one
+/// (the fields are private), so its lengths always agree with each other:
+/// a hand-made, inconsistent layout made `waverec` and `bayes_shrink`
+/// panic before.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
-    /// Levels J.
-    pub levels: usize,
-    /// Band lengths, `levels + 1` of them.
-    pub lens: [usize; MAX_LEVELS + 1],
-    /// Original signal length.
-    pub n: usize,
+    levels: usize,
+    lens: [usize; MAX_LEVELS + 1],
+    n: usize,
 }
 
 impl Layout {
@@ -184,15 +184,31 @@ impl Layout {
         Ok(Self { levels, lens, n })
     }
 
-    /// Total coefficient count.
-    pub fn total(&self) -> usize {
-        self.lens[..=self.levels].iter().sum()
+    /// Levels J.
+    pub fn levels(&self) -> usize {
+        self.levels
     }
 
-    /// Range of band `b` (0 = cA_J, 1 = cD_J, …, J = cD_1).
+    /// Band lengths, cA_J first (`levels + 1` of them).
+    pub fn lens(&self) -> &[usize] {
+        self.lens.get(..=self.levels).unwrap_or(&[])
+    }
+
+    /// Original signal length.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Total coefficient count.
+    pub fn total(&self) -> usize {
+        self.lens().iter().sum()
+    }
+
+    /// Range of band `b` (0 = cA_J, 1 = cD_J, …, J = cD_1); empty past J.
     pub fn band(&self, b: usize) -> core::ops::Range<usize> {
-        let start: usize = self.lens[..b].iter().sum();
-        start..start + self.lens[b]
+        let lens = self.lens();
+        let start: usize = lens.iter().take(b).sum();
+        start..start + lens.get(b).copied().unwrap_or(0)
     }
 }
 
