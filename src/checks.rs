@@ -7,6 +7,8 @@
 
 use core::cell::RefCell;
 
+use crate::emu::with_bus;
+
 use embedded_hal_bus::spi::RefCellDevice;
 
 use crate::algo::fusion::{
@@ -173,7 +175,8 @@ pub fn qualify_digest() -> u64 {
     match emd(&x, &cfg, &mut rows, &mut work, &mut idx) {
         Ok(dec) => {
             d.word(dec.imfs as u32);
-            for v in &rows[..(dec.imfs + dec.residue as usize) * N] {
+            let used = (dec.imfs + dec.residue as usize) * N;
+            for v in rows.get(..used).unwrap_or(&[]) {
                 d.f32(*v);
             }
         }
@@ -294,7 +297,7 @@ fn run_board_array(
         &mut pipe,
     );
     for n in 0..samples {
-        bus.borrow_mut().advance(1e-3);
+        with_bus(&bus, |b| b.advance(1e-3));
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
         let out = pipe.step(&mut gyros);
         each(n, &bus, &out, &pipe);
@@ -314,9 +317,11 @@ pub fn pipeline_digest() -> u64 {
     let mut d = Digest::new();
     let ran = run_board_array(profile, 9, 400, |n, bus, out, _| {
         if n == 199 {
-            bus.borrow_mut().chips[1].set_fault(Fault::Spikes {
-                prob: 0.2,
-                magnitude_dps: 5.0,
+            with_bus(bus, |b| {
+                b.chips[1].set_fault(Fault::Spikes {
+                    prob: 0.2,
+                    magnitude_dps: 5.0,
+                })
             });
         }
         for f in out.fused.iter() {
@@ -376,10 +381,10 @@ fn adx_run(
     let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
     let mut g = Adxrs453::new(dev, 2);
     let init = g.init(&mut delay).map_err(|e| e.map_spi(bus_err));
-    bus.borrow_mut().chips[0].set_fault(fault);
+    with_bus(&bus, |b| b.chips[0].set_fault(fault));
     let (mut errors, mut wild) = (0, 0);
     for _ in 0..reads {
-        bus.borrow_mut().advance(1e-3);
+        with_bus(&bus, |b| b.advance(1e-3));
         match g.read_dps() {
             // 3 °/s is over 6 σ of the part's noise at 1 kHz (0.47 °/s).
             Ok(v) if (v + 5.0).abs() > 3.0 => wild += 1,
@@ -467,7 +472,7 @@ fn saturation_is_flagged() -> bool {
     let mut ok = true;
     let ran = run_board_array(RateProfile::constant(1.0), 3, 41, |n, bus, out, pipe| {
         if n == 0 {
-            bus.borrow_mut().chips[3].set_fault(Fault::Saturated);
+            with_bus(bus, |b| b.chips[3].set_fault(Fault::Saturated));
             return;
         }
         // A saturated axis is never offered, even before the flag is set.

@@ -1165,7 +1165,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             }
         };
         let tentative = (self.len as f32 - step) as i32 & !1;
-        self.len = tentative.clamp(self.cfg.lambda1 as i32, self.cfg.lambda2 as i32) as u16;
+        // (max then min: `clamp` asserts λ1 ≤ λ2, which `new` checked.)
+        self.len = tentative
+            .max(self.cfg.lambda1 as i32)
+            .min(self.cfg.lambda2 as i32) as u16;
     }
 }
 

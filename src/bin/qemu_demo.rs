@@ -26,7 +26,7 @@ use gyro_array::board::qemu::exit;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::{board_array, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
+use gyro_array::emu::{board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
@@ -89,7 +89,9 @@ fn main() -> ! {
         selftest::run(
             &mut gyros,
             |g| if g == 4 { 2 } else { 0 },
-            || bus.borrow_mut().advance(dt),
+            || {
+                with_bus(&bus, |b| b.advance(dt));
+            },
             &mut blocks,
             &mut results,
         )
@@ -128,8 +130,7 @@ fn main() -> ! {
         }
         last_tick = now;
 
-        {
-            let mut b = bus.borrow_mut();
+        with_bus(&bus, |b| {
             match n {
                 1500 => {
                     b.chips[2].set_fault(Fault::Stuck);
@@ -144,7 +145,7 @@ fn main() -> ! {
                 _ => {}
             }
             b.advance(dt);
-        }
+        });
 
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
         let out = pipe.step(&mut gyros);
@@ -175,7 +176,7 @@ fn main() -> ! {
                     sigma_x_1ms = tracker::sigma_dps(&e, 0);
                 }
             }
-            let truth = bus.borrow().chips[0].true_rate_dps();
+            let truth = with_bus(&bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
             for (a, f) in out.fused.iter().enumerate() {
                 match f {
                     Some(f) => defmt::info!(

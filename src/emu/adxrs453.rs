@@ -127,7 +127,7 @@ impl Adxrs453Model {
         let mut dps = self.noise.step(
             &self.params,
             &mut self.rng,
-            self.true_rate_dps[self.axis],
+            self.true_rate_dps[self.axis.min(2)],
             dt_s,
         );
         if let Fault::Spikes {

@@ -225,6 +225,16 @@ impl<'a, const N: usize> EmuBus<'a, N> {
     }
 }
 
+/// Run `f` on the bus behind its `RefCell`, if nothing else holds it
+/// (the harness never nests borrows; `None` rather than a panic path if
+/// it ever did).
+pub fn with_bus<'a, const N: usize, R>(
+    bus: &core::cell::RefCell<EmuBus<'a, N>>,
+    f: impl FnOnce(&mut EmuBus<'a, N>) -> R,
+) -> Option<R> {
+    bus.try_borrow_mut().ok().map(|mut b| f(&mut b))
+}
+
 impl<const N: usize> ErrorType for EmuBus<'_, N> {
     type Error = BusError;
 }
@@ -296,7 +306,7 @@ impl<const N: usize> embedded_hal::delay::DelayNs for EmuDelay<'_, '_, N> {
         let step = (self.dt_s * 1e9) as u64;
         while step > 0 && self.pending_ns >= step {
             self.pending_ns -= step;
-            self.bus.borrow_mut().advance(self.dt_s);
+            with_bus(self.bus, |b| b.advance(self.dt_s));
         }
     }
 }

@@ -67,8 +67,13 @@ fn ensure_tools() {
             "install qemu-system-arm",
         );
     }
-    let v = have("flip-link", "--version").unwrap_or_default();
-    if !v.contains(FLIP_LINK) {
+    // flip-link has no --version: ask cargo what it installed.
+    let v = Command::new("cargo")
+        .args(["install", "--list"])
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+        .unwrap_or_default();
+    if !v.contains(&format!("flip-link v{FLIP_LINK}")) {
         must(
             run(Command::new("cargo")
                 .args(["install", "flip-link", "--locked", "--force", "--version"])
