@@ -31,8 +31,8 @@ use stm32f4xx_hal::{
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
-use gyro_array::board::persist;
 use gyro_array::board::record::Cause;
+use gyro_array::board::{persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
@@ -54,7 +54,7 @@ fn give_up(what: &str) -> ! {
 #[entry]
 fn main() -> ! {
     let record = persist::take();
-    persist::guard_stack();
+    stack::guard_stack();
     let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
         give_up("peripherals taken twice")
     };
@@ -161,7 +161,7 @@ fn main() -> ! {
         }
     }
 
-    let u = persist::stack_usage();
+    let u = stack::stack_usage();
     defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
     watchdog.start(100.millis());
     let period = SYSCLK_HZ / FS_HZ;
@@ -182,7 +182,7 @@ fn main() -> ! {
         // A completed sample is the only thing that feeds the watchdog.
         watchdog.feed();
         if out.seq % 10_000 == 0 {
-            let u = persist::stack_usage();
+            let u = stack::stack_usage();
             defmt::info!("seq {}: stack peak {} of {} bytes", out.seq, u.peak, u.size);
         }
         if out.seq % 1000 == 0 {

@@ -23,6 +23,7 @@ use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::qemu::exit;
+use gyro_array::board::stack;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
@@ -49,6 +50,7 @@ fn SysTick() {
 
 #[entry]
 fn main() -> ! {
+    stack::guard_stack();
     let cp = cortex_m::Peripherals::take().unwrap_or_else(|| exit(false));
     let profile = RateProfile {
         base_dps: [0.5, -0.2, 10.0],
@@ -239,6 +241,8 @@ fn main() -> ! {
     );
     pass &= self_test_ok;
     pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
+    let u = stack::stack_usage();
+    defmt::info!("stack: peak {} of {} bytes", u.peak, u.size);
     defmt::info!("demo {}", if pass { "PASS" } else { "FAIL" });
     exit(pass)
 }

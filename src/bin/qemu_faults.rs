@@ -21,9 +21,9 @@ use core::mem::MaybeUninit;
 
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
-use gyro_array::board::persist;
 use gyro_array::board::qemu::exit;
 use gyro_array::board::record::Cause;
+use gyro_array::board::{persist, stack};
 
 /// Stage word and its guard, kept across resets (both garbage at power-up).
 #[unsafe(link_section = ".uninit.stage")]
@@ -78,7 +78,7 @@ fn deep(n: u32) -> u32 {
 #[entry]
 fn main() -> ! {
     let record = persist::take();
-    persist::guard_stack();
+    stack::guard_stack();
     match (stage(), record) {
         (0, _) => {
             defmt::info!("stage 1: cold boot (record: {}), forcing a panic", record);
@@ -98,7 +98,7 @@ fn main() -> ! {
                 exit(false);
             }
             set_stage(2);
-            let u = persist::stack_usage();
+            let u = stack::stack_usage();
             defmt::info!(
                 "stack before the overflow: {} of {} bytes used",
                 u.peak,

@@ -6,3 +6,5 @@ pub mod persist;
 #[cfg(feature = "qemu")]
 pub mod qemu;
 pub mod record;
+#[cfg(any(feature = "qemu", feature = "persist"))]
+pub mod stack;

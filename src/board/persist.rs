@@ -1,7 +1,7 @@
 //! Fault containment on the target: a panic or a hard fault is recorded in
 //! RAM that survives the reset, the core resets, and the next boot reports
-//! what happened ([`take`]). Also the stack: [`guard_stack`] at boot (paint
-//! and MPU guard), [`stack_usage`] whenever the firmware reports status.
+//! what happened ([`take`]). The stack guard that turns an overflow into a
+//! hard fault is in [`super::stack`].
 //!
 //! - **Panic**: the message goes to panic-persist's region, the cause to
 //!   the [`Record`] (CRC-checked, so power-up garbage never reads as a
@@ -21,6 +21,7 @@ use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use super::record::{Cause, FaultRegs, Record, WORDS};
+use super::stack::{stack_bounds, GUARD};
 
 /// The record, in `.uninit` (neither loaded nor zeroed at start-up).
 #[unsafe(link_section = ".uninit.reset_record")]
@@ -33,16 +34,6 @@ static BOOTS: AtomicU32 = AtomicU32::new(0);
 const EMERGENCY_WORDS: usize = 256;
 #[unsafe(link_section = ".uninit.emergency_stack")]
 static mut EMERGENCY: MaybeUninit<[u32; EMERGENCY_WORDS]> = MaybeUninit::uninit();
-
-/// Painted into the free stack at boot.
-const PAINT: u32 = 0xCAFE_F00D;
-
-unsafe extern "C" {
-    /// Lowest stack address (cortex-m-rt; the bottom of RAM with flip-link).
-    static _stack_end: u32;
-    /// Initial stack pointer (top of the stack).
-    static _stack_start: u32;
-}
 
 /// The last run's record, if any, and forget it (a second boot without a
 /// new fault reports nothing). Call once, early at boot.
@@ -142,76 +133,4 @@ extern "C" fn hard_fault(sp: u32) -> ! {
         record_and_reset(Cause::StackOverflow(regs))
     }
     record_and_reset(Cause::HardFault(regs))
-}
-
-/// The stack region [bottom, top).
-fn stack_bounds() -> (u32, u32) {
-    // Linker symbols: only their addresses are used.
-    (&raw const _stack_end as u32, &raw const _stack_start as u32)
-}
-
-/// Bytes at the bottom of the stack that the MPU makes inaccessible.
-const GUARD: u32 = 32;
-
-/// Paint the free stack below the current stack pointer (keeping 64 bytes
-/// of margin), so that [`stack_usage`] can find the deepest use later, and
-/// put an MPU no-access region of 32 bytes at the bottom of the stack.
-///
-/// flip-link already puts the stack at the bottom of RAM, where on the
-/// STM32F405 an overflow hits reserved space and bus-faults. The guard
-/// makes the overflow fault on any memory map: QEMU's mps2-an386 ignores
-/// accesses to unmapped addresses, and there a runaway stack went on
-/// writing until it wrecked the code. Call once, early in `main`.
-pub fn guard_stack() {
-    let (lo, _) = stack_bounds();
-    let base = lo.next_multiple_of(GUARD);
-    let sp = cortex_m::register::msp::read() - 64;
-    let mut a = base + GUARD;
-    while a < sp {
-        // SAFETY: [lo, sp) is stack below the live frames: nothing uses it.
-        unsafe { (a as *mut u32).write_volatile(PAINT) };
-        a += 4;
-    }
-    // MPU region 0 (ARMv7-M B3.5): base, 32 bytes, AP = no access, XN;
-    // the default map stays in force elsewhere (PRIVDEFENA).
-    let w = |addr: usize, v: u32| {
-        // SAFETY: MPU registers, written in the documented order before
-        // the region is used; nothing else configures the MPU.
-        unsafe { (addr as *mut u32).write_volatile(v) }
-    };
-    w(0xE000_ED98, 0); // RNR
-    w(0xE000_ED9C, base); // RBAR
-    w(
-        0xE000_EDA0,
-        (1 << 28) | ((GUARD.trailing_zeros() - 1) << 1) | 1,
-    ); // RASR
-    w(0xE000_ED94, (1 << 2) | 1); // CTRL: PRIVDEFENA | ENABLE
-    cortex_m::asm::dsb();
-    cortex_m::asm::isb();
-}
-
-/// Stack use so far.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct StackUsage {
-    /// Deepest use since the paint, bytes.
-    pub peak: u32,
-    /// Size of the stack region, bytes.
-    pub size: u32,
-}
-
-/// The high-water mark: the first word from the bottom that is no longer
-/// paint marks the deepest the stack has been.
-pub fn stack_usage() -> StackUsage {
-    let (lo, hi) = stack_bounds();
-    let lo = lo.next_multiple_of(GUARD) + GUARD;
-    let mut a = lo;
-    // SAFETY: reading the stack region's own words.
-    while a < hi && unsafe { (a as *const u32).read_volatile() } == PAINT {
-        a += 4;
-    }
-    StackUsage {
-        peak: hi - a,
-        size: hi - lo,
-    }
 }
