@@ -270,10 +270,25 @@ fn run_board_array(
     profile: RateProfile,
     seed: u64,
     samples: u32,
+    each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+) -> Option<()> {
+    run_board_array_from(profile, seed, samples, [Fault::None; 5], each)
+}
+
+/// [`run_board_array`] with a fault per chip present from power-up.
+pub(crate) fn run_board_array_from(
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    at_power_up: [Fault; 5],
     mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
 ) -> Option<()> {
     let cs: [CsLine; 5] = Default::default();
-    let bus = RefCell::new(EmuBus::new(board_array(profile, seed), &cs));
+    let mut chips = board_array(profile, seed);
+    for (c, f) in chips.iter_mut().zip(at_power_up) {
+        c.set_fault(f);
+    }
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
     let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
@@ -458,6 +473,14 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
         saturation_is_flagged(),
     );
     check(
+        "recovery: late power-up, resets of both chip kinds, all back in use",
+        recovery_comes_back(),
+    );
+    check(
+        "recovery: a wrong chip is retried with back-off and never used",
+        recovery_backs_off(),
+    );
+    check(
         "allan: streaming OADEV and E-DAVAR bit-identical to the golden digest",
         allan_digest() == golden::ALLAN,
     );
@@ -466,6 +489,102 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
         qualify_digest() == golden::QUALIFY,
     );
     tally
+}
+
+/// Gyro 2 is unpowered at start-up and powers up at sample 300; gyro 1
+/// (ICM-42688-P) resets at 800 and gyro 4 (ADXRS453) at 1200. Every sample
+/// must still fuse all three axes from the others, each lost gyro must be
+/// restarted and back in fusion (the reset ones within 100 samples), and
+/// the counters must say so.
+fn recovery_comes_back() -> bool {
+    let mut ok = true;
+    let mut back = [None::<u32>; 5];
+    let mut counters = None;
+    let ran = run_board_array_from(
+        RateProfile::constant(1.0),
+        5,
+        3000,
+        [
+            Fault::None,
+            Fault::None,
+            Fault::PoweredOff,
+            Fault::None,
+            Fault::None,
+        ],
+        |n, bus, out, pipe| {
+            match n {
+                300 => {
+                    with_bus(bus, |b| b.chips[2].set_fault(Fault::None));
+                }
+                800 => {
+                    with_bus(bus, |b| b.chips[1].power_cycle());
+                }
+                1200 => {
+                    with_bus(bus, |b| b.chips[4].power_cycle());
+                }
+                _ => {}
+            }
+            ok &= out.fused.iter().all(|f| f.is_some());
+            for (i, since) in [(2, 300), (1, 800), (4, 1200)] {
+                let used = out.offered.iter().any(|m| m & (1 << i) != 0);
+                if n > since && used && back[i].is_none() {
+                    back[i] = Some(n - since);
+                }
+            }
+            counters = Some(*pipe.counters());
+        },
+    );
+    let Some(c) = counters else { return false };
+    #[cfg(feature = "defmt")]
+    defmt::info!(
+        "recovery: back after {} (late power-up), {} (ICM reset), {} (ADXRS453 reset) samples",
+        back[2],
+        back[1],
+        back[4]
+    );
+    #[cfg(test)]
+    std::println!(
+        "recovery: back after {:?} (late power-up), {:?} (ICM reset), {:?} (ADXRS453 reset) samples; counters {:?}",
+        back[2],
+        back[1],
+        back[4],
+        c
+    );
+    ran.is_some()
+        && ok
+        && back[2].is_some()
+        && back[1].is_some_and(|d| d <= 100)
+        && back[4].is_some_and(|d| d <= 200)
+        && c[1].resets == 1
+        && c[1].restarted == 1
+        && c[4].resets == 1
+        && c[4].restarted == 1
+        && c[2].restarted == 1
+}
+
+/// Gyro 3 answers with another part's id for 10 s: it is retried with a
+/// growing back-off (a handful of attempts, not one per sample) and never
+/// offered to fusion.
+fn recovery_backs_off() -> bool {
+    let mut never_used = true;
+    let mut attempts = 0;
+    let ran = run_board_array_from(
+        RateProfile::constant(1.0),
+        6,
+        10_000,
+        [
+            Fault::None,
+            Fault::None,
+            Fault::None,
+            Fault::WrongId,
+            Fault::None,
+        ],
+        |_, _, out, pipe| {
+            never_used &= out.offered.iter().all(|m| m & (1 << 3) == 0);
+            attempts = pipe.counters()[3].restarts;
+        },
+    );
+    ran.is_some() && never_used && (5..=20).contains(&attempts)
 }
 
 fn saturation_is_flagged() -> bool {
@@ -486,4 +605,13 @@ fn saturation_is_flagged() -> bool {
         }
     });
     ran.is_some() && ok
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn recovery_figures() {
+        assert!(super::recovery_comes_back());
+        assert!(super::recovery_backs_off());
+    }
 }

@@ -10,7 +10,7 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 
-use super::{Gyro, ReadFault, Reading};
+use super::{Gyro, ReadFault, Reading, Restart};
 
 /// Register addresses (datasheet table "Register map"); 16-bit registers
 /// are read at their even (high-byte) address.
@@ -241,6 +241,9 @@ impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
         let d = self.read_sensor().map_err(|e| match e {
             Error::Spi(_) => ReadFault::Bus,
             Error::Parity(_) => ReadFault::Parity,
+            // POR set: the part went through a power-on reset and needs
+            // its start-up check again (our reading of the POR bit).
+            Error::Fault(f) if f & fault::POR != 0 => ReadFault::Reset,
             Error::Fault(f) => ReadFault::ChipFault(f),
             _ => ReadFault::BadResponse,
         })?;
@@ -258,6 +261,44 @@ impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
             r.saturated = 1 << self.axis;
         }
         Ok(r)
+    }
+
+    /// `init`'s start-up check in steps, 50 ms apart: request with CHK,
+    /// then every fault bit must show, then none, then the part id.
+    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
+        let bad = |_| ReadFault::BadResponse;
+        match step {
+            0 => {
+                self.frame(with_parity(cmd::SENSOR_DATA | cmd::CHK))
+                    .map_err(|_| ReadFault::Bus)?;
+                Ok(Restart::Again {
+                    step: 1,
+                    wait_us: 50_000,
+                })
+            }
+            1 => {
+                let forced = self.frame(with_parity(cmd::SENSOR_DATA)).map_err(bad)?;
+                if (forced & 0xFF) as u8 & fault::ALL != fault::ALL {
+                    return Err(ReadFault::BadResponse);
+                }
+                Ok(Restart::Again {
+                    step: 2,
+                    wait_us: 50_000,
+                })
+            }
+            _ => {
+                let after = self.frame(with_parity(cmd::SENSOR_DATA)).map_err(bad)?;
+                self.pending = Pending::SensorData;
+                if (after & 0xFF) as u8 & fault::ALL != 0 {
+                    return Err(ReadFault::BadResponse);
+                }
+                let pid = self.read_register(reg::PID1).map_err(bad)?;
+                if (pid >> 8) as u8 != PID_HIGH {
+                    return Err(ReadFault::BadResponse);
+                }
+                Ok(Restart::Done)
+            }
+        }
     }
 }
 

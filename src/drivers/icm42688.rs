@@ -7,7 +7,7 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::{Operation, SpiDevice};
 
-use super::{Gyro, ReadFault, Reading};
+use super::{Gyro, ReadFault, Reading, Restart};
 
 /// Register addresses (datasheet names). Bank 0 unless noted.
 #[allow(missing_docs)]
@@ -37,6 +37,9 @@ const GYRO_MODE_LN: u8 = 0b11 << 2;
 const EN_G_ALL: u8 = 0b111;
 /// Address bit 7 marks a read.
 const READ: u8 = 0x80;
+/// INT_STATUS.RESET_DONE_INT (bit 4): set when the chip comes out of a
+/// reset, cleared when INT_STATUS is read.
+pub const RESET_DONE: u8 = 1 << 4;
 
 /// Gyro full-scale range, GYRO_CONFIG0.GYRO_FS_SEL (bits 7:5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -198,6 +201,8 @@ impl SelfTest {
 pub struct Icm42688<SPI> {
     spi: SPI,
     full_scale: FullScale,
+    /// The configuration last set (a restart sets it again).
+    config: Config,
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -206,6 +211,10 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         Self {
             spi,
             full_scale: FullScale::Dps2000,
+            config: Config {
+                full_scale: FullScale::Dps2000,
+                odr: Odr::Hz1000,
+            },
         }
     }
 
@@ -231,8 +240,32 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         }
         self.configure(cfg)?;
         self.write_checked(reg::PWR_MGMT0, GYRO_MODE_LN)?;
+        // Clear RESET_DONE (set by the reset above): from here on, a set
+        // bit in a sample's INT_STATUS means the chip reset behind our back.
+        self.read(reg::INT_STATUS)?;
         delay.delay_ms(45); // gyro start-up time, datasheet table 1
         Ok(())
+    }
+
+    /// One sample: a burst read of GYRO_DATA_X1..Z0, TMST_FSYNCH and
+    /// INT_STATUS (0x25..=0x2D, 9 bytes). Returns the raw counts and
+    /// INT_STATUS, whose RESET_DONE bit reveals a silent reset.
+    pub fn read_sample(&mut self) -> Result<([i16; 3], u8), Error<SPI::Error>> {
+        let mut b = [0u8; 9];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[reg::GYRO_DATA_X1 | READ]),
+                Operation::Read(&mut b),
+            ])
+            .map_err(Error::Spi)?;
+        Ok((
+            [
+                i16::from_be_bytes([b[0], b[1]]),
+                i16::from_be_bytes([b[2], b[3]]),
+                i16::from_be_bytes([b[4], b[5]]),
+            ],
+            b[8],
+        ))
     }
 
     /// Set range and output data rate, and check the read-back.
@@ -240,6 +273,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         let v = ((cfg.full_scale as u8) << 5) | cfg.odr as u8;
         self.write_checked(reg::GYRO_CONFIG0, v)?;
         self.full_scale = FullScale::from_bits(v >> 5);
+        self.config = cfg;
         Ok(())
     }
 
@@ -280,6 +314,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             return Err(Error::InvalidArgument);
         }
         let saved = self.read(reg::GYRO_CONFIG0)?;
+        let saved_config = self.config;
         self.configure(Config {
             full_scale: FullScale::Dps250,
             odr: Odr::Hz1000,
@@ -299,6 +334,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write(reg::REG_BANK_SEL, 0)?;
         self.write_checked(reg::GYRO_CONFIG0, saved)?;
         self.full_scale = FullScale::from_bits(saved >> 5);
+        self.config = saved_config;
 
         let mut st = SelfTest {
             response_lsb: [0.0; 3],
@@ -377,7 +413,10 @@ pub fn factory_response_lsb(code: u8) -> f32 {
 
 impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
     fn read(&mut self) -> Result<Reading, ReadFault> {
-        let raw = self.read_raw().map_err(|_| ReadFault::Bus)?;
+        let (raw, status) = self.read_sample().map_err(|_| ReadFault::Bus)?;
+        if status & RESET_DONE != 0 {
+            return Err(ReadFault::Reset);
+        }
         let s = self.full_scale.lsb_per_dps();
         let mut saturated = 0;
         for (i, r) in raw.iter().enumerate() {
@@ -391,6 +430,38 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
             axes: 0b111,
             saturated,
         })
+    }
+
+    /// `init` in steps: soft reset; 1 ms later identify, configure (with
+    /// read-back), start the gyro and clear RESET_DONE; done after the
+    /// 45 ms gyro start-up. The configuration is the last one set.
+    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
+        let bus = |_| ReadFault::Bus;
+        match step {
+            0 => {
+                self.write(reg::DEVICE_CONFIG, SOFT_RESET).map_err(bus)?;
+                Ok(Restart::Again {
+                    step: 1,
+                    wait_us: 1000,
+                })
+            }
+            1 => {
+                self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                if self.read(reg::WHO_AM_I).map_err(bus)? != WHO_AM_I_VALUE {
+                    return Err(ReadFault::BadResponse);
+                }
+                let cfg = self.config;
+                self.configure(cfg).map_err(|_| ReadFault::BadResponse)?;
+                self.write_checked(reg::PWR_MGMT0, GYRO_MODE_LN)
+                    .map_err(|_| ReadFault::BadResponse)?;
+                self.read(reg::INT_STATUS).map_err(bus)?;
+                Ok(Restart::Again {
+                    step: 2,
+                    wait_us: 45_000,
+                })
+            }
+            _ => Ok(Restart::Done),
+        }
     }
 }
 
@@ -433,6 +504,7 @@ mod tests {
         s.extend(rd(0x4F, &[0x66]));
         s.extend(wr(0x4E, 0x0C)); // gyro low-noise
         s.extend(rd(0x4E, &[0x0C]));
+        s.extend(rd(0x2D, &[0x10])); // INT_STATUS: clears RESET_DONE
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         g.init(&mut NoDelay, Config::default()).unwrap();
@@ -479,7 +551,11 @@ mod tests {
 
     #[test]
     fn burst_read_scales_big_endian_counts() {
-        let s = rd(0x25, &[0x00, 0x83, 0xFF, 0x7D, 0x7F, 0xFF]);
+        // GYRO_DATA_X1..Z0, TMST (2), INT_STATUS (data ready only).
+        let s = rd(
+            0x25,
+            &[0x00, 0x83, 0xFF, 0x7D, 0x7F, 0xFF, 0x12, 0x34, 0x08],
+        );
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         g.full_scale = FullScale::Dps250;
@@ -488,6 +564,44 @@ mod tests {
         assert_eq!(r.rate_dps[0], 1.0);
         assert_eq!(r.rate_dps[1], -1.0);
         assert_eq!(r.saturated, 0b100);
+        spi.done();
+    }
+
+    #[test]
+    fn a_silent_reset_is_reported_and_a_restart_reconfigures() {
+        let mut s = Vec::new();
+        // INT_STATUS with RESET_DONE: the chip reset since it was set up.
+        s.extend(rd(0x25, &[0x80, 0x00, 0x80, 0x00, 0x80, 0x00, 0, 0, 0x10]));
+        s.extend(wr(0x11, 0x01)); // step 0: soft reset
+        s.extend(wr(0x76, 0x00)); // step 1: bank 0, id, config, gyro on
+        s.extend(rd(0x75, &[0x47]));
+        s.extend(wr(0x4F, 0x06)); // the configuration set before
+        s.extend(rd(0x4F, &[0x06]));
+        s.extend(wr(0x4E, 0x0C));
+        s.extend(rd(0x4E, &[0x0C]));
+        s.extend(rd(0x2D, &[0x10]));
+        let mut spi = Mock::new(&s);
+        let mut g = Icm42688::new(spi.clone());
+        g.config = Config {
+            full_scale: FullScale::Dps2000,
+            odr: Odr::Hz1000,
+        };
+        assert_eq!(Gyro::read(&mut g), Err(ReadFault::Reset));
+        assert_eq!(
+            g.restart(0),
+            Ok(Restart::Again {
+                step: 1,
+                wait_us: 1000
+            })
+        );
+        assert_eq!(
+            g.restart(1),
+            Ok(Restart::Again {
+                step: 2,
+                wait_us: 45_000
+            })
+        );
+        assert_eq!(g.restart(2), Ok(Restart::Done));
         spi.done();
     }
 

@@ -20,6 +20,24 @@ pub enum ReadFault {
     ChipFault(u8),
     /// The chip answered with something that is not a data frame.
     BadResponse,
+    /// The chip has reset itself since it was configured (a brown-out, a
+    /// glitch): its configuration is gone and it must be restarted.
+    Reset,
+}
+
+/// One step of a non-blocking restart ([`Gyro::restart`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Restart {
+    /// Call again with `step` once at least `wait_us` have passed.
+    Again {
+        /// The next step.
+        step: u8,
+        /// Microseconds to wait first.
+        wait_us: u32,
+    },
+    /// The chip is configured and producing data again.
+    Done,
 }
 
 /// One reading of a gyro in its native counts and in degrees per second.
@@ -40,4 +58,10 @@ pub struct Reading {
 pub trait Gyro {
     /// Read the latest rate sample of every axis the part has.
     fn read(&mut self) -> Result<Reading, ReadFault>;
+
+    /// Restart the chip (reset, identify, configure) without blocking: the
+    /// pipeline calls this with step 0, then with each step it returns,
+    /// after the wait it asks for, while the other gyros keep sampling.
+    /// Each call is a few SPI transactions. An error ends the attempt.
+    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault>;
 }

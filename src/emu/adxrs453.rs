@@ -36,9 +36,18 @@ pub struct Adxrs453Model {
     pub fault: Fault,
     /// The true rate at the last update.
     pub true_rate_dps: [f32; 3],
+    /// Reset since the last start-up check: responses flag POR, data are
+    /// not valid.
+    por: bool,
 }
 
 impl Adxrs453Model {
+    /// A power-on reset: POR until the next start-up check.
+    pub fn power_cycle(&mut self) {
+        self.por = true;
+        self.next = 0;
+    }
+
     /// A part on board axis `axis` (0..=2).
     pub fn new(params: NoiseParams, profile: RateProfile, seed: u64, axis: usize) -> Self {
         Self {
@@ -54,6 +63,7 @@ impl Adxrs453Model {
             rng: Rng::new(seed),
             fault: Fault::None,
             true_rate_dps: [0.0; 3],
+            por: false,
         }
     }
 
@@ -73,7 +83,7 @@ impl Adxrs453Model {
         let out = (self.tx >> shift) as u8;
         self.rx = (self.rx << 8) | mosi as u32;
         self.nbytes = self.nbytes.saturating_add(1);
-        if self.nbytes == 4 {
+        if self.nbytes == 4 && self.fault != Fault::PoweredOff {
             self.next = self.respond(self.rx);
         }
         corrupt(&mut self.rng, out, self.fault)
@@ -103,6 +113,10 @@ impl Adxrs453Model {
                 let mut st = 0b01u32;
                 if c & cmd::CHK != 0 {
                     faults = fault::ALL;
+                    st = 0b00;
+                    self.por = false;
+                } else if self.por {
+                    faults = fault::POR;
                     st = 0b00;
                 } else if self.fault == Fault::ChipFault {
                     faults = fault::PLL | fault::CST;

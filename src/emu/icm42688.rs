@@ -2,7 +2,7 @@
 
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::{corrupt, Fault, Rng};
-use crate::drivers::icm42688::{factory_response_lsb, reg, FullScale, WHO_AM_I_VALUE};
+use crate::drivers::icm42688::{factory_response_lsb, reg, FullScale, RESET_DONE, WHO_AM_I_VALUE};
 
 const GYRO_CONFIG0_RESET: u8 = 0x06; // ±2000 °/s, 1 kHz
 /// Data registers read −32768 while the gyro is off (datasheet 14.x).
@@ -56,7 +56,14 @@ impl Icm42688Model {
         self.bank0 = [0; 128];
         self.bank0[reg::GYRO_CONFIG0 as usize] = GYRO_CONFIG0_RESET;
         self.bank0[reg::WHO_AM_I as usize] = WHO_AM_I_VALUE;
+        self.bank0[reg::INT_STATUS as usize] = RESET_DONE;
         self.set_output([DATA_OFF; 3]);
+    }
+
+    /// A power-on reset: registers to their reset values, gyro off,
+    /// RESET_DONE set.
+    pub fn power_cycle(&mut self) {
+        self.reset();
     }
 
     fn set_output(&mut self, v: [i16; 3]) {
@@ -86,6 +93,9 @@ impl Icm42688Model {
     }
 
     fn write_reg(&mut self, a: u8, v: u8) {
+        if self.fault == Fault::PoweredOff {
+            return;
+        }
         let a = a & 0x7F;
         if a == reg::REG_BANK_SEL {
             self.bank0[a as usize] = v & 7;
@@ -119,7 +129,12 @@ impl Icm42688Model {
             }
             Phase::Read(a) => {
                 self.phase = Phase::Read(a.wrapping_add(1) & 0x7F);
-                self.read_reg(a)
+                let v = self.read_reg(a);
+                // INT_STATUS clears on read (datasheet 14.x).
+                if a == reg::INT_STATUS && self.bank() == 0 && self.fault != Fault::PoweredOff {
+                    self.bank0[reg::INT_STATUS as usize] = 0;
+                }
+                v
             }
             Phase::Write(a) => {
                 self.write_reg(a, mosi);

@@ -60,6 +60,10 @@ pub enum Fault {
     ChipFault,
     /// The built-in self-test produces no deflection.
     DeadSelfTest,
+    /// The chip has no power: it does not drive MISO and ignores every
+    /// command. Clearing this fault powers it up in its reset state (a late
+    /// power-up, or the end of a brown-out).
+    PoweredOff,
 }
 
 /// A chip on the emulated bus. No heap here, so the variants are not boxed;
@@ -92,11 +96,34 @@ impl Chip {
             Chip::Adx(c) => c.advance(t_s, dt_s),
         }
     }
-    /// Inject (or clear, with [`Fault::None`]) a fault.
+    /// Inject (or clear, with [`Fault::None`]) a fault. Leaving
+    /// [`Fault::PoweredOff`] powers the chip up in its reset state.
     pub fn set_fault(&mut self, f: Fault) {
+        let was_off = self.fault() == Fault::PoweredOff;
         match self {
             Chip::Icm(c) => c.fault = f,
             Chip::Adx(c) => c.fault = f,
+        }
+        if was_off && f != Fault::PoweredOff {
+            self.power_cycle();
+        }
+    }
+
+    /// The fault being injected.
+    pub fn fault(&self) -> Fault {
+        match self {
+            Chip::Icm(c) => c.fault,
+            Chip::Adx(c) => c.fault,
+        }
+    }
+
+    /// A reset as at power-up (a brown-out, a glitch on the reset line):
+    /// the ICM-42688-P loses its configuration and flags RESET_DONE; the
+    /// ADXRS453 flags POR until its start-up check runs again.
+    pub fn power_cycle(&mut self) {
+        match self {
+            Chip::Icm(c) => c.power_cycle(),
+            Chip::Adx(c) => c.power_cycle(),
         }
     }
     /// The true rate (°/s, per board axis) the chip's sensor sees now.
@@ -275,7 +302,7 @@ impl<const N: usize> SpiBus<u8> for EmuBus<'_, N> {
 /// Flip one random bit of `b` with probability `prob` (MISO corruption).
 pub(crate) fn corrupt(rng: &mut Rng, b: u8, fault: Fault) -> u8 {
     match fault {
-        Fault::NoResponse => 0xFF,
+        Fault::NoResponse | Fault::PoweredOff => 0xFF,
         Fault::BitErrors { prob } if rng.uniform() < prob => b ^ (1 << (rng.next_u32() % 8)),
         _ => b,
     }

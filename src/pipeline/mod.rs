@@ -1,16 +1,26 @@
 //! The per-sample loop: read every gyro, account for every sample, flag and
-//! exclude faulty chips, fuse each axis.
+//! exclude faulty chips, restart lost ones, fuse each axis.
 //!
 //! Nothing is dropped silently: every sample has a sequence number, every
 //! read error and overrun is counted, and every health change is reported in
 //! [`Output::health_changed`] for the firmware to log.
+//!
+//! Recovery: a gyro that failed at start-up, reports a reset of its own
+//! (ICM-42688-P RESET_DONE, ADXRS453 POR), or stays excluded for
+//! `restart_after` samples is restarted through [`Gyro::restart`], a few
+//! SPI transactions per sample while the others keep sampling. A failed
+//! attempt is retried after a back-off that doubles from `backoff_min` to
+//! `backoff_max` samples and resets once the gyro is healthy again. A
+//! restarted gyro rejoins fusion after `stuck_after` good samples (its
+//! configuration was just verified), any other flagged one after
+//! `recover_after`.
 
 pub mod selftest;
 pub mod startup;
 pub mod tracker;
 
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};
-use crate::drivers::{Gyro, ReadFault};
+use crate::drivers::{Gyro, ReadFault, Restart};
 
 /// Health flags of one gyro (bit set = problem).
 pub mod flag {
@@ -24,6 +34,8 @@ pub mod flag {
     pub const STUCK: u8 = 1 << 2;
     /// At the end of its range for `stuck_after` samples.
     pub const SATURATED: u8 = 1 << 3;
+    /// Being restarted (not read until the restart is done).
+    pub const RESTARTING: u8 = 1 << 4;
 }
 
 /// Pipeline settings.
@@ -34,6 +46,14 @@ pub struct PipelineConfig {
     pub stuck_after: u16,
     /// Consecutive good samples before a flag (other than init) clears.
     pub recover_after: u16,
+    /// Samples a gyro may stay excluded before it is restarted.
+    pub restart_after: u16,
+    /// Sample period, µs (turns the drivers' restart waits into samples).
+    pub sample_us: u32,
+    /// Back-off before the first retry of a failed restart, samples.
+    pub backoff_min: u32,
+    /// Longest back-off, samples.
+    pub backoff_max: u32,
 }
 
 impl Default for PipelineConfig {
@@ -41,6 +61,10 @@ impl Default for PipelineConfig {
         Self {
             stuck_after: 16,
             recover_after: 64,
+            restart_after: 100,
+            sample_us: 1000,
+            backoff_min: 25,
+            backoff_max: 1000,
         }
     }
 }
@@ -61,6 +85,33 @@ pub struct GyroCounters {
     pub saturated: u32,
     /// Samples in which the gyro was excluded from fusion.
     pub excluded: u32,
+    /// Resets the chip reported by itself.
+    pub resets: u32,
+    /// Restart attempts.
+    pub restarts: u32,
+    /// Restarts that completed (the chip configured and sampling again).
+    pub restarted: u32,
+}
+
+/// Where a gyro is in its recovery.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Recovery {
+    /// Read every sample.
+    #[default]
+    Running,
+    /// A restart is due at sequence number `at`.
+    Waiting {
+        /// When.
+        at: u32,
+    },
+    /// Restart step `step` is due at sequence number `at`.
+    Restarting {
+        /// The driver's next step.
+        step: u8,
+        /// When.
+        at: u32,
+    },
 }
 
 /// Health of one gyro.
@@ -69,9 +120,16 @@ pub struct GyroCounters {
 pub struct Health {
     /// [`flag`] bits.
     pub flags: u8,
+    /// Recovery state.
+    pub recovery: Recovery,
     good_run: u16,
     same_run: u16,
     sat_run: u16,
+    bad_run: u16,
+    /// Good samples needed before the flags clear.
+    need: u16,
+    /// Back-off before the next retry, samples.
+    backoff: u32,
     last_raw: [i16; 3],
 }
 
@@ -107,6 +165,14 @@ impl<const N: usize> Pipeline<N> {
         if cfg.stuck_after < 2 || cfg.recover_after == 0 {
             return Err(ConfigError::Parameter);
         }
+        if cfg.sample_us == 0 || cfg.backoff_min == 0 || cfg.backoff_max < cfg.backoff_min {
+            return Err(ConfigError::Parameter);
+        }
+        let h = Health {
+            need: cfg.recover_after,
+            backoff: cfg.backoff_min,
+            ..Health::default()
+        };
         Ok(Self {
             cfg,
             fusion: Fusion::new(method)?,
@@ -114,14 +180,19 @@ impl<const N: usize> Pipeline<N> {
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
-            health: [Health::default(); N],
+            health: [h; N],
         })
     }
 
-    /// Mark a gyro whose init or self-test failed; it is never read.
+    /// Mark a gyro whose init or self-test failed: it is not read, and is
+    /// restarted after the first back-off.
     pub fn mark_init_failed(&mut self, i: usize) {
+        let (seq, backoff) = (self.seq, self.cfg.backoff_min);
         if let Some(h) = self.health.get_mut(i) {
             h.flags |= flag::INIT_FAILED;
+            h.recovery = Recovery::Waiting {
+                at: seq.wrapping_add(backoff),
+            };
         }
     }
 
@@ -153,11 +224,16 @@ impl<const N: usize> Pipeline<N> {
     pub fn log_health_changes(&self, out: &Output<N>) {
         for i in 0..N {
             if out.health_changed & (1 << i) != 0 {
+                let c = self.counters[i];
                 defmt::warn!(
-                    "seq {}: gyro {} health flags now {=u8:#06b}",
+                    "seq {}: gyro {} health flags now {=u8:#07b} ({}; resets {}, restarts {}, restarted {})",
                     out.seq,
                     i,
-                    self.health[i].flags
+                    self.health[i].flags,
+                    self.health[i].recovery,
+                    c.resets,
+                    c.restarts,
+                    c.restarted
                 );
             }
         }
@@ -178,9 +254,12 @@ impl<const N: usize> Pipeline<N> {
             health_changed: 0,
         };
         self.seq = self.seq.wrapping_add(1);
+        let seq = out.seq;
         for (i, g) in gyros.iter_mut().enumerate() {
             let before = self.health[i].flags;
-            if before & flag::INIT_FAILED == 0 {
+            if self.health[i].recovery != Recovery::Running {
+                self.recover(i, &mut **g, seq);
+            } else {
                 let r = g.read();
                 if let Some(axes) = self.account(i, r) {
                     for (a, off) in out.offered.iter_mut().enumerate() {
@@ -211,8 +290,55 @@ impl<const N: usize> Pipeline<N> {
         out
     }
 
+    /// Drive gyro `i`'s restart: start it when due, run the step the
+    /// driver asked for when its wait is over.
+    fn recover(&mut self, i: usize, g: &mut dyn Gyro, seq: u32) {
+        let cfg = self.cfg;
+        let (Some(h), Some(c)) = (self.health.get_mut(i), self.counters.get_mut(i)) else {
+            return;
+        };
+        let due = |at: u32| (seq.wrapping_sub(at) as i32) >= 0;
+        let step = match h.recovery {
+            Recovery::Running => return,
+            Recovery::Waiting { at } if due(at) => {
+                c.restarts = c.restarts.saturating_add(1);
+                h.flags |= flag::RESTARTING;
+                0
+            }
+            Recovery::Restarting { step, at } if due(at) => step,
+            _ => return,
+        };
+        match g.restart(step) {
+            Ok(Restart::Again { step, wait_us }) => {
+                let wait = wait_us.div_ceil(cfg.sample_us);
+                h.recovery = Recovery::Restarting {
+                    step,
+                    at: seq.wrapping_add(wait.max(1)),
+                };
+            }
+            Ok(Restart::Done) => {
+                c.restarted = c.restarted.saturating_add(1);
+                h.recovery = Recovery::Running;
+                // Configured and verified just now: it rejoins after a run
+                // as long as the stuck check needs, not recover_after.
+                h.flags = flag::READ_ERROR;
+                h.need = cfg.stuck_after;
+                h.good_run = 0;
+                h.bad_run = 0;
+            }
+            Err(_) => {
+                h.recovery = Recovery::Waiting {
+                    at: seq.wrapping_add(h.backoff),
+                };
+                h.backoff = h.backoff.saturating_mul(2).min(cfg.backoff_max);
+            }
+        }
+    }
+
     /// Update counters and health for gyro `i`; the axes it may offer.
     fn account(&mut self, i: usize, r: Result<crate::drivers::Reading, ReadFault>) -> Option<u8> {
+        let cfg = self.cfg;
+        let seq = self.seq;
         let c = &mut self.counters[i];
         let h = &mut self.health[i];
         let r = match r {
@@ -221,10 +347,17 @@ impl<const N: usize> Pipeline<N> {
                 match e {
                     ReadFault::Parity => c.parity = c.parity.saturating_add(1),
                     ReadFault::ChipFault(_) => c.chip_faults = c.chip_faults.saturating_add(1),
+                    ReadFault::Reset => c.resets = c.resets.saturating_add(1),
                     _ => {}
                 }
                 h.flags |= flag::READ_ERROR;
                 h.good_run = 0;
+                if e == ReadFault::Reset {
+                    // Its configuration is gone: restart it now.
+                    h.recovery = Recovery::Waiting { at: seq };
+                } else {
+                    Self::maybe_restart(h, cfg, seq);
+                }
                 return None;
             }
             Ok(r) => r,
@@ -254,12 +387,30 @@ impl<const N: usize> Pipeline<N> {
         } else {
             0
         };
-        if h.good_run >= self.cfg.recover_after {
-            h.flags &= flag::INIT_FAILED;
+        if h.good_run >= h.need {
+            h.flags = 0;
+            h.need = self.cfg.recover_after;
         }
         if h.flags != 0 {
+            Self::maybe_restart(h, cfg, seq);
             return None;
         }
+        // Healthy: the next loss starts from the shortest back-off.
+        h.bad_run = 0;
+        h.backoff = cfg.backoff_min;
         Some(r.axes & !r.saturated)
+    }
+
+    /// An excluded gyro: after `restart_after` samples of it, schedule a
+    /// restart after the current back-off (doubled for the next time).
+    fn maybe_restart(h: &mut Health, cfg: PipelineConfig, seq: u32) {
+        h.bad_run = h.bad_run.saturating_add(1);
+        if h.bad_run >= cfg.restart_after {
+            h.bad_run = 0;
+            h.recovery = Recovery::Waiting {
+                at: seq.wrapping_add(h.backoff),
+            };
+            h.backoff = h.backoff.saturating_mul(2).min(cfg.backoff_max);
+        }
     }
 }
