@@ -275,8 +275,9 @@ fn run_board_array(
     run_board_array_from(profile, seed, samples, [Fault::None; 5], each)
 }
 
-/// [`run_board_array`] with a fault per chip present from power-up.
-pub(crate) fn run_board_array_from(
+/// Run the board's emulated array as [`run_board_array`] does, with a
+/// fault per chip present from power-up (the fault campaign's harness).
+pub fn run_board_array_from(
     profile: RateProfile,
     seed: u64,
     samples: u32,

@@ -201,17 +201,20 @@ fn main() -> ! {
     let c = pipe.counters();
     for (i, c) in c.iter().enumerate() {
         defmt::info!(
-            "gyro {}: reads {} errors {} (parity {}, chip {}) saturated {} excluded {}",
+            "gyro {}: reads {} errors {} (parity {}, chip {}) not read (restarting) {} saturated {} excluded {}; restarts {}, completed {}",
             i,
             c.reads,
             c.errors,
             c.parity,
             c.chip_faults,
+            c.not_read,
             c.saturated,
-            c.excluded
+            c.excluded,
+            c.restarts,
+            c.restarted
         );
     }
-    let accounted = c.iter().all(|c| c.reads + c.errors == SAMPLES);
+    let accounted = c.iter().all(|c| c.reads + c.errors + c.not_read == SAMPLES);
     defmt::info!(
         "samples {} overruns {} accounted {}",
         SAMPLES,

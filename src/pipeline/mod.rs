@@ -5,15 +5,17 @@
 //! read error and overrun is counted, and every health change is reported in
 //! [`Output::health_changed`] for the firmware to log.
 //!
-//! Recovery: a gyro that failed at start-up, reports a reset of its own
-//! (ICM-42688-P RESET_DONE, ADXRS453 POR), or stays excluded for
-//! `restart_after` samples is restarted through [`Gyro::restart`], a few
-//! SPI transactions per sample while the others keep sampling. A failed
-//! attempt is retried after a back-off that doubles from `backoff_min` to
-//! `backoff_max` samples and resets once the gyro is healthy again. A
-//! restarted gyro rejoins fusion after `stuck_after` good samples (its
-//! configuration was just verified), any other flagged one after
-//! `recover_after`.
+//! Recovery: a gyro that failed at start-up or reports a reset of its own
+//! (ICM-42688-P RESET_DONE, ADXRS453 POR) is restarted through
+//! [`Gyro::restart`], a few SPI transactions per sample while the others
+//! keep sampling; one that reads but stays bad (errors, stuck, saturated)
+//! for `restart_after` samples in a row is restarted too. A failed attempt
+//! is retried after a back-off that doubles from `backoff_min` to
+//! `backoff_max` samples (for a bad-reading gyro, the back-off also
+//! lengthens the bad run that triggers the next restart) and resets once
+//! the gyro is healthy again. A restarted gyro rejoins fusion after
+//! `stuck_after` good samples (its configuration was just verified), any
+//! other flagged one after `recover_after`.
 
 pub mod selftest;
 pub mod startup;
@@ -91,6 +93,18 @@ pub struct GyroCounters {
     pub restarts: u32,
     /// Restarts that completed (the chip configured and sampling again).
     pub restarted: u32,
+    /// Samples in which the gyro was not read because it was being
+    /// restarted or waiting for its next attempt. Every sample is one of
+    /// `reads`, `errors` or `not_read`.
+    pub not_read: u32,
+}
+
+impl Health {
+    /// The back-off before the next retry if the attempt under way (or
+    /// the next one) fails, samples.
+    pub fn backoff(&self) -> u32 {
+        self.backoff
+    }
 }
 
 /// Where a gyro is in its recovery.
@@ -125,7 +139,7 @@ pub struct Health {
     good_run: u16,
     same_run: u16,
     sat_run: u16,
-    bad_run: u16,
+    bad_run: u32,
     /// Good samples needed before the flags clear.
     need: u16,
     /// Back-off before the next retry, samples.
@@ -258,6 +272,7 @@ impl<const N: usize> Pipeline<N> {
         for (i, g) in gyros.iter_mut().enumerate() {
             let before = self.health[i].flags;
             if self.health[i].recovery != Recovery::Running {
+                self.counters[i].not_read = self.counters[i].not_read.saturating_add(1);
                 self.recover(i, &mut **g, seq);
             } else {
                 let r = g.read();
@@ -392,7 +407,13 @@ impl<const N: usize> Pipeline<N> {
             h.need = self.cfg.recover_after;
         }
         if h.flags != 0 {
-            Self::maybe_restart(h, cfg, seq);
+            // A good sample of a flagged gyro is on its way back: only a
+            // run of bad ones leads to a restart.
+            if good {
+                h.bad_run = 0;
+            } else {
+                Self::maybe_restart(h, cfg, seq);
+            }
             return None;
         }
         // Healthy: the next loss starts from the shortest back-off.
@@ -401,15 +422,15 @@ impl<const N: usize> Pipeline<N> {
         Some(r.axes & !r.saturated)
     }
 
-    /// An excluded gyro: after `restart_after` samples of it, schedule a
-    /// restart after the current back-off (doubled for the next time).
+    /// A bad sample of a gyro that is still read: after `restart_after`
+    /// bad samples in a row (or the current back-off, if longer), restart
+    /// it now, and double the back-off for the next time. It stays read
+    /// until then, so one that comes good on its own is never restarted.
     fn maybe_restart(h: &mut Health, cfg: PipelineConfig, seq: u32) {
         h.bad_run = h.bad_run.saturating_add(1);
-        if h.bad_run >= cfg.restart_after {
+        if h.bad_run >= (cfg.restart_after as u32).max(h.backoff) {
             h.bad_run = 0;
-            h.recovery = Recovery::Waiting {
-                at: seq.wrapping_add(h.backoff),
-            };
+            h.recovery = Recovery::Waiting { at: seq };
             h.backoff = h.backoff.saturating_mul(2).min(cfg.backoff_max);
         }
     }

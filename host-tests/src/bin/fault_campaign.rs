@@ -1,0 +1,439 @@
+//! Fault-injection campaign through the whole emulated board: the real
+//! drivers on the emulated SPI bus, start-up, the pipeline with recovery and
+//! fusion, for many runs with random fault schedules.
+//!
+//! `cargo run -p host-tests --profile host --bin fault-campaign -- [--runs N] [--seed S] [--samples N]`
+//!
+//! Each run draws a rate profile (constant, or a sway of up to 20 °/s at
+//! 0.2–5 Hz, running from power-up), one or two faulty chips (two at once
+//! in half the runs), and for each a fault, an onset (at power-up in a
+//! quarter of the cases) and a duration (permanent in a quarter). Faults:
+//! stuck, saturated, spikes (small or large), byte bit errors, single-bit
+//! frame errors (ADXRS453), wrong id, no response, chip fault (ADXRS453),
+//! power off (a late power-up when it starts at power-up), and a power
+//! cycle (a reset, instantaneous).
+//!
+//! Invariants checked per run (a violation prints the run's seed, which
+//! reproduces it with `--seed S --runs 1`):
+//! 1. no panic;
+//! 2. every sample accounted for: sequence numbers 0, 1, 2, … and, per
+//!    gyro, reads + errors + samples not read (restarting) = samples;
+//! 3. a deterministic fault (stuck, saturated, wrong id, no response, chip
+//!    fault, power off) is out of fusion within 20 samples of its onset and
+//!    stays out while it lasts (a stuck chip: from the sample it is flagged
+//!    or rejected, as its first frozen samples still equal the truth);
+//! 4. the fused rate is within 1 °/s of the truth on every axis where a
+//!    healthy majority exists (more chips on that axis without a fault than
+//!    with one);
+//! 5. every chip is back in fusion after its fault ends: within 100 samples,
+//!    plus the part's datasheet restart time after a reset (ICM-42688-P
+//!    46 ms, ADXRS453 100 ms of start-up check), plus, when the chip was in
+//!    the restart cycle as its fault ended, the back-off then in force and
+//!    one restart (retries of a chip that stays lost slow down to once a
+//!    second).
+
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use gyro_array::checks::run_board_array_from;
+use gyro_array::emu::{Fault, RateProfile, Rng};
+
+const SAMPLES: u32 = 3000;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Fault(Fault),
+    PowerCycle,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Injection {
+    chip: usize,
+    kind: Kind,
+    start: u32,
+    /// Exclusive end (u32::MAX: permanent).
+    end: u32,
+}
+
+impl Injection {
+    fn active(&self, n: u32) -> bool {
+        (self.start..self.end).contains(&n)
+    }
+    /// A fault whose chip must be out of fusion while it lasts. A wrong
+    /// id only matters when the chip is probed: at power-up, not while it
+    /// delivers good data.
+    fn deterministic(&self) -> bool {
+        match self.kind {
+            Kind::Fault(Fault::WrongId) => self.start == 0,
+            Kind::Fault(
+                Fault::Stuck
+                | Fault::Saturated
+                | Fault::NoResponse
+                | Fault::ChipFault
+                | Fault::PoweredOff,
+            ) => true,
+            _ => false,
+        }
+    }
+}
+
+fn draw(seed: u64, samples: u32) -> (RateProfile, Vec<Injection>) {
+    let mut rng = Rng::new(seed);
+    let profile = if rng.uniform() < 0.5 {
+        RateProfile::constant(rng.uniform() * 10.0 - 5.0)
+    } else {
+        RateProfile {
+            base_dps: [0.5, -0.3, 1.0],
+            sine_dps: [
+                20.0 * rng.uniform(),
+                20.0 * rng.uniform(),
+                20.0 * rng.uniform(),
+            ],
+            sine_hz: 0.2 + 4.8 * rng.uniform(),
+            sine_start_s: 0.0,
+        }
+    };
+    let count = if rng.uniform() < 0.5 { 1 } else { 2 };
+    let mut inj: Vec<Injection> = Vec::new();
+    while inj.len() < count {
+        let chip = (rng.next_u32() % 5) as usize;
+        if inj.iter().any(|i| i.chip == chip) {
+            continue;
+        }
+        let adx = chip == 4;
+        let kinds: &[Kind] = &[
+            Kind::Fault(Fault::Stuck),
+            Kind::Fault(Fault::Saturated),
+            Kind::Fault(Fault::Spikes {
+                prob: 0.05,
+                magnitude_dps: 0.3,
+            }),
+            Kind::Fault(Fault::Spikes {
+                prob: 0.05,
+                magnitude_dps: 200.0,
+            }),
+            Kind::Fault(Fault::BitErrors { prob: 0.05 }),
+            Kind::Fault(Fault::WrongId),
+            Kind::Fault(Fault::NoResponse),
+            Kind::Fault(Fault::PoweredOff),
+            Kind::PowerCycle,
+            Kind::Fault(if adx { Fault::ChipFault } else { Fault::Stuck }),
+            Kind::Fault(if adx {
+                Fault::FrameBitError { prob: 0.05 }
+            } else {
+                Fault::BitErrors { prob: 0.01 }
+            }),
+        ];
+        let kind = kinds[(rng.next_u32() as usize) % kinds.len()];
+        let start = if rng.uniform() < 0.25 && kind != Kind::PowerCycle {
+            0
+        } else {
+            1 + rng.next_u32() % (samples * 2 / 3)
+        };
+        let end = match kind {
+            Kind::PowerCycle => start + 1,
+            _ if rng.uniform() < 0.25 => u32::MAX,
+            _ => start + 50 + rng.next_u32() % 1000,
+        };
+        inj.push(Injection {
+            chip,
+            kind,
+            start,
+            end,
+        });
+    }
+    (profile, inj)
+}
+
+/// The invariants a run broke (empty: none).
+fn run(seed: u64, samples: u32) -> Vec<String> {
+    let (profile, inj) = draw(seed, samples);
+    let mut bad: Vec<String> = Vec::new();
+    let mut at_power_up = [Fault::None; 5];
+    for i in &inj {
+        if let (Kind::Fault(f), 0) = (i.kind, i.start) {
+            at_power_up[i.chip] = f;
+        }
+    }
+    // Per injection: first sample out of fusion, first sample back.
+    let mut out_at = vec![None::<u32>; inj.len()];
+    let mut back_at = vec![None::<u32>; inj.len()];
+    let mut backoff_at_end = vec![0u32; inj.len()];
+    let mut flagged_at = vec![None::<u32>; inj.len()];
+    let mut last_counters = None;
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        run_board_array_from(profile, seed, samples, at_power_up, |n, bus, out, pipe| {
+            // Inject for the next sample (the chips advance before it).
+            gyro_array::emu::with_bus(bus, |b| {
+                for i in &inj {
+                    if n + 1 == i.start {
+                        match i.kind {
+                            Kind::Fault(f) => b.chips[i.chip].set_fault(f),
+                            Kind::PowerCycle => b.chips[i.chip].power_cycle(),
+                        }
+                    }
+                    if n + 1 == i.end && i.kind != Kind::PowerCycle {
+                        b.chips[i.chip].set_fault(Fault::None);
+                    }
+                }
+            });
+            if out.seq != n {
+                bad.push(format!("2: sequence {} at sample {n}", out.seq));
+            }
+            let truth =
+                gyro_array::emu::with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
+            for (k, i) in inj.iter().enumerate() {
+                let used = out.offered.iter().any(|m| m & (1 << i.chip) != 0);
+                let flagged = pipe.health()[i.chip].flags != 0;
+                if i.active(n) {
+                    if !used && out_at[k].is_none() {
+                        out_at[k] = Some(n);
+                    }
+                    if flagged && flagged_at[k].is_none() {
+                        flagged_at[k] = Some(n);
+                    }
+                    if i.deterministic() && used && n >= i.start + 20 {
+                        let frozen_ok = i.kind == Kind::Fault(Fault::Stuck)
+                            && flagged_at[k].is_none_or(|f| n < f);
+                        if !frozen_ok {
+                            bad.push(format!(
+                                "3: chip {} used at sample {n} during {:?}",
+                                i.chip, i.kind
+                            ));
+                        }
+                    }
+                } else if n >= i.end && used && back_at[k].is_none() {
+                    back_at[k] = Some(n);
+                }
+                if n + 1 == i.end || n == i.end {
+                    // The restart cycle the chip is in as its fault ends
+                    // (a restart may have been triggered by the last bad
+                    // sample, which the pipeline reads on the end sample).
+                    backoff_at_end[k] = backoff_at_end[k].max(pipe_backoff(pipe, i.chip, n));
+                }
+            }
+            // Healthy majority per axis: chips on the axis with / without an
+            // active fault.
+            for (a, f) in out.fused.iter().enumerate() {
+                let on_axis = |c: usize| a == 2 || c < 4;
+                let faulty = inj
+                    .iter()
+                    .filter(|i| {
+                        on_axis(i.chip)
+                            && (i.active(n)
+                                || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 200)
+                    })
+                    .count();
+                let total = (0..5).filter(|&c| on_axis(c)).count();
+                if total - faulty > faulty {
+                    match f {
+                        Some(f) if (f.rate_dps - truth[a]).abs() <= 1.0 => {}
+                        Some(f) => bad.push(format!(
+                            "4: axis {a} fused {:.2} vs truth {:.2} at sample {n}",
+                            f.rate_dps, truth[a]
+                        )),
+                        None => bad.push(format!("4: axis {a} has no fused value at sample {n}")),
+                    }
+                }
+            }
+            last_counters = Some(*pipe.counters());
+            if std::env::var_os("CAMPAIGN_TRACE").is_some() {
+                if let Some(f) = out.fused[2] {
+                    println!(
+                        "{n} z fused {:.3} truth {:.3} w {:?} rates {:?} rej {:#07b} fb {}",
+                        f.rate_dps,
+                        truth[2],
+                        f.weights,
+                        out.rate_dps.iter().map(|r| r[2]).collect::<Vec<_>>(),
+                        f.rejected,
+                        f.fallback
+                    );
+                }
+                for i in &inj {
+                    let h = pipe.health()[i.chip];
+                    println!(
+                        "{n} chip {} flags {:#07b} {:?} offered {}",
+                        i.chip,
+                        h.flags,
+                        h.recovery,
+                        out.offered.iter().any(|m| m & (1 << i.chip) != 0)
+                    );
+                }
+            }
+        })
+    }));
+    if result.is_err() {
+        bad.push("1: panic".into());
+        return bad;
+    }
+    if let Some(c) = last_counters {
+        for (g, c) in c.iter().enumerate() {
+            let total = c.reads + c.errors + c.not_read;
+            if total != samples {
+                bad.push(format!(
+                    "2: gyro {g}: reads + errors + not read = {total} of {samples}"
+                ));
+            }
+        }
+    }
+    for (k, i) in inj.iter().enumerate() {
+        if i.deterministic() && i.end > i.start + 20 {
+            match out_at[k] {
+                Some(o) if o <= i.start + 20 => {}
+                o => bad.push(format!(
+                    "3: chip {} out at {o:?} after {:?} from {}",
+                    i.chip, i.kind, i.start
+                )),
+            }
+        }
+        if i.end < samples.saturating_sub(400) {
+            let restart = match (i.kind, i.chip) {
+                (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), 4) => 100,
+                (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), _) => 46,
+                _ => 0,
+            };
+            // A chip out of fusion long enough is restarted; when its fault
+            // ends it may be waiting for the next attempt, plus that
+            // attempt's restart time.
+            let backoff = if backoff_at_end[k] > 0 {
+                backoff_at_end[k] + if i.chip == 4 { 100 } else { 46 }
+            } else {
+                0
+            };
+            let limit = i.end + 100 + restart + backoff;
+            if limit >= samples {
+                continue; // not observable within the run
+            }
+            match back_at[k] {
+                Some(b) if b <= limit => {}
+                b => bad.push(format!(
+                    "5: chip {} back at {b:?} after {:?} ended at {} (limit {limit})",
+                    i.chip, i.kind, i.end
+                )),
+            }
+        }
+    }
+    bad
+}
+
+/// How long a gyro in the restart cycle at sample `n` may take to start
+/// its first attempt that can succeed: the wait to the next attempt, or,
+/// with one under way (begun while the fault lasted, so it fails), that
+/// attempt's rest plus the back-off after it. 0 when it is running.
+fn pipe_backoff(pipe: &gyro_array::pipeline::Pipeline<5>, chip: usize, n: u32) -> u32 {
+    let h = pipe.health()[chip];
+    match h.recovery {
+        gyro_array::pipeline::Recovery::Waiting { at } => at.saturating_sub(n).max(1),
+        gyro_array::pipeline::Recovery::Restarting { at, .. } => {
+            at.saturating_sub(n) + 100 + h.backoff()
+        }
+        gyro_array::pipeline::Recovery::Running => 0,
+    }
+}
+
+struct Args {
+    runs: u64,
+    seed: u64,
+    samples: u32,
+}
+
+fn parse() -> Result<Args, String> {
+    let mut a = Args {
+        runs: 1000,
+        seed: 1,
+        samples: SAMPLES,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(k) = it.next() {
+        let v = it.next().ok_or(format!("{k} needs a value"))?;
+        let num = |v: &str| {
+            v.parse::<u64>()
+                .map_err(|_| format!("{k}: {v:?} is not a number"))
+        };
+        match k.as_str() {
+            "--runs" => a.runs = num(&v)?.max(1),
+            "--seed" => a.seed = num(&v)?,
+            "--samples" => a.samples = (num(&v)? as u32).max(1000),
+            _ => {
+                return Err(format!(
+                    "unknown argument {k:?} (--runs N, --seed S, --samples N)"
+                ))
+            }
+        }
+    }
+    Ok(a)
+}
+
+fn main() -> ExitCode {
+    let args = match parse() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("fault-campaign: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    // Panics are caught per run and counted; keep their default message off
+    // the terminal.
+    std::panic::set_hook(Box::new(|_| {}));
+    let violations: [AtomicU32; 5] = Default::default();
+    let failed_runs = AtomicU32::new(0);
+    let next = AtomicU32::new(0);
+    let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let reports = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            s.spawn(|| loop {
+                let r = next.fetch_add(1, Ordering::Relaxed) as u64;
+                if r >= args.runs {
+                    break;
+                }
+                let seed = args.seed + r;
+                let bad = run(seed, args.samples);
+                if !bad.is_empty() {
+                    failed_runs.fetch_add(1, Ordering::Relaxed);
+                    for b in &bad {
+                        let k = b.as_bytes()[0] - b'1';
+                        violations[k as usize % 5].fetch_add(1, Ordering::Relaxed);
+                    }
+                    let (_, inj) = draw(seed, args.samples);
+                    reports.lock().unwrap().push(format!(
+                        "seed {seed}: {} violation(s), first: {}; faults {inj:?}",
+                        bad.len(),
+                        bad[0]
+                    ));
+                }
+            });
+        }
+    });
+    let mut reports = reports.into_inner().unwrap();
+    reports.sort();
+    for r in reports.iter().take(20) {
+        println!("{r}");
+    }
+    let names = [
+        "no panic",
+        "every sample accounted for",
+        "deterministic fault out within 20 samples, kept out",
+        "fused within 1 °/s where a healthy majority exists",
+        "back in fusion after the fault ends",
+    ];
+    println!(
+        "fault campaign: {} runs × {} samples from seed {}; runs with a violation: {}",
+        args.runs,
+        args.samples,
+        args.seed,
+        failed_runs.load(Ordering::Relaxed)
+    );
+    for (i, n) in names.iter().enumerate() {
+        println!(
+            "  invariant {}: {n}: {} violations",
+            i + 1,
+            violations[i].load(Ordering::Relaxed)
+        );
+    }
+    if failed_runs.load(Ordering::Relaxed) == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
