@@ -440,7 +440,10 @@ impl<const N: usize> Fusion<N> {
             if !has(offered, i) {
                 continue;
             }
-            if y[i].is_finite() {
+            // Finite and within a physical range: a value of 10⁶ °/s is
+            // no rate (a garbled frame, a bad scale), and sums of a few
+            // near f32::MAX overflowed to ±inf (found by fuzzing).
+            if y[i].abs() <= RATE_LIMIT_DPS {
                 valid |= 1 << i;
             }
         }
@@ -908,6 +911,11 @@ fn regate_without_worst<const N: usize>(
     }
     good
 }
+
+/// Largest |rate| fusion accepts, °/s: far beyond any gyro's range (the
+/// ICM-42688-P saturates at 2000 °/s), small enough that no sum or square
+/// of a few of them overflows f32. NaN fails the comparison too.
+pub const RATE_LIMIT_DPS: f32 = 1.0e6;
 
 /// Gate of the warm-up (robust sigmas from the median): wide, because a
 /// MAD of three to five values is a rough scale.

@@ -9,6 +9,8 @@
 //! - `size`: flash and static RAM of the firmware binaries.
 //! - `panics`: panic call sites in each release ELF, by the code they come
 //!   from (llvm-objdump and llvm-addr2line).
+//! - `fuzz [SECONDS]`: replay the committed regression inputs, then run
+//!   every cargo-fuzz target for SECONDS (10 by default; CI uses that).
 //!
 //! Missing tools are installed: the rustup target, qemu-system-arm (apt),
 //! defmt-print and flip-link (cargo, pinned).
@@ -192,6 +194,17 @@ fn main() {
             ensure_tools();
             size(&build_board());
         }
+        "fuzz" => {
+            let secs: u64 = match std::env::args().nth(2).map(|s| s.parse()) {
+                None => 10,
+                Some(Ok(s)) if s > 0 => s,
+                Some(_) => {
+                    eprintln!("usage: cargo xtask fuzz [SECONDS > 0]");
+                    exit(2);
+                }
+            };
+            fuzz(secs);
+        }
         "panics" => {
             ensure_tools();
             let elfs = [
@@ -215,6 +228,53 @@ fn main() {
 
 /// Flash (text + rodata + data) and static RAM (data + bss) from the ELF
 /// section headers, without binutils.
+/// The cargo-fuzz targets (fuzz/fuzz_targets).
+const FUZZ_TARGETS: &[&str] = &[
+    "fusion", "davar", "allan", "qualify", "drivers", "pipeline", "record",
+];
+const CARGO_FUZZ: &str = "0.13.2";
+
+/// Replay fuzz/regressions/<target>/*, then fuzz each target for `secs`.
+fn fuzz(secs: u64) {
+    let v = Command::new("cargo")
+        .args(["install", "--list"])
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+        .unwrap_or_default();
+    if !v.contains(&format!("cargo-fuzz v{CARGO_FUZZ}")) {
+        must(
+            run(Command::new("cargo")
+                .args(["install", "cargo-fuzz", "--locked", "--version"])
+                .arg(format!("={CARGO_FUZZ}"))),
+            "install cargo-fuzz",
+        );
+    }
+    let dir = root().join("fuzz");
+    for t in FUZZ_TARGETS {
+        let reg = dir.join("regressions").join(t);
+        if let Ok(entries) = std::fs::read_dir(&reg) {
+            for e in entries.flatten() {
+                must(
+                    run(Command::new("cargo")
+                        .args(["+nightly", "fuzz", "run", "--fuzz-dir", "fuzz", t])
+                        .arg(e.path())),
+                    &format!("fuzz regression {t}/{}", e.file_name().to_string_lossy()),
+                );
+            }
+        }
+        must(
+            run(Command::new("cargo")
+                .args(["+nightly", "fuzz", "run", "--fuzz-dir", "fuzz", t, "--"])
+                .arg(format!("-max_total_time={secs}"))),
+            &format!("fuzz {t}"),
+        );
+    }
+    println!(
+        "xtask: {} fuzz targets ran {secs} s each without a crash",
+        FUZZ_TARGETS.len()
+    );
+}
+
 /// Callees that panic (the core library's panic entry points).
 const PANIC_CALLEES: &[&str] = &[
     "core::panicking::",
