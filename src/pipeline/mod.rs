@@ -325,7 +325,8 @@ impl<const N: usize> Pipeline<N> {
         };
         match g.restart(step) {
             Ok(Restart::Again { step, wait_us }) => {
-                let wait = wait_us.div_ceil(cfg.sample_us);
+                // (sample_us > 0 is checked in `new`; `max` shows it.)
+                let wait = wait_us.div_ceil(cfg.sample_us.max(1));
                 h.recovery = Recovery::Restarting {
                     step,
                     at: seq.wrapping_add(wait.max(1)),
