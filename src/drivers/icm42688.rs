@@ -432,6 +432,25 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         })
     }
 
+    /// REG_BANK_SEL, GYRO_CONFIG0 and PWR_MGMT0 as `init` left them.
+    fn check_config(&mut self) -> Result<(), ReadFault> {
+        let cfg = self.config;
+        let want = [
+            (reg::REG_BANK_SEL, 0),
+            (
+                reg::GYRO_CONFIG0,
+                ((cfg.full_scale as u8) << 5) | cfg.odr as u8,
+            ),
+            (reg::PWR_MGMT0, GYRO_MODE_LN),
+        ];
+        for (r, v) in want {
+            if self.read(r).map_err(|_| ReadFault::Bus)? != v {
+                return Err(ReadFault::Config);
+            }
+        }
+        Ok(())
+    }
+
     /// `init` in steps: soft reset; 1 ms later identify, configure (with
     /// read-back), start the gyro and clear RESET_DONE; done after the
     /// 45 ms gyro start-up. The configuration is the last one set.
@@ -602,6 +621,21 @@ mod tests {
             })
         );
         assert_eq!(g.restart(2), Ok(Restart::Done));
+        spi.done();
+    }
+
+    #[test]
+    fn config_check_reads_back_three_registers() {
+        let mut s = Vec::new();
+        s.extend(rd(0x76, &[0x00]));
+        s.extend(rd(0x4F, &[0x06])); // ±2000 °/s, 1 kHz: as set
+        s.extend(rd(0x4E, &[0x0C]));
+        s.extend(rd(0x76, &[0x00]));
+        s.extend(rd(0x4F, &[0x66])); // ±250 °/s: not what was set
+        let mut spi = Mock::new(&s);
+        let mut g = Icm42688::new(spi.clone());
+        assert_eq!(g.check_config(), Ok(()));
+        assert_eq!(g.check_config(), Err(ReadFault::Config));
         spi.done();
     }
 

@@ -23,6 +23,9 @@ pub enum ReadFault {
     /// The chip has reset itself since it was configured (a brown-out, a
     /// glitch): its configuration is gone and it must be restarted.
     Reset,
+    /// A configuration register read back differs from what the driver
+    /// set (corrupted): the chip must be restarted.
+    Config,
 }
 
 /// One step of a non-blocking restart ([`Gyro::restart`]).
@@ -64,4 +67,11 @@ pub trait Gyro {
     /// after the wait it asks for, while the other gyros keep sampling.
     /// Each call is a few SPI transactions. An error ends the attempt.
     fn restart(&mut self, step: u8) -> Result<Restart, ReadFault>;
+
+    /// Read the configuration registers back and compare them with what
+    /// the driver set (the pipeline does this for one gyro at a time, at a
+    /// low rate). Parts without configuration have nothing to check.
+    fn check_config(&mut self) -> Result<(), ReadFault> {
+        Ok(())
+    }
 }

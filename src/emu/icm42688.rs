@@ -60,6 +60,11 @@ impl Icm42688Model {
         self.set_output([DATA_OFF; 3]);
     }
 
+    /// Flip GYRO_FS_SEL's top bit (a corrupted register).
+    pub fn corrupt_config(&mut self) {
+        self.bank0[reg::GYRO_CONFIG0 as usize] ^= 0x80;
+    }
+
     /// A power-on reset: registers to their reset values, gyro off,
     /// RESET_DONE set.
     pub fn power_cycle(&mut self) {

@@ -126,6 +126,16 @@ impl Chip {
             Chip::Adx(c) => c.power_cycle(),
         }
     }
+    /// A corrupted configuration register (a single-event upset, a bad
+    /// write): the ICM-42688-P's GYRO_CONFIG0 flips its full-scale bits, so
+    /// its data change scale without any flag. The ADXRS453 has no
+    /// configuration; nothing happens.
+    pub fn corrupt_config(&mut self) {
+        if let Chip::Icm(c) = self {
+            c.corrupt_config();
+        }
+    }
+
     /// The true rate (°/s, per board axis) the chip's sensor sees now.
     pub fn true_rate_dps(&self) -> [f32; 3] {
         match self {

@@ -56,6 +56,9 @@ pub struct PipelineConfig {
     pub backoff_min: u32,
     /// Longest back-off, samples.
     pub backoff_max: u32,
+    /// Every this many samples one gyro (in turn) has its configuration
+    /// read back (0: never).
+    pub check_every: u32,
 }
 
 impl Default for PipelineConfig {
@@ -67,6 +70,7 @@ impl Default for PipelineConfig {
             sample_us: 1000,
             backoff_min: 25,
             backoff_max: 1000,
+            check_every: 50,
         }
     }
 }
@@ -89,6 +93,8 @@ pub struct GyroCounters {
     pub excluded: u32,
     /// Resets the chip reported by itself.
     pub resets: u32,
+    /// Configuration read-backs that differed (corrupted registers).
+    pub config_errors: u32,
     /// Restart attempts.
     pub restarts: u32,
     /// Restarts that completed (the chip configured and sampling again).
@@ -275,7 +281,15 @@ impl<const N: usize> Pipeline<N> {
                 self.counters[i].not_read = self.counters[i].not_read.saturating_add(1);
                 self.recover(i, &mut **g, seq);
             } else {
-                let r = g.read();
+                let due = self.cfg.check_every != 0
+                    && seq % self.cfg.check_every == 0
+                    && (seq / self.cfg.check_every) as usize % N == i;
+                // One gyro in turn also has its configuration read back.
+                let r = if due {
+                    g.check_config().and_then(|()| g.read())
+                } else {
+                    g.read()
+                };
                 if let Some(axes) = self.account(i, r) {
                     for (a, off) in out.offered.iter_mut().enumerate() {
                         if axes & (1 << a) != 0 {
@@ -364,11 +378,12 @@ impl<const N: usize> Pipeline<N> {
                     ReadFault::Parity => c.parity = c.parity.saturating_add(1),
                     ReadFault::ChipFault(_) => c.chip_faults = c.chip_faults.saturating_add(1),
                     ReadFault::Reset => c.resets = c.resets.saturating_add(1),
+                    ReadFault::Config => c.config_errors = c.config_errors.saturating_add(1),
                     _ => {}
                 }
                 h.flags |= flag::READ_ERROR;
                 h.good_run = 0;
-                if e == ReadFault::Reset {
+                if matches!(e, ReadFault::Reset | ReadFault::Config) {
                     // Its configuration is gone: restart it now.
                     h.recovery = Recovery::Waiting { at: seq };
                 } else {

@@ -10,8 +10,9 @@
 //! quarter of the cases) and a duration (permanent in a quarter). Faults:
 //! stuck, saturated, spikes (small or large), byte bit errors, single-bit
 //! frame errors (ADXRS453), wrong id, no response, chip fault (ADXRS453),
-//! power off (a late power-up when it starts at power-up), and a power
-//! cycle (a reset, instantaneous).
+//! power off (a late power-up when it starts at power-up), a power cycle
+//! (a reset, instantaneous) and a corrupted range register (ICM-42688-P,
+//! instantaneous, unflagged: only the configuration read-back finds it).
 //!
 //! Invariants checked per run (a violation prints the run's seed, which
 //! reproduces it with `--seed S --runs 1`):
@@ -27,7 +28,8 @@
 //!    with one);
 //! 5. every chip is back in fusion after its fault ends: within 100 samples,
 //!    plus the part's datasheet restart time after a reset (ICM-42688-P
-//!    46 ms, ADXRS453 100 ms of start-up check), plus, when the chip was in
+//!    46 ms, ADXRS453 100 ms of start-up check; a corrupted register, up to
+//!    250 samples until its read-back comes round), plus, when the chip was in
 //!    the restart cycle as its fault ended, the back-off then in force and
 //!    one restart (retries of a chip that stays lost slow down to once a
 //!    second).
@@ -44,6 +46,8 @@ const SAMPLES: u32 = 3000;
 enum Kind {
     Fault(Fault),
     PowerCycle,
+    /// A corrupted configuration register (ICM-42688-P range bits).
+    CorruptConfig,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -117,6 +121,7 @@ fn draw(seed: u64, samples: u32) -> (RateProfile, Vec<Injection>) {
             Kind::Fault(Fault::NoResponse),
             Kind::Fault(Fault::PoweredOff),
             Kind::PowerCycle,
+            Kind::CorruptConfig,
             Kind::Fault(if adx { Fault::ChipFault } else { Fault::Stuck }),
             Kind::Fault(if adx {
                 Fault::FrameBitError { prob: 0.05 }
@@ -125,13 +130,14 @@ fn draw(seed: u64, samples: u32) -> (RateProfile, Vec<Injection>) {
             }),
         ];
         let kind = kinds[(rng.next_u32() as usize) % kinds.len()];
-        let start = if rng.uniform() < 0.25 && kind != Kind::PowerCycle {
+        let instant = matches!(kind, Kind::PowerCycle | Kind::CorruptConfig);
+        let start = if rng.uniform() < 0.25 && !instant {
             0
         } else {
             1 + rng.next_u32() % (samples * 2 / 3)
         };
         let end = match kind {
-            Kind::PowerCycle => start + 1,
+            Kind::PowerCycle | Kind::CorruptConfig => start + 1,
             _ if rng.uniform() < 0.25 => u32::MAX,
             _ => start + 50 + rng.next_u32() % 1000,
         };
@@ -170,9 +176,10 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
                         match i.kind {
                             Kind::Fault(f) => b.chips[i.chip].set_fault(f),
                             Kind::PowerCycle => b.chips[i.chip].power_cycle(),
+                            Kind::CorruptConfig => b.chips[i.chip].corrupt_config(),
                         }
                     }
-                    if n + 1 == i.end && i.kind != Kind::PowerCycle {
+                    if n + 1 == i.end && !matches!(i.kind, Kind::PowerCycle | Kind::CorruptConfig) {
                         b.chips[i.chip].set_fault(Fault::None);
                     }
                 }
@@ -219,9 +226,14 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
                 let faulty = inj
                     .iter()
                     .filter(|i| {
+                        // A reset chip counts as faulty while it restarts;
+                        // a silently corrupted one until its read-back.
                         on_axis(i.chip)
                             && (i.active(n)
-                                || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 200)
+                                || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 200
+                                || i.kind == Kind::CorruptConfig
+                                    && n >= i.start
+                                    && n < i.start + 300)
                     })
                     .count();
                 let total = (0..5).filter(|&c| on_axis(c)).count();
@@ -290,6 +302,8 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
             let restart = match (i.kind, i.chip) {
                 (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), 4) => 100,
                 (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), _) => 46,
+                // Found by the read-back: each gyro every 5 × 50 samples.
+                (Kind::CorruptConfig, _) => 250 + 46,
                 _ => 0,
             };
             // A chip out of fusion long enough is restarted; when its fault
