@@ -44,6 +44,41 @@ use gyro_array::pipeline::{Pipeline, PipelineConfig};
 const FS_HZ: u32 = 1000;
 const SYSCLK_HZ: u32 = 168_000_000;
 
+/// The board's noise tracker: three E-DAVARs.
+type Tracker = NoiseTracker<1024, 35, 9>;
+
+/// The noise tracker (33 KB) in a static of its own, built by a function
+/// that is not inlined: its construction's temporaries live in that
+/// function's frame, freed on return, not in main's for good. `None` if
+/// the configuration is refused. Called once.
+#[inline(never)]
+#[allow(unsafe_code)]
+fn noise_tracker() -> Option<&'static mut Tracker> {
+    use core::mem::MaybeUninit;
+    #[unsafe(link_section = ".uninit.tracker")]
+    static mut TRACKER: MaybeUninit<Tracker> = MaybeUninit::uninit();
+    let t = Tracker::new(tracker::config(1024)).ok()?;
+    // SAFETY: called once, from main, before anything refers to TRACKER.
+    unsafe { Some((*(&raw mut TRACKER)).write(t)) }
+}
+
+/// The self-test's five 8 KB blocks, in CCM RAM (`.ccmram`, see memory.x),
+/// zeroed. Called once.
+#[allow(unsafe_code)]
+fn selftest_blocks() -> &'static mut [[f32; selftest::BLOCK]; 5] {
+    use core::mem::MaybeUninit;
+    #[unsafe(link_section = ".ccmram.selftest")]
+    static mut BLOCKS: MaybeUninit<[[f32; selftest::BLOCK]; 5]> = MaybeUninit::uninit();
+    // SAFETY: called once, from main, before anything else refers to
+    // BLOCKS; all-zero bits are valid f32s.
+    unsafe {
+        let p = &raw mut BLOCKS;
+        p.cast::<u8>()
+            .write_bytes(0, core::mem::size_of::<[[f32; selftest::BLOCK]; 5]>());
+        (*p).assume_init_mut()
+    }
+}
+
 /// A start-up step that cannot go on: log it and reset (the record says
 /// the firmware asked; the next boot reports it).
 fn give_up(what: &str) -> ! {
@@ -129,7 +164,7 @@ fn main() -> ! {
     );
 
     // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
-    let Ok(mut noise) = NoiseTracker::<1024, 35, 9>::new(tracker::config(1024)) else {
+    let Some(noise) = noise_tracker() else {
         give_up("noise tracker configuration")
     };
 
@@ -139,9 +174,9 @@ fn main() -> ! {
     }
     // Noise-health self-test (the board must be still): 2048 samples of
     // every gyro at the sampling rate, then trend, Hurst and normality.
-    // The blocks (40 KB) live only for the test.
+    // The blocks (40 KB) live in the core-coupled RAM, out of the stack.
     {
-        let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
+        let blocks = selftest_blocks();
         let mut results = [Err(QualifyError::TooShort); 5];
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
         let ok = selftest::run(
@@ -151,7 +186,7 @@ fn main() -> ! {
                 let _ = nb::block!(tick.wait());
                 watchdog.feed();
             },
-            &mut blocks,
+            blocks,
             &mut results,
         );
         if ok {
