@@ -59,7 +59,11 @@ fn noise_tracker() -> Option<&'static mut Tracker> {
     static mut TRACKER: MaybeUninit<Tracker> = MaybeUninit::uninit();
     let t = Tracker::new(tracker::config(1024)).ok()?;
     // SAFETY: called once, from main, before anything refers to TRACKER.
-    unsafe { Some((*(&raw mut TRACKER)).write(t)) }
+    unsafe {
+        let p = (&raw mut TRACKER).cast::<Tracker>();
+        p.write(t);
+        Some(&mut *p)
+    }
 }
 
 /// The self-test's five 8 KB blocks, in CCM RAM (`.ccmram`, see memory.x),
