@@ -902,7 +902,7 @@ fn regate_without_worst<const N: usize>(
         }
     }
     let rest = active & !(1u8 << (worst.1 & 7));
-    let med = median(y, rest);
+    let med = gate_median(y, v, rest);
     let mut good = rest;
     for i in 0..N {
         let e = y[i] - med;
