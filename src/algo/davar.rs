@@ -232,6 +232,8 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     cfg: DavarConfig,
     ring: [i32; CAP],
     n: u64,
+    /// Sample of the 32-sample hop on which the hop's work is done (1..=31).
+    hop_phase: u8,
     /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
     /// is not a power of two is a library call on the Cortex-M4).
     cur_slot: usize,
@@ -348,6 +350,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             cfg,
             ring: [0; CAP],
             n: 0,
+            hop_phase: 1,
             cur_slot: 0,
             next: [0; T],
             a: [0; T],
@@ -458,7 +461,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// (the price of a window around t): λ2/2 and one hop, the time the
     /// terms and the segmentation take to compute.
     pub fn latency(&self) -> u64 {
-        (SEG * self.span).div_ceil(2) as u64 + 1 + SEG as u64
+        (SEG * self.span).div_ceil(2) as u64 + self.hop_phase as u64 + SEG as u64
+    }
+
+    /// Do the hop's work `phase` samples (1..=31, clamped) after each frame
+    /// boundary instead of 1: several E-DAVARs fed the same samples (the
+    /// three fused axes) then do their heaviest samples at different
+    /// times. Estimates come `phase − 1` samples later. Set before the
+    /// first sample.
+    pub fn with_hop_phase(mut self, phase: u8) -> Self {
+        self.hop_phase = phase.clamp(1, SEG as u8 - 1);
+        self
     }
 
     /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
@@ -563,22 +576,25 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // the next samples), every other sample one row of the
         // segmentation.
         let phase = (n % SEG as u64) as usize;
+        let hop_phase = self.hop_phase as usize;
+        // Samples since the hop: the terms of τ = 2ʲ come j samples after it.
+        let rel = (phase + SEG - hop_phase) % SEG;
         if phase == 0 && centred_adaptive {
             self.store_frame();
         }
-        if (2..=T).contains(&phase) {
-            self.add_terms(phase - 1);
+        if (1..T).contains(&rel) {
+            self.add_terms(rel);
         }
-        if phase != 1 {
+        if rel != 0 {
             if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
                 self.dp_row();
             }
             return Ok(None);
         }
-        // The hop, one sample after a frame boundary: the τ0 terms of the
-        // last frame end on its first sample.
+        // The hop, at least one sample after a frame boundary: the τ0
+        // terms of the last frame end on its first sample.
         self.add_terms(0);
-        if n < (self.span * SEG) as u64 + 1 {
+        if n < (self.span * SEG + hop_phase) as u64 {
             return Ok(None);
         }
         let c = n / SEG as u64; // frames 0..c are complete

@@ -46,8 +46,14 @@ pub struct Described<const T: usize> {
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FRAMES, T> {
     /// One E-DAVAR per axis with `cfg`.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
+        // Hops 11 samples apart, so the three axes never do their heaviest
+        // sample together.
         Ok(Self {
-            axes: [Davar::new(cfg)?, Davar::new(cfg)?, Davar::new(cfg)?],
+            axes: [
+                Davar::new(cfg)?.with_hop_phase(1),
+                Davar::new(cfg)?.with_hop_phase(12),
+                Davar::new(cfg)?.with_hop_phase(23),
+            ],
             origin: [None; 3],
             last_seq: None,
             restarts: 0,
