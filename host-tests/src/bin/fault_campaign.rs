@@ -15,7 +15,8 @@
 //! instantaneous, unflagged: only the configuration read-back finds it).
 //!
 //! Invariants checked per run (a violation prints the run's seed, which
-//! reproduces it with `--seed S --runs 1`):
+//! reproduces it with `--seed S --runs 1`; `CAMPAIGN_TRACE=1` then prints
+//! the z axis's fusion and the faulty chips' health at every sample):
 //! 1. no panic;
 //! 2. every sample accounted for: sequence numbers 0, 1, 2, … and, per
 //!    gyro, reads + errors + samples not read (restarting) = samples;
