@@ -282,8 +282,22 @@ pub fn run_board_array_from(
     seed: u64,
     samples: u32,
     at_power_up: [Fault; 5],
-    mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+    each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
 ) -> Option<()> {
+    run_board_array_with(profile, seed, samples, at_power_up, None, each).map(|_| ())
+}
+
+/// [`run_board_array_from`] with the ICM-42688-P array self-test of
+/// `self_test` samples per phase at start-up (`None`: skipped). Returns the
+/// mask of gyros that failed start-up.
+pub fn run_board_array_with(
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    at_power_up: [Fault; 5],
+    self_test: Option<u16>,
+    mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+) -> Option<u8> {
     let cs: [CsLine; 5] = Default::default();
     let mut chips = board_array(profile, seed);
     for (c, f) in chips.iter_mut().zip(at_power_up) {
@@ -305,11 +319,11 @@ pub fn run_board_array_from(
         Method::Adaptive(AdaptiveConfig::default()),
     )
     .ok()?;
-    start_array(
+    let failed = start_array(
         [&mut g0, &mut g1, &mut g2, &mut g3],
         &mut g4,
         &mut delay,
-        None,
+        self_test,
         &mut pipe,
     );
     for n in 0..samples {
@@ -318,7 +332,7 @@ pub fn run_board_array_from(
         let out = pipe.step(&mut gyros);
         each(n, &bus, &out, &pipe);
     }
-    Some(())
+    Some(failed)
 }
 
 /// Run the board's array for 400 samples (spikes on gyro 1 from sample 200)
@@ -439,6 +453,38 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
     check(
         "icm42688: dead self-test fails on all axes",
         icm_init(Fault::DeadSelfTest) == Err(icm42688::Error::SelfTestFailed(0b111)),
+    );
+    // Start-up on a swaying vehicle: 20 °/s on every axis from power-up,
+    // 0.2 to 5 Hz, through the array self-test (20 samples per phase, as
+    // the board runs it). Every healthy chip passes; a dead one still fails.
+    let mut sway_failures = 0u32;
+    for (k, hz) in [0.2f32, 0.5, 1.0, 2.0, 3.5, 5.0].into_iter().enumerate() {
+        let profile = RateProfile {
+            base_dps: [1.0, -2.0, 3.0],
+            sine_dps: [20.0, 20.0, 20.0],
+            sine_hz: hz,
+            sine_start_s: 0.0,
+        };
+        let mut faults = [Fault::None; 5];
+        let dead = k % 4;
+        faults[dead] = Fault::DeadSelfTest;
+        let healthy = run_board_array_with(
+            profile,
+            40 + k as u64,
+            0,
+            [Fault::None; 5],
+            Some(20),
+            |_, _, _, _| {},
+        );
+        let one_dead =
+            run_board_array_with(profile, 40 + k as u64, 0, faults, Some(20), |_, _, _, _| {});
+        if healthy != Some(0) || one_dead != Some(1 << dead) {
+            sway_failures += 1;
+        }
+    }
+    check(
+        "start-up under a 20 deg/s sway (0.2-5 Hz): healthy chips pass the array self-test, a dead one fails",
+        sway_failures == 0,
     );
     let (init, errors, wild) = adx_run(Fault::None, 200);
     check(

@@ -1,14 +1,30 @@
 //! Bring-up of the board's array, shared by the firmware, the QEMU demo and
 //! the self-checks: gyros 0–3 are ICM-42688-P (init, then the datasheet
-//! self-test), gyro 4 is the ADXRS453 (CHK start-up). A gyro that fails is
-//! logged and marked in the pipeline, which then never offers it to fusion.
+//! self-test, run across the array so that it holds on a moving board),
+//! gyro 4 is the ADXRS453 (CHK start-up). A gyro that fails is logged and
+//! marked in the pipeline, which then never offers it to fusion.
+//!
+//! # Self-test on a moving board
+//!
+//! The datasheet test compares two averages 200 ms apart, one with the
+//! self-test actuation off and one with it on; the response is about
+//! 2.5 °/s. A vehicle swaying at 4 °/s changes its rate by more than that
+//! between the two averages, so a chip tested alone fails or passes by
+//! chance. Here the four ICM-42688-P are tested together and read at the
+//! same instants: phase 0 with every actuation off, phase 1 with chips
+//! {0, 2} on, phase 2 with {1, 3} on. A chip's response is its change from
+//! phase 0 minus the mean change of the chips that stayed off, which saw
+//! the same motion. What is left of the motion is the chips' scale
+//! mismatch times the rate change (1 % of 40 °/s is 0.4 °/s, against a
+//! pass threshold of 1.25 °/s). With a single chip alive there is no
+//! reference and the test is the datasheet's (the board must be still).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 
 use super::Pipeline;
 use crate::drivers::adxrs453::Adxrs453;
-use crate::drivers::icm42688::{Config, Icm42688};
+use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
 
 /// What the log needs of a bus error: `defmt::Format` with the defmt
 /// feature, nothing without it (the host tests).
@@ -22,11 +38,11 @@ pub trait Loggable {}
 #[cfg(not(feature = "defmt"))]
 impl<T> Loggable for T {}
 
-/// Start the array. `self_test` is the number of samples per ICM-42688-P
-/// self-test phase, or `None` to skip it. Returns the mask of gyros that
-/// failed (also marked in `pipe`).
+/// Start the array. `self_test` is the number of samples per phase of the
+/// ICM-42688-P array self-test, or `None` to skip it. Returns the mask of
+/// gyros that failed (also marked in `pipe`).
 pub fn start_array<SPI: SpiDevice>(
-    icm: [&mut Icm42688<SPI>; 4],
+    mut icm: [&mut Icm42688<SPI>; 4],
     adx: &mut Adxrs453<SPI>,
     delay: &mut impl DelayNs,
     self_test: Option<u16>,
@@ -36,13 +52,22 @@ where
     SPI::Error: Loggable,
 {
     let mut failed = 0u8;
-    for (i, g) in icm.into_iter().enumerate() {
-        let r = g
-            .init(delay, Config::default())
-            .and_then(|_| match self_test {
-                Some(n) => g.self_test(delay, n).map(Some),
-                None => Ok(None),
-            });
+    for (i, g) in icm.iter_mut().enumerate() {
+        if let Err(_e) = g.init(delay, Config::default()) {
+            #[cfg(feature = "defmt")]
+            defmt::error!("gyro {}: ICM-42688-P init failed: {}", i, _e);
+            failed |= 1 << i;
+        }
+    }
+    let tests = match self_test {
+        Some(n) => array_self_test(&mut icm, !failed & 0b1111, delay, n),
+        None => [const { Ok(None) }; 4],
+    };
+    for (i, r) in tests.iter().enumerate() {
+        if failed & (1 << i) != 0 {
+            pipe.mark_init_failed(i);
+            continue;
+        }
         match r {
             Ok(_st) =>
             {
@@ -56,7 +81,7 @@ where
             }
             Err(_e) => {
                 #[cfg(feature = "defmt")]
-                defmt::error!("gyro {}: ICM-42688-P init failed: {}", i, _e);
+                defmt::error!("gyro {}: ICM-42688-P self-test failed: {}", i, _e);
                 pipe.mark_init_failed(i);
                 failed |= 1 << i;
             }
@@ -75,4 +100,110 @@ where
         }
     }
     failed
+}
+
+/// Chips whose actuation is on in phases 1 and 2 of the array self-test.
+const ST_SETS: [u8; 2] = [0b0101, 0b1010];
+
+/// Outcome of one chip's self-test (`None`: not run).
+type StResult<E> = Result<Option<SelfTest>, Error<E>>;
+
+/// The array self-test (module docs) on the chips in `alive`, `n` samples
+/// per phase. A chip not in `alive` gets `Ok(None)`.
+pub fn array_self_test<SPI: SpiDevice>(
+    icm: &mut [&mut Icm42688<SPI>; 4],
+    alive: u8,
+    delay: &mut impl DelayNs,
+    n: u16,
+) -> [StResult<SPI::Error>; 4] {
+    let mut out: [StResult<SPI::Error>; 4] = [const { Ok(None) }; 4];
+    if n == 0 {
+        return [0, 1, 2, 3].map(|i| {
+            if alive & (1 << i) != 0 {
+                Err(Error::InvalidArgument)
+            } else {
+                Ok(None)
+            }
+        });
+    }
+    let mut saved: [Option<SavedConfig>; 4] = [None; 4];
+    // Chips still in the test (an error takes a chip out).
+    let mut live = 0u8;
+    for (i, g) in icm.iter_mut().enumerate() {
+        if alive & (1 << i) == 0 {
+            continue;
+        }
+        match g.self_test_begin() {
+            Ok(s) => {
+                saved[i] = Some(s);
+                live |= 1 << i;
+            }
+            Err(e) => out[i] = Err(e),
+        }
+    }
+    delay.delay_ms(20);
+    // Mean raw reading per phase, chip and axis.
+    let mut means = [[[0.0f32; 3]; 4]; 3];
+    for phase in 0..3 {
+        if phase > 0 {
+            let on = ST_SETS[phase - 1];
+            for (i, g) in icm.iter_mut().enumerate() {
+                if live & (1 << i) != 0 {
+                    if let Err(e) = g.set_self_test(on & (1 << i) != 0) {
+                        out[i] = Err(e);
+                        live &= !(1 << i);
+                    }
+                }
+            }
+            delay.delay_ms(200); // datasheet: settle before reading
+        }
+        let mut acc = [[0i32; 3]; 4];
+        for _ in 0..n {
+            delay.delay_us(1000); // one sample at 1 kHz, every chip
+            for (i, g) in icm.iter_mut().enumerate() {
+                if live & (1 << i) == 0 {
+                    continue;
+                }
+                match g.read_raw() {
+                    Ok(r) => {
+                        for (a, v) in acc[i].iter_mut().zip(r) {
+                            *a += v as i32;
+                        }
+                    }
+                    Err(e) => {
+                        out[i] = Err(e);
+                        live &= !(1 << i);
+                    }
+                }
+            }
+        }
+        for (m, a) in means[phase].iter_mut().zip(acc) {
+            *m = a.map(|v| v as f32 / n as f32);
+        }
+    }
+    for (k, &set) in ST_SETS.iter().enumerate() {
+        // The chips that stayed off in this phase saw the same motion.
+        let refs = live & !set;
+        let count = refs.count_ones() as f32;
+        let mut motion = [0.0f32; 3];
+        if count > 0.0 {
+            for h in (0..4).filter(|h| refs & (1 << h) != 0) {
+                for (a, m) in motion.iter_mut().enumerate() {
+                    *m += (means[k + 1][h][a] - means[0][h][a]) / count;
+                }
+            }
+        }
+        for (i, g) in icm.iter_mut().enumerate() {
+            if set & (1 << i) == 0 {
+                continue;
+            }
+            let Some(s) = saved[i] else { continue };
+            let response = [0, 1, 2].map(|a| means[k + 1][i][a] - means[0][i][a] - motion[a]);
+            let end = g.self_test_end(s, response);
+            if live & (1 << i) != 0 {
+                out[i] = end.map(Some);
+            }
+        }
+    }
+    out
 }
