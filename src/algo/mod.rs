@@ -1,6 +1,7 @@
 //! Pure algorithms: no hardware, no heap, capacity in the types.
 
 pub mod allan;
+pub mod calib;
 pub mod davar;
 pub mod fusion;
 pub mod math;

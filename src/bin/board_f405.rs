@@ -225,6 +225,15 @@ fn main() -> ! {
             defmt::info!("seq {}: stack peak {} of {} bytes", out.seq, u.peak, u.size);
         }
         if out.seq % 1000 == 0 {
+            for (a, cal) in pipe.calibration().iter().enumerate() {
+                defmt::info!(
+                    "seq {} axis {}: relative calibration scale {} bias {} dps",
+                    out.seq,
+                    a,
+                    cal.scale(),
+                    cal.bias()
+                );
+            }
             for f in out.fused.iter().flatten() {
                 defmt::info!(
                     "seq {}: fused {=f32} dps, weights {}",

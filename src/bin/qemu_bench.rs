@@ -14,8 +14,9 @@ use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
 
 use gyro_array::algo::allan::stream::StreamAdev;
+use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
-use gyro_array::algo::fusion::{AxisState, Fusion};
+use gyro_array::algo::fusion::{AxisState, Fusion, Method};
 use gyro_array::board::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
 use gyro_array::checks::methods;
 use gyro_array::emu::Rng;
@@ -117,6 +118,40 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
         );
         ok &= per_sample > 0.0;
     }
+
+    // The default path of the pipeline: relative calibration, adaptive
+    // fusion, calibration update (as `Pipeline::step` runs them).
+    let Ok(fusion) = Fusion::<4>::new(Method::Adaptive(Default::default())) else {
+        exit(false)
+    };
+    let mut st = [AxisState::<4>::default(); 3];
+    let mut cal = [RelCal::<4>::new(CalConfig::default()); 3];
+    let mut step = |st: &mut [AxisState<4>; 3], cal: &mut [RelCal<4>; 3], f: &[[f32; 4]; 3]| {
+        for (a, axis) in f.iter().enumerate() {
+            let y = black_box(axis);
+            if let Ok(r) = fusion.fuse(&mut st[a], &cal[a].correct(y), 0b1111) {
+                let used = (0..4)
+                    .filter(|&i| r.weights[i] > 0.0)
+                    .fold(0u8, |m, i| m | 1 << i);
+                cal[a].update(y, used);
+                black_box(r);
+            }
+        }
+    };
+    for f in frames.iter() {
+        step(&mut st, &mut cal, f);
+    }
+    let t0 = t.now();
+    for f in frames.iter() {
+        step(&mut st, &mut cal, f);
+    }
+    let ticks = (t.now() - t0).saturating_sub(overhead);
+    let per_sample = ticks as f32 * ipt / FRAMES as f32;
+    defmt::info!(
+        "bench fusion adaptive + online relative calibration: {=u32} instructions per 3-axis sample (N = 4)",
+        per_sample as u32
+    );
+    ok &= per_sample > 0.0;
 
     ok
 }

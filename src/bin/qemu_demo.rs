@@ -180,6 +180,13 @@ fn main() -> ! {
                     sigma_x_1ms = tracker::sigma_dps(&e, 0);
                 }
             }
+            let cal = &pipe.calibration()[2];
+            defmt::info!(
+                "seq {} axis 2: relative calibration scale {} bias {} dps",
+                out.seq,
+                cal.scale(),
+                cal.bias()
+            );
             let truth = with_bus(&bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
             for (a, f) in out.fused.iter().enumerate() {
                 match f {

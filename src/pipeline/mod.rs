@@ -21,6 +21,7 @@ pub mod selftest;
 pub mod startup;
 pub mod tracker;
 
+use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};
 use crate::drivers::{Gyro, ReadFault, Restart};
 
@@ -173,6 +174,8 @@ pub struct Pipeline<const N: usize> {
     cfg: PipelineConfig,
     fusion: Fusion<N>,
     axes: [AxisState<N>; 3],
+    /// Online relative calibration per axis, applied before fusion.
+    cal: [RelCal<N>; 3],
     seq: u32,
     overruns: u32,
     counters: [GyroCounters; N],
@@ -197,6 +200,7 @@ impl<const N: usize> Pipeline<N> {
             cfg,
             fusion: Fusion::new(method)?,
             axes: [AxisState::default(); 3],
+            cal: [RelCal::new(CalConfig::default()); 3],
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
@@ -314,9 +318,25 @@ impl<const N: usize> Pipeline<N> {
             for (i, v) in y.iter_mut().enumerate() {
                 *v = out.rate_dps[i][a];
             }
-            out.fused[a] = self.fusion.fuse(&mut self.axes[a], &y, out.offered[a]).ok();
+            // Fusion sees the chips with their relative scale and bias
+            // taken out (`algo::calib`); the calibration then learns from
+            // the raw readings of the chips fusion used.
+            let (cal, st) = (&mut self.cal[a], &mut self.axes[a]);
+            let fused = self.fusion.fuse(st, &cal.correct(&y), out.offered[a]).ok();
+            if let Some(f) = &fused {
+                let used = (0..N)
+                    .filter(|&i| f.weights[i] > 0.0)
+                    .fold(0u8, |m, i| m | 1 << i);
+                cal.update(&y, used);
+            }
+            out.fused[a] = fused;
         }
         out
+    }
+
+    /// The online relative calibration of each axis (x, y, z).
+    pub fn calibration(&self) -> &[RelCal<N>; 3] {
+        &self.cal
     }
 
     /// Drive gyro `i`'s restart: start it when due, run the step the
@@ -349,6 +369,12 @@ impl<const N: usize> Pipeline<N> {
             Ok(Restart::Done) => {
                 c.restarted = c.restarted.saturating_add(1);
                 h.recovery = Recovery::Running;
+                // What the calibration learnt may come from the fault that
+                // made the chip restart (a corrupted range reads as a scale
+                // error): learn it again.
+                for cal in self.cal.iter_mut() {
+                    cal.reset(i);
+                }
                 // Configured and verified just now: it rejoins after a run
                 // as long as the stuck check needs, not recover_after.
                 h.flags = flag::READ_ERROR;
