@@ -126,7 +126,7 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
     };
     let mut st = [AxisState::<4>::default(); 3];
     let mut cal = [RelCal::<4>::new(CalConfig::default()); 3];
-    let mut step = |st: &mut [AxisState<4>; 3], cal: &mut [RelCal<4>; 3], f: &[[f32; 4]; 3]| {
+    let step = |st: &mut [AxisState<4>; 3], cal: &mut [RelCal<4>; 3], f: &[[f32; 4]; 3]| {
         for (a, axis) in f.iter().enumerate() {
             let y = black_box(axis);
             if let Ok(r) = fusion.fuse(&mut st[a], &cal[a].correct(y), 0b1111) {
