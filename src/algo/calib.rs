@@ -158,7 +158,7 @@ impl<const N: usize> RelCal<N> {
             // estimate after a start or a restart is ready in a second
             // rather than a time constant.
             let a = if (self.n[i] as f32) < grow {
-                self.n[i] += 1;
+                self.n[i] = self.n[i].saturating_add(1);
                 1.0 / self.n[i] as f32
             } else {
                 self.cfg.alpha
@@ -198,8 +198,9 @@ impl<const N: usize> RelCal<N> {
             } else {
                 self.wild |= 1 << i;
             }
-            self.scale[i] = s.clamp(1.0 - m, 1.0 + m);
-            self.bias[i] = b.clamp(-self.cfg.max_bias_dps, self.cfg.max_bias_dps);
+            // max/min, not clamp: clamp panics on a bad bound.
+            self.scale[i] = s.max(1.0 - m).min(1.0 + m);
+            self.bias[i] = b.max(-self.cfg.max_bias_dps).min(self.cfg.max_bias_dps);
         }
         // Align to the average chip, not the median one: the corrected
         // chips then share the mean scale and bias of the array, as an

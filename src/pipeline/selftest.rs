@@ -160,11 +160,21 @@ fn median_finite(v: &mut [f32], n: usize) -> f32 {
         }
     }
     let v = &mut v[..k];
-    v.sort_unstable_by(f32::total_cmp);
-    match k {
-        0 => f32::NAN,
-        _ if k % 2 == 1 => v[k / 2],
-        _ => 0.5 * (v[k / 2 - 1] + v[k / 2]),
+    // Insertion sort: a handful of values, and none of the core sort's
+    // panic paths in the firmware.
+    for i in 1..v.len() {
+        let mut j = i;
+        while j > 0 && v[j - 1] > v[j] {
+            v.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+    let mid = k / 2;
+    match (v.get(mid.wrapping_sub(1)), v.get(mid)) {
+        (_, None) => f32::NAN,
+        (_, Some(&m)) if k % 2 == 1 => m,
+        (Some(&a), Some(&b)) => 0.5 * (a + b),
+        (None, Some(&m)) => m,
     }
 }
 

@@ -127,30 +127,36 @@ pub fn array_self_test<SPI: SpiDevice>(
         });
     }
     let mut saved: [Option<SavedConfig>; 4] = [None; 4];
-    // Chips still in the test (an error takes a chip out).
+    // Chips still in the test (an error takes a chip out). The loops zip
+    // the per-chip arrays rather than index them: no bounds checks, no
+    // panic paths in the firmware.
     let mut live = 0u8;
-    for (i, g) in icm.iter_mut().enumerate() {
+    for (i, ((g, sv), o)) in icm
+        .iter_mut()
+        .zip(saved.iter_mut())
+        .zip(out.iter_mut())
+        .enumerate()
+    {
         if alive & (1 << i) == 0 {
             continue;
         }
         match g.self_test_begin() {
             Ok(s) => {
-                saved[i] = Some(s);
+                *sv = Some(s);
                 live |= 1 << i;
             }
-            Err(e) => out[i] = Err(e),
+            Err(e) => *o = Err(e),
         }
     }
     delay.delay_ms(20);
     // Mean raw reading per phase, chip and axis.
     let mut means = [[[0.0f32; 3]; 4]; 3];
-    for phase in 0..3 {
-        if phase > 0 {
-            let on = ST_SETS[phase - 1];
-            for (i, g) in icm.iter_mut().enumerate() {
+    for (phase, mean) in means.iter_mut().enumerate() {
+        if let Some(&on) = phase.checked_sub(1).and_then(|k| ST_SETS.get(k)) {
+            for (i, (g, o)) in icm.iter_mut().zip(out.iter_mut()).enumerate() {
                 if live & (1 << i) != 0 {
                     if let Err(e) = g.set_self_test(on & (1 << i) != 0) {
-                        out[i] = Err(e);
+                        *o = Err(e);
                         live &= !(1 << i);
                     }
                 }
@@ -160,48 +166,70 @@ pub fn array_self_test<SPI: SpiDevice>(
         let mut acc = [[0i32; 3]; 4];
         for _ in 0..n {
             delay.delay_us(1000); // one sample at 1 kHz, every chip
-            for (i, g) in icm.iter_mut().enumerate() {
+            for (i, ((g, o), ac)) in icm
+                .iter_mut()
+                .zip(out.iter_mut())
+                .zip(acc.iter_mut())
+                .enumerate()
+            {
                 if live & (1 << i) == 0 {
                     continue;
                 }
                 match g.read_raw() {
                     Ok(r) => {
-                        for (a, v) in acc[i].iter_mut().zip(r) {
+                        for (a, v) in ac.iter_mut().zip(r) {
                             *a += v as i32;
                         }
                     }
                     Err(e) => {
-                        out[i] = Err(e);
+                        *o = Err(e);
                         live &= !(1 << i);
                     }
                 }
             }
         }
-        for (m, a) in means[phase].iter_mut().zip(acc) {
+        for (m, a) in mean.iter_mut().zip(acc) {
             *m = a.map(|v| v as f32 / n as f32);
         }
     }
-    for (k, &set) in ST_SETS.iter().enumerate() {
+    let [base, on1, on2] = means;
+    for (&set, phase) in ST_SETS.iter().zip([on1, on2]) {
+        // Change of every chip from phase 0.
+        let mut delta = [[0.0f32; 3]; 4];
+        for ((d, p), b) in delta.iter_mut().zip(phase.iter()).zip(base.iter()) {
+            for ((x, pv), bv) in d.iter_mut().zip(p).zip(b) {
+                *x = pv - bv;
+            }
+        }
         // The chips that stayed off in this phase saw the same motion.
         let refs = live & !set;
         let count = refs.count_ones() as f32;
         let mut motion = [0.0f32; 3];
         if count > 0.0 {
-            for h in (0..4).filter(|h| refs & (1 << h) != 0) {
-                for (a, m) in motion.iter_mut().enumerate() {
-                    *m += (means[k + 1][h][a] - means[0][h][a]) / count;
+            for (h, d) in delta.iter().enumerate() {
+                if refs & (1 << h) != 0 {
+                    for (m, v) in motion.iter_mut().zip(d) {
+                        *m += v / count;
+                    }
                 }
             }
         }
-        for (i, g) in icm.iter_mut().enumerate() {
+        let chips = icm
+            .iter_mut()
+            .zip(delta.iter())
+            .zip(out.iter_mut().zip(saved.iter()));
+        for (i, ((g, d), (o, sv))) in chips.enumerate() {
             if set & (1 << i) == 0 {
                 continue;
             }
-            let Some(s) = saved[i] else { continue };
-            let response = [0, 1, 2].map(|a| means[k + 1][i][a] - means[0][i][a] - motion[a]);
+            let Some(s) = *sv else { continue };
+            let mut response = [0.0f32; 3];
+            for ((r, dv), m) in response.iter_mut().zip(d).zip(motion) {
+                *r = dv - m;
+            }
             let end = g.self_test_end(s, response);
             if live & (1 << i) != 0 {
-                out[i] = end.map(Some);
+                *o = end.map(Some);
             }
         }
     }
