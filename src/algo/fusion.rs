@@ -851,24 +851,48 @@ fn frozen_check<const N: usize>(
     y: &[f32; N],
     valid: u8,
 ) -> u8 {
-    let mut moving = 0u8;
+    // A gyro is frozen when its own run of repeats is long enough and some
+    // other gyro has moved since it froze (its run is longer than the
+    // shortest). Asking only "did another gyro move on this sample" let a
+    // stuck chip back in whenever a healthy one repeated a quantised value
+    // (2.4 % of samples with N = 2). Candidates are rare: the comparison
+    // runs out of line.
+    let mut candidates = 0u8;
     for i in 0..N {
         let on = has(valid, i);
         let same = y[i].to_bits() == st.last[i].to_bits();
         let f = st.frozen[i];
-        st.frozen[i] = match (on, same) {
+        let f = match (on, same) {
             (false, _) => f,
             (true, true) => f.saturating_add(1),
             (true, false) => 0,
         };
-        moving |= ((on && !same) as u8) << i;
+        st.frozen[i] = f;
+        candidates |= ((on && f.saturating_add(1) >= c.frozen_after) as u8) << i;
         st.last[i] = if on { y[i] } else { st.last[i] };
     }
+    if candidates == 0 {
+        valid
+    } else {
+        drop_frozen(st, valid, candidates)
+    }
+}
+
+/// The gyros of `valid` left after dropping the `candidates` whose run of
+/// repeats is longer than the shortest among `valid`.
+#[cold]
+#[inline(never)]
+fn drop_frozen<const N: usize>(st: &AxisState<N>, valid: u8, candidates: u8) -> u8 {
+    let mut shortest = u8::MAX;
+    for i in 0..N {
+        if has(valid, i) {
+            shortest = shortest.min(st.frozen[i]);
+        }
+    }
     let mut active = valid;
-    if moving != 0 {
-        for i in 0..N {
-            let frozen = st.frozen[i].saturating_add(1) >= c.frozen_after;
-            active &= !(((has(valid, i) && frozen) as u8) << i);
+    for i in 0..N {
+        if has(candidates, i) && st.frozen[i] > shortest {
+            active &= !(1 << i);
         }
     }
     active

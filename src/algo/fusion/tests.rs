@@ -341,3 +341,56 @@ fn running_normaliser_settings_are_checked() {
         );
     }
 }
+
+/// Issue 9: a stuck chip among N = 2…8 quantised healthy chips (131 LSB/°/s,
+/// σ = 0.09 °/s: a healthy chip repeats its value on about 2.4 % of samples)
+/// is out of adaptive fusion within 5 samples of sticking and never back
+/// while stuck, over 20 000 samples.
+fn stuck_stays_out<const N: usize>() -> (Option<usize>, usize) {
+    let f = Fusion::<N>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+    let mut st = AxisState::<N>::default();
+    let mut rng = Rng::new(N as u64);
+    let q = |v: f32| (v * 131.0).round() / 131.0;
+    let (start, n) = (200, 20_000);
+    let mut stuck = 0.0;
+    let (mut out_at, mut readmitted) = (None, 0);
+    for k in 0..n {
+        let mut y = [0.0f32; N];
+        for v in y.iter_mut() {
+            *v = q(3.0 + 0.09 * rng.gaussian());
+        }
+        if k == start {
+            stuck = y[0];
+        }
+        if k >= start {
+            y[0] = stuck;
+        }
+        let r = f.fuse(&mut st, &y, ((1u16 << N) - 1) as u8).unwrap();
+        if k >= start {
+            let used = r.weights[0] > 0.0;
+            match (used, out_at) {
+                (false, None) => out_at = Some(k - start),
+                (true, Some(_)) => readmitted += 1,
+                _ => {}
+            }
+        }
+    }
+    (out_at, readmitted)
+}
+
+#[test]
+fn a_stuck_chip_is_out_within_5_samples_and_stays_out_for_n_2_to_8() {
+    let r = [
+        stuck_stays_out::<2>(),
+        stuck_stays_out::<3>(),
+        stuck_stays_out::<4>(),
+        stuck_stays_out::<5>(),
+        stuck_stays_out::<6>(),
+        stuck_stays_out::<7>(),
+        stuck_stays_out::<8>(),
+    ];
+    for (i, (out_at, readmitted)) in r.iter().enumerate() {
+        assert!(out_at.is_some_and(|k| k <= 5), "N = {}: {r:?}", i + 2);
+        assert_eq!(*readmitted, 0, "N = {}: {r:?}", i + 2);
+    }
+}
