@@ -29,6 +29,8 @@ pub const WARM: u32 = 256;
 /// The estimates are solved every `EVERY` updates (the moments every one).
 pub const EVERY: u32 = 32;
 
+use crate::algo::fusion::{median, AxisState, FuseError, Fused, Fusion};
+
 /// Settings of [`RelCal`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -110,38 +112,34 @@ impl<const N: usize> RelCal<N> {
         out
     }
 
+    /// One calibrated fused sample, in the pipeline's order: fuse the
+    /// corrected readings, then learn from the raw `y` of the gyros fusion
+    /// used.
+    #[inline]
+    pub fn fuse(
+        &mut self,
+        fusion: &Fusion<N>,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        offered: u8,
+    ) -> Result<Fused<N>, FuseError> {
+        let r = fusion.fuse(st, &self.correct(y), offered)?;
+        self.update(y, r.used());
+        Ok(r)
+    }
+
     /// Learn from this sample's raw readings `y`, on the chips in `used`
     /// (those fusion trusted: faulty chips must not teach the consensus).
     /// Needs at least three chips in `used`; otherwise nothing changes.
     pub fn update(&mut self, y: &[f32; N], used: u8) {
-        let mut v = [0.0f32; N];
-        let mut k = 0;
         let mut mask = 0u8;
-        for i in 0..N {
-            if used & (1 << i) != 0 && y[i].is_finite() {
-                v[k] = y[i];
-                k += 1;
-                mask |= 1 << i;
-            }
+        for (i, v) in y.iter().enumerate() {
+            mask |= ((used & (1 << i) != 0 && v.is_finite()) as u8) << i;
         }
-        if k < 3 {
+        if mask.count_ones() < 3 {
             return;
         }
-        // Insertion sort of at most N values (N ≤ 8 on the board).
-        for i in 1..k {
-            let x = v[i];
-            let mut j = i;
-            while j > 0 && v[j - 1] > x {
-                v[j] = v[j - 1];
-                j -= 1;
-            }
-            v[j] = x;
-        }
-        let c = if k % 2 == 1 {
-            v[k / 2]
-        } else {
-            0.5 * (v[k / 2 - 1] + v[k / 2])
-        };
+        let c = median(y, mask);
         // (Bounded: α = 0 must not count samples until n overflows.)
         let grow = 1.0 / self.cfg.alpha.max(1e-6);
         for i in 0..N {

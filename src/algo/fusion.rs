@@ -223,6 +223,18 @@ pub struct Fused<const N: usize> {
     pub fallback: bool,
 }
 
+impl<const N: usize> Fused<N> {
+    /// The gyros that went into the fused rate (weight above 0).
+    #[inline]
+    pub fn used(&self) -> u8 {
+        let mut m = 0u8;
+        for (i, w) in self.weights.iter().enumerate() {
+            m |= ((*w > 0.0) as u8) << i;
+        }
+        m
+    }
+}
+
 /// Immutable fusion settings; one value drives all axes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fusion<const N: usize> {
@@ -707,8 +719,9 @@ fn floor(v: f32, lo: f32) -> f32 {
 /// fully unrolled for the const N) of order-preserving integer keys, with
 /// gyros outside `m` keyed last. On the Cortex-M4 integer compare-exchanges
 /// are far cheaper than float compares (`vcmp` + `vmrs`) or an insertion
-/// sort's data-dependent loops.
-fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
+/// sort's data-dependent loops. NaN when `m` is empty. Also the consensus
+/// of the online calibration and of the self-test.
+pub(crate) fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
     // Sign-magnitude to two's complement: an involution on the bits.
     let key = |b: i32| b ^ (((b >> 31) as u32) >> 1) as i32;
     let mut k = [i32::MAX; N];

@@ -321,15 +321,9 @@ impl<const N: usize> Pipeline<N> {
             // Fusion sees the chips with their relative scale and bias
             // taken out (`algo::calib`); the calibration then learns from
             // the raw readings of the chips fusion used.
-            let (cal, st) = (&mut self.cal[a], &mut self.axes[a]);
-            let fused = self.fusion.fuse(st, &cal.correct(&y), out.offered[a]).ok();
-            if let Some(f) = &fused {
-                let used = (0..N)
-                    .filter(|&i| f.weights[i] > 0.0)
-                    .fold(0u8, |m, i| m | 1 << i);
-                cal.update(&y, used);
-            }
-            out.fused[a] = fused;
+            out.fused[a] = self.cal[a]
+                .fuse(&self.fusion, &mut self.axes[a], &y, out.offered[a])
+                .ok();
         }
         out
     }

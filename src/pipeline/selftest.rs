@@ -103,7 +103,7 @@ pub fn run<const N: usize>(
 }
 
 /// The analysis of [`run`] on blocks already read: each gyro against its
-/// peers on the same axis. Returns whether every gyro is stationary and
+/// peers on the same axis (`N` ≤ 8: peer sets are `u8` masks, as in fusion). Returns whether every gyro is stationary and
 /// normal.
 pub fn analyse<const N: usize>(
     blocks: &[[f32; BLOCK]; N],
@@ -116,7 +116,7 @@ pub fn analyse<const N: usize>(
     for g in 0..N {
         let peers = (0..N)
             .filter(|&h| h != g && axis(h) == axis(g))
-            .fold(0u32, |m, h| m | 1 << h);
+            .fold(0u8, |m, h| m | 1 << h);
         let r = &mut results[g];
         *r = if peers == 0 {
             noise_health(&blocks[g])
@@ -150,34 +150,6 @@ pub fn analyse<const N: usize>(
     ok
 }
 
-/// Median of the finite values among the first `n` of `v` (NaN if none).
-fn median_finite(v: &mut [f32], n: usize) -> f32 {
-    let mut k = 0;
-    for i in 0..n.min(v.len()) {
-        if v[i].is_finite() {
-            v[k] = v[i];
-            k += 1;
-        }
-    }
-    let v = &mut v[..k];
-    // Insertion sort: a handful of values, and none of the core sort's
-    // panic paths in the firmware.
-    for i in 1..v.len() {
-        let mut j = i;
-        while j > 0 && v[j - 1] > v[j] {
-            v.swap(j - 1, j);
-            j -= 1;
-        }
-    }
-    let mid = k / 2;
-    match (v.get(mid.wrapping_sub(1)), v.get(mid)) {
-        (_, None) => f32::NAN,
-        (_, Some(&m)) if k % 2 == 1 => m,
-        (Some(&a), Some(&b)) => 0.5 * (a + b),
-        (None, Some(&m)) => m,
-    }
-}
-
 /// `out = blocks[g] − (a + b·m)`, `m` the per-sample median of the gyros in
 /// `peers`, `a` and `b` the least-squares fit (f64 sums: 2048 samples of
 /// up to ±2000 °/s). Where no peer read, `m` is the block's mean reference.
@@ -190,20 +162,18 @@ fn median_finite(v: &mut [f32], n: usize) -> f32 {
 fn against_peers<const N: usize>(
     blocks: &[[f32; BLOCK]; N],
     g: usize,
-    peers: u32,
+    peers: u8,
     out: &mut [f32; BLOCK],
 ) {
     let mut vals = [0.0f32; N];
     let (mut n, mut sm, mut sy, mut smm, mut smy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
     for i in 0..BLOCK {
-        let mut k = 0;
-        for (h, b) in blocks.iter().enumerate() {
-            if peers & (1 << h) != 0 {
-                vals[k] = b[i];
-                k += 1;
-            }
+        let mut finite = 0u8;
+        for (h, (v, b)) in vals.iter_mut().zip(blocks.iter()).enumerate() {
+            *v = b[i];
+            finite |= ((peers & (1 << h) != 0 && v.is_finite()) as u8) << h;
         }
-        let m = median_finite(&mut vals, k);
+        let m = crate::algo::fusion::median(&vals, finite);
         out[i] = m; // the reference, for the second pass
         let y = blocks[g][i];
         if m.is_finite() && y.is_finite() {

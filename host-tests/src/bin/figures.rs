@@ -76,6 +76,23 @@ const PALETTE: [RGBColor; 5] = [
     RGBColor(140, 86, 75),
 ];
 
+/// The series legend every panel uses, boxed at `pos`.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    pos: SeriesLabelPosition,
+) -> Result<(), Err>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(pos)
+        .draw()?;
+    Ok(())
+}
+
 fn curve(rate: &[f64]) -> Result<Vec<AdevPoint>, Err> {
     let mut phase = vec![0.0; rate.len() + 1];
     let mut pts = [AdevPoint::default(); 40];
@@ -176,35 +193,10 @@ fn allan(out: &Path, seed: u64) -> Result<(), Err> {
         ))?
         .label("fused (adaptive)")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(3)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     root.present()?;
     println!("wrote {}", path.display());
     Ok(())
-}
-
-/// A perceptual blue–green–yellow ramp (viridis anchor points) for v ∈ [0, 1].
-fn ramp(v: f64) -> RGBColor {
-    const A: [(f64, f64, f64); 5] = [
-        (68.0, 1.0, 84.0),
-        (59.0, 82.0, 139.0),
-        (33.0, 145.0, 140.0),
-        (94.0, 201.0, 98.0),
-        (253.0, 231.0, 37.0),
-    ];
-    let x = v.clamp(0.0, 1.0) * 4.0;
-    let k = (x.floor() as usize).min(3);
-    let f = x - k as f64;
-    let mix = |a: f64, b: f64| (a + (b - a) * f).round() as u8;
-    RGBColor(
-        mix(A[k].0, A[k + 1].0),
-        mix(A[k].1, A[k + 1].1),
-        mix(A[k].2, A[k + 1].2),
-    )
 }
 
 /// Noise variance of the E-DAVAR test signal at sample t: 1, a step to 4
@@ -299,7 +291,7 @@ fn edavar(out: &Path, seed: u64) -> Result<(), Err> {
     chart.draw_series(cells.iter().map(|&(x0, x1, j, v)| {
         Rectangle::new(
             [(x0, j as f64 - 0.5), (x1, j as f64 + 0.5)],
-            ramp((v - vlo) / (vhi - vlo)).filled(),
+            ViridisRGB::get_color_normalized(v, vlo, vhi).filled(),
         )
     }))?;
 
@@ -335,12 +327,7 @@ fn edavar(out: &Path, seed: u64) -> Result<(), Err> {
             .label(name)
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], c.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
 
     // The window: its span around each t.
     let mut chart = ChartBuilder::on(&bot)
@@ -453,8 +440,7 @@ fn replay(out: &Path, seed: u64) -> Result<(), Err> {
         fused.push(f.map_or(f64::NAN, |f| f.rate_dps as f64));
         for i in 0..5 {
             rates[i].push(o.rate_dps[i][2] as f64);
-            let w = f.map_or(0.0, |f| f.weights[i]);
-            used[i].push(o.offered[2] & (1 << i) != 0 && w > 0.0);
+            used[i].push(f.is_some_and(|f| f.used() & (1 << i) != 0));
         }
     })
     .ok_or("the board array did not start")?;
@@ -516,12 +502,7 @@ fn replay(out: &Path, seed: u64) -> Result<(), Err> {
         ))?
         .label("fused")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight)?;
 
     let lim = 2.0;
     let mut chart = ChartBuilder::on(&mid)
@@ -558,12 +539,7 @@ fn replay(out: &Path, seed: u64) -> Result<(), Err> {
         ))?
         .label("fused")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerRight)
-        .draw()?;
+    legend(&mut chart, SeriesLabelPosition::LowerRight)?;
 
     // Membership: a bar per chip where fusion used it; the faults as grey.
     let mut chart = ChartBuilder::on(&bot)

@@ -163,16 +163,11 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
                     let r = f.fuse(&mut states[j], &y, 0b1111).expect("valid input");
                     sums[j + 1] += ((r.rate_dps - truth) as f64).powi(2);
                 }
-                let yc = cal.correct(&y);
                 let last = states.len() - 1;
-                let r = adaptive
-                    .fuse(&mut states[last], &yc, 0b1111)
+                let r = cal
+                    .fuse(&adaptive, &mut states[last], &y, 0b1111)
                     .expect("valid input");
                 sums[4] += ((r.rate_dps - truth) as f64).powi(2);
-                let used = (0..4)
-                    .filter(|&i| r.weights[i] > 0.0)
-                    .fold(0u8, |m, i| m | 1 << i);
-                cal.update(&y, used);
             }
             for (r, s) in res.iter_mut().zip(&sums) {
                 r.push((s / SAMPLES as f64).sqrt());
