@@ -13,6 +13,8 @@
 //!   drivers run unchanged where the hardware is missing.
 //! - [`pipeline`]: the per-sample loop: read every gyro, account for every
 //!   sample, flag and exclude faulty chips, fuse.
+//! - [`link`]: the output link to the antenna controller (frames over a
+//!   UART, commands back) and its decoder, shared with the host tools.
 //! - [`board`]: bindings for the QEMU machine and the STM32F405 board
 //!   (firmware builds only), and the reset record that survives a fault.
 #![cfg_attr(not(test), no_std)]
@@ -28,4 +30,5 @@ pub mod board;
 pub mod checks;
 pub mod drivers;
 pub mod emu;
+pub mod link;
 pub mod pipeline;

@@ -263,6 +263,15 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
+    /// Switch the fusion method. Its noise model and the frozen-chip
+    /// state start again; the relative calibration is kept. On error
+    /// nothing changes.
+    pub fn set_method(&mut self, method: Method) -> Result<(), ConfigError> {
+        self.fusion = Fusion::new(method)?;
+        self.axes = [AxisState::default(); 3];
+        Ok(())
+    }
+
     /// The fusion settings.
     pub fn fusion(&self) -> &Fusion<N> {
         &self.fusion

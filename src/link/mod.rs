@@ -1,0 +1,33 @@
+//! The output link to the antenna controller: versioned binary frames over
+//! a UART (specification: `docs/link.md`).
+//!
+//! - [`msg`]: the messages (fused samples, raw samples, status, command
+//!   acknowledgements; commands the other way).
+//! - [`wire`]: framing (postcard body, CRC-16, COBS, 0x00 delimiter) and
+//!   the streaming [`wire::Decoder`] the board and the host tools share.
+//! - [`port`]: the board's end: a transmit queue fed from the pipeline,
+//!   drained from idle time, and command handling.
+//!
+//! Budget: every frame must fit in one sample period at [`BAUD`] with
+//! 8N1 framing (10 bits a byte): [`frame_budget`] bytes at 1 kHz. The
+//! largest frames are measured by the tests (`link::tests`).
+
+pub mod msg;
+pub mod port;
+pub mod wire;
+
+#[cfg(test)]
+mod tests;
+
+/// Protocol version, the first byte of every payload.
+pub const VERSION: u8 = 1;
+
+/// UART speed: 2 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
+/// BRR = 2.625) and within reach of common USB-serial bridges.
+pub const BAUD: u32 = 2_000_000;
+
+/// Bytes the link carries per sample period of `sample_us` at [`BAUD`],
+/// 8N1.
+pub const fn frame_budget(sample_us: u32) -> u32 {
+    (BAUD as u64 / 10 * sample_us as u64 / 1_000_000) as u32
+}

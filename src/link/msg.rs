@@ -1,0 +1,235 @@
+//! The messages of the output link (protocol version [`super::VERSION`]).
+//!
+//! Board → host: [`Frame`]; host → board: [`Command`]. Both travel in an
+//! envelope (`super::wire`) with the link sequence number. Field order is
+//! the wire order (postcard: integers marked `fixint` are little-endian of
+//! their width, other integers are LEB128 varints, `f32` is IEEE-754
+//! little-endian, `Option` is a 0/1 byte then the value, enums a varint
+//! variant index, `heapless::Vec` a varint length then the items).
+//! `docs/link.md` is the specification with byte offsets.
+
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+/// Most gyros a frame describes.
+pub const MAX_GYROS: usize = 8;
+
+/// A frame from the board.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Frame {
+    /// One fused sample (mode [`Mode::Fused`]).
+    Sample(Sample),
+    /// Every gyro's reading of one sample (mode [`Mode::Raw`]).
+    Raw(Raw),
+    /// Counters and settings (every `status_every` samples and on request).
+    Status(Status),
+    /// The answer to a command.
+    Ack(Ack),
+}
+
+/// One fused sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Sample sequence number (counts every sample period, missed ones too).
+    #[serde(with = "postcard::fixint::le")]
+    pub seq: u32,
+    /// Time of the sample, µs since boot.
+    #[serde(with = "postcard::fixint::le")]
+    pub t_us: u64,
+    /// Fused rate x, y, z, °/s; NaN where the axis is not valid.
+    pub rate_dps: [f32; 3],
+    /// Bit a set: axis a has a fused value.
+    pub valid: u8,
+    /// Bit a set: axis a fell back to the plain mean (degraded).
+    pub degraded: u8,
+    /// Per axis, the gyros in the fused value (bit i = gyro i).
+    pub used: [u8; 3],
+    /// Per gyro, the pipeline's health flags (`pipeline::flag`).
+    pub health: Vec<u8, MAX_GYROS>,
+    /// The newest E-DAVAR estimate of one axis (the axes take turns; only
+    /// new estimates are sent, never before a window has filled).
+    pub noise: Option<Noise>,
+}
+
+/// One E-DAVAR estimate with the time it describes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Noise {
+    /// Axis (0 = x).
+    pub axis: u8,
+    /// Sequence number of the sample the estimate describes (it lags the
+    /// frame's own `seq` by about half a window).
+    #[serde(with = "postcard::fixint::le")]
+    pub seq: u32,
+    /// Window length, samples.
+    pub len: u16,
+    /// Allan deviation at the three τ of [`Status::noise_tau`], °/s.
+    pub sigma_dps: [f32; 3],
+}
+
+/// Every gyro's reading of one sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Raw {
+    /// Sample sequence number.
+    #[serde(with = "postcard::fixint::le")]
+    pub seq: u32,
+    /// Time of the sample, µs since boot.
+    #[serde(with = "postcard::fixint::le")]
+    pub t_us: u64,
+    /// Per gyro, x, y, z in °/s (NaN where not read or absent).
+    pub rate_dps: Vec<[f32; 3], MAX_GYROS>,
+    /// Per gyro, health flags.
+    pub health: Vec<u8, MAX_GYROS>,
+}
+
+/// Counters of one gyro.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GyroStatus {
+    /// Health flags.
+    pub flags: u8,
+    /// Good reads.
+    pub reads: u32,
+    /// Failed reads.
+    pub errors: u32,
+    /// Samples out of fusion.
+    pub excluded: u32,
+    /// Restarts begun.
+    pub restarts: u32,
+    /// Restarts completed.
+    pub restarted: u32,
+}
+
+/// Counters and settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// Sequence number of the newest sample.
+    pub seq: u32,
+    /// Time, µs since boot.
+    pub t_us: u64,
+    /// Output settings in force.
+    pub settings: Settings,
+    /// τ of the three σ in [`Noise`], samples.
+    pub noise_tau: [u16; 3],
+    /// Sample period, µs.
+    pub sample_us: u32,
+    /// Sample periods missed (overruns).
+    pub overruns: u32,
+    /// Link counters.
+    pub link: LinkCounters,
+    /// Peak stack use, bytes (0 where not measured).
+    pub stack_peak: u32,
+    /// Per gyro counters.
+    pub gyros: Vec<GyroStatus, MAX_GYROS>,
+}
+
+/// What the link itself counted.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkCounters {
+    /// Frames queued for sending.
+    pub sent: u32,
+    /// Frames dropped because the transmit queue was full (each one is a
+    /// gap in the link sequence number).
+    pub dropped: u32,
+    /// Commands accepted.
+    pub accepted: u32,
+    /// Commands rejected (including received frames that did not decode).
+    pub rejected: u32,
+}
+
+/// What the board streams.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Mode {
+    /// [`Sample`] frames.
+    Fused,
+    /// [`Raw`] frames, for characterising the chips.
+    Raw,
+}
+
+/// The fusion method a command may select.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FusionMethod {
+    /// Plain mean.
+    Mean,
+    /// Support-degree weighting (Zhang).
+    Zhang,
+    /// Inverse-variance weighting with online noise estimates (default).
+    Adaptive,
+}
+
+/// Output settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Settings {
+    /// Stream mode.
+    pub mode: Mode,
+    /// Fusion method.
+    pub method: FusionMethod,
+    /// One sample or raw frame every `divider` samples (1 ..= 1000).
+    pub divider: u16,
+    /// One status frame every `status_every` samples (0 = on request only).
+    pub status_every: u32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Fused,
+            method: FusionMethod::Adaptive,
+            divider: 1,
+            status_every: 1000,
+        }
+    }
+}
+
+/// The answer to a command.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Ack {
+    /// The command's id; `None` when the frame was too damaged to read it.
+    pub id: Option<u8>,
+    /// Done, or why not (nothing changed then).
+    pub result: Result<(), Reject>,
+}
+
+/// Why a command was rejected. A rejected command changes nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Reject {
+    /// COBS or CRC failed: the frame was damaged.
+    Corrupt,
+    /// Longer than any command.
+    TooLong,
+    /// Another protocol version.
+    Version,
+    /// The bytes do not decode as a command.
+    Malformed,
+    /// A value outside its range (the divider).
+    OutOfRange,
+    /// The firmware refused the change (the fusion configuration).
+    Refused,
+}
+
+/// A command to the board.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Command {
+    /// Chosen by the host; echoed in the [`Ack`].
+    pub id: u8,
+    /// What to do.
+    pub op: Op,
+}
+
+/// The operations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Op {
+    /// Select the stream mode.
+    SetMode(Mode),
+    /// Select the fusion method (its noise model starts again).
+    SetMethod(FusionMethod),
+    /// Output every `n`-th sample, n in 1 ..= 1000.
+    SetDivider(u16),
+    /// Status every `n` samples (0 = on request only; else 100 ..= 60 000).
+    SetStatusEvery(u32),
+    /// Send a status frame now.
+    RequestStatus,
+}

@@ -1,0 +1,305 @@
+//! The board's end of the link: a transmit queue drained whenever the
+//! UART can take a byte, the command decoder, and the frames built from
+//! the pipeline's output.
+//!
+//! Nothing here blocks. The firmware calls [`Port::publish`] once per
+//! sample, and [`Port::drain`] and [`Port::receive`] while it waits for the
+//! next sample tick, so the UART is fed from the idle time of every sample
+//! period, with no interrupt and no DMA (the QEMU machines model neither
+//! for their UARTs). A frame goes into the queue whole or not at all; one
+//! that does not fit is counted in [`LinkCounters::dropped`] and leaves a
+//! gap in the link sequence number.
+
+use heapless::{Deque, Vec};
+
+use super::msg::{
+    Ack, Command, Frame, FusionMethod, GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject,
+    Sample, Settings, Status, MAX_GYROS,
+};
+use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use crate::algo::fusion::{AdaptiveConfig, Method};
+use crate::pipeline::{Output, Pipeline};
+
+/// Longest command frame the board accepts (commands are ≤ 16 bytes).
+pub const RX_MAX: usize = 64;
+
+impl FusionMethod {
+    /// The fusion method with its default settings.
+    pub fn method(self) -> Method {
+        match self {
+            FusionMethod::Mean => Method::Mean,
+            FusionMethod::Zhang => Method::Zhang,
+            FusionMethod::Adaptive => Method::Adaptive(AdaptiveConfig::default()),
+        }
+    }
+}
+
+/// The board's end of the link, with a `TX`-byte transmit queue.
+pub struct Port<const TX: usize> {
+    tx: Deque<u8, TX>,
+    rx: Decoder<RX_MAX>,
+    link_seq: u32,
+    settings: Settings,
+    counters: LinkCounters,
+    /// The axis whose E-DAVAR estimate goes into the next frame.
+    noise_turn: usize,
+    /// Per axis, the described sequence number last sent.
+    noise_sent: [Option<u32>; 3],
+    status_requested: bool,
+}
+
+impl<const TX: usize> Port<TX> {
+    /// A port with `settings`; its method must be the pipeline's.
+    pub fn new(settings: Settings) -> Self {
+        Self {
+            tx: Deque::new(),
+            rx: Decoder::new(),
+            link_seq: 0,
+            settings,
+            counters: LinkCounters::default(),
+            noise_turn: 0,
+            noise_sent: [None; 3],
+            status_requested: false,
+        }
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> Settings {
+        self.settings
+    }
+
+    /// What the link counted.
+    pub fn counters(&self) -> LinkCounters {
+        self.counters
+    }
+
+    /// Bytes waiting to be sent.
+    pub fn queued(&self) -> usize {
+        self.tx.len()
+    }
+
+    /// Queue `frame` whole, or drop it (counted) if the queue lacks room.
+    /// Either way it uses a link sequence number. True if queued.
+    pub fn send(&mut self, frame: &Frame) -> bool {
+        let mut buf = [0u8; MAX_FRAME];
+        let seq = self.link_seq;
+        self.link_seq = self.link_seq.wrapping_add(1);
+        let ok = match encode(seq, frame, &mut buf) {
+            Ok(n) if TX - self.tx.len() >= n => {
+                for &b in buf.get(..n).unwrap_or(&[]) {
+                    // Cannot fail: the room was checked.
+                    let _ = self.tx.push_back(b);
+                }
+                true
+            }
+            _ => false,
+        };
+        if ok {
+            self.counters.sent = self.counters.sent.wrapping_add(1);
+        } else {
+            self.counters.dropped = self.counters.dropped.wrapping_add(1);
+        }
+        ok
+    }
+
+    /// Queue the frame for sample `out` if the divider selects it: a
+    /// [`Sample`] (with the next new E-DAVAR estimate from `noise`, asked
+    /// per axis) or a [`Raw`] frame. `t_us` is the sample's time.
+    pub fn publish<const N: usize>(
+        &mut self,
+        out: &Output<N>,
+        t_us: u64,
+        pipe: &Pipeline<N>,
+        mut noise: impl FnMut(usize) -> Option<Noise>,
+    ) {
+        let div = u32::from(self.settings.divider.max(1));
+        if !out.seq.is_multiple_of(div) {
+            return;
+        }
+        let mut health = Vec::<u8, MAX_GYROS>::new();
+        for h in pipe.health().iter().take(MAX_GYROS) {
+            let _ = health.push(h.flags);
+        }
+        let frame = match self.settings.mode {
+            Mode::Fused => {
+                let mut s = Sample {
+                    seq: out.seq,
+                    t_us,
+                    rate_dps: [f32::NAN; 3],
+                    valid: 0,
+                    degraded: 0,
+                    used: [0; 3],
+                    health,
+                    noise: None,
+                };
+                for (a, f) in out.fused.iter().enumerate() {
+                    if let Some(f) = f {
+                        s.rate_dps[a] = f.rate_dps;
+                        s.valid |= 1 << a;
+                        s.degraded |= u8::from(f.fallback) << a;
+                        s.used[a] = f.used();
+                    }
+                }
+                s.noise = self.next_noise(&mut noise);
+                Frame::Sample(s)
+            }
+            Mode::Raw => {
+                let mut rates = Vec::<[f32; 3], MAX_GYROS>::new();
+                for r in out.rate_dps.iter().take(MAX_GYROS) {
+                    let _ = rates.push(*r);
+                }
+                Frame::Raw(Raw {
+                    seq: out.seq,
+                    t_us,
+                    rate_dps: rates,
+                    health,
+                })
+            }
+        };
+        self.send(&frame);
+    }
+
+    /// The next axis (in turn) with an estimate not sent yet, finite.
+    fn next_noise(&mut self, noise: &mut impl FnMut(usize) -> Option<Noise>) -> Option<Noise> {
+        for k in 0..3 {
+            let a = (self.noise_turn + k) % 3;
+            let Some(n) = noise(a) else { continue };
+            let fresh = self.noise_sent.get(a).copied().flatten() != Some(n.seq);
+            if fresh && n.sigma_dps.iter().all(|s| s.is_finite()) {
+                if let Some(s) = self.noise_sent.get_mut(a) {
+                    *s = Some(n.seq);
+                }
+                self.noise_turn = (a + 1) % 3;
+                return Some(n);
+            }
+        }
+        None
+    }
+
+    /// Whether a status frame is due with sample `seq` (periodic or
+    /// requested); clears the request.
+    pub fn status_due(&mut self, seq: u32) -> bool {
+        let every = self.settings.status_every;
+        let due = self.status_requested || (every != 0 && seq.is_multiple_of(every));
+        self.status_requested = false;
+        due
+    }
+
+    /// The status frame: settings, the link's and the pipeline's counters.
+    pub fn status<const N: usize>(
+        &self,
+        pipe: &Pipeline<N>,
+        seq: u32,
+        t_us: u64,
+        noise_tau: [u16; 3],
+        sample_us: u32,
+        stack_peak: u32,
+    ) -> Frame {
+        let mut gyros = Vec::<GyroStatus, MAX_GYROS>::new();
+        for (h, c) in pipe.health().iter().zip(pipe.counters()).take(MAX_GYROS) {
+            let _ = gyros.push(GyroStatus {
+                flags: h.flags,
+                reads: c.reads,
+                errors: c.errors,
+                excluded: c.excluded,
+                restarts: c.restarts,
+                restarted: c.restarted,
+            });
+        }
+        Frame::Status(Status {
+            seq,
+            t_us,
+            settings: self.settings,
+            noise_tau,
+            sample_us,
+            overruns: pipe.overruns(),
+            link: self.counters,
+            stack_peak,
+            gyros,
+        })
+    }
+
+    /// Send queued bytes until the UART would block or the queue is empty;
+    /// the bytes sent.
+    pub fn drain<W: embedded_hal_nb::serial::Write<u8>>(&mut self, uart: &mut W) -> usize {
+        let mut n = 0;
+        while let Some(&b) = self.tx.front() {
+            match uart.write(b) {
+                Ok(()) => {
+                    self.tx.pop_front();
+                    n += 1;
+                }
+                // WouldBlock, or a UART error: try again next time.
+                Err(_) => break,
+            }
+        }
+        n
+    }
+
+    /// Read the bytes the UART has; apply every complete command to
+    /// `pipe` and the settings, and queue its [`Ack`]. A command that
+    /// cannot be read or applied changes nothing and is rejected.
+    pub fn receive<R: embedded_hal_nb::serial::Read<u8>, const N: usize>(
+        &mut self,
+        uart: &mut R,
+        pipe: &mut Pipeline<N>,
+    ) {
+        // Bounded: a UART that always has a byte cannot hold the loop.
+        for _ in 0..RX_MAX {
+            let Ok(b) = uart.read() else { break };
+            if let Some(r) = self.rx.feed::<Command>(b) {
+                self.handle(r, pipe);
+            }
+        }
+    }
+
+    /// Apply one received frame (see [`Port::receive`]).
+    pub fn handle<const N: usize>(
+        &mut self,
+        r: Result<Decoded<Command>, FrameError>,
+        pipe: &mut Pipeline<N>,
+    ) {
+        let (id, result) = match r {
+            Err(e) => (
+                None,
+                Err(match e {
+                    FrameError::Cobs | FrameError::Crc => Reject::Corrupt,
+                    FrameError::TooLong => Reject::TooLong,
+                    FrameError::Version(_) => Reject::Version,
+                    FrameError::Malformed => Reject::Malformed,
+                }),
+            ),
+            Ok(d) => (Some(d.body.id), self.apply(d.body, pipe)),
+        };
+        if result.is_ok() {
+            self.counters.accepted = self.counters.accepted.wrapping_add(1);
+        } else {
+            self.counters.rejected = self.counters.rejected.wrapping_add(1);
+        }
+        self.send(&Frame::Ack(Ack { id, result }));
+    }
+
+    fn apply<const N: usize>(&mut self, c: Command, pipe: &mut Pipeline<N>) -> Result<(), Reject> {
+        match c.op {
+            Op::SetMode(m) => self.settings.mode = m,
+            Op::SetMethod(m) => {
+                pipe.set_method(m.method()).map_err(|_| Reject::Refused)?;
+                self.settings.method = m;
+            }
+            Op::SetDivider(d) => {
+                if !(1..=1000).contains(&d) {
+                    return Err(Reject::OutOfRange);
+                }
+                self.settings.divider = d;
+            }
+            Op::SetStatusEvery(n) => {
+                if n != 0 && !(100..=60_000).contains(&n) {
+                    return Err(Reject::OutOfRange);
+                }
+                self.settings.status_every = n;
+            }
+            Op::RequestStatus => self.status_requested = true,
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,418 @@
+//! Link tests: round trips, frame sizes against the budget, resync after
+//! damage, command handling.
+
+use heapless::Vec;
+use proptest::prelude::*;
+
+use super::msg::*;
+use super::port::Port;
+use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use super::{frame_budget, VERSION};
+use crate::algo::fusion::{AdaptiveConfig, Method};
+use crate::pipeline::{Pipeline, PipelineConfig};
+
+fn vec<T: Clone, const N: usize>(v: T, n: usize) -> Vec<T, N> {
+    let mut out = Vec::new();
+    for _ in 0..n {
+        out.push(v.clone()).ok().unwrap();
+    }
+    out
+}
+
+/// The largest sample frame for `n` gyros: every field at its widest.
+fn big_sample(n: usize) -> Frame {
+    Frame::Sample(Sample {
+        seq: u32::MAX,
+        t_us: u64::MAX,
+        rate_dps: [-1234.5; 3],
+        valid: 7,
+        degraded: 7,
+        used: [0xFF; 3],
+        health: vec(0xFF, n),
+        noise: Some(Noise {
+            axis: 2,
+            seq: u32::MAX,
+            len: u16::MAX,
+            sigma_dps: [1.0; 3],
+        }),
+    })
+}
+
+fn big_raw(n: usize) -> Frame {
+    Frame::Raw(Raw {
+        seq: u32::MAX,
+        t_us: u64::MAX,
+        rate_dps: vec([1.0; 3], n),
+        health: vec(0xFF, n),
+    })
+}
+
+fn big_status(n: usize) -> Frame {
+    Frame::Status(Status {
+        seq: u32::MAX,
+        t_us: u64::MAX,
+        settings: Settings {
+            mode: Mode::Raw,
+            method: FusionMethod::Adaptive,
+            divider: 1000,
+            status_every: u32::MAX,
+        },
+        noise_tau: [u16::MAX; 3],
+        sample_us: u32::MAX,
+        overruns: u32::MAX,
+        link: LinkCounters {
+            sent: u32::MAX,
+            dropped: u32::MAX,
+            accepted: u32::MAX,
+            rejected: u32::MAX,
+        },
+        stack_peak: u32::MAX,
+        gyros: vec(
+            GyroStatus {
+                flags: 0xFF,
+                reads: u32::MAX,
+                errors: u32::MAX,
+                excluded: u32::MAX,
+                restarts: u32::MAX,
+                restarted: u32::MAX,
+            },
+            n,
+        ),
+    })
+}
+
+fn wire_len(f: &Frame) -> usize {
+    let mut buf = [0u8; MAX_FRAME];
+    encode(u32::MAX, f, &mut buf).unwrap()
+}
+
+fn decode_all(
+    bytes: &[u8],
+) -> (
+    std::vec::Vec<Result<Decoded<Frame>, FrameError>>,
+    Decoder<MAX_FRAME>,
+) {
+    let mut d = Decoder::<MAX_FRAME>::new();
+    let out = bytes.iter().filter_map(|&b| d.feed::<Frame>(b)).collect();
+    (out, d)
+}
+
+#[test]
+fn every_frame_kind_round_trips() {
+    let frames = [
+        big_sample(5),
+        big_raw(5),
+        big_status(5),
+        Frame::Ack(Ack {
+            id: Some(7),
+            result: Err(Reject::OutOfRange),
+        }),
+        Frame::Ack(Ack {
+            id: None,
+            result: Ok(()),
+        }),
+    ];
+    for (k, f) in frames.iter().enumerate() {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(k as u32, f, &mut buf).unwrap();
+        assert_eq!(buf[n - 1], 0);
+        assert!(!buf[..n - 1].contains(&0), "COBS leaves no 0x00 inside");
+        let (got, d) = decode_all(&buf[..n]);
+        assert_eq!(got.len(), 1);
+        let got = got[0].as_ref().unwrap();
+        assert_eq!((got.link_seq, &got.body), (k as u32, f));
+        assert_eq!(d.stats().frames, 1);
+    }
+}
+
+/// The largest frames the board (5 gyros) sends at 1 kHz fit the budget
+/// with room for an acknowledgement in the same period; printed for the
+/// specification.
+#[test]
+fn the_largest_frames_fit_one_sample_period_at_1_khz() {
+    let budget = frame_budget(1000) as usize;
+    let ack = wire_len(&Frame::Ack(Ack {
+        id: Some(255),
+        result: Err(Reject::Refused),
+    }));
+    for n in [5, MAX_GYROS] {
+        let (s, r, st) = (
+            wire_len(&big_sample(n)),
+            wire_len(&big_raw(n)),
+            wire_len(&big_status(n)),
+        );
+        println!("{n} gyros: sample {s} B, raw {r} B, status {st} B, ack {ack} B; budget {budget} B per 1 ms");
+        assert!(s + ack <= budget && r + ack <= budget);
+        // A status frame (once a second) and a sample in one period.
+        assert!(st + s <= 2 * budget);
+    }
+    assert_eq!(budget, 200);
+}
+
+#[test]
+fn every_single_bit_flip_in_a_frame_is_caught() {
+    let f = big_sample(5);
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(1, &f, &mut buf).unwrap();
+    let mut caught = 0;
+    for bit in 0..(n - 1) * 8 {
+        let mut b = buf[..n].to_vec();
+        b[bit / 8] ^= 1 << (bit % 8);
+        let (got, d) = decode_all(&b);
+        assert!(
+            got.iter().all(|r| r.is_err()),
+            "bit {bit} flipped went through"
+        );
+        assert_eq!(d.stats().frames, 0);
+        caught += 1;
+    }
+    assert_eq!(caught, (n - 1) * 8);
+}
+
+#[test]
+fn a_frame_of_another_version_is_counted_not_decoded() {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(1, &big_raw(2), &mut buf).unwrap();
+    // Re-frame the payload with another version byte and a fresh CRC.
+    let mut payload = [0u8; MAX_FRAME];
+    let m = cobs::decode(&buf[..n - 1], &mut payload).unwrap();
+    payload[0] = VERSION + 1;
+    let crc = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740).checksum(&payload[..m - 2]);
+    payload[m - 2..m].copy_from_slice(&crc.to_le_bytes());
+    let mut out = [0u8; MAX_FRAME];
+    let k = cobs::encode(&payload[..m], &mut out);
+    out[k] = 0;
+    let (got, d) = decode_all(&out[..=k]);
+    assert_eq!(got, [Err(FrameError::Version(VERSION + 1))]);
+    assert_eq!(d.stats().version, 1);
+}
+
+fn stream(frames: &[Frame]) -> std::vec::Vec<u8> {
+    let mut out = std::vec::Vec::new();
+    for (k, f) in frames.iter().enumerate() {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(k as u32, f, &mut buf).unwrap();
+        out.extend_from_slice(&buf[..n]);
+    }
+    out
+}
+
+proptest! {
+    /// Garbage never panics the decoder and never yields a frame that was
+    /// not sent (the CRC would have to collide: 2⁻¹⁶ per garbage frame;
+    /// these inputs are short).
+    #[test]
+    fn garbage_is_counted_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+        let (got, d) = decode_all(&bytes);
+        let s = d.stats();
+        prop_assert_eq!(got.len() as u64, s.frames + s.corrupt + s.too_long + s.version + s.malformed);
+    }
+
+    /// Damage anywhere in a stream (bytes changed, dropped or inserted)
+    /// costs only the frames it touches: every frame it does not touch is
+    /// decoded, in order, with its link sequence number.
+    #[test]
+    fn the_decoder_resynchronises_after_damage(
+        at in 0usize..1000, len in 1usize..40, kind in 0u8..3, junk in any::<u8>()
+    ) {
+        let frames: std::vec::Vec<Frame> = (0..12).map(|k| match k % 3 {
+            0 => big_sample(5),
+            1 => big_raw(4),
+            _ => big_status(3),
+        }).collect();
+        let clean = stream(&frames);
+        // Frame boundaries: end offsets (exclusive) of each frame.
+        let mut ends = std::vec::Vec::new();
+        for (i, &b) in clean.iter().enumerate() {
+            if b == 0 { ends.push(i + 1); }
+        }
+        let at = at % clean.len();
+        let end = (at + len).min(clean.len());
+        let mut bad = clean.clone();
+        match kind {
+            0 => for b in &mut bad[at..end] { *b ^= junk | 1 },
+            1 => { bad.drain(at..end); }
+            _ => { for _ in 0..len { bad.insert(at, junk); } }
+        }
+        let (got, _) = decode_all(&bad);
+        let ok: std::vec::Vec<u32> = got.iter().filter_map(|r| r.as_ref().ok().map(|d| d.link_seq)).collect();
+        // Frames entirely before the damage, or starting after it (plus the
+        // one the damage runs into), must all come through.
+        let mut start = 0;
+        let mut want = std::vec::Vec::new();
+        for (k, &e) in ends.iter().enumerate() {
+            let untouched = e <= at || (kind != 2 && start > end) || (kind == 2 && start > at);
+            if untouched { want.push(k as u32); }
+            start = e;
+        }
+        for k in &want {
+            prop_assert!(ok.contains(k), "frame {} lost: got {:?}", k, ok);
+        }
+        for (k, d) in got.iter().flatten().enumerate() {
+            // Whatever decodes is a frame that was sent, unchanged.
+            prop_assert_eq!(&d.body, &frames[d.link_seq as usize], "frame {}", k);
+        }
+        prop_assert!(ok.windows(2).all(|w| w[0] < w[1]));
+    }
+}
+
+fn pipeline() -> Pipeline<4> {
+    Pipeline::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    )
+    .unwrap()
+}
+
+fn command_bytes(id: u8, op: Op) -> std::vec::Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(0, &Command { id, op }, &mut buf).unwrap();
+    buf[..n].to_vec()
+}
+
+/// Feed `bytes` to the port as received, then decode what it sent.
+fn exchange(port: &mut Port<1024>, pipe: &mut Pipeline<4>, bytes: &[u8]) -> std::vec::Vec<Frame> {
+    struct Rx<'a>(&'a [u8]);
+    impl embedded_hal_nb::serial::ErrorType for Rx<'_> {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_hal_nb::serial::Read<u8> for Rx<'_> {
+        fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
+            let (&b, rest) = self
+                .0
+                .split_first()
+                .ok_or(embedded_hal_nb::nb::Error::WouldBlock)?;
+            self.0 = rest;
+            Ok(b)
+        }
+    }
+    struct Tx(std::vec::Vec<u8>);
+    impl embedded_hal_nb::serial::ErrorType for Tx {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_hal_nb::serial::Write<u8> for Tx {
+        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            self.0.push(b);
+            Ok(())
+        }
+        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+    let mut rx = Rx(bytes);
+    while !rx.0.is_empty() {
+        port.receive(&mut rx, pipe);
+    }
+    let mut tx = Tx(std::vec::Vec::new());
+    port.drain(&mut tx);
+    decode_all(&tx.0)
+        .0
+        .into_iter()
+        .map(|r| r.unwrap().body)
+        .collect()
+}
+
+#[test]
+fn every_command_is_acknowledged_or_rejected_with_its_reason() {
+    let mut pipe = pipeline();
+    let mut port = Port::<1024>::new(Settings::default());
+    let cases = [
+        (Op::SetDivider(10), Ok(())),
+        (Op::SetDivider(0), Err(Reject::OutOfRange)),
+        (Op::SetDivider(1001), Err(Reject::OutOfRange)),
+        (Op::SetMode(Mode::Raw), Ok(())),
+        (Op::SetMethod(FusionMethod::Mean), Ok(())),
+        (Op::SetStatusEvery(50), Err(Reject::OutOfRange)),
+        (Op::SetStatusEvery(0), Ok(())),
+        (Op::RequestStatus, Ok(())),
+    ];
+    for (id, (op, want)) in cases.iter().enumerate() {
+        let got = exchange(&mut port, &mut pipe, &command_bytes(id as u8, *op));
+        assert_eq!(
+            got,
+            [Frame::Ack(Ack {
+                id: Some(id as u8),
+                result: *want
+            })],
+            "{op:?}"
+        );
+    }
+    let s = port.settings();
+    assert_eq!(
+        (s.divider, s.mode, s.method, s.status_every),
+        (10, Mode::Raw, FusionMethod::Mean, 0)
+    );
+    assert_eq!(pipe.fusion().method(), Method::Mean);
+    assert!(port.status_due(1), "requested");
+    assert!(!port.status_due(2), "request cleared, periodic off");
+    let c = port.counters();
+    assert_eq!((c.accepted, c.rejected), (5, 3));
+}
+
+#[test]
+fn a_damaged_command_changes_nothing_and_is_rejected() {
+    let mut pipe = pipeline();
+    let mut port = Port::<1024>::new(Settings::default());
+    let before = port.settings();
+    let good = command_bytes(3, Op::SetDivider(5));
+    // Every single-byte corruption of the frame body.
+    for i in 0..good.len() - 1 {
+        let mut b = good.clone();
+        b[i] ^= 0x40;
+        let got = exchange(&mut port, &mut pipe, &b);
+        assert!(!got.is_empty());
+        for f in got {
+            let Frame::Ack(a) = f else { panic!("{f:?}") };
+            assert!(a.result.is_err(), "byte {i}: {a:?}");
+        }
+        assert_eq!(port.settings(), before);
+    }
+    // A well-formed frame that is not a command, and one too long.
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(0, &big_status(2), &mut buf).unwrap();
+    let got = exchange(&mut port, &mut pipe, &buf[..n]);
+    assert!(
+        matches!(
+            got[..],
+            [Frame::Ack(Ack {
+                id: None,
+                result: Err(Reject::TooLong | Reject::Malformed)
+            })]
+        ),
+        "{got:?}"
+    );
+    assert_eq!(port.settings(), before);
+}
+
+#[test]
+fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
+    let mut port = Port::<100>::new(Settings::default());
+    let f = big_sample(5);
+    assert!(port.send(&f));
+    assert!(!port.send(&f), "no room for a second");
+    assert_eq!(port.counters().dropped, 1);
+    struct Tx(std::vec::Vec<u8>);
+    impl embedded_hal_nb::serial::ErrorType for Tx {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_hal_nb::serial::Write<u8> for Tx {
+        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            self.0.push(b);
+            Ok(())
+        }
+        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+    let mut tx = Tx(std::vec::Vec::new());
+    port.drain(&mut tx);
+    assert!(port.send(&f));
+    port.drain(&mut tx);
+    let (got, _) = decode_all(&tx.0);
+    let seqs: std::vec::Vec<u32> = got.iter().map(|r| r.as_ref().unwrap().link_seq).collect();
+    assert_eq!(
+        seqs,
+        [0, 2],
+        "link sequence 1 was dropped and shows as a gap"
+    );
+}

@@ -1,0 +1,227 @@
+//! Framing: version byte, link sequence number and postcard body, then a
+//! CRC-16, COBS-encoded and ended by a 0x00 byte.
+//!
+//! ```text
+//! payload = VERSION (u8) | link_seq (u32 LE) | postcard(body)
+//! frame   = COBS(payload | CRC-16/IBM-3740(payload) LE) | 0x00
+//! ```
+//!
+//! COBS leaves no 0x00 inside a frame, so a receiver that starts anywhere,
+//! or loses bytes, finds the next frame at the next 0x00. The CRC
+//! (CRC-16/IBM-3740, also called CCITT-FALSE: poly 0x1021, init 0xFFFF)
+//! catches every error of up to 3 bits and every burst of up to 16 bits in
+//! frames this short (Hamming distance 4 up to 32 751 bits).
+
+use crc::{Crc, CRC_16_IBM_3740};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use super::VERSION;
+
+/// Longest payload (version to CRC) either side sends; longer frames are
+/// rejected as [`FrameError::TooLong`].
+pub const MAX_PAYLOAD: usize = 384;
+/// Longest frame on the wire: COBS adds one byte per 254, plus the 0x00.
+pub const MAX_FRAME: usize = MAX_PAYLOAD + MAX_PAYLOAD / 254 + 2;
+
+const CRC16: Crc<u16> = Crc::<u16>::new(&CRC_16_IBM_3740);
+
+#[derive(Serialize, Deserialize)]
+struct Envelope<T> {
+    #[serde(with = "postcard::fixint::le")]
+    link_seq: u32,
+    body: T,
+}
+
+/// Why a frame could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EncodeError {
+    /// The message does not fit in [`MAX_PAYLOAD`] or the output buffer.
+    TooLong,
+}
+
+/// Encode `body` with `link_seq` into `out`: the whole frame, 0x00
+/// included. Returns its length.
+pub fn encode<T: Serialize>(link_seq: u32, body: &T, out: &mut [u8]) -> Result<usize, EncodeError> {
+    let mut payload = [0u8; MAX_PAYLOAD];
+    let (head, rest) = payload.split_at_mut(1);
+    head[0] = VERSION;
+    let env = Envelope { link_seq, body };
+    let n = postcard::to_slice(&env, rest)
+        .map_err(|_| EncodeError::TooLong)?
+        .len()
+        + 1;
+    if n + 2 > MAX_PAYLOAD {
+        return Err(EncodeError::TooLong);
+    }
+    let crc = CRC16.checksum(&payload[..n]).to_le_bytes();
+    payload[n..n + 2].copy_from_slice(&crc);
+    let m = cobs::try_encode(&payload[..n + 2], out).map_err(|_| EncodeError::TooLong)?;
+    let end = out.get_mut(m).ok_or(EncodeError::TooLong)?;
+    *end = 0;
+    Ok(m + 1)
+}
+
+/// Why a received frame was discarded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// COBS decoding failed, or the frame is shorter than version + CRC.
+    Cobs,
+    /// The CRC does not match.
+    Crc,
+    /// More than [`MAX_FRAME`] bytes before the delimiter.
+    TooLong,
+    /// Another protocol version (the byte it had).
+    Version(u8),
+    /// The CRC matched but the body does not decode as the expected type
+    /// (or has bytes left over).
+    Malformed,
+}
+
+/// What a [`Decoder`] counted.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DecodeStats {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Frames discarded for COBS or CRC errors.
+    pub corrupt: u64,
+    /// Frames discarded as too long.
+    pub too_long: u64,
+    /// Frames with another protocol version.
+    pub version: u64,
+    /// Frames whose body did not decode.
+    pub malformed: u64,
+    /// Bytes in discarded frames (delimiters not counted).
+    pub bytes_dropped: u64,
+}
+
+/// One decoded frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decoded<T> {
+    /// The link sequence number: consecutive frames differ by 1, so a gap
+    /// shows frames lost on the board (see `LinkCounters::dropped`) or on
+    /// the wire.
+    pub link_seq: u32,
+    /// The message.
+    pub body: T,
+}
+
+/// A streaming decoder: feed it bytes as they come; it never panics,
+/// resynchronises at the next 0x00 after any damage and counts what it
+/// dropped. `MAX` is its buffer (at least [`MAX_FRAME`] for board frames).
+pub struct Decoder<const MAX: usize> {
+    buf: [u8; MAX],
+    len: usize,
+    overflow: bool,
+    stats: DecodeStats,
+}
+
+impl<const MAX: usize> Default for Decoder<MAX> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const MAX: usize> Decoder<MAX> {
+    /// An empty decoder.
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; MAX],
+            len: 0,
+            overflow: false,
+            stats: DecodeStats {
+                frames: 0,
+                corrupt: 0,
+                too_long: 0,
+                version: 0,
+                malformed: 0,
+                bytes_dropped: 0,
+            },
+        }
+    }
+
+    /// The counters so far.
+    pub fn stats(&self) -> DecodeStats {
+        self.stats
+    }
+
+    /// Bytes held waiting for a delimiter.
+    pub fn pending(&self) -> usize {
+        self.len
+    }
+
+    /// Feed one byte; at a delimiter that ends a non-empty frame, the
+    /// frame or why it was discarded.
+    pub fn feed<T: DeserializeOwned>(
+        &mut self,
+        byte: u8,
+    ) -> Option<Result<Decoded<T>, FrameError>> {
+        if byte != 0 {
+            match self.buf.get_mut(self.len) {
+                Some(slot) if !self.overflow => {
+                    *slot = byte;
+                    self.len += 1;
+                }
+                _ => {
+                    self.overflow = true;
+                    self.stats.bytes_dropped += 1;
+                }
+            }
+            return None;
+        }
+        let (len, overflow) = (self.len, self.overflow);
+        self.len = 0;
+        self.overflow = false;
+        if len == 0 && !overflow {
+            return None; // back-to-back delimiters: nothing lost
+        }
+        let r = if overflow {
+            Err(FrameError::TooLong)
+        } else {
+            self.buf
+                .get_mut(..len)
+                .map_or(Err(FrameError::TooLong), decode_frame::<T>)
+        };
+        match r {
+            Ok(_) => self.stats.frames += 1,
+            Err(e) => {
+                self.stats.bytes_dropped += len as u64;
+                match e {
+                    FrameError::Cobs | FrameError::Crc => self.stats.corrupt += 1,
+                    FrameError::TooLong => self.stats.too_long += 1,
+                    FrameError::Version(_) => self.stats.version += 1,
+                    FrameError::Malformed => self.stats.malformed += 1,
+                }
+            }
+        }
+        Some(r)
+    }
+}
+
+/// Decode one COBS frame (without its 0x00), in place.
+fn decode_frame<T: DeserializeOwned>(frame: &mut [u8]) -> Result<Decoded<T>, FrameError> {
+    let n = cobs::decode_in_place(frame).map_err(|_| FrameError::Cobs)?;
+    let payload = frame.get(..n).ok_or(FrameError::Cobs)?;
+    let Some((data, crc)) = payload.split_last_chunk::<2>() else {
+        return Err(FrameError::Cobs);
+    };
+    if CRC16.checksum(data) != u16::from_le_bytes(*crc) {
+        return Err(FrameError::Crc);
+    }
+    let Some((&version, body)) = data.split_first() else {
+        return Err(FrameError::Cobs);
+    };
+    if version != VERSION {
+        return Err(FrameError::Version(version));
+    }
+    match postcard::take_from_bytes::<Envelope<T>>(body) {
+        Ok((env, [])) => Ok(Decoded {
+            link_seq: env.link_seq,
+            body: env.body,
+        }),
+        _ => Err(FrameError::Malformed),
+    }
+}
