@@ -1,6 +1,8 @@
 //! Board bindings: what differs between the QEMU machine and the real
 //! STM32F405 board, and the fault containment both share.
 
+#[cfg(feature = "qemu")]
+pub mod cmsdk_uart;
 #[cfg(feature = "persist")]
 pub mod persist;
 #[cfg(feature = "qemu")]

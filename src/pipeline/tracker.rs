@@ -6,6 +6,7 @@ use super::Output;
 use crate::algo::allan::stream::quantise;
 use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep};
 use crate::algo::math::sqrtf;
+use crate::link::msg::Noise;
 
 /// Input resolution of the tracker, °/s: ±2048 °/s fits the |w| < 2²⁰
 /// integer range, and the step adds (LSB²/12) ≈ 3e-7 (°/s)² of white
@@ -99,6 +100,19 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         Some(Described {
             seq: origin.wrapping_add(step.t as u32),
             step,
+        })
+    }
+
+    /// The last estimate of `axis` as the output link sends it: σ at
+    /// τ = 2^`taus[k]` samples with the sequence number it describes.
+    /// `None` until the window has filled.
+    pub fn noise(&self, axis: usize, taus: [usize; 3]) -> Option<Noise> {
+        let d = self.estimate(axis)?;
+        Some(Noise {
+            axis: axis as u8,
+            seq: d.seq,
+            len: d.step.len,
+            sigma_dps: taus.map(|j| sigma_dps(&d.step, j)),
         })
     }
 

@@ -119,6 +119,11 @@ fn build_qemu(bin: &str) -> PathBuf {
 /// Run a firmware image in QEMU and decode its defmt stream to stdout; true
 /// when QEMU's semihosting exit code and defmt-print both report success.
 fn qemu(elf: &Path, icount: bool) -> bool {
+    qemu_with(elf, icount, &[]).0
+}
+
+/// [`qemu`] with extra QEMU arguments; also returns the decoded log.
+fn qemu_with(elf: &Path, icount: bool, extra: &[&str]) -> (bool, String) {
     // A firmware that hangs (a fault loop, a stack overflow) must fail
     // the run, not stall CI: coreutils' `timeout` kills QEMU after 300 s.
     let mut q = Command::new("timeout");
@@ -134,8 +139,11 @@ fn qemu(elf: &Path, icount: bool) -> bool {
     ]);
     q.args(["-semihosting-config", "enable=on,target=native"]);
     if icount {
-        q.args(["-icount", "shift=0"]);
+        // One instruction per ns of virtual time; idle time (WFI) is
+        // skipped, not slept through in real time.
+        q.args(["-icount", "shift=0,sleep=off"]);
     }
+    q.args(extra);
     q.arg("-kernel").arg(elf).stdout(Stdio::piped());
     eprintln!("xtask: {q:?} | defmt-print -e {}", elf.display());
     let mut child = q.spawn().unwrap_or_else(|e| {
@@ -154,8 +162,77 @@ fn qemu(elf: &Path, icount: bool) -> bool {
             exit(1)
         });
     let q_ok = child.wait().map(|s| s.success()).unwrap_or(false);
-    print!("{}", String::from_utf8_lossy(&decoded.stdout));
-    q_ok && decoded.status.success()
+    let text = String::from_utf8_lossy(&decoded.stdout).into_owned();
+    print!("{text}");
+    (q_ok && decoded.status.success(), text)
+}
+
+/// The host tool (`gyro-tool`), built; its path.
+fn build_tool() -> PathBuf {
+    must(
+        run(Command::new("cargo").args(["build", "--profile", "host", "-p", "gyro-tool"])),
+        "build gyro-tool",
+    );
+    root().join("target").join("host").join("gyro")
+}
+
+/// The demo end to end: QEMU's UART0 goes to a Unix socket, `gyro record`
+/// records it (sending two commands: a status request, accepted, and a
+/// divider of 0, rejected), then `gyro check` compares the recording with
+/// the count and CRC-32 of fused rates the firmware logged, and
+/// `gyro analyse` analyses it.
+fn demo_end_to_end() -> bool {
+    let elf = build_qemu("qemu-demo");
+    let gyro = build_tool();
+    let dir = root().join("target").join("link");
+    let _ = std::fs::create_dir_all(&dir);
+    let sock = dir.join("qemu-demo.sock");
+    let rec = dir.join("qemu-demo.glk");
+    let _ = std::fs::remove_file(&sock);
+    let mut recorder = match Command::new(&gyro)
+        .arg("record")
+        .arg("--from")
+        .arg(format!("unix:{}", sock.display()))
+        .arg("-o")
+        .arg(&rec)
+        .args(["--send", "status", "--send", "divider=0", "--quiet"])
+        .spawn()
+    {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("xtask: cannot start gyro record: {e}");
+            return false;
+        }
+    };
+    let chardev = format!("socket,id=link,path={},server=on,wait=on", sock.display());
+    let (ok, log) = qemu_with(
+        &elf,
+        true,
+        &["-chardev", &chardev, "-serial", "chardev:link"],
+    );
+    let rec_ok = recorder.wait().map(|s| s.success()).unwrap_or(false);
+    if !(ok && rec_ok) {
+        eprintln!("xtask: demo {ok}, recorder {rec_ok}");
+        return false;
+    }
+    // "link: N sample frames, fused-rate CRC-32 0x…"
+    let Some((n, crc)) = log.lines().find_map(|l| {
+        let rest = l.split("link: ").nth(1)?;
+        let n = rest.split_whitespace().next()?;
+        let crc = rest.split("CRC-32 ").nth(1)?.split_whitespace().next()?;
+        Some((n.to_string(), crc.to_string()))
+    }) else {
+        eprintln!("xtask: the demo did not log its sample count and CRC-32");
+        return false;
+    };
+    run(Command::new(&gyro).arg("check").arg(&rec).args([
+        "--samples",
+        &n,
+        "--fused-crc32",
+        &crc,
+        "--acks",
+        "ok,out-of-range",
+    ])) && run(Command::new(&gyro).arg("analyse").arg(&rec))
 }
 
 fn build_board() -> PathBuf {
@@ -173,8 +250,7 @@ fn main() {
             ensure_tools();
             let ok = qemu(&build_qemu("qemu-tests"), false);
             must(ok, "on-target suite (qemu-tests)");
-            let ok = qemu(&build_qemu("qemu-demo"), true);
-            must(ok, "demo (qemu-demo)");
+            must(demo_end_to_end(), "demo and its output link (qemu-demo)");
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
             build_board();
@@ -182,8 +258,7 @@ fn main() {
         }
         "run" => {
             ensure_tools();
-            let ok = qemu(&build_qemu("qemu-demo"), true);
-            must(ok, "demo");
+            must(demo_end_to_end(), "demo");
         }
         "bench" => {
             ensure_tools();

@@ -1,0 +1,490 @@
+//! `gyro`: the host side of the gyro board's output link.
+//!
+//! - `gyro record --from SRC -o FILE`: save the byte stream (the recording
+//!   is the wire format itself, so nothing is lost), with a live view.
+//! - `gyro watch --from SRC`: the live view alone.
+//! - `--send OP` (record, watch): commands to the board, acknowledged in
+//!   the stream: `status`, `divider=N`, `status-every=N`,
+//!   `mode=fused|raw`, `method=mean|zhang|adaptive`.
+//! - `gyro check FILE`: integrity of a recording (no corrupt frame, no
+//!   gap), optionally against the firmware's own count and CRC-32.
+//! - `gyro decode FILE --what samples|noise|raw|status -o CSV`.
+//! - `gyro analyse FILE`: Allan deviation of each fused axis and the
+//!   E-DAVAR estimates the board sent.
+//!
+//! SRC is `serial:PATH[@BAUD]`, `tcp:HOST:PORT`, `unix:PATH`, `file:PATH`
+//! or `-`. Protocol: `docs/link.md`.
+
+mod analyse;
+mod source;
+mod summary;
+
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::{Parser, Subcommand, ValueEnum};
+use gyro_array::link::msg::{Command, Frame, FusionMethod, Mode, Op, Reject};
+use gyro_array::link::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use source::Source;
+use summary::{status_line, Summary};
+
+#[derive(Parser)]
+#[command(
+    name = "gyro",
+    version,
+    about = "Record, watch, check and analyse the gyro board's output link"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Save the link's bytes to a file, with a live view.
+    Record {
+        #[command(flatten)]
+        link: LinkArgs,
+        /// The recording (the raw wire bytes).
+        #[arg(short, long)]
+        out: PathBuf,
+    },
+    /// Show the link live.
+    Watch {
+        #[command(flatten)]
+        link: LinkArgs,
+    },
+    /// Check a recording: no corrupt frame, no gap in the link or sample
+    /// sequence numbers; exit 1 otherwise.
+    Check {
+        /// The recording.
+        file: PathBuf,
+        /// Expect exactly this many sample frames.
+        #[arg(long)]
+        samples: Option<u64>,
+        /// Expect this CRC-32 of the fused rates (the firmware's log).
+        #[arg(long, value_parser = parse_hex)]
+        fused_crc32: Option<u32>,
+        /// Expect these acknowledgements, in order (ok, corrupt, too-long,
+        /// version, malformed, out-of-range, refused), comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        acks: Option<Vec<AckKind>>,
+    },
+    /// Export one kind of frame from a recording as CSV.
+    Decode {
+        /// The recording.
+        file: PathBuf,
+        /// Which frames.
+        #[arg(long, value_enum, default_value = "samples")]
+        what: What,
+        /// The CSV file (standard output if absent).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+    },
+    /// Allan deviation of each fused axis, and the board's E-DAVAR
+    /// estimates, from a recording.
+    Analyse {
+        /// The recording.
+        file: PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+struct LinkArgs {
+    /// serial:PATH[@BAUD], tcp:HOST:PORT, unix:PATH, file:PATH or -.
+    #[arg(long)]
+    from: Source,
+    /// Commands to send once connected (repeatable).
+    #[arg(long = "send", value_parser = parse_op)]
+    send: Vec<Op>,
+    /// Stop after this many seconds (default: at the end of the stream).
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// How long to keep trying to connect to a socket, seconds.
+    #[arg(long, default_value_t = 30.0)]
+    connect_timeout: f64,
+    /// No live view.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum What {
+    Samples,
+    Noise,
+    Raw,
+    Status,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum AckKind {
+    Ok,
+    Corrupt,
+    TooLong,
+    Version,
+    Malformed,
+    OutOfRange,
+    Refused,
+}
+
+impl AckKind {
+    fn of(r: Result<(), Reject>) -> Self {
+        match r {
+            Ok(()) => AckKind::Ok,
+            Err(Reject::Corrupt) => AckKind::Corrupt,
+            Err(Reject::TooLong) => AckKind::TooLong,
+            Err(Reject::Version) => AckKind::Version,
+            Err(Reject::Malformed) => AckKind::Malformed,
+            Err(Reject::OutOfRange) => AckKind::OutOfRange,
+            Err(Reject::Refused) => AckKind::Refused,
+        }
+    }
+}
+
+fn parse_hex(s: &str) -> Result<u32, String> {
+    u32::from_str_radix(s.trim_start_matches("0x"), 16).map_err(|e| format!("{s:?}: {e}"))
+}
+
+fn parse_op(s: &str) -> Result<Op, String> {
+    let (k, v) = s.split_once('=').unwrap_or((s, ""));
+    let num = |v: &str| v.parse::<u32>().map_err(|e| format!("{s:?}: {e}"));
+    Ok(match (k, v) {
+        ("status", "") => Op::RequestStatus,
+        // Out-of-range values are sent as they are: the board rejects them.
+        ("divider", v) => Op::SetDivider(u16::try_from(num(v)?).unwrap_or(u16::MAX)),
+        ("status-every", v) => Op::SetStatusEvery(num(v)?),
+        ("mode", "fused") => Op::SetMode(Mode::Fused),
+        ("mode", "raw") => Op::SetMode(Mode::Raw),
+        ("method", "mean") => Op::SetMethod(FusionMethod::Mean),
+        ("method", "zhang") => Op::SetMethod(FusionMethod::Zhang),
+        ("method", "adaptive") => Op::SetMethod(FusionMethod::Adaptive),
+        _ => {
+            return Err(format!(
+                "{s:?}: expected status, divider=N, status-every=N, mode=fused|raw or method=mean|zhang|adaptive"
+            ))
+        }
+    })
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let r = match cli.cmd {
+        Cmd::Record { link, out } => stream(&link, Some(out)),
+        Cmd::Watch { link } => stream(&link, None),
+        Cmd::Check {
+            file,
+            samples,
+            fused_crc32,
+            acks,
+        } => check(&file, samples, fused_crc32, acks),
+        Cmd::Decode { file, what, out } => decode(&file, what, out),
+        Cmd::Analyse { file } => analyse::run(&file),
+    };
+    match r {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("gyro: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+/// Every decoder result of a recording, and the decoder with its counts.
+type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
+
+/// Decode every frame of a recording.
+fn read_recording(file: &PathBuf) -> Res<Recording> {
+    let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    let mut dec = Decoder::<MAX_FRAME>::new();
+    let frames = bytes.iter().filter_map(|&b| dec.feed::<Frame>(b)).collect();
+    Ok((frames, dec))
+}
+
+/// `record` and `watch`.
+fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
+    let wait = Duration::from_secs_f64(args.connect_timeout.max(0.0));
+    let mut conn = source::open(&args.from, wait)?;
+    let mut file = match &out {
+        Some(p) => Some(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
+        None => None,
+    };
+    if !args.send.is_empty() {
+        let w = conn
+            .writer
+            .as_mut()
+            .ok_or("--send needs a serial port or a socket")?;
+        for (id, op) in args.send.iter().enumerate() {
+            let mut buf = [0u8; MAX_FRAME];
+            let id = u8::try_from(id).map_err(|_| "at most 256 commands")?;
+            let n = encode(u32::from(id), &Command { id, op: *op }, &mut buf)
+                .map_err(|e| format!("{e:?}"))?;
+            w.write_all(&buf[..n])?;
+        }
+        w.flush()?;
+    }
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        let b = ProgressBar::new_spinner();
+        b.set_style(ProgressStyle::with_template(
+            "{spinner} {elapsed} {bytes} {msg}",
+        )?);
+        b
+    };
+    let deadline = args
+        .seconds
+        .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    let mut dec = Decoder::<MAX_FRAME>::new();
+    let mut sum = Summary::default();
+    let mut buf = [0u8; 4096];
+    let mut last_view = Instant::now();
+    loop {
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+        let n = match conn.reader.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e.into()),
+        };
+        if let Some(f) = file.as_mut() {
+            f.write_all(&buf[..n])?;
+        }
+        bar.inc(n as u64);
+        for &b in &buf[..n] {
+            if let Some(r) = dec.feed::<Frame>(b) {
+                if let Ok(Decoded {
+                    body: Frame::Status(st),
+                    ..
+                }) = &r
+                {
+                    bar.println(status_line(st));
+                }
+                if let Ok(Decoded {
+                    body: Frame::Ack(a),
+                    ..
+                }) = &r
+                {
+                    bar.println(format!("ack: command {:?} -> {:?}", a.id, a.result));
+                }
+                sum.add(&r);
+            }
+        }
+        if last_view.elapsed() > Duration::from_millis(100) {
+            last_view = Instant::now();
+            let st = dec.stats();
+            let rate = sum
+                .last_sample
+                .as_ref()
+                .map(|s| {
+                    format!(
+                        "seq {} rate {:+8.3} {:+8.3} {:+8.3} dps",
+                        s.seq, s.rate_dps[0], s.rate_dps[1], s.rate_dps[2]
+                    )
+                })
+                .unwrap_or_default();
+            bar.set_message(format!(
+                "{} frames, {} corrupt, {} missing | {rate}",
+                st.frames, st.corrupt, sum.link_missing
+            ));
+        }
+    }
+    bar.finish_and_clear();
+    if let Some(f) = file.as_mut() {
+        f.flush()?;
+    }
+    eprint!("{}", sum.report(&dec.stats()));
+    Ok(true)
+}
+
+fn check(
+    file: &PathBuf,
+    samples: Option<u64>,
+    crc: Option<u32>,
+    acks: Option<Vec<AckKind>>,
+) -> Res<bool> {
+    let (frames, dec) = read_recording(file)?;
+    let mut sum = Summary::default();
+    for r in &frames {
+        sum.add(r);
+    }
+    let st = dec.stats();
+    print!("{}", sum.report(&st));
+    let mut fails = Vec::new();
+    if st.frames == 0 {
+        fails.push("no frame".to_string());
+    }
+    if st.corrupt + st.too_long + st.version + st.malformed > 0 || st.bytes_dropped > 0 {
+        fails.push("frames failed to decode".into());
+    }
+    if sum.link_missing > 0 || sum.link_restarts > 0 {
+        fails.push("gaps in the link sequence numbers".into());
+    }
+    if sum.sample_gaps > 0 {
+        fails.push("gaps in the sample sequence numbers".into());
+    }
+    if let Some(n) = samples {
+        if sum.samples != n {
+            fails.push(format!("{} sample frames, expected {n}", sum.samples));
+        }
+    }
+    if let Some(c) = crc {
+        if sum.fused_crc32() != c {
+            fails.push(format!(
+                "fused-rate CRC-32 {:#010x}, the firmware's {c:#010x}",
+                sum.fused_crc32()
+            ));
+        }
+    }
+    if let Some(want) = acks {
+        let got: Vec<AckKind> = sum.acks.iter().map(|a| AckKind::of(a.result)).collect();
+        let ids_ok = sum
+            .acks
+            .iter()
+            .enumerate()
+            .all(|(i, a)| a.id == Some(i as u8));
+        if got != want || !ids_ok {
+            fails.push(format!(
+                "acknowledgements {got:?}, expected {want:?} for ids 0.."
+            ));
+        }
+    }
+    for f in &fails {
+        println!("FAIL: {f}");
+    }
+    if fails.is_empty() {
+        println!("check: PASS");
+    }
+    Ok(fails.is_empty())
+}
+
+fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
+    let (frames, dec) = read_recording(file)?;
+    let sink: Box<dyn Write> = match &out {
+        Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    let mut w = csv::Writer::from_writer(sink);
+    let mut header_done = false;
+    for d in frames.iter().flatten() {
+        match (&d.body, what) {
+            (Frame::Sample(s), What::Samples) => {
+                if !header_done {
+                    let mut h: Vec<String> = [
+                        "link_seq", "seq", "t_us", "x_dps", "y_dps", "z_dps", "valid", "degraded",
+                        "used_x", "used_y", "used_z",
+                    ]
+                    .map(String::from)
+                    .to_vec();
+                    h.extend((0..s.health.len()).map(|i| format!("flags_{i}")));
+                    w.write_record(&h)?;
+                    header_done = true;
+                }
+                let mut r = vec![
+                    d.link_seq.to_string(),
+                    s.seq.to_string(),
+                    s.t_us.to_string(),
+                ];
+                r.extend(s.rate_dps.iter().map(|v| v.to_string()));
+                r.extend([s.valid, s.degraded].iter().map(|v| v.to_string()));
+                r.extend(s.used.iter().map(|v| v.to_string()));
+                r.extend(s.health.iter().map(|v| v.to_string()));
+                w.write_record(&r)?;
+            }
+            (Frame::Sample(s), What::Noise) => {
+                let Some(n) = s.noise else { continue };
+                if !header_done {
+                    w.write_record([
+                        "frame_seq",
+                        "axis",
+                        "describes_seq",
+                        "window",
+                        "sigma0_dps",
+                        "sigma1_dps",
+                        "sigma2_dps",
+                    ])?;
+                    header_done = true;
+                }
+                let mut r = vec![
+                    s.seq.to_string(),
+                    n.axis.to_string(),
+                    n.seq.to_string(),
+                    n.len.to_string(),
+                ];
+                r.extend(n.sigma_dps.iter().map(|v| v.to_string()));
+                w.write_record(&r)?;
+            }
+            (Frame::Raw(s), What::Raw) => {
+                if !header_done {
+                    let mut h = vec!["link_seq".to_string(), "seq".into(), "t_us".into()];
+                    for i in 0..s.rate_dps.len() {
+                        h.extend(["x", "y", "z"].map(|a| format!("g{i}_{a}_dps")));
+                    }
+                    h.extend((0..s.health.len()).map(|i| format!("flags_{i}")));
+                    w.write_record(&h)?;
+                    header_done = true;
+                }
+                let mut r = vec![
+                    d.link_seq.to_string(),
+                    s.seq.to_string(),
+                    s.t_us.to_string(),
+                ];
+                for g in &s.rate_dps {
+                    r.extend(g.iter().map(|v| v.to_string()));
+                }
+                r.extend(s.health.iter().map(|v| v.to_string()));
+                w.write_record(&r)?;
+            }
+            (Frame::Status(s), What::Status) => {
+                if !header_done {
+                    w.write_record([
+                        "seq",
+                        "t_us",
+                        "mode",
+                        "method",
+                        "divider",
+                        "overruns",
+                        "sent",
+                        "dropped",
+                        "accepted",
+                        "rejected",
+                        "stack_peak",
+                    ])?;
+                    header_done = true;
+                }
+                w.write_record([
+                    s.seq.to_string(),
+                    s.t_us.to_string(),
+                    format!("{:?}", s.settings.mode),
+                    format!("{:?}", s.settings.method),
+                    s.settings.divider.to_string(),
+                    s.overruns.to_string(),
+                    s.link.sent.to_string(),
+                    s.link.dropped.to_string(),
+                    s.link.accepted.to_string(),
+                    s.link.rejected.to_string(),
+                    s.stack_peak.to_string(),
+                ])?;
+            }
+            _ => {}
+        }
+    }
+    w.flush()?;
+    let st = dec.stats();
+    if st.frames != frames.len() as u64 {
+        eprintln!(
+            "gyro: {} of {} frames did not decode ({} bytes dropped)",
+            frames.len() as u64 - st.frames,
+            frames.len(),
+            st.bytes_dropped
+        );
+    }
+    Ok(true)
+}
