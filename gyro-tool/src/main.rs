@@ -66,6 +66,9 @@ enum Cmd {
         /// Expect exactly this many sample frames.
         #[arg(long)]
         samples: Option<u64>,
+        /// Expect at least this many sample frames.
+        #[arg(long)]
+        min_samples: Option<u64>,
         /// Expect this CRC-32 of the fused rates (the firmware's log).
         #[arg(long, value_parser = parse_hex)]
         fused_crc32: Option<u32>,
@@ -178,9 +181,10 @@ fn main() -> ExitCode {
         Cmd::Check {
             file,
             samples,
+            min_samples,
             fused_crc32,
             acks,
-        } => check(&file, samples, fused_crc32, acks),
+        } => check(&file, (samples, min_samples), fused_crc32, acks),
         Cmd::Decode { file, what, out } => decode(&file, what, out),
         Cmd::Analyse { file } => analyse::run(&file),
     };
@@ -214,19 +218,18 @@ fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
         Some(p) => Some(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
         None => None,
     };
-    if !args.send.is_empty() {
-        let w = conn
-            .writer
-            .as_mut()
-            .ok_or("--send needs a serial port or a socket")?;
-        for (id, op) in args.send.iter().enumerate() {
-            let mut buf = [0u8; MAX_FRAME];
-            let id = u8::try_from(id).map_err(|_| "at most 256 commands")?;
-            let n = encode(u32::from(id), &Command { id, op: *op }, &mut buf)
-                .map_err(|e| format!("{e:?}"))?;
-            w.write_all(&buf[..n])?;
-        }
-        w.flush()?;
+    // Commands go out once the board is heard from (a UART drops what
+    // arrives before it is enabled), all in one write.
+    let mut commands = Vec::new();
+    for (id, op) in args.send.iter().enumerate() {
+        let mut buf = [0u8; MAX_FRAME];
+        let id = u8::try_from(id).map_err(|_| "at most 256 commands")?;
+        let n = encode(u32::from(id), &Command { id, op: *op }, &mut buf)
+            .map_err(|e| format!("{e:?}"))?;
+        commands.extend_from_slice(&buf[..n]);
+    }
+    if !commands.is_empty() && conn.writer.is_none() {
+        return Err("--send needs a serial port or a socket".into());
     }
     let bar = if args.quiet {
         ProgressBar::hidden()
@@ -275,6 +278,13 @@ fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
                     bar.println(format!("ack: command {:?} -> {:?}", a.id, a.result));
                 }
                 sum.add(&r);
+                if r.is_ok() && !commands.is_empty() {
+                    if let Some(w) = conn.writer.as_mut() {
+                        w.write_all(&commands)?;
+                        w.flush()?;
+                    }
+                    commands.clear();
+                }
             }
         }
         if last_view.elapsed() > Duration::from_millis(100) {
@@ -306,7 +316,7 @@ fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
 
 fn check(
     file: &PathBuf,
-    samples: Option<u64>,
+    (samples, min_samples): (Option<u64>, Option<u64>),
     crc: Option<u32>,
     acks: Option<Vec<AckKind>>,
 ) -> Res<bool> {
@@ -333,6 +343,14 @@ fn check(
     if let Some(n) = samples {
         if sum.samples != n {
             fails.push(format!("{} sample frames, expected {n}", sum.samples));
+        }
+    }
+    if let Some(n) = min_samples {
+        if sum.samples < n {
+            fails.push(format!(
+                "{} sample frames, expected at least {n}",
+                sum.samples
+            ));
         }
     }
     if let Some(c) = crc {

@@ -3,6 +3,8 @@
 
 #[cfg(feature = "qemu")]
 pub mod cmsdk_uart;
+#[cfg(feature = "board")]
+pub mod f405;
 #[cfg(feature = "persist")]
 pub mod persist;
 #[cfg(feature = "qemu")]

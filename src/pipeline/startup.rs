@@ -41,15 +41,18 @@ impl<T> Loggable for T {}
 /// Start the array. `self_test` is the number of samples per phase of the
 /// ICM-42688-P array self-test, or `None` to skip it. Returns the mask of
 /// gyros that failed (also marked in `pipe`).
-pub fn start_array<SPI: SpiDevice>(
+/// The ADXRS453 may sit on its own bus (`ADX`): it is rated to 8 MHz, the
+/// ICM-42688-P to 24 MHz.
+pub fn start_array<SPI: SpiDevice, ADX: SpiDevice>(
     mut icm: [&mut Icm42688<SPI>; 4],
-    adx: &mut Adxrs453<SPI>,
+    adx: &mut Adxrs453<ADX>,
     delay: &mut impl DelayNs,
     self_test: Option<u16>,
     pipe: &mut Pipeline<5>,
 ) -> u8
 where
     SPI::Error: Loggable,
+    ADX::Error: Loggable,
 {
     let mut failed = 0u8;
     for (i, g) in icm.iter_mut().enumerate() {

@@ -239,6 +239,295 @@ fn build_board() -> PathBuf {
     build_firmware("board", "board-f405")
 }
 
+/// A QEMU Machine Protocol client (JSON lines over a Unix socket).
+struct Qmp {
+    w: std::os::unix::net::UnixStream,
+    r: std::io::BufReader<std::os::unix::net::UnixStream>,
+}
+
+impl Qmp {
+    fn connect(path: &Path) -> Option<Self> {
+        let t0 = std::time::Instant::now();
+        let s = loop {
+            match std::os::unix::net::UnixStream::connect(path) {
+                Ok(s) => break s,
+                Err(_) if t0.elapsed().as_secs() < 30 => {
+                    std::thread::sleep(std::time::Duration::from_millis(50))
+                }
+                Err(e) => {
+                    eprintln!("xtask: QMP {}: {e}", path.display());
+                    return None;
+                }
+            }
+        };
+        let mut q = Qmp {
+            w: s.try_clone().ok()?,
+            r: std::io::BufReader::new(s),
+        };
+        q.line()?; // greeting
+        q.call(r#"{"execute":"qmp_capabilities"}"#)?;
+        Some(q)
+    }
+
+    fn line(&mut self) -> Option<String> {
+        use std::io::BufRead;
+        let mut l = String::new();
+        (self.r.read_line(&mut l).ok()? > 0).then_some(l)
+    }
+
+    /// Send a command; its reply (events in between are skipped).
+    fn call(&mut self, cmd: &str) -> Option<String> {
+        use std::io::Write;
+        self.w.write_all(cmd.as_bytes()).ok()?;
+        self.w.write_all(b"\n").ok()?;
+        loop {
+            let l = self.line()?;
+            if l.contains("\"return\"") || l.contains("\"error\"") {
+                return Some(l);
+            }
+        }
+    }
+
+    /// Guest physical memory [addr, addr + n).
+    fn read(&mut self, addr: u32, n: u32, scratch: &Path) -> Option<Vec<u8>> {
+        let r = self.call(&format!(
+            r#"{{"execute":"pmemsave","arguments":{{"val":{addr},"size":{n},"filename":"{}"}}}}"#,
+            scratch.display()
+        ))?;
+        if r.contains("\"error\"") {
+            return None;
+        }
+        std::fs::read(scratch).ok()
+    }
+}
+
+/// An RTT host over QMP: polls the defmt up-channel of the firmware and
+/// collects what it wrote. defmt-rtt does not wait for a host (it
+/// overwrites), so the poll must outpace the log: 20 ms of QEMU's
+/// real-time clock against a 1 KiB buffer and a few lines a second.
+struct RttReader {
+    block: u32,
+    cursor: Option<u32>,
+    bytes: Vec<u8>,
+}
+
+impl RttReader {
+    fn new(elf: &Path) -> Option<Self> {
+        use object::{Object, ObjectSymbol};
+        let data = std::fs::read(elf).ok()?;
+        let file = object::File::parse(&*data).ok()?;
+        let block = file
+            .symbols()
+            .find(|s| s.name() == Ok("_SEGGER_RTT"))?
+            .address() as u32;
+        Some(Self {
+            block,
+            cursor: None,
+            bytes: Vec::new(),
+        })
+    }
+
+    fn poll(&mut self, q: &mut Qmp, scratch: &Path) {
+        let Some(h) = q.read(self.block, 48, scratch) else {
+            return;
+        };
+        if !h.starts_with(b"SEGGER RTT") {
+            return; // not initialised yet
+        }
+        let word = |o: usize| u32::from_le_bytes([h[o], h[o + 1], h[o + 2], h[o + 3]]);
+        let (buf, size, write) = (word(28), word(32), word(36));
+        if size == 0 || write >= size {
+            return;
+        }
+        let from = self.cursor.unwrap_or(0);
+        if from == write {
+            return;
+        }
+        let Some(b) = q.read(buf, size, scratch) else {
+            return;
+        };
+        if write > from {
+            self.bytes
+                .extend_from_slice(&b[from as usize..write as usize]);
+        } else {
+            self.bytes.extend_from_slice(&b[from as usize..]);
+            self.bytes.extend_from_slice(&b[..write as usize]);
+        }
+        self.cursor = Some(write);
+    }
+}
+
+/// The real board binary on QEMU's STM32F405 (`netduinoplus2`), which
+/// models the SPI buses and USARTs but no gyro and no working clock tree:
+/// it must take the clock fallback, report every absent chip with its
+/// typed error, keep sampling, and stream link frames on USART1, which
+/// `gyro record` records while three commands go the other way. Its
+/// defmt log is read over QMP (see `RttReader`).
+fn board_qemu(seconds: u64) -> bool {
+    use gyro_array::link::msg::Frame;
+    use gyro_array::link::wire::{Decoder, MAX_FRAME};
+    use gyro_array::pipeline::flag;
+
+    let elf = build_board();
+    let gyro = build_tool();
+    let dir = root().join("target").join("link");
+    let _ = std::fs::create_dir_all(&dir);
+    let (sock, qmp, rec, scratch) = (
+        dir.join("board.sock"),
+        dir.join("board-qmp.sock"),
+        dir.join("board.glk"),
+        dir.join("board-mem.bin"),
+    );
+    let _ = std::fs::remove_file(&sock);
+    let _ = std::fs::remove_file(&qmp);
+    let Some(mut rtt) = RttReader::new(&elf) else {
+        eprintln!("xtask: no _SEGGER_RTT in {}", elf.display());
+        return false;
+    };
+    let recorder = Command::new(&gyro)
+        .arg("record")
+        .arg("--from")
+        .arg(format!("unix:{}", sock.display()))
+        .arg("-o")
+        .arg(&rec)
+        .args([
+            "--send",
+            "status",
+            "--send",
+            "method=mean",
+            "--send",
+            "divider=0",
+            "--quiet",
+        ])
+        .spawn();
+    let mut q = Command::new("timeout");
+    q.arg((seconds + 60).to_string())
+        .args([
+            "qemu-system-arm",
+            "-machine",
+            "netduinoplus2",
+            "-nographic",
+            "-monitor",
+            "none",
+        ])
+        // Instruction-counted time (idle time skipped): the sample timing
+        // is the firmware's, not the host's. Paused until the RTT reader
+        // is attached, so no boot log is missed.
+        .args(["-icount", "shift=0,sleep=off", "-S"])
+        .arg("-qmp")
+        .arg(format!("unix:{},server=on,wait=off", qmp.display()))
+        .arg("-chardev")
+        .arg(format!(
+            "socket,id=link,path={},server=on,wait=on",
+            sock.display()
+        ))
+        .args(["-serial", "chardev:link", "-kernel"])
+        .arg(&elf)
+        .stdout(Stdio::null());
+    eprintln!("xtask: {q:?}");
+    let (Ok(mut recorder), Ok(mut qemu)) = (recorder, q.spawn()) else {
+        eprintln!("xtask: cannot start gyro record or qemu-system-arm");
+        return false;
+    };
+    let Some(mut qc) = Qmp::connect(&qmp) else {
+        let _ = qemu.kill();
+        let _ = recorder.kill();
+        return false;
+    };
+    rtt.poll(&mut qc, &scratch);
+    let _ = qc.call(r#"{"execute":"cont"}"#);
+    let t0 = std::time::Instant::now();
+    while t0.elapsed().as_secs() < seconds {
+        rtt.poll(&mut qc, &scratch);
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    rtt.poll(&mut qc, &scratch);
+    let _ = qc.call(r#"{"execute":"quit"}"#);
+    let _ = qemu.wait();
+    let rec_ok = recorder.wait().map(|s| s.success()).unwrap_or(false);
+
+    let log = Command::new("defmt-print")
+        .arg("-e")
+        .arg(&elf)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .and_then(|mut c| {
+            use std::io::Write;
+            if let Some(mut i) = c.stdin.take() {
+                i.write_all(&rtt.bytes)?;
+            }
+            c.wait_with_output()
+        })
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+        .unwrap_or_default();
+    println!(
+        "--- board log (RTT, {} bytes) ---\n{log}---",
+        rtt.bytes.len()
+    );
+    let mut fails = Vec::new();
+    if !rec_ok {
+        fails.push("gyro record failed".to_string());
+    }
+    if !log.contains("clock: ") {
+        fails.push("no clock report".into());
+    }
+    for i in 0..4 {
+        if !log.contains(&format!("gyro {i}: ICM-42688-P init failed: WrongId(0)")) {
+            fails.push(format!("gyro {i}: no typed WrongId error logged"));
+        }
+    }
+    if !log.contains("gyro 4: ADXRS453 init failed: CheckFailed") {
+        fails.push("gyro 4: no typed CheckFailed error logged".into());
+    }
+    // The link: the check proper, then what the status frames say.
+    if !run(Command::new(&gyro).arg("check").arg(&rec).args([
+        "--min-samples",
+        "1000",
+        "--acks",
+        "ok,ok,out-of-range",
+    ])) {
+        fails.push("the recorded link failed its check".into());
+    }
+    let bytes = std::fs::read(&rec).unwrap_or_default();
+    let mut dec = Decoder::<MAX_FRAME>::new();
+    let last_status = bytes
+        .iter()
+        .filter_map(|&b| dec.feed::<Frame>(b))
+        .filter_map(|r| match r {
+            Ok(d) => match d.body {
+                Frame::Status(s) => Some(s),
+                _ => None,
+            },
+            Err(_) => None,
+        })
+        .last();
+    match last_status {
+        Some(s) => {
+            let all_out = s.gyros.len() == 5
+                && s.gyros
+                    .iter()
+                    .all(|g| g.flags & flag::INIT_FAILED != 0 && g.reads == 0);
+            let retried = s.gyros.iter().all(|g| g.restarts > 0);
+            println!(
+                "board-qemu: status at seq {}: method {:?}, gyros out {all_out}, re-probed {retried} (restarts {:?}), stack peak {} B",
+                s.seq,
+                s.settings.method,
+                s.gyros.iter().map(|g| g.restarts).collect::<Vec<_>>(),
+                s.stack_peak
+            );
+            if !all_out || !retried {
+                fails.push("status frames do not show every absent gyro out and re-probed".into());
+            }
+        }
+        None => fails.push("no status frame".into()),
+    }
+    for f in &fails {
+        println!("board-qemu: FAIL: {f}");
+    }
+    fails.is_empty()
+}
+
 fn main() {
     let task = std::env::args().nth(1).unwrap_or_default();
     match task.as_str() {
@@ -253,8 +542,12 @@ fn main() {
             must(demo_end_to_end(), "demo and its output link (qemu-demo)");
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
-            build_board();
+            must(board_qemu(10), "board-f405 on QEMU netduinoplus2");
             println!("xtask: all checks passed");
+        }
+        "board-qemu" => {
+            ensure_tools();
+            must(board_qemu(10), "board-f405 on QEMU netduinoplus2");
         }
         "run" => {
             ensure_tools();
@@ -295,7 +588,7 @@ fn main() {
             println!("panic call sites from this crate, all ELFs: {ours_total}");
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|run|bench|size|panics>");
+            eprintln!("usage: cargo xtask <test|run|board-qemu|bench|size|panics|fuzz [SECONDS]>");
             exit(2);
         }
     }
