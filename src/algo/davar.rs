@@ -470,8 +470,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// times. Estimates come `phase − 1` samples later. Set before the
     /// first sample.
     pub fn with_hop_phase(mut self, phase: u8) -> Self {
-        self.hop_phase = phase.clamp(1, SEG as u8 - 1);
+        self.set_hop_phase(phase);
         self
+    }
+
+    /// [`Davar::with_hop_phase`] in place.
+    pub fn set_hop_phase(&mut self, phase: u8) {
+        self.hop_phase = phase.clamp(1, SEG as u8 - 1);
     }
 
     /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over

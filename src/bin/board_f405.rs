@@ -76,23 +76,19 @@ fn spi_clock(pclk: Hertz, max: u32) -> Hertz {
 /// The board's noise tracker: three E-DAVARs.
 type Tracker = NoiseTracker<1024, 35, 9>;
 
-/// The noise tracker (33 KB) in a static of its own, built by a function
-/// that is not inlined: its construction's temporaries live in that
-/// function's frame, freed on return, not in main's for good. `None` if
-/// the configuration is refused. Called once.
+/// The noise tracker (33 KB) in a static of its own, built in place
+/// (`NoiseTracker::init_in`). `None` if the configuration is refused.
+/// Not inlined, so that the axis under construction is off main's frame
+/// once built. Called once.
 #[inline(never)]
 #[allow(unsafe_code)]
 fn noise_tracker() -> Option<&'static mut Tracker> {
     use core::mem::MaybeUninit;
     #[unsafe(link_section = ".uninit.tracker")]
     static mut TRACKER: MaybeUninit<Tracker> = MaybeUninit::uninit();
-    let t = Tracker::new(tracker::config(1024)).ok()?;
     // SAFETY: called once, from main, before anything refers to TRACKER.
-    unsafe {
-        let p = (&raw mut TRACKER).cast::<Tracker>();
-        p.write(t);
-        Some(&mut *p)
-    }
+    let slot = unsafe { (&raw mut TRACKER).as_mut() }?;
+    Tracker::init_in(slot, tracker::config(1024)).ok()
 }
 
 /// The self-test's five 8 KB blocks, in CCM RAM (`.ccmram`, see memory.x),
@@ -274,6 +270,7 @@ fn main() -> ! {
     let u = stack::stack_usage();
     defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
     watchdog.start(100.millis());
+    let mut meter = stack::StackMeter::new();
     let mut last = f405::ticks();
     // Sample clock, µs (64-bit: the tick counter wraps after 49 days).
     let mut t_us: u64 = 0;
@@ -302,28 +299,26 @@ fn main() -> ! {
         pipe.log_health_changes(&out);
         noise.push(&out);
         port.publish(&out, t_us, &pipe, |a| noise.noise(a, NOISE_TAU));
+        meter.step(64);
         if port.status_due(out.seq) {
-            let u = stack::stack_usage();
             let st = port.status(
                 &pipe,
                 out.seq,
                 t_us,
                 [1, 16, 256],
                 1_000_000 / FS_HZ,
-                u.peak,
+                meter.peak(),
             );
             port.send(&st);
         }
         // A completed sample is the only thing that feeds the watchdog.
         watchdog.feed();
         if out.seq % 10_000 == 0 {
-            let u = stack::stack_usage();
             let l = port.counters();
             defmt::info!(
-                "seq {}: stack peak {} of {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
+                "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
                 out.seq,
-                u.peak,
-                u.size,
+                meter.peak(),
                 l.sent,
                 l.dropped,
                 l.accepted,

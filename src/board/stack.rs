@@ -84,3 +84,55 @@ pub fn stack_usage() -> StackUsage {
         size: hi - lo,
     }
 }
+
+/// The high-water mark measured a little at a time: a full
+/// [`stack_usage`] reads every free word (≈ 12 000 on the board, some
+/// 60 000 cycles), too much for one 1 ms sample. The meter reads `words`
+/// words per call, from the bottom of the stack up, and completes a pass
+/// when it meets the first word that is no longer paint; [`StackMeter::peak`]
+/// is the deepest use found by the passes so far.
+pub struct StackMeter {
+    lo: u32,
+    hi: u32,
+    at: u32,
+    peak: u32,
+}
+
+impl Default for StackMeter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StackMeter {
+    /// A meter for the stack painted by [`guard_stack`], its first pass
+    /// done now (call it where a long scan is acceptable, at start-up).
+    pub fn new() -> Self {
+        let (lo, hi) = stack_bounds();
+        let lo = lo.next_multiple_of(GUARD) + GUARD;
+        Self {
+            lo,
+            hi,
+            at: lo,
+            peak: stack_usage().peak,
+        }
+    }
+
+    /// Scan up to `words` more words.
+    pub fn step(&mut self, words: u32) {
+        for _ in 0..words {
+            // SAFETY: reading the stack region's own words.
+            if self.at >= self.hi || unsafe { (self.at as *const u32).read_volatile() } != PAINT {
+                self.peak = self.peak.max(self.hi - self.at);
+                self.at = self.lo;
+                return;
+            }
+            self.at += 4;
+        }
+    }
+
+    /// Deepest use found so far, bytes.
+    pub fn peak(&self) -> u32 {
+        self.peak
+    }
+}

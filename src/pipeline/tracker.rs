@@ -19,6 +19,29 @@ pub const fn config(lambda2: u16) -> DavarConfig {
     DavarConfig::segmented(lambda2 / 2, lambda2)
 }
 
+/// Hops 11 samples apart, so the three axes never do their heaviest
+/// sample together.
+const HOP_PHASES: [u8; 3] = [1, 12, 23];
+
+/// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's
+/// temporaries reuse one frame.
+#[inline(never)]
+#[allow(unsafe_code)]
+fn build_axis<const CAP: usize, const FRAMES: usize, const T: usize>(
+    dst: *mut Davar<CAP, FRAMES, T, 0>,
+    cfg: DavarConfig,
+    phase: u8,
+) -> Result<(), DavarError> {
+    let d = Davar::new(cfg)?;
+    // SAFETY: the caller passes a pointer valid for writes of one Davar;
+    // once written it is initialised and may be borrowed.
+    unsafe {
+        dst.write(d);
+        (*dst).set_hop_phase(phase);
+    }
+    Ok(())
+}
+
 /// E-DAVAR on the three fused axes.
 ///
 /// Allan variances need contiguous samples: an axis whose sample is missing
@@ -47,18 +70,44 @@ pub struct Described<const T: usize> {
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FRAMES, T> {
     /// One E-DAVAR per axis with `cfg`.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
-        // Hops 11 samples apart, so the three axes never do their heaviest
-        // sample together.
         Ok(Self {
             axes: [
-                Davar::new(cfg)?.with_hop_phase(1),
-                Davar::new(cfg)?.with_hop_phase(12),
-                Davar::new(cfg)?.with_hop_phase(23),
+                Davar::new(cfg)?.with_hop_phase(HOP_PHASES[0]),
+                Davar::new(cfg)?.with_hop_phase(HOP_PHASES[1]),
+                Davar::new(cfg)?.with_hop_phase(HOP_PHASES[2]),
             ],
             origin: [None; 3],
             last_seq: None,
             restarts: 0,
         })
+    }
+
+    /// Build the tracker in place in `slot` (a firmware static), one axis
+    /// at a time: the stack holds one axis under construction (≈ 11 KB
+    /// for λ2 = 1024) instead of the whole tracker twice, as returning it
+    /// by value does (66 KB on the board, measured from the frame size).
+    /// On error `slot` stays uninitialised.
+    #[allow(unsafe_code)]
+    pub fn init_in(
+        slot: &mut core::mem::MaybeUninit<Self>,
+        cfg: DavarConfig,
+    ) -> Result<&mut Self, DavarError> {
+        let p = slot.as_mut_ptr();
+        // SAFETY: `p` is valid for writes of `Self` (from the MaybeUninit);
+        // `axes` is an array of 3. Fields are written through raw pointers,
+        // never read before they are written.
+        let axes = unsafe { core::ptr::addr_of_mut!((*p).axes).cast::<Davar<CAP, FRAMES, T, 0>>() };
+        for (i, phase) in HOP_PHASES.into_iter().enumerate() {
+            // SAFETY: i < 3, inside `axes`.
+            build_axis(unsafe { axes.add(i) }, cfg, phase)?;
+        }
+        // SAFETY: as above; after these writes every field is initialised.
+        unsafe {
+            core::ptr::addr_of_mut!((*p).origin).write([None; 3]);
+            core::ptr::addr_of_mut!((*p).last_seq).write(None);
+            core::ptr::addr_of_mut!((*p).restarts).write(0);
+            Ok(slot.assume_init_mut())
+        }
     }
 
     /// Feed one pipeline output.
