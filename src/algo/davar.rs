@@ -859,12 +859,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let len = p.end - p.start;
         let mut avar = [0.0f32; T];
         for (j, v) in avar.iter_mut().enumerate() {
-            let m = 1u64 << j;
-            let terms = (len + 1).saturating_sub(2 * m);
-            if terms > 0 {
-                let mf = m as f64;
-                *v = (p.acc[j] as f64 / (2.0 * mf * mf * terms as f64)) as f32;
-            }
+            *v = Self::avar_of(&p, j);
         }
         Some(DavarStep {
             t: p.t,
@@ -875,6 +870,35 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             threshold: self.threshold,
             avar,
         })
+    }
+
+    /// The last estimate's time `t` and window length: what
+    /// [`Davar::estimate`] reports, without converting its sums (some 300
+    /// instructions per τ on a Cortex-M4).
+    pub fn estimate_window(&self) -> Option<(u64, u16)> {
+        self.last.map(|p| (p.t, (p.end - p.start) as u16))
+    }
+
+    /// One τ (2ʲ samples) of [`Davar::estimate`]: `None` before the first
+    /// estimate or for j ≥ T.
+    pub fn estimate_avar(&self, j: usize) -> Option<f32> {
+        let p = self.last?;
+        (j < T).then(|| Self::avar_of(&p, j))
+    }
+
+    /// σ² at τ = 2ʲ from a published window's exact sums (0 where the
+    /// window has no term at that τ).
+    fn avar_of(p: &Published<T>, j: usize) -> f32 {
+        let len = p.end - p.start;
+        let m = 1u64 << j;
+        let terms = (len + 1).saturating_sub(2 * m);
+        match p.acc.get(j) {
+            Some(&acc) if terms > 0 => {
+                let mf = m as f64;
+                (acc as f64 / (2.0 * mf * mf * terms as f64)) as f32
+            }
+            _ => 0.0,
+        }
     }
 
     /// Start segmenting the span of frames `first..first + span`: snapshot

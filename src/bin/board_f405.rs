@@ -298,7 +298,7 @@ fn main() -> ! {
         let out = pipe.step(&mut gyros);
         pipe.log_health_changes(&out);
         noise.push(&out);
-        port.publish(&out, t_us, &pipe, |a| noise.noise(a, NOISE_TAU));
+        port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         meter.step(64);
         if port.status_due(out.seq) {
             let st = port.status(

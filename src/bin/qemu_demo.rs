@@ -189,7 +189,7 @@ fn main() -> ! {
         noise.push(&out);
         let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
         let before = port.counters().sent;
-        port.publish(&out, t_us, &pipe, |a| noise.noise(a, NOISE_TAU));
+        port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         if port.counters().sent != before {
             sample_frames += 1;
             for f in &out.fused {

@@ -20,6 +20,25 @@ use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Output, Pipeline};
 
+/// Where the E-DAVAR estimates come from (the pipeline's noise tracker).
+pub trait NoiseSource {
+    /// Sequence number of the sample the axis's newest estimate describes
+    /// (cheap: the port asks every sample).
+    fn described(&self, axis: usize) -> Option<u32>;
+    /// The axis's newest estimate (asked only when it is new).
+    fn noise(&self, axis: usize) -> Option<Noise>;
+}
+
+/// No noise tracking.
+impl NoiseSource for () {
+    fn described(&self, _: usize) -> Option<u32> {
+        None
+    }
+    fn noise(&self, _: usize) -> Option<Noise> {
+        None
+    }
+}
+
 /// Longest command frame the board accepts (commands are ≤ 16 bytes).
 pub const RX_MAX: usize = 64;
 
@@ -103,14 +122,14 @@ impl<const TX: usize> Port<TX> {
     }
 
     /// Queue the frame for sample `out` if the divider selects it: a
-    /// [`Sample`] (with the next new E-DAVAR estimate from `noise`, asked
-    /// per axis) or a [`Raw`] frame. `t_us` is the sample's time.
+    /// [`Sample`] (with the next new E-DAVAR estimate from `noise`) or a
+    /// [`Raw`] frame. `t_us` is the sample's time.
     pub fn publish<const N: usize>(
         &mut self,
         out: &Output<N>,
         t_us: u64,
         pipe: &Pipeline<N>,
-        mut noise: impl FnMut(usize) -> Option<Noise>,
+        noise: &impl NoiseSource,
     ) {
         let div = u32::from(self.settings.divider.max(1));
         if !out.seq.is_multiple_of(div) {
@@ -140,7 +159,7 @@ impl<const TX: usize> Port<TX> {
                         s.used[a] = f.used();
                     }
                 }
-                s.noise = self.next_noise(&mut noise);
+                s.noise = self.next_noise(noise);
                 Frame::Sample(s)
             }
             Mode::Raw => {
@@ -160,15 +179,22 @@ impl<const TX: usize> Port<TX> {
     }
 
     /// The next axis (in turn) with an estimate not sent yet, finite.
-    fn next_noise(&mut self, noise: &mut impl FnMut(usize) -> Option<Noise>) -> Option<Noise> {
+    fn next_noise(&mut self, noise: &impl NoiseSource) -> Option<Noise> {
         for k in 0..3 {
             let a = (self.noise_turn + k) % 3;
-            let Some(n) = noise(a) else { continue };
-            let fresh = self.noise_sent.get(a).copied().flatten() != Some(n.seq);
-            if fresh && n.sigma_dps.iter().all(|s| s.is_finite()) {
-                if let Some(s) = self.noise_sent.get_mut(a) {
-                    *s = Some(n.seq);
-                }
+            let Some(seq) = noise.described(a) else {
+                continue;
+            };
+            if self.noise_sent.get(a).copied().flatten() == Some(seq) {
+                continue;
+            }
+            // Asked once per new estimate: one that is not finite is
+            // skipped, never sent.
+            if let Some(s) = self.noise_sent.get_mut(a) {
+                *s = Some(seq);
+            }
+            let Some(n) = noise.noise(a) else { continue };
+            if n.sigma_dps.iter().all(|s| s.is_finite()) {
                 self.noise_turn = (a + 1) % 3;
                 return Some(n);
             }

@@ -7,6 +7,7 @@ use crate::algo::allan::stream::quantise;
 use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep};
 use crate::algo::math::sqrtf;
 use crate::link::msg::Noise;
+use crate::link::port::NoiseSource;
 
 /// Input resolution of the tracker, °/s: ±2048 °/s fits the |w| < 2²⁰
 /// integer range, and the step adds (LSB²/12) ≈ 3e-7 (°/s)² of white
@@ -152,22 +153,47 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         })
     }
 
-    /// The last estimate of `axis` as the output link sends it: σ at
-    /// τ = 2^`taus[k]` samples with the sequence number it describes.
-    /// `None` until the window has filled.
-    pub fn noise(&self, axis: usize, taus: [usize; 3]) -> Option<Noise> {
-        let d = self.estimate(axis)?;
-        Some(Noise {
-            axis: axis as u8,
-            seq: d.seq,
-            len: d.step.len,
-            sigma_dps: taus.map(|j| sigma_dps(&d.step, j)),
-        })
+    /// The link's view of the tracker: σ at τ = 2^`taus[k]` samples.
+    pub fn at_taus(&self, taus: [usize; 3]) -> LinkNoise<'_, CAP, FRAMES, T> {
+        LinkNoise {
+            tracker: self,
+            taus,
+        }
     }
 
     /// Window restarts so far (summed over axes).
     pub fn restarts(&self) -> u32 {
         self.restarts
+    }
+}
+
+/// The tracker as the output link reads it ([`NoiseTracker::at_taus`]).
+pub struct LinkNoise<'a, const CAP: usize, const FRAMES: usize, const T: usize> {
+    tracker: &'a NoiseTracker<CAP, FRAMES, T>,
+    taus: [usize; 3],
+}
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
+    for LinkNoise<'_, CAP, FRAMES, T>
+{
+    fn described(&self, axis: usize) -> Option<u32> {
+        let (t, _) = self.tracker.axes.get(axis)?.estimate_window()?;
+        let origin = (*self.tracker.origin.get(axis)?)?;
+        Some(origin.wrapping_add(t as u32))
+    }
+
+    fn noise(&self, axis: usize) -> Option<Noise> {
+        let d = self.tracker.axes.get(axis)?;
+        let (t, len) = d.estimate_window()?;
+        let origin = (*self.tracker.origin.get(axis)?)?;
+        Some(Noise {
+            axis: axis as u8,
+            seq: origin.wrapping_add(t as u32),
+            len,
+            sigma_dps: self
+                .taus
+                .map(|j| d.estimate_avar(j).map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)),
+        })
     }
 }
 

@@ -598,7 +598,7 @@ fn main() {
 /// section headers, without binutils.
 /// The cargo-fuzz targets (fuzz/fuzz_targets).
 const FUZZ_TARGETS: &[&str] = &[
-    "fusion", "davar", "allan", "qualify", "drivers", "pipeline", "record",
+    "fusion", "davar", "allan", "qualify", "drivers", "pipeline", "record", "link",
 ];
 const CARGO_FUZZ: &str = "0.13.2";
 
