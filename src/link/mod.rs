@@ -5,8 +5,8 @@
 //!   acknowledgements; commands the other way).
 //! - [`wire`]: framing (postcard body, CRC-16, COBS, 0x00 delimiter) and
 //!   the streaming [`wire::Decoder`] the board and the host tools share.
-//! - [`port`]: the board's end: a transmit queue fed from the pipeline,
-//!   drained from idle time, and command handling.
+//! - [`port`]: the board's end: a transmit queue ([`ring`]) fed from the
+//!   pipeline, drained from idle time, and command handling.
 //!
 //! Budget: every frame must fit in one sample period at [`BAUD`] with
 //! 8N1 framing (10 bits a byte): [`frame_budget`] bytes at 1 kHz. The
@@ -14,6 +14,7 @@
 
 pub mod msg;
 pub mod port;
+pub mod ring;
 pub mod wire;
 
 #[cfg(test)]

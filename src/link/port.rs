@@ -10,12 +10,13 @@
 //! that does not fit is counted in [`LinkCounters::dropped`] and leaves a
 //! gap in the link sequence number.
 
-use heapless::{Deque, Vec};
+use heapless::Vec;
 
 use super::msg::{
     Ack, Command, Frame, FusionMethod, GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject,
     Sample, Settings, Status, MAX_GYROS,
 };
+use super::ring::ByteRing;
 use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Output, Pipeline};
@@ -55,7 +56,7 @@ impl FusionMethod {
 
 /// The board's end of the link, with a `TX`-byte transmit queue.
 pub struct Port<const TX: usize> {
-    tx: Deque<u8, TX>,
+    tx: ByteRing<TX>,
     rx: Decoder<RX_MAX>,
     link_seq: u32,
     settings: Settings,
@@ -71,7 +72,7 @@ impl<const TX: usize> Port<TX> {
     /// A port with `settings`; its method must be the pipeline's.
     pub fn new(settings: Settings) -> Self {
         Self {
-            tx: Deque::new(),
+            tx: ByteRing::new(),
             rx: Decoder::new(),
             link_seq: 0,
             settings,
@@ -104,14 +105,8 @@ impl<const TX: usize> Port<TX> {
         let seq = self.link_seq;
         self.link_seq = self.link_seq.wrapping_add(1);
         let ok = match encode(seq, frame, &mut buf) {
-            Ok(n) if TX - self.tx.len() >= n => {
-                for &b in buf.get(..n).unwrap_or(&[]) {
-                    // Cannot fail: the room was checked.
-                    let _ = self.tx.push_back(b);
-                }
-                true
-            }
-            _ => false,
+            Ok(n) => self.tx.push(buf.get(..n).unwrap_or(&[])),
+            Err(_) => false,
         };
         if ok {
             self.counters.sent = self.counters.sent.wrapping_add(1);
@@ -249,14 +244,19 @@ impl<const TX: usize> Port<TX> {
     /// the bytes sent.
     pub fn drain<W: embedded_hal_nb::serial::Write<u8>>(&mut self, uart: &mut W) -> usize {
         let mut n = 0;
-        while let Some(&b) = self.tx.front() {
-            match uart.write(b) {
-                Ok(()) => {
-                    self.tx.pop_front();
-                    n += 1;
-                }
+        while !self.tx.is_empty() {
+            let mut k = 0;
+            for &b in self.tx.front() {
                 // WouldBlock, or a UART error: try again next time.
-                Err(_) => break,
+                if uart.write(b).is_err() {
+                    break;
+                }
+                k += 1;
+            }
+            self.tx.consume(k);
+            n += k;
+            if k == 0 {
+                break;
             }
         }
         n

@@ -416,3 +416,35 @@ fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
         "link sequence 1 was dropped and shows as a gap"
     );
 }
+
+/// The two worked examples of `docs/link.md`, byte for byte.
+#[test]
+fn the_specification_examples_are_what_the_code_sends() {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(
+        0,
+        &Command {
+            id: 7,
+            op: Op::RequestStatus,
+        },
+        &mut buf,
+    )
+    .unwrap();
+    assert_eq!(
+        buf[..n],
+        [0x02, 0x01, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0xbc, 0x90, 0x00]
+    );
+    let n = encode(
+        5,
+        &Frame::Ack(Ack {
+            id: Some(7),
+            result: Err(Reject::OutOfRange),
+        }),
+        &mut buf,
+    )
+    .unwrap();
+    assert_eq!(
+        buf[..n],
+        [0x03, 0x01, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0xf3, 0x97, 0x00]
+    );
+}
