@@ -70,7 +70,8 @@ fn spi_clock(pclk: Hertz, max: u32) -> Hertz {
     while pclk.raw() / d > max && d < 256 {
         d *= 2;
     }
-    Hertz::from_raw(pclk.raw() / d)
+    // Never 0: the HAL divides the bus clock by it.
+    Hertz::from_raw((pclk.raw() / d).max(1))
 }
 
 /// The board's noise tracker: three E-DAVARs.

@@ -66,6 +66,13 @@ fn main() -> ! {
     exit(ok)
 }
 
+/// Ticks of an empty `t.now()` pair.
+fn overhead_of(t: &Ticks) -> u64 {
+    let t0 = t.now();
+    let t1 = t.now();
+    t1 - t0
+}
+
 /// A UART that takes every byte at once (the board writes one data
 /// register per byte as the USART empties).
 struct NullUart(u32);
@@ -150,6 +157,22 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
     let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::config(1024)) else {
         exit(false)
     };
+    // The reads alone (drivers and the emulated SPI exchange), fault-free:
+    // the share of "read + fuse" that is bus traffic.
+    let mut read_ticks = 0u64;
+    const READS: u32 = 500;
+    for _ in 0..READS {
+        with_bus(&bus, |b| b.advance(dt));
+        let t0 = t.now();
+        for g in [&mut g0 as &mut dyn Gyro, &mut g1, &mut g2, &mut g3, &mut g4] {
+            let _ = black_box(g.read());
+        }
+        read_ticks += (t.now() - t0).saturating_sub(overhead_of(t));
+    }
+    defmt::info!(
+        "bench whole loop: reading the 5 gyros alone (drivers + emulated SPI): mean {=u32} instructions",
+        (read_ticks as f32 * ipt / READS as f32) as u32
+    );
     let mut port = Port::<2048>::new(Settings::default());
     let mut uart = NullUart(0);
     // Parts: read + calibrate + fuse, E-DAVAR, link.

@@ -52,12 +52,15 @@ pub fn encode<T: Serialize>(link_seq: u32, body: &T, out: &mut [u8]) -> Result<u
         .map_err(|_| EncodeError::TooLong)?
         .len()
         + 1;
-    if n + 2 > MAX_PAYLOAD {
-        return Err(EncodeError::TooLong);
-    }
-    let crc = CRC16.checksum(&payload[..n]).to_le_bytes();
-    payload[n..n + 2].copy_from_slice(&crc);
-    let m = cobs::try_encode(&payload[..n + 2], out).map_err(|_| EncodeError::TooLong)?;
+    let (data, tail) = payload
+        .split_at_mut_checked(n)
+        .ok_or(EncodeError::TooLong)?;
+    let crc = CRC16.checksum(data).to_le_bytes();
+    tail.get_mut(..2)
+        .ok_or(EncodeError::TooLong)?
+        .copy_from_slice(&crc);
+    let framed = payload.get(..n + 2).ok_or(EncodeError::TooLong)?;
+    let m = cobs::try_encode(framed, out).map_err(|_| EncodeError::TooLong)?;
     let end = out.get_mut(m).ok_or(EncodeError::TooLong)?;
     *end = 0;
     Ok(m + 1)
