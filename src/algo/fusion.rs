@@ -915,9 +915,7 @@ fn drop_frozen<const N: usize>(st: &AxisState<N>, valid: u8, candidates: u8) -> 
 /// median is the mean of the middle two, so one wild value plus one noisy
 /// but honest one (an ADXRS453 among ICM-42688-Ps) can pull it off every
 /// quiet gyro: drop the most outlying value and gate again about the new
-/// median. Rare, so kept out of line.
-#[cold]
-#[inline(never)]
+/// median.
 fn regate_without_worst<const N: usize>(
     y: &[f32; N],
     v: &[f32; N],
@@ -947,6 +945,81 @@ fn regate_without_worst<const N: usize>(
         good &= !(((has(rest, i) && off) as u8) << i);
     }
     good
+}
+
+/// The first gate kept fewer than two gyros or left two or more out
+/// (rare, so out of line): [`regate_without_worst`] for the first, then
+/// [`consensus_gate`] if two or more are out.
+#[cold]
+#[inline(never)]
+fn regate<const N: usize>(
+    y: &[f32; N],
+    v: &[f32; N],
+    active: u8,
+    mut good: u8,
+    med: f32,
+    k2: f32,
+    v_med: f32,
+) -> u8 {
+    if good & good.wrapping_sub(1) == 0 {
+        good = regate_without_worst(y, v, active, med, k2, v_med);
+    }
+    let off = active & !good;
+    if off & off.wrapping_sub(1) != 0 {
+        good = consensus_gate(y, v, active, good, k2, v_med);
+    }
+    good
+}
+
+/// The gate rejected two or more gyros. With an even count the median
+/// sits between the middle two, and when two chips agree by chance with a
+/// faulty one (a bit error that moved a chip by 1 °/s, beside a noisy but
+/// honest ADXRS453) the gate can keep the wrong pair and reject the quiet
+/// majority: the fault campaign's last two failures in 10 000 runs. So
+/// take every active gyro's value in turn as the reference, gate the
+/// others about it as about the median (residual variance vᵢ + v_med: a
+/// reference's own variance must not widen the gate, or a chip the noise
+/// model already distrusts would vouch for everybody), and keep the
+/// consistent set of largest total inverse variance; the first gate's
+/// choice stands unless another set outweighs it. Two rejections are rare (two faulty
+/// chips at once), so this is out of line.
+#[cold]
+#[inline(never)]
+fn consensus_gate<const N: usize>(
+    y: &[f32; N],
+    v: &[f32; N],
+    active: u8,
+    first: u8,
+    k2: f32,
+    v_med: f32,
+) -> u8 {
+    let weight = |set: u8| -> f32 {
+        let mut w = 0.0;
+        for i in 0..N {
+            if has(set, i) {
+                w += 1.0 / v[i];
+            }
+        }
+        w
+    };
+    let (mut best, mut best_w) = (first, weight(first));
+    for j in 0..N {
+        if !has(active, j) {
+            continue;
+        }
+        let mut set = 0u8;
+        for i in 0..N {
+            let e = y[i] - y[j];
+            if has(active, i) && e * e <= k2 * (v[i] + v_med) {
+                set |= 1 << i;
+            }
+        }
+        let w = weight(set);
+        if set.count_ones() >= 2 && w > best_w {
+            (best, best_w) = (set, w);
+        }
+    }
+    best
 }
 
 /// Largest |rate| fusion accepts, °/s: far beyond any gyro's range (the
@@ -1025,13 +1098,16 @@ fn adaptive_active<const N: usize>(
         let k2 = c.gate_k * c.gate_k;
         // vbar / (n − 1), with vbar = (vsum − vmax) / (n − 1).
         let v_med = (vsum - vmax) / (nm1 * nm1);
+        let mut n_off = 0u32;
         for i in 0..N {
             let e = y[i] - med;
-            let off = e * e > k2 * (v[i] + v_med);
-            good &= !(((has(active, i) && off) as u8) << i);
+            let off = has(active, i) && e * e > k2 * (v[i] + v_med);
+            good &= !((off as u8) << i);
+            n_off += off as u32;
         }
-        if good & good.wrapping_sub(1) == 0 {
-            good = regate_without_worst(y, &v, active, med, k2, v_med);
+        // Fewer than two kept, or two or more out: rare, out of line.
+        if n_off >= 2 || n - n_off < 2 {
+            good = regate(y, &v, active, good, med, k2, v_med);
         }
         if good & good.wrapping_sub(1) == 0 {
             // Still fewer than two: everybody disagrees, nothing to single
