@@ -126,12 +126,14 @@ pub fn burg<F: Real>(x: &[F], p: usize, scratch: &mut [F]) -> Result<ArModel<F>,
             f[t] = ft - km * bt1;
             b[t] = bt1 - km * ft;
         }
-        k[m - 1] = km;
+        // (`check` bounds p by MAX_ORDER; `get` lets the compiler see it.)
+        *k.get_mut(m - 1).ok_or(QualifyError::Parameter)? = km;
         den = d;
     }
     let mut phi = [F::of(0.0); MAX_ORDER];
-    levinson_from_reflection(&k[..p], &mut phi);
-    let kp = k[p - 1];
+    let ks = k.get(..p).ok_or(QualifyError::Parameter)?;
+    levinson_from_reflection(ks, &mut phi);
+    let kp = *ks.last().ok_or(QualifyError::Parameter)?;
     let sigma2 = (F::of(1.0) - kp * kp) * den / F::of(2.0 * (n - p) as f64);
     Ok(ArModel {
         order: p,

@@ -143,10 +143,10 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
 /// Mirror `nbsym` = 2 extrema at each end (PyEMD `prepare_points_simple`):
 /// writes (positions, values) of the extended maxima and minima.
 #[allow(clippy::too_many_arguments)]
-fn prepare<F: Real>(
+fn prepare<'a, F: Real>(
     s: &[F],
-    imax: &[u32],
-    imin: &[u32],
+    imax: &'a [u32],
+    imin: &'a [u32],
     tmax: &mut [F],
     zmax: &mut [F],
     tmin: &mut [F],
@@ -155,156 +155,175 @@ fn prepare<F: Real>(
     const NB: usize = 2;
     let n = s.len();
     let (em, en) = (imax.len(), imin.len());
-    if em == 0 || en == 0 {
+    if em == 0 || en == 0 || n == 0 {
         return None;
     }
+    // Every index below is checked: an inconsistent input (extrema outside
+    // the signal) gives `None`, the caller's "stop sifting", not a panic.
+    let at = |i: usize| s.get(i).copied();
+    let sl = |v: &'a [u32], r: core::ops::Range<usize>| v.get(r);
     // Index lists as small fixed arrays (at most NB + 1 entries).
     let rev = |v: &[u32], out: &mut [usize; 4]| -> usize {
-        for (k, &x) in v.iter().rev().enumerate() {
-            out[k] = x as usize;
+        for (o, &x) in out.iter_mut().zip(v.iter().rev()) {
+            *o = x as usize;
         }
-        v.len()
+        v.len().min(4)
     };
-    let imax0 = imax[0] as usize;
-    let imin0 = imin[0] as usize;
-    let imax_l = imax[em - 1] as usize;
-    let imin_l = imin[en - 1] as usize;
+    let imax0 = *imax.first()? as usize;
+    let imin0 = *imin.first()? as usize;
+    let imax_l = *imax.last()? as usize;
+    let imin_l = *imin.last()? as usize;
     let (mut lmax, mut lmin, mut rmax, mut rmin) =
         ([0usize; 4], [0usize; 4], [0usize; 4], [0usize; 4]);
     let (mut nlmax, mut nlmin, mut nrmax, mut nrmin);
     let mut lsym;
     if imax0 < imin0 {
-        if s[0] > s[imin0] {
-            nlmax = rev(&imax[1.min(em)..em.min(NB + 1)], &mut lmax);
-            nlmin = rev(&imin[..en.min(NB)], &mut lmin);
+        if at(0)? > at(imin0)? {
+            nlmax = rev(sl(imax, 1.min(em)..em.min(NB + 1))?, &mut lmax);
+            nlmin = rev(sl(imin, 0..en.min(NB))?, &mut lmin);
             lsym = imax0;
         } else {
-            nlmax = rev(&imax[..em.min(NB)], &mut lmax);
-            nlmin = rev(&imin[..en.min(NB - 1)], &mut lmin);
-            lmin[nlmin] = 0;
+            nlmax = rev(sl(imax, 0..em.min(NB))?, &mut lmax);
+            nlmin = rev(sl(imin, 0..en.min(NB - 1))?, &mut lmin);
+            *lmin.get_mut(nlmin)? = 0;
             nlmin += 1;
             lsym = 0;
         }
-    } else if s[0] < s[imax0] {
-        nlmax = rev(&imax[..em.min(NB)], &mut lmax);
-        nlmin = rev(&imin[1.min(en)..en.min(NB + 1)], &mut lmin);
+    } else if at(0)? < at(imax0)? {
+        nlmax = rev(sl(imax, 0..em.min(NB))?, &mut lmax);
+        nlmin = rev(sl(imin, 1.min(en)..en.min(NB + 1))?, &mut lmin);
         lsym = imin0;
     } else {
-        nlmax = rev(&imax[..em.min(NB - 1)], &mut lmax);
-        lmax[nlmax] = 0;
+        nlmax = rev(sl(imax, 0..em.min(NB - 1))?, &mut lmax);
+        *lmax.get_mut(nlmax)? = 0;
         nlmax += 1;
-        nlmin = rev(&imin[..en.min(NB)], &mut lmin);
+        nlmin = rev(sl(imin, 0..en.min(NB))?, &mut lmin);
         lsym = 0;
     }
+    let last = n - 1;
     let mut rsym;
     if imax_l < imin_l {
-        if s[n - 1] < s[imax_l] {
-            nrmax = rev(&imax[em.saturating_sub(NB)..], &mut rmax);
-            nrmin = rev(&imin[en.saturating_sub(NB + 1)..en - 1], &mut rmin);
+        if at(last)? < at(imax_l)? {
+            nrmax = rev(sl(imax, em.saturating_sub(NB)..em)?, &mut rmax);
+            nrmin = rev(sl(imin, en.saturating_sub(NB + 1)..en - 1)?, &mut rmin);
             rsym = imin_l;
         } else {
             // append(ind_max[max(em-NB+1,0):], n-1)[::-1]
-            let src = &imax[(em + 1).saturating_sub(NB)..];
-            rmax[0] = n - 1;
-            for (k, &x) in src.iter().rev().enumerate() {
-                rmax[k + 1] = x as usize;
+            let src = sl(imax, (em + 1).saturating_sub(NB)..em)?;
+            rmax[0] = last;
+            for (o, &x) in rmax.iter_mut().skip(1).zip(src.iter().rev()) {
+                *o = x as usize;
             }
-            nrmax = src.len() + 1;
-            nrmin = rev(&imin[en.saturating_sub(NB)..], &mut rmin);
-            rsym = n - 1;
+            nrmax = (src.len() + 1).min(4);
+            nrmin = rev(sl(imin, en.saturating_sub(NB)..en)?, &mut rmin);
+            rsym = last;
         }
-    } else if s[n - 1] > s[imin_l] {
-        nrmax = rev(&imax[em.saturating_sub(NB + 1)..em - 1], &mut rmax);
-        nrmin = rev(&imin[en.saturating_sub(NB)..], &mut rmin);
+    } else if at(last)? > at(imin_l)? {
+        nrmax = rev(sl(imax, em.saturating_sub(NB + 1)..em - 1)?, &mut rmax);
+        nrmin = rev(sl(imin, en.saturating_sub(NB)..en)?, &mut rmin);
         rsym = imax_l;
     } else {
-        nrmax = rev(&imax[em.saturating_sub(NB)..], &mut rmax);
-        let src = &imin[(en + 1).saturating_sub(NB)..];
-        rmin[0] = n - 1;
-        for (k, &x) in src.iter().rev().enumerate() {
-            rmin[k + 1] = x as usize;
+        nrmax = rev(sl(imax, em.saturating_sub(NB)..em)?, &mut rmax);
+        let src = sl(imin, (en + 1).saturating_sub(NB)..en)?;
+        rmin[0] = last;
+        for (o, &x) in rmin.iter_mut().skip(1).zip(src.iter().rev()) {
+            *o = x as usize;
         }
-        nrmin = src.len() + 1;
-        rsym = n - 1;
+        nrmin = (src.len() + 1).min(4);
+        rsym = last;
     }
     // Empty lists fall back to all extrema: cannot happen with ≥ 1 of each
     // and NB = 2 except in degenerate cases; mirror what is there.
     if nlmin == 0 {
-        nlmin = rev(&imin[..en.min(4)], &mut lmin);
+        nlmin = rev(sl(imin, 0..en.min(4))?, &mut lmin);
     }
     if nrmin == 0 {
-        nrmin = rev(&imin[en.saturating_sub(4)..], &mut rmin);
+        nrmin = rev(sl(imin, en.saturating_sub(4)..en)?, &mut rmin);
     }
     if nlmax == 0 {
-        nlmax = rev(&imax[..em.min(4)], &mut lmax);
+        nlmax = rev(sl(imax, 0..em.min(4))?, &mut lmax);
     }
     if nrmax == 0 {
-        nrmax = rev(&imax[em.saturating_sub(4)..], &mut rmax);
+        nrmax = rev(sl(imax, em.saturating_sub(4)..em)?, &mut rmax);
     }
     let mirror = |sym: usize, i: usize| 2.0 * sym as f64 - i as f64;
     // Mirrored points must fall outside the signal; otherwise mirror about
     // the end sample (PyEMD's second pass).
     if mirror(lsym, lmin[0]) > 0.0 || mirror(lsym, lmax[0]) > 0.0 {
         if lsym == imax0 {
-            nlmax = rev(&imax[..em.min(NB)], &mut lmax);
+            nlmax = rev(sl(imax, 0..em.min(NB))?, &mut lmax);
         } else {
-            nlmin = rev(&imin[..en.min(NB)], &mut lmin);
+            nlmin = rev(sl(imin, 0..en.min(NB))?, &mut lmin);
         }
         if lsym == 0 {
             return None;
         }
         lsym = 0;
     }
-    let last = n - 1;
-    if mirror(rsym, rmin[nrmin - 1]) < last as f64 || mirror(rsym, rmax[nrmax - 1]) < last as f64 {
+    let (rmin_end, rmax_end) = (
+        *rmin.get(nrmin.checked_sub(1)?)?,
+        *rmax.get(nrmax.checked_sub(1)?)?,
+    );
+    if mirror(rsym, rmin_end) < last as f64 || mirror(rsym, rmax_end) < last as f64 {
         if rsym == imax_l {
-            nrmax = rev(&imax[em.saturating_sub(NB)..], &mut rmax);
+            nrmax = rev(sl(imax, em.saturating_sub(NB)..em)?, &mut rmax);
         } else {
-            nrmin = rev(&imin[en.saturating_sub(NB)..], &mut rmin);
+            nrmin = rev(sl(imin, en.saturating_sub(NB)..en)?, &mut rmin);
         }
         if rsym == last {
             return None;
         }
         rsym = last;
     }
-    let fill = |t: &mut [F], z: &mut [F], l: &[usize], inner: &[u32], r: &[usize]| -> usize {
-        let mut c = 0;
-        let mut push = |pos: f64, val: F, t: &mut [F], z: &mut [F]| {
-            // Drop a point at the same position as the previous one.
-            if c > 0 && t[c - 1].f64() == pos {
-                return;
+    let fill =
+        |t: &mut [F], z: &mut [F], l: &[usize], inner: &[u32], r: &[usize]| -> Option<usize> {
+            let mut c: usize = 0;
+            let mut push = |pos: f64, val: F, t: &mut [F], z: &mut [F]| -> Option<()> {
+                // Drop a point at the same position as the previous one.
+                if let Some(&prev) = c.checked_sub(1).and_then(|p| t.get(p)) {
+                    if prev.f64() == pos {
+                        return Some(());
+                    }
+                }
+                *t.get_mut(c)? = F::of(pos);
+                *z.get_mut(c)? = val;
+                c += 1;
+                Some(())
+            };
+            for &i in l {
+                push(mirror(lsym, i), at(i)?, t, z)?;
             }
-            t[c] = F::of(pos);
-            z[c] = val;
-            c += 1;
+            for &i in inner {
+                push(i as f64, at(i as usize)?, t, z)?;
+            }
+            for &i in r {
+                push(mirror(rsym, i), at(i)?, t, z)?;
+            }
+            Some(c)
         };
-        for &i in l {
-            push(mirror(lsym, i), s[i], t, z);
-        }
-        for &i in inner {
-            push(i as f64, s[i as usize], t, z);
-        }
-        for &i in r {
-            push(mirror(rsym, i), s[i], t, z);
-        }
-        c
-    };
-    let cmax = fill(tmax, zmax, &lmax[..nlmax], imax, &rmax[..nrmax]);
-    let cmin = fill(tmin, zmin, &lmin[..nlmin], imin, &rmin[..nrmin]);
+    let cmax = fill(tmax, zmax, lmax.get(..nlmax)?, imax, rmax.get(..nrmax)?)?;
+    let cmin = fill(tmin, zmin, lmin.get(..nlmin)?, imin, rmin.get(..nrmin)?)?;
     Some((cmax, cmin))
 }
 
 /// Cubic spline through (t, z) (not-a-knot for ≥ 4 points, natural for 3)
 /// evaluated at 0..n into `out`; `m2` is scratch of ≥ 3·len.
 fn spline<F: Real>(t: &[F], z: &[F], out: &mut [F], m2: &mut [F]) -> bool {
+    spline_checked(t, z, out, m2).is_some()
+}
+
+/// [`spline`] with every index checked (`None` for inconsistent lengths).
+fn spline_checked<F: Real>(t: &[F], z: &[F], out: &mut [F], m2: &mut [F]) -> Option<()> {
     let k = t.len();
-    if k < 3 || m2.len() < 3 * k {
-        return false;
+    if k < 3 || z.len() < k || m2.len() < 3 * k {
+        return None;
     }
     let (m, rest) = m2.split_at_mut(k);
     let (cp, dp) = rest.split_at_mut(k);
-    let h = |i: usize| t[i + 1] - t[i];
-    let slope = |i: usize| (z[i + 1] - z[i]) / h(i);
+    let tt = |i: usize| t.get(i).copied();
+    let zz = |i: usize| z.get(i).copied();
+    let h = |i: usize| Some(tt(i + 1)? - tt(i)?);
+    let slope = |i: usize| Some((zz(i + 1)? - zz(i)?) / h(i)?);
     let six = F::of(6.0);
     let two = F::of(2.0);
     let zero = F::of(0.0);
@@ -312,20 +331,20 @@ fn spline<F: Real>(t: &[F], z: &[F], out: &mut [F], m2: &mut [F]) -> bool {
     let rows = k - 2;
     for r in 0..rows {
         let i = r + 1;
-        let (h0, h1) = (h(i - 1), h(i));
+        let (h0, h1) = (h(i - 1)?, h(i)?);
         let (mut lo, mut di, mut up) = (h0, two * (h0 + h1), h1);
-        let rhs = six * (slope(i) - slope(i - 1));
+        let rhs = six * (slope(i)? - slope(i - 1)?);
         if k >= 4 {
             // Not-a-knot: M_0 = ((h0 + h1) M_1 − h0 M_2)/h1 on the first row,
             // M_{k−1} = ((h_{k−2} + h_{k−3}) M_{k−2} − h_{k−2} M_{k−3})/h_{k−3} on the last.
             if i == 1 {
-                let (g0, g1) = (h(0), h(1));
+                let (g0, g1) = (h(0)?, h(1)?);
                 di += lo * (g0 + g1) / g1;
                 up -= lo * g0 / g1;
                 lo = zero;
             }
             if i == k - 2 {
-                let (g2, g3) = (h(k - 2), h(k - 3));
+                let (g2, g3) = (h(k - 2)?, h(k - 3)?);
                 di += up * (g2 + g3) / g3;
                 lo -= up * g2 / g3;
                 up = zero;
@@ -340,43 +359,50 @@ fn spline<F: Real>(t: &[F], z: &[F], out: &mut [F], m2: &mut [F]) -> bool {
             }
         }
         // Thomas forward sweep.
-        if r == 0 {
-            cp[r] = up / di;
-            dp[r] = rhs / di;
-        } else {
-            let den = di - lo * cp[r - 1];
-            cp[r] = up / den;
-            dp[r] = (rhs - lo * dp[r - 1]) / den;
-        }
+        let (c, d) = match r.checked_sub(1) {
+            None => (up / di, rhs / di),
+            Some(p) => {
+                let (cprev, dprev) = (*cp.get(p)?, *dp.get(p)?);
+                let den = di - lo * cprev;
+                (up / den, (rhs - lo * dprev) / den)
+            }
+        };
+        *cp.get_mut(r)? = c;
+        *dp.get_mut(r)? = d;
     }
     for r in (0..rows).rev() {
-        m[r + 1] = if r + 1 == rows {
-            dp[r]
+        let v = if r + 1 == rows {
+            *dp.get(r)?
         } else {
-            dp[r] - cp[r] * m[r + 2]
+            *dp.get(r)? - *cp.get(r)? * *m.get(r + 2)?
         };
+        *m.get_mut(r + 1)? = v;
     }
-    if k >= 4 {
-        m[0] = ((h(0) + h(1)) * m[1] - h(0) * m[2]) / h(1);
-        m[k - 1] = ((h(k - 2) + h(k - 3)) * m[k - 2] - h(k - 2) * m[k - 3]) / h(k - 3);
+    let (first, last) = if k >= 4 {
+        (
+            ((h(0)? + h(1)?) * *m.get(1)? - h(0)? * *m.get(2)?) / h(1)?,
+            ((h(k - 2)? + h(k - 3)?) * *m.get(k - 2)? - h(k - 2)? * *m.get(k - 3)?) / h(k - 3)?,
+        )
     } else {
-        m[0] = zero;
-        m[k - 1] = zero;
-    }
+        (zero, zero)
+    };
+    *m.get_mut(0)? = first;
+    *m.get_mut(k - 1)? = last;
     let mut seg = 0;
     for (x, o) in out.iter_mut().enumerate() {
         let x = F::of(x as f64);
-        while seg + 2 < k && x > t[seg + 1] {
+        while seg + 2 < k && x > tt(seg + 1)? {
             seg += 1;
         }
-        let hi = h(seg);
-        let (u, v) = (t[seg + 1] - x, x - t[seg]);
-        *o = m[seg] * u * u * u / (six * hi)
-            + m[seg + 1] * v * v * v / (six * hi)
-            + (z[seg] / hi - m[seg] * hi / six) * u
-            + (z[seg + 1] / hi - m[seg + 1] * hi / six) * v;
+        let hi = h(seg)?;
+        let (u, v) = (tt(seg + 1)? - x, x - tt(seg)?);
+        let (m0, m1) = (*m.get(seg)?, *m.get(seg + 1)?);
+        *o = m0 * u * u * u / (six * hi)
+            + m1 * v * v * v / (six * hi)
+            + (zz(seg)? / hi - m0 * hi / six) * u
+            + (zz(seg + 1)? / hi - m1 * hi / six) * v;
     }
-    true
+    Some(())
 }
 
 /// Decompose `x` into IMFs (rows of `n` samples in `out`, then the residue
@@ -411,7 +437,10 @@ pub fn emd<F: Real>(
     let (tmin, w) = w.split_at_mut(n + 4);
     let (zmin, w) = w.split_at_mut(n + 4);
     let scratch = w;
-    let (idx_max, idx_min) = idx[..n].split_at_mut(n / 2);
+    let (idx_max, idx_min) = idx
+        .get_mut(..n)
+        .ok_or(QualifyError::Buffer)?
+        .split_at_mut(n / 2);
     let mut dec = Decomposition {
         imfs: 0,
         residue: false,
@@ -425,8 +454,8 @@ pub fn emd<F: Real>(
     while !finished && dec.imfs < max_imfs {
         // residue = x − Σ IMFs so far
         residue.copy_from_slice(x);
-        for r in 0..dec.imfs {
-            for (v, o) in residue.iter_mut().zip(&out[r * n..(r + 1) * n]) {
+        for row in out.chunks_exact(n).take(dec.imfs) {
+            for (v, o) in residue.iter_mut().zip(row) {
                 *v -= *o;
             }
         }
@@ -445,30 +474,32 @@ pub fn emd<F: Real>(
                 finished = true;
                 break;
             }
-            let Some((cmax, cmin)) = prepare(
-                imf,
-                &idx_max[..nmax],
-                &idx_min[..nmin],
-                tmax,
-                zmax,
-                tmin,
-                zmin,
+            let (Some(im), Some(in_)) = (idx_max.get(..nmax), idx_min.get(..nmin)) else {
+                finished = true;
+                break;
+            };
+            let Some((cmax, cmin)) = prepare(imf, im, in_, tmax, zmax, tmin, zmin) else {
+                finished = true;
+                break;
+            };
+            let (Some(tx), Some(zx), Some(tn), Some(zn)) = (
+                tmax.get(..cmax),
+                zmax.get(..cmax),
+                tmin.get(..cmin),
+                zmin.get(..cmin),
             ) else {
                 finished = true;
                 break;
             };
-            if !spline(&tmax[..cmax], &zmax[..cmax], emax, scratch)
-                || !spline(&tmin[..cmin], &zmin[..cmin], emin, scratch)
-            {
+            if !spline(tx, zx, emax, scratch) || !spline(tn, zn, emin, scratch) {
                 finished = true;
                 break;
             }
             // PyEMD's IMF test uses the extended extrema of this pass.
-            let signs_ok = zmax[..cmax].iter().all(|v| !(*v < zero))
-                && zmin[..cmin].iter().all(|v| !(*v > zero));
+            let signs_ok = zx.iter().all(|v| !(*v < zero)) && zn.iter().all(|v| !(*v > zero));
             old.copy_from_slice(imf);
-            for i in 0..n {
-                imf[i] -= (emax[i] + emin[i]) / F::of(2.0);
+            for ((v, a), b) in imf.iter_mut().zip(emax.iter()).zip(emin.iter()) {
+                *v -= (*a + *b) / F::of(2.0);
             }
             let (nmax2, nmin2, nz) = extrema(imf, idx_max, idx_min);
             let ext2 = nmax2 + nmin2;
@@ -485,7 +516,9 @@ pub fn emd<F: Real>(
         if dec.imfs < 16 {
             dec.sifts[dec.imfs] = it.min(u16::MAX as usize) as u16;
         }
-        out[dec.imfs * n..(dec.imfs + 1) * n].copy_from_slice(imf);
+        if let Some(row) = out.chunks_exact_mut(n).nth(dec.imfs) {
+            row.copy_from_slice(imf);
+        }
         dec.imfs += 1;
         if end_condition(x, out, dec.imfs, n, cfg) {
             finished = true;
@@ -496,14 +529,16 @@ pub fn emd<F: Real>(
     }
     // Residue = x − Σ IMFs; kept unless ≈ 0 (np.allclose).
     residue.copy_from_slice(x);
-    for r in 0..dec.imfs {
-        for (v, o) in residue.iter_mut().zip(&out[r * n..(r + 1) * n]) {
+    for row in out.chunks_exact(n).take(dec.imfs) {
+        for (v, o) in residue.iter_mut().zip(row) {
             *v -= *o;
         }
     }
     dec.residue = residue.iter().any(|v| v.abs() > F::of(1e-8));
     if dec.residue {
-        out[dec.imfs * n..(dec.imfs + 1) * n].copy_from_slice(residue);
+        if let Some(row) = out.chunks_exact_mut(n).nth(dec.imfs) {
+            row.copy_from_slice(residue);
+        }
     }
     Ok(dec)
 }
@@ -536,10 +571,10 @@ fn check_imf<F: Real>(new: &[F], old: &[F], cfg: &EmdConfig) -> bool {
 
 fn end_condition<F: Real>(x: &[F], out: &[F], imfs: usize, n: usize, cfg: &EmdConfig) -> bool {
     let (mut lo, mut hi, mut l1) = (f64::MAX, f64::MIN, 0.0f64);
-    for i in 0..n {
-        let mut v = x[i].f64();
+    for (i, xi) in x.iter().enumerate().take(n) {
+        let mut v = xi.f64();
         for r in 0..imfs {
-            v -= out[r * n + i].f64();
+            v -= out.get(r * n + i).map_or(0.0, |o| o.f64());
         }
         lo = lo.min(v);
         hi = hi.max(v);

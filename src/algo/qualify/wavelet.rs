@@ -228,16 +228,22 @@ pub fn wavedec<F: Real>(
         return Err(QualifyError::Buffer);
     }
     let (cur, next) = scratch.split_at_mut(half);
-    cur[..x.len()].copy_from_slice(x);
+    part_mut(cur, ..x.len())?.copy_from_slice(x);
     let mut m = x.len();
     for j in 0..levels {
         let band = lay.band(levels - j);
         let out = band.len();
-        dwt(w, &cur[..m], &mut next[..out], &mut coeffs[band])?;
-        cur[..out].copy_from_slice(&next[..out]);
+        dwt(
+            w,
+            part(cur, ..m)?,
+            part_mut(next, ..out)?,
+            part_mut(coeffs, band)?,
+        )?;
+        part_mut(cur, ..out)?.copy_from_slice(part(next, ..out)?);
         m = out;
     }
-    coeffs[lay.band(0)].copy_from_slice(&cur[..m]);
+    let a = part(cur, ..m)?;
+    part_mut(coeffs, lay.band(0))?.copy_from_slice(a);
     Ok(lay)
 }
 
@@ -256,47 +262,72 @@ pub fn waverec<F: Real>(
     }
     let (cur, next) = scratch.split_at_mut(half);
     let mut m = lay.lens[0];
-    cur[..m].copy_from_slice(&coeffs[lay.band(0)]);
+    part_mut(cur, ..m)?.copy_from_slice(part(coeffs, lay.band(0))?);
     for b in 1..=lay.levels {
-        let d = &coeffs[lay.band(b)];
+        let d = part(coeffs, lay.band(b))?;
         if m == d.len() + 1 {
             m -= 1; // PyWavelets trims the approximation
         }
         if m != d.len() {
             return Err(QualifyError::Parameter);
         }
-        let len = idwt(w, &cur[..m], d, next)?;
-        cur[..len].copy_from_slice(&next[..len]);
+        let len = idwt(w, part(cur, ..m)?, d, next)?;
+        part_mut(cur, ..len)?.copy_from_slice(part(next, ..len)?);
         m = len;
     }
     if m < lay.n {
         return Err(QualifyError::Parameter);
     }
-    out[..lay.n].copy_from_slice(&cur[..lay.n]);
+    part_mut(out, ..lay.n)?.copy_from_slice(part(cur, ..lay.n)?);
     Ok(())
+}
+
+/// `s[r]`, or a `Buffer` error instead of a panic.
+fn part<F, R: core::slice::SliceIndex<[F], Output = [F]>>(
+    s: &[F],
+    r: R,
+) -> Result<&[F], QualifyError> {
+    s.get(r).ok_or(QualifyError::Buffer)
+}
+
+/// `&mut s[r]`, or a `Buffer` error instead of a panic.
+fn part_mut<F, R: core::slice::SliceIndex<[F], Output = [F]>>(
+    s: &mut [F],
+    r: R,
+) -> Result<&mut [F], QualifyError> {
+    s.get_mut(r).ok_or(QualifyError::Buffer)
 }
 
 /// Median of |v| (heap-sorts `tmp` in place: O(n log n) whatever the data,
 /// no recursion, so long host logs and board blocks alike stay bounded).
+/// Over the first `min(v.len(), tmp.len())` values (the callers give a
+/// `tmp` at least as long).
 fn median_abs<F: Real>(v: &[F], tmp: &mut [F]) -> F {
-    let n = v.len();
+    let n = v.len().min(tmp.len());
+    if n == 0 {
+        return F::of(0.0);
+    }
     for (t, x) in tmp.iter_mut().zip(v) {
         *t = x.abs();
     }
     let t = &mut tmp[..n];
-    let sift = |t: &mut [F], mut root: usize, end: usize| loop {
-        let mut child = 2 * root + 1;
-        if child >= end {
-            break;
-        }
-        if child + 1 < end && t[child] < t[child + 1] {
-            child += 1;
-        }
-        if t[root] < t[child] {
-            t.swap(root, child);
-            root = child;
-        } else {
-            break;
+    // (`end` clamped to the slice, so the compiler sees every index in it.)
+    let sift = |t: &mut [F], mut root: usize, end: usize| {
+        let end = end.min(t.len());
+        loop {
+            let mut child = 2 * root + 1;
+            if child >= end {
+                break;
+            }
+            if child + 1 < end && t[child] < t[child + 1] {
+                child += 1;
+            }
+            if root < child && t[root] < t[child] {
+                t.swap(root, child);
+                root = child;
+            } else {
+                break;
+            }
         }
     };
     for start in (0..n / 2).rev() {
@@ -306,10 +337,11 @@ fn median_abs<F: Real>(v: &[F], tmp: &mut [F]) -> F {
         t.swap(0, end);
         sift(t, 0, end);
     }
+    let mid = |i: usize| t.get(i).copied().unwrap_or(F::of(0.0));
     if n % 2 == 1 {
-        t[n / 2]
+        mid(n / 2)
     } else {
-        (t[n / 2 - 1] + t[n / 2]) / F::of(2.0)
+        (mid(n / 2 - 1) + mid(n / 2)) / F::of(2.0)
     }
 }
 
@@ -335,11 +367,11 @@ pub fn bayes_shrink<F: Real>(
         return Err(QualifyError::Buffer);
     }
     // scipy.stats.norm.ppf(0.75)
-    let sigma = median_abs(&coeffs[finest], tmp) / F::of(0.674_489_750_196_081_7);
+    let sigma = median_abs(part(coeffs, finest)?, tmp) / F::of(0.674_489_750_196_081_7);
     let var = sigma * sigma;
     let mut thresholds = [F::of(0.0); MAX_LEVELS + 1];
     for b in 1..=lay.levels {
-        let band = &mut coeffs[lay.band(b)];
+        let band = part_mut(coeffs, lay.band(b))?;
         let mut s2 = F::of(0.0);
         for &c in band.iter() {
             s2 += c * c;
