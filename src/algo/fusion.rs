@@ -847,9 +847,14 @@ fn adaptive<const N: usize>(
         return None;
     }
     if active == full::<N>() {
-        adaptive_active(c, st, y, valid, full::<N>(), out)
+        adaptive_active(c, st, y, valid, full::<N>(), full::<N>(), out)
     } else {
-        adaptive_active(c, st, y, valid, active, out)
+        // Frozen candidates are not fused but still vote in the median gate:
+        // a healthy chip that repeats a quantised value four times (it
+        // happens) must not leave a faulty one ungated for want of a
+        // quorum (fault campaign, seed 7 783 687: three gyros on x, one
+        // rescaled, one repeating; the rescaled one was fused).
+        adaptive_active(c, st, y, valid, active, valid, out)
     }
 }
 
@@ -1022,6 +1027,12 @@ fn consensus_gate<const N: usize>(
     best
 }
 
+/// Huber's c² for the noise update (c = 2).
+const HUBER_C2: f32 = 4.0;
+/// 1 / E[min(z², c²)] for z ~ N(0, 1) and c = 2: 1 / (P(|z| < 2) − 4φ(2)
+/// + 4·P(|z| > 2)) = 1 / 0.920 537 (checked by `huber_kappa_is_the_gaussian_consistency_factor`).
+const HUBER_KAPPA: f32 = 1.086_322_5;
+
 /// Largest |rate| fusion accepts, °/s: far beyond any gyro's range (the
 /// ICM-42688-P saturates at 2000 °/s), small enough that no sum or square
 /// of a few of them overflows f32. NaN fails the comparison too.
@@ -1035,11 +1046,17 @@ const WARM_GATE: f32 = 6.0;
 /// noise model yet, so gate on the spread itself. A value more than
 /// [`WARM_GATE`] robust sigmas (1.4826 · MAD about the median) from the
 /// median is left out, so a chip that spikes or garbles frames from
-/// power-up is not averaged in. Out of line: it runs for a few dozen
-/// samples after start-up or a rejoin.
+/// power-up is not averaged in. Also returns the limit squared, which caps
+/// what one sample adds to a warming chip's noise estimate. Out of line:
+/// it runs for a few dozen samples after start-up or a rejoin.
 #[cold]
 #[inline(never)]
-fn warm_up_gate<const N: usize>(c: &AdaptiveConfig, y: &[f32; N], active: u8, med: f32) -> u8 {
+fn warm_up_gate<const N: usize>(
+    c: &AdaptiveConfig,
+    y: &[f32; N],
+    active: u8,
+    med: f32,
+) -> (u8, f32) {
     let mut dev = [0.0f32; N];
     for i in 0..N {
         dev[i] = (y[i] - med).abs();
@@ -1049,10 +1066,11 @@ fn warm_up_gate<const N: usize>(c: &AdaptiveConfig, y: &[f32; N], active: u8, me
     for i in 0..N {
         good &= !(((has(active, i) && dev[i] > lim) as u8) << i);
     }
-    good
+    (good, lim * lim)
 }
 
-/// Weights, median gate, noise update and the fused value over `active`.
+/// Weights, median gate, noise update and the fused value over `active`;
+/// the gate's median and quorum are over `voters` (⊇ `active`).
 #[inline(always)]
 fn adaptive_active<const N: usize>(
     c: &AdaptiveConfig,
@@ -1060,9 +1078,10 @@ fn adaptive_active<const N: usize>(
     y: &[f32; N],
     valid: u8,
     active: u8,
+    voters: u8,
     out: &mut Fused<N>,
 ) -> Option<(f32, [f32; N])> {
-    let n = active.count_ones();
+    let n = voters.count_ones();
     // Current weights: inverse variance once warmed up, equal before.
     let all_warm = active & !st.warm == 0;
     let mut v = [0.0f32; N];
@@ -1077,11 +1096,12 @@ fn adaptive_active<const N: usize>(
     // Median gate (needs 3 gyros to tell which one is off): the residual
     // y_i − median has variance about σ_i² + (typical σ²)/(n − 1).
     let med = if all_warm {
-        gate_median(y, &v, active)
+        gate_median(y, &v, voters)
     } else {
-        median(y, active)
+        median(y, voters)
     };
     let mut good = active;
+    let mut warm_cap = f32::INFINITY;
     if n >= 3 && all_warm {
         // The typical variance: the mean of the active gyros' without the
         // largest. The plain mean let one very noisy or spiking gyro widen
@@ -1090,7 +1110,7 @@ fn adaptive_active<const N: usize>(
         // at ~60 more instructions per 3-axis sample.
         let (mut vsum, mut vmax) = (0.0f32, 0.0f32);
         for i in 0..N {
-            let vi = if has(active, i) { v[i] } else { 0.0 };
+            let vi = if has(voters, i) { v[i] } else { 0.0 };
             vsum += vi;
             vmax = if vi > vmax { vi } else { vmax };
         }
@@ -1098,25 +1118,32 @@ fn adaptive_active<const N: usize>(
         let k2 = c.gate_k * c.gate_k;
         // vbar / (n − 1), with vbar = (vsum − vmax) / (n − 1).
         let v_med = (vsum - vmax) / (nm1 * nm1);
-        let mut n_off = 0u32;
+        let mut offm = 0u8;
         for i in 0..N {
             let e = y[i] - med;
-            let off = has(active, i) && e * e > k2 * (v[i] + v_med);
-            good &= !((off as u8) << i);
-            n_off += off as u32;
+            let off = has(voters, i) && e * e > k2 * (v[i] + v_med);
+            offm |= (off as u8) << i;
         }
-        // Fewer than two kept, or two or more out: rare, out of line.
-        if n_off >= 2 || n - n_off < 2 {
+        good = active & !offm;
+        // Voters that agree with the median: the fused ones and any frozen
+        // candidate (a healthy chip repeating a value still vouches).
+        let mut support = voters & !offm;
+        // Fewer than two agree, or two or more fused gyros out (one AND
+        // each, no popcount): rare, out of line.
+        let out_active = active & offm;
+        if support & support.wrapping_sub(1) == 0 || out_active & out_active.wrapping_sub(1) != 0 {
             good = regate(y, &v, active, good, med, k2, v_med);
+            support = good | (voters & !active & !offm);
         }
-        if good & good.wrapping_sub(1) == 0 {
+        if good == 0 || support & support.wrapping_sub(1) == 0 {
             // Still fewer than two: everybody disagrees, nothing to single
             // out; fall back.
             good = active;
             out.fallback = true;
         }
     } else if n >= 3 {
-        good = warm_up_gate(c, y, active, med);
+        (good, warm_cap) = warm_up_gate(c, y, voters, med);
+        good &= active;
         if good & good.wrapping_sub(1) == 0 {
             good = active;
             out.fallback = true;
@@ -1130,14 +1157,25 @@ fn adaptive_active<const N: usize>(
             y,
             full::<N>(),
             full::<N>(),
-            all_warm,
+            (all_warm, warm_cap),
             med,
             &v,
             &w,
             out,
         )
     } else {
-        update_and_fuse(c, st, y, active, good, all_warm, med, &v, &w, out)
+        update_and_fuse(
+            c,
+            st,
+            y,
+            active,
+            good,
+            (all_warm, warm_cap),
+            med,
+            &v,
+            &w,
+            out,
+        )
     }
 }
 
@@ -1155,7 +1193,7 @@ fn update_and_fuse<const N: usize>(
     y: &[f32; N],
     active: u8,
     good: u8,
-    all_warm: bool,
+    (all_warm, warm_cap): (bool, f32),
     med: f32,
     v: &[f32; N],
     w: &[f32; N],
@@ -1180,14 +1218,28 @@ fn update_and_fuse<const N: usize>(
             if !has(active, i) || !(wo > 0.0) {
                 continue;
             }
+            let was_warm = has(st.warm, i);
             let e = (y[i] - med) - wyo / wo;
             let v_others = if all_warm { 1.0 / wo } else { 0.0 };
             let mut e2 = e * e;
-            let was_warm = has(st.warm, i);
-            // Clip, so one spike moves the estimate by at most gate_k².
-            let cap = c.gate_k * c.gate_k * (v[i] + v_others);
-            if was_warm && e2 > cap {
-                e2 = cap;
+            // Warming up, one sample adds at most the warm-up gate's limit
+            // squared: a chip that spikes from power-up does not start with
+            // its spikes in its variance, and one that is plainly wrong
+            // still warms up (with a large variance) instead of holding the
+            // axis in warm-up.
+            if !was_warm && e2 > warm_cap {
+                e2 = warm_cap;
+            }
+            // Huber's scale estimate once warm: e² capped at c²·(its expected
+            // value) with c = 2, times κ = 1/E[min(z², 4)] = 1.0864 so that
+            // Gaussian noise is estimated without bias. With the cap at the
+            // gate (c = 5), outliers at more than 1/(κc²) ≈ 4 % of samples
+            // (a chip spiking at 5 %) made the estimate grow without bound
+            // until the spikes fitted inside the gate (fault campaign, seed
+            // 7 783 523); with c = 2 it stays bounded up to 23 %.
+            if was_warm {
+                let cap = HUBER_C2 * (v[i] + v_others);
+                e2 = if e2 > cap { cap } else { e2 } * HUBER_KAPPA;
             }
             // Plain average until `warmup` updates, then the EWMA; the count
             // stops once warm (it is only needed until then).

@@ -15,8 +15,9 @@
 //! instantaneous, unflagged: only the configuration read-back finds it).
 //!
 //! Invariants checked per run (a violation prints the run's seed, which
-//! reproduces it with `--seed S --runs 1`; `CAMPAIGN_TRACE=1` then prints
-//! the z axis's fusion and the faulty chips' health at every sample):
+//! reproduces it with `--seed S --runs 1`; `CAMPAIGN_TRACE=A` then prints
+//! axis A's fusion (0 = x; anything else: z) and the faulty chips' health
+//! at every sample):
 //! 1. no panic;
 //! 2. every sample accounted for: sequence numbers 0, 1, 2, … and, per
 //!    gyro, reads + errors + samples not read (restarting) = samples;
@@ -250,14 +251,18 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
                 }
             }
             last_counters = Some(*pipe.counters());
-            if std::env::var_os("CAMPAIGN_TRACE").is_some() {
-                if let Some(f) = out.fused[2] {
+            if let Some(axis) = std::env::var("CAMPAIGN_TRACE")
+                .ok()
+                .map(|v| v.parse::<usize>().unwrap_or(2).min(2))
+            {
+                if let Some(f) = out.fused[axis] {
                     println!(
-                        "{n} z fused {:.3} truth {:.3} w {:?} rates {:?} rej {:#07b} fb {}",
+                        "{n} {} fused {:.3} truth {:.3} w {:?} rates {:?} rej {:#07b} fb {}",
+                        ["x", "y", "z"][axis],
                         f.rate_dps,
-                        truth[2],
+                        truth[axis],
                         f.weights,
-                        out.rate_dps.iter().map(|r| r[2]).collect::<Vec<_>>(),
+                        out.rate_dps.iter().map(|r| r[axis]).collect::<Vec<_>>(),
                         f.rejected,
                         f.fallback
                     );

@@ -112,9 +112,10 @@ pub fn burg<F: Real>(x: &[F], p: usize, scratch: &mut [F]) -> Result<ArModel<F>,
     let mut den = F::of(0.0);
     for m in 1..=p {
         let (mut num, mut d) = (F::of(0.0), F::of(0.0));
-        for t in m..n {
-            num += f[t] * b[t - 1];
-            d += f[t] * f[t] + b[t - 1] * b[t - 1];
+        // t = m..n: f[t] against b[t − 1].
+        for (&ft, &bt1) in f.iter().skip(m).zip(b.iter().skip(m - 1)) {
+            num += ft * bt1;
+            d += ft * ft + bt1 * bt1;
         }
         if !(d > F::of(0.0)) {
             return Err(QualifyError::Constant);
@@ -122,9 +123,15 @@ pub fn burg<F: Real>(x: &[F], p: usize, scratch: &mut [F]) -> Result<ArModel<F>,
         let km = F::of(2.0) * num / d;
         // Update from the end so b[t − 1] is still the old value.
         for t in (m..n).rev() {
-            let (ft, bt1) = (f[t], b[t - 1]);
-            f[t] = ft - km * bt1;
-            b[t] = bt1 - km * ft;
+            let (Some(&ft), Some(&bt1)) = (f.get(t), b.get(t - 1)) else {
+                continue;
+            };
+            if let Some(fo) = f.get_mut(t) {
+                *fo = ft - km * bt1;
+            }
+            if let Some(bo) = b.get_mut(t) {
+                *bo = bt1 - km * ft;
+            }
         }
         // (`check` bounds p by MAX_ORDER; `get` lets the compiler see it.)
         *k.get_mut(m - 1).ok_or(QualifyError::Parameter)? = km;
