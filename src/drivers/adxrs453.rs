@@ -129,6 +129,18 @@ fn odd(v: u32) -> bool {
     v.count_ones() % 2 == 1
 }
 
+/// °C of a TEM1/TEM0 register value (see [`Adxrs453::read_temperature_c`]).
+pub fn tem_to_c(v: u16) -> f32 {
+    let t10 = ((v as i16) >> 6) as f32; // arithmetic shift keeps the sign
+    45.0 + t10 / 5.0
+}
+
+/// °C to a TEM1/TEM0 register value (the emulated part).
+pub fn c_to_tem(c: f32) -> u16 {
+    let t10 = ((c - 45.0) * 5.0) as i32;
+    (((t10.clamp(-512, 511)) as i16) << 6) as u16
+}
+
 /// Add bit 0 so that the command has odd parity.
 pub fn with_parity(c: u32) -> u32 {
     let c = c & !1;
@@ -223,6 +235,15 @@ impl<SPI: SpiDevice> Adxrs453<SPI> {
         Ok(d)
     }
 
+    /// Die temperature, °C, from TEM1/TEM0: a 10-bit two's-complement
+    /// value in bits 15:6, 5 LSB/°C, 0 at 45 °C (datasheet, TEM register).
+    /// (Analog Devices' no-OS driver computes `((reg >> 6) − 0x31F) / 5`
+    /// unsigned, the same below 45 °C and wrong above it.)
+    pub fn read_temperature_c(&mut self) -> Result<f32, Error<SPI::Error>> {
+        let v = self.read_register(reg::TEM1)?;
+        Ok(tem_to_c(v))
+    }
+
     /// Rate in °/s.
     pub fn read_dps(&mut self) -> Result<f32, Error<SPI::Error>> {
         Ok(self.read_sensor()?.rate as f32 / LSB_PER_DPS)
@@ -237,6 +258,10 @@ impl<SPI: SpiDevice> Adxrs453<SPI> {
 }
 
 impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
+    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
+        self.read_temperature_c().map_err(|_| ReadFault::Bus)
+    }
+
     fn read(&mut self) -> Result<Reading, ReadFault> {
         let d = self.read_sensor().map_err(|e| match e {
             Error::Spi(_) => ReadFault::Bus,

@@ -41,6 +41,14 @@ const READ: u8 = 0x80;
 /// reset, cleared when INT_STATUS is read.
 pub const RESET_DONE: u8 = 1 << 4;
 
+/// TEMP_DATA counts per °C (datasheet 14.6, 16-bit temperature).
+pub const TEMP_LSB_PER_C: f32 = 132.48;
+
+/// Die temperature, °C, of TEMP_DATA counts.
+pub fn temperature_c(counts: i16) -> f32 {
+    counts as f32 / TEMP_LSB_PER_C + 25.0
+}
+
 /// Gyro full-scale range, GYRO_CONFIG0.GYRO_FS_SEL (bits 7:5).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -253,6 +261,19 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.read(reg::INT_STATUS)?;
         delay.delay_ms(45); // gyro start-up time, datasheet table 1
         Ok(())
+    }
+
+    /// Die temperature, °C: TEMP_DATA1/0 (0x1D, 0x1E), big-endian
+    /// counts; datasheet 14.6: T = TEMP_DATA / 132.48 + 25.
+    pub fn read_temperature_c(&mut self) -> Result<f32, Error<SPI::Error>> {
+        let mut b = [0u8; 2];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[reg::TEMP_DATA1 | READ]),
+                Operation::Read(&mut b),
+            ])
+            .map_err(Error::Spi)?;
+        Ok(temperature_c(i16::from_be_bytes(b)))
     }
 
     /// One sample: a burst read of GYRO_DATA_X1..Z0, TMST_FSYNCH and
@@ -472,6 +493,10 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
             axes: 0b111,
             saturated,
         })
+    }
+
+    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
+        self.read_temperature_c().map_err(|_| ReadFault::Bus)
     }
 
     /// REG_BANK_SEL, GYRO_CONFIG0 and PWR_MGMT0 as `init` left them.

@@ -74,4 +74,10 @@ pub trait Gyro {
     fn check_config(&mut self) -> Result<(), ReadFault> {
         Ok(())
     }
+
+    /// Die temperature, °C, for the bias-versus-temperature calibration
+    /// (read at a low rate). Parts without a sensor answer `BadResponse`.
+    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
+        Err(ReadFault::BadResponse)
+    }
 }

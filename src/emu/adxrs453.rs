@@ -1,9 +1,10 @@
 //! Frame-level model of the ADXRS453: 32-bit pipelined frames with parity,
 //! status and fault bits, the CHK start-up check and the register file.
 
+use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::{corrupt, Fault, Rng};
-use crate::drivers::adxrs453::{cmd, fault, reg, LSB_PER_DPS};
+use crate::drivers::adxrs453::{c_to_tem, cmd, fault, reg, LSB_PER_DPS};
 
 /// Give a response its parity bits: P0 (bit 28) odd over 31:16, P1 (bit 0)
 /// odd over 15:0.
@@ -34,8 +35,12 @@ pub struct Adxrs453Model {
     rng: Rng,
     /// Fault being injected.
     pub fault: Fault,
-    /// The true rate at the last update.
+    /// The true rate at the last update (board frame).
     pub true_rate_dps: [f32; 3],
+    /// Mounting, scale/misalignment and temperature terms (the row of the
+    /// sensitive axis counts).
+    pub mount: Mount,
+    temp_c: f32,
     /// Reset since the last start-up check: responses flag POR, data are
     /// not valid.
     por: bool,
@@ -63,6 +68,8 @@ impl Adxrs453Model {
             rng: Rng::new(seed),
             fault: Fault::None,
             true_rate_dps: [0.0; 3],
+            mount: Mount::ALIGNED,
+            temp_c: 25.0,
             por: false,
         }
     }
@@ -92,7 +99,7 @@ impl Adxrs453Model {
     fn register(&self, addr: u16) -> u16 {
         match addr & !1 {
             reg::RATE1 => self.rate as u16,
-            reg::TEM1 => 0x0320 << 6, // about 25 °C
+            reg::TEM1 => c_to_tem(self.temp_c),
             reg::PID1 if self.fault == Fault::WrongId => 0x5A01,
             reg::PID1 => 0x5201,
             reg::FAULT1 if self.fault == Fault::ChipFault => 0x0080,
@@ -138,12 +145,14 @@ impl Adxrs453Model {
 
     pub(super) fn advance(&mut self, t_s: f32, dt_s: f32) {
         self.true_rate_dps = self.profile.at(t_s);
-        let mut dps = self.noise.step(
-            &self.params,
-            &mut self.rng,
-            self.true_rate_dps[self.axis.min(2)],
-            dt_s,
-        );
+        let axis = self.axis.min(2);
+        let chip = self.mount.chip_rate(self.true_rate_dps);
+        let (thermal, temp_c) = self.mount.thermal(t_s);
+        self.temp_c = temp_c;
+        let mut dps = self
+            .noise
+            .step(&self.params, &mut self.rng, chip[axis], dt_s)
+            + thermal[axis];
         if let Fault::Spikes {
             prob,
             magnitude_dps,

@@ -1,8 +1,11 @@
 //! Register-level model of the ICM-42688-P gyro (banks 0 and 1).
 
+use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::{corrupt, Fault, Rng};
-use crate::drivers::icm42688::{factory_response_lsb, reg, FullScale, RESET_DONE, WHO_AM_I_VALUE};
+use crate::drivers::icm42688::{
+    factory_response_lsb, reg, FullScale, RESET_DONE, TEMP_LSB_PER_C, WHO_AM_I_VALUE,
+};
 
 const GYRO_CONFIG0_RESET: u8 = 0x06; // ±2000 °/s, 1 kHz
 /// Data registers read −32768 while the gyro is off (datasheet 14.x).
@@ -26,8 +29,10 @@ pub struct Icm42688Model {
     rng: Rng,
     /// Fault being injected.
     pub fault: Fault,
-    /// The true rate at the last update.
+    /// The true rate at the last update (board frame).
     pub true_rate_dps: [f32; 3],
+    /// Mounting, scale/misalignment and temperature terms.
+    pub mount: Mount,
 }
 
 impl Icm42688Model {
@@ -44,6 +49,7 @@ impl Icm42688Model {
             rng: Rng::new(seed),
             fault: Fault::None,
             true_rate_dps: [0.0; 3],
+            mount: Mount::ALIGNED,
         };
         m.reset();
         for r in [reg::XG_ST_DATA, reg::YG_ST_DATA, reg::ZG_ST_DATA] {
@@ -152,9 +158,15 @@ impl Icm42688Model {
 
     pub(super) fn advance(&mut self, t_s: f32, dt_s: f32) {
         self.true_rate_dps = self.profile.at(t_s);
+        let chip = self.mount.chip_rate(self.true_rate_dps);
+        let (thermal, temp_c) = self.mount.thermal(t_s);
+        let t = ((temp_c - 25.0) * TEMP_LSB_PER_C) as i16;
+        let [hi, lo] = t.to_be_bytes();
+        self.bank0[reg::TEMP_DATA1 as usize] = hi;
+        self.bank0[reg::TEMP_DATA1 as usize + 1] = lo;
         let mut meas = [0.0f32; 3];
         for (i, m) in meas.iter_mut().enumerate() {
-            *m = self.noise[i].step(&self.params, &mut self.rng, self.true_rate_dps[i], dt_s);
+            *m = self.noise[i].step(&self.params, &mut self.rng, chip[i], dt_s) + thermal[i];
         }
         let cfg = self.bank0[reg::GYRO_CONFIG0 as usize];
         let lsb = FullScale::from_bits(cfg >> 5).lsb_per_dps();

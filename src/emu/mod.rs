@@ -9,6 +9,7 @@
 
 pub mod adxrs453;
 pub mod icm42688;
+pub mod mount;
 pub mod noise;
 pub mod rng;
 
@@ -20,6 +21,7 @@ use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
 pub use adxrs453::Adxrs453Model;
 pub use icm42688::Icm42688Model;
+pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;
 
