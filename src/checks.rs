@@ -15,11 +15,12 @@ use crate::algo::fusion::{
     AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
     SeedConfig,
 };
+use crate::algo::mounting::CalRecord;
 use crate::drivers::adxrs453::{self, Adxrs453};
 use crate::drivers::icm42688::{self, Config, Icm42688};
 use crate::drivers::Gyro;
 use crate::emu::{
-    board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model,
+    board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model, Mount,
     NoiseParams, RateProfile, Rng,
 };
 use crate::pipeline::startup::start_array;
@@ -296,12 +297,43 @@ pub fn run_board_array_with(
     samples: u32,
     at_power_up: [Fault; 5],
     self_test: Option<u16>,
+    each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+) -> Option<u8> {
+    run_array(
+        profile,
+        seed,
+        samples,
+        at_power_up,
+        self_test,
+        None,
+        None,
+        each,
+    )
+}
+
+/// [`run_board_array_with`] with the chips mounted as `mounts` say
+/// (`None`: aligned) and the pipeline given the static calibration `cal`
+/// (`None`: uncalibrated).
+#[allow(clippy::too_many_arguments)]
+pub fn run_array(
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    at_power_up: [Fault; 5],
+    self_test: Option<u16>,
+    mounts: Option<[Mount; 5]>,
+    cal: Option<&CalRecord>,
     mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
 ) -> Option<u8> {
     let cs: [CsLine; 5] = Default::default();
     let mut chips = board_array(profile, seed);
     for (c, f) in chips.iter_mut().zip(at_power_up) {
         c.set_fault(f);
+    }
+    if let Some(m) = mounts {
+        for (c, m) in chips.iter_mut().zip(m) {
+            c.set_mount(m);
+        }
     }
     let bus = RefCell::new(EmuBus::new(chips, &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
@@ -319,6 +351,9 @@ pub fn run_board_array_with(
         Method::Adaptive(AdaptiveConfig::default()),
     )
     .ok()?;
+    if let Some(cal) = cal {
+        pipe.set_calibration(Ok(cal)).ok()?;
+    }
     let failed = start_array(
         [&mut g0, &mut g1, &mut g2, &mut g3],
         &mut g4,

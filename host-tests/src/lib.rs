@@ -1,1 +1,208 @@
 //! Host-side helpers shared by the tests and the evaluation binaries.
+// As in the firmware crate: `!(x > 0.0)` is also true for NaN, and the
+// numeric code indexes several arrays by the same chip index.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
+pub mod calibration {
+    //! The static calibration procedure on the emulated array (issue 9):
+    //! a rate table (±100 °/s about each board axis at 25 °C) and a
+    //! thermal chamber (still, at 5, 25 and 45 °C), each held for `hold`
+    //! samples, read through the real drivers and pipeline (with an
+    //! identity calibration so that the pipeline reports chip-frame rates
+    //! and polls each chip's die temperature). From the means:
+    //!
+    //! - chip = A · board + b(T): column k of A is (r₊ − r₋)/(2ω) of the
+    //!   runs about board axis k; M = A⁻¹ (the ADXRS453: 1/A_zz);
+    //! - b(T) = b₂₅ + k·(T − 25): a least-squares line through the three
+    //!   still runs against the temperature the drivers read.
+
+    use gyro_array::algo::mounting::{CalRecord, ChipCal};
+    use gyro_array::checks::run_array;
+    use gyro_array::emu::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
+
+    /// Rate of the rate-table runs, °/s.
+    pub const OMEGA: f32 = 100.0;
+    /// Samples ignored at the start of each run (start-up, filters).
+    const SETTLE: u32 = 200;
+
+    /// Mean chip-frame rate per chip and axis, and mean die temperature
+    /// per chip, of one run.
+    fn run(rate: [f32; 3], temp_c: f32, hold: u32, seed: u64) -> ([[f64; 3]; 5], [f64; 5]) {
+        let profile = RateProfile {
+            base_dps: rate,
+            sine_dps: [0.0; 3],
+            sine_hz: 0.0,
+            sine_start_s: 0.0,
+        };
+        let identity = CalRecord {
+            serial: 0,
+            chips: [ChipCal::IDENTITY; 5].into_iter().collect(),
+        };
+        let mut sum = [[0.0f64; 3]; 5];
+        let mut n = [[0u32; 3]; 5];
+        let (mut tsum, mut tn) = ([0.0f64; 5], [0u32; 5]);
+        run_array(
+            profile,
+            seed,
+            SETTLE + hold,
+            [Fault::None; 5],
+            None,
+            Some(mounted_board(TempProfile::constant(temp_c))),
+            Some(&identity),
+            |k, _, out, pipe| {
+                if k < SETTLE {
+                    return;
+                }
+                for (i, r) in out.rate_dps.iter().enumerate() {
+                    for a in 0..3 {
+                        if r[a].is_finite() {
+                            sum[i][a] += r[a] as f64;
+                            n[i][a] += 1;
+                        }
+                    }
+                }
+                if k % 50 == 25 {
+                    for (i, t) in pipe.temperatures().iter().enumerate() {
+                        if let Some(t) = t {
+                            tsum[i] += *t as f64;
+                            tn[i] += 1;
+                        }
+                    }
+                }
+            },
+        );
+        let mean = core::array::from_fn(|i| {
+            core::array::from_fn(|a| {
+                if n[i][a] > 0 {
+                    sum[i][a] / n[i][a] as f64
+                } else {
+                    f64::NAN
+                }
+            })
+        });
+        let temp = core::array::from_fn(|i| {
+            if tn[i] > 0 {
+                tsum[i] / tn[i] as f64
+            } else {
+                f64::NAN
+            }
+        });
+        (mean, temp)
+    }
+
+    fn inverse(a: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+        let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+        if !(det.abs() > 1e-9) {
+            return None;
+        }
+        let c = |i: usize, j: usize| {
+            let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+            let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+            a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
+        };
+        // inverse = adjugate / det; adjugate[j][i] = cofactor(i, j).
+        Some(core::array::from_fn(|j| {
+            core::array::from_fn(|i| c(i, j) / det)
+        }))
+    }
+
+    /// Run the procedure; the record for the emulated board.
+    pub fn calibrate(hold: u32, seed: u64) -> Option<CalRecord> {
+        let w = OMEGA as f64;
+        let mut a = [[[0.0f64; 3]; 3]; 5];
+        for k in 0..3 {
+            let mut rate = [0.0f32; 3];
+            rate[k] = OMEGA;
+            let (p, _) = run(rate, 25.0, hold, seed);
+            rate[k] = -OMEGA;
+            let (m, _) = run(rate, 25.0, hold, seed + 1);
+            for i in 0..5 {
+                for r in 0..3 {
+                    a[i][r][k] = (p[i][r] - m[i][r]) / (2.0 * w);
+                }
+            }
+        }
+        // Still runs at three temperatures: bias line per chip axis.
+        let runs: Vec<_> = [5.0f32, 25.0, 45.0]
+            .iter()
+            .enumerate()
+            .map(|(j, &t)| run([0.0; 3], t, hold, seed + 10 + j as u64))
+            .collect();
+        let mut chips = heapless::Vec::new();
+        for i in 0..5 {
+            let ts: Vec<f64> = runs.iter().map(|r| r.1[i]).collect();
+            let tbar = ts.iter().sum::<f64>() / 3.0;
+            let mut c = ChipCal::IDENTITY;
+            for r in 0..3 {
+                let bs: Vec<f64> = runs.iter().map(|x| x.0[i][r]).collect();
+                let bbar = bs.iter().sum::<f64>() / 3.0;
+                let (mut sxy, mut sxx) = (0.0, 0.0);
+                for (t, b) in ts.iter().zip(&bs) {
+                    sxy += (t - tbar) * (b - bbar);
+                    sxx += (t - tbar) * (t - tbar);
+                }
+                let k = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+                let b25 = bbar + k * (25.0 - tbar);
+                c.bias_tc_dps_per_c[r] = if k.is_finite() { k as f32 } else { 0.0 };
+                c.bias_dps[r] = if b25.is_finite() { b25 as f32 } else { 0.0 };
+            }
+            c.t_ref_c = 25.0;
+            if i < 4 {
+                let m = inverse(a[i])?;
+                c.m = m.map(|r| r.map(|v| v as f32));
+            } else {
+                c.m[2][2] = (1.0 / a[i][2][2]) as f32;
+            }
+            chips.push(c).ok()?;
+        }
+        Some(CalRecord { serial: 1, chips })
+    }
+
+    /// How far a record is from the emulated board's true constants.
+    #[derive(Debug)]
+    pub struct Errors {
+        /// Largest |(M·A_true − I)ᵢⱼ| per chip (scale and misalignment left).
+        pub scale: [f64; 5],
+        /// Largest |b − b_true| per chip, °/s.
+        pub bias_dps: [f64; 5],
+        /// Largest |k − k_true| per chip, °/s/°C.
+        pub tc: [f64; 5],
+    }
+
+    /// Compare `rec` with the truth of the emulated board.
+    pub fn errors(rec: &CalRecord) -> Errors {
+        let chips = board_array(RateProfile::constant(0.0), 1);
+        let mounts: [Mount; 5] = mounted_board(TempProfile::ROOM);
+        let mut e = Errors {
+            scale: [0.0; 5],
+            bias_dps: [0.0; 5],
+            tc: [0.0; 5],
+        };
+        for i in 0..5 {
+            let (bias, se) = chips[i].bias_and_scale();
+            let c = &rec.chips[i];
+            let at = |r: usize, k: usize| (1.0 + se as f64) * mounts[i].m[r][k] as f64;
+            let axes: &[usize] = if i < 4 { &[0, 1, 2] } else { &[2] };
+            for &r in axes {
+                e.bias_dps[i] = e.bias_dps[i].max((c.bias_dps[r] as f64 - bias as f64).abs());
+                e.tc[i] = e.tc[i].max(
+                    (c.bias_tc_dps_per_c[r] as f64 - mounts[i].bias_tc_dps_per_c[r] as f64).abs(),
+                );
+                for k in 0..3 {
+                    let v = if i < 4 {
+                        (0..3).map(|l| c.m[r][l] as f64 * at(l, k)).sum::<f64>()
+                    } else if k == 2 {
+                        c.m[2][2] as f64 * at(2, 2)
+                    } else {
+                        continue;
+                    };
+                    let want = if r == k { 1.0 } else { 0.0 };
+                    e.scale[i] = e.scale[i].max((v - want).abs());
+                }
+            }
+        }
+        e
+    }
+}

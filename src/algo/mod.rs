@@ -5,5 +5,6 @@ pub mod calib;
 pub mod davar;
 pub mod fusion;
 pub mod math;
+pub mod mounting;
 pub mod qualify;
 pub mod stats;

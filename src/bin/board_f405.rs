@@ -40,6 +40,7 @@ use stm32f4xx_hal::{
 };
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::algo::mounting::{self, CalRecord};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, RxQueue};
 use gyro_array::board::record::Cause;
@@ -107,6 +108,18 @@ fn selftest_blocks() -> &'static mut [[f32; selftest::BLOCK]; 5] {
             .write_bytes(0, core::mem::size_of::<[[f32; selftest::BLOCK]; 5]>());
         (*p).assume_init_mut()
     }
+}
+
+/// The calibration record's flash sector (`CALIB` in memory.x, sector
+/// 11), as bytes.
+#[allow(unsafe_code)]
+fn calib_bytes() -> &'static [u8] {
+    unsafe extern "C" {
+        static _calib_start: u8;
+    }
+    // SAFETY: CALIB is 128 KiB of memory-mapped flash that nothing writes
+    // while the firmware runs; MAX_LEN is far less.
+    unsafe { core::slice::from_raw_parts(&raw const _calib_start, mounting::MAX_LEN) }
 }
 
 /// A start-up step that cannot go on: log it and reset (the record says
@@ -224,6 +237,14 @@ fn main() -> ! {
     ) else {
         give_up("pipeline configuration")
     };
+    // The static calibration (mounting, scale, misalignment, bias and its
+    // temperature slope). Without a valid record the board runs
+    // uncalibrated and says so: here, and in every sample frame (bit 7 of
+    // `degraded`).
+    match pipe.set_calibration(CalRecord::decode(calib_bytes()).as_ref().map_err(|e| *e)) {
+        Ok(()) => defmt::info!("calibration record in use"),
+        Err(e) => defmt::warn!("calibration record: {}; running uncalibrated", e),
+    }
     let failed = start_array(
         [&mut g0, &mut g1, &mut g2, &mut g3],
         &mut g4,

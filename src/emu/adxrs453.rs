@@ -74,6 +74,11 @@ impl Adxrs453Model {
         }
     }
 
+    /// The error terms it was built with.
+    pub fn params(&self) -> NoiseParams {
+        self.params
+    }
+
     pub(super) fn begin_frame(&mut self) {
         self.tx = self.next;
         if let Fault::FrameBitError { prob } = self.fault {

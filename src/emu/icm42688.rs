@@ -58,6 +58,11 @@ impl Icm42688Model {
         m
     }
 
+    /// The error terms it was built with.
+    pub fn params(&self) -> NoiseParams {
+        self.params
+    }
+
     fn reset(&mut self) {
         self.bank0 = [0; 128];
         self.bank0[reg::GYRO_CONFIG0 as usize] = GYRO_CONFIG0_RESET;

@@ -111,6 +111,32 @@ impl Chip {
         }
     }
 
+    /// Mount the chip: rotation, scale/misalignment, bias slope and die
+    /// temperature ([`Mount`]).
+    pub fn set_mount(&mut self, m: Mount) {
+        match self {
+            Chip::Icm(c) => c.mount = m,
+            Chip::Adx(c) => c.mount = m,
+        }
+    }
+
+    /// The chip's mounting.
+    pub fn mount(&self) -> Mount {
+        match self {
+            Chip::Icm(c) => c.mount,
+            Chip::Adx(c) => c.mount,
+        }
+    }
+
+    /// The constant bias of its noise model, °/s, and its scale error.
+    pub fn bias_and_scale(&self) -> (f32, f32) {
+        let p = match self {
+            Chip::Icm(c) => c.params(),
+            Chip::Adx(c) => c.params(),
+        };
+        (p.bias_dps, p.scale_error)
+    }
+
     /// The fault being injected.
     pub fn fault(&self) -> Fault {
         match self {
@@ -348,6 +374,71 @@ impl<const N: usize> embedded_hal::delay::DelayNs for EmuDelay<'_, '_, N> {
             with_bus(self.bus, |b| b.advance(self.dt_s));
         }
     }
+}
+
+/// The mountings of a board whose chips are not aligned with it, as real
+/// boards are: chip 0 aligned, chip 1 turned 90° about z, chip 2 upside
+/// down (180° about x), chip 3 turned 90° about y, the ADXRS453 on z; each
+/// with its own scale (±1 %) and misalignment (±0.3°) errors and a bias
+/// slope of 0.003–0.012 °/s/°C, at die temperature `temp`.
+pub fn mounted_board(temp: TempProfile) -> [Mount; 5] {
+    const R: [[[f32; 3]; 3]; 5] = [
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+        [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    ];
+    // Scale (diagonal) and misalignment (off-diagonal, radians) per chip.
+    const E: [[[f32; 3]; 3]; 5] = [
+        [
+            [0.008, 0.004, -0.003],
+            [-0.002, -0.006, 0.005],
+            [0.001, 0.003, 0.01],
+        ],
+        [
+            [-0.009, -0.005, 0.002],
+            [0.004, 0.007, -0.001],
+            [-0.003, 0.002, -0.004],
+        ],
+        [
+            [0.005, 0.001, 0.004],
+            [0.003, -0.01, -0.002],
+            [-0.005, 0.004, 0.006],
+        ],
+        [
+            [-0.004, 0.002, 0.005],
+            [-0.001, 0.009, 0.003],
+            [0.002, -0.005, -0.007],
+        ],
+        [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.004, -0.003, 0.012]],
+    ];
+    const TC: [[f32; 3]; 5] = [
+        [0.006, -0.004, 0.008],
+        [-0.005, 0.007, 0.003],
+        [0.01, 0.004, -0.006],
+        [-0.003, -0.008, 0.005],
+        [0.0, 0.0, 0.012],
+    ];
+    core::array::from_fn(|k| {
+        let mut m = [[0.0f32; 3]; 3];
+        // chip = (I + E) · R · board
+        for i in 0..3 {
+            for j in 0..3 {
+                let mut v = 0.0;
+                for l in 0..3 {
+                    let e = if i == l { 1.0 + E[k][i][l] } else { E[k][i][l] };
+                    v += e * R[k][l][j];
+                }
+                m[i][j] = v;
+            }
+        }
+        Mount {
+            m,
+            bias_tc_dps_per_c: TC[k],
+            temp,
+        }
+    })
 }
 
 /// The board's array: four ICM-42688-P (chips 0..=3, all axes) and one

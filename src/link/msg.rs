@@ -40,7 +40,8 @@ pub struct Sample {
     pub rate_dps: [f32; 3],
     /// Bit a set: axis a has a fused value.
     pub valid: u8,
-    /// Bit a set: axis a fell back to the plain mean (degraded).
+    /// Bit a set: axis a fell back to the plain mean (degraded). Bit 7
+    /// set: the board runs without a static calibration record.
     pub degraded: u8,
     /// Per axis, the gyros in the fused value (bit i = gyro i).
     pub used: [u8; 3],

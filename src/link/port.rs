@@ -154,6 +154,8 @@ impl<const TX: usize> Port<TX> {
                         s.used[a] = f.used();
                     }
                 }
+                // Bit 7: no static calibration record in use.
+                s.degraded |= u8::from(!pipe.calibrated()) << 7;
                 s.noise = self.next_noise(noise);
                 Frame::Sample(s)
             }

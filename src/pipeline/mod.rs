@@ -23,6 +23,7 @@ pub mod tracker;
 
 use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};
+use crate::algo::mounting::{CalError, CalRecord, ChipCal};
 use crate::drivers::{Gyro, ReadFault, Restart};
 
 /// Health flags of one gyro (bit set = problem).
@@ -176,6 +177,13 @@ pub struct Pipeline<const N: usize> {
     axes: [AxisState<N>; 3],
     /// Online relative calibration per axis, applied before fusion.
     cal: [RelCal<N>; 3],
+    /// Static calibration per chip (mounting, scale, misalignment, bias
+    /// and its temperature slope), applied to every reading when a valid
+    /// record was given.
+    static_cal: [ChipCal; N],
+    calibrated: bool,
+    /// Last die temperature per chip, °C (read while calibrated).
+    temps: [Option<f32>; N],
     seq: u32,
     overruns: u32,
     counters: [GyroCounters; N],
@@ -201,6 +209,9 @@ impl<const N: usize> Pipeline<N> {
             fusion: Fusion::new(method)?,
             axes: [AxisState::default(); 3],
             cal: [RelCal::new(CalConfig::default()); 3],
+            static_cal: [ChipCal::IDENTITY; N],
+            calibrated: false,
+            temps: [None; N],
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
@@ -263,6 +274,34 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
+    /// Use the static calibration `rec` (as read from storage). A missing
+    /// or invalid record, or one for another number of chips, leaves the
+    /// pipeline uncalibrated ([`Pipeline::calibrated`] false, sent on the
+    /// link) and returns why.
+    pub fn set_calibration(&mut self, rec: Result<&CalRecord, CalError>) -> Result<(), CalError> {
+        let rec = rec.inspect_err(|_| self.calibrated = false)?;
+        if rec.chips.len() != N {
+            self.calibrated = false;
+            return Err(CalError::Chips);
+        }
+        for (d, c) in self.static_cal.iter_mut().zip(rec.chips.iter()) {
+            *d = *c;
+        }
+        self.calibrated = true;
+        Ok(())
+    }
+
+    /// Whether a static calibration record is in use.
+    pub fn calibrated(&self) -> bool {
+        self.calibrated
+    }
+
+    /// Last die temperature read from each chip, °C (read only while
+    /// calibrated: one chip in turn, every `check_every` samples).
+    pub fn temperatures(&self) -> &[Option<f32>; N] {
+        &self.temps
+    }
+
     /// Switch the fusion method. Its noise model and the frozen-chip
     /// state start again; the relative calibration is kept. On error
     /// nothing changes.
@@ -311,7 +350,23 @@ impl<const N: usize> Pipeline<N> {
                     }
                 }
                 if let Ok(r) = r {
-                    out.rate_dps[i] = r.rate_dps;
+                    out.rate_dps[i] = if self.calibrated {
+                        self.static_cal[i].apply(r.rate_dps, r.axes, self.temps[i])
+                    } else {
+                        r.rate_dps
+                    };
+                }
+                // The die temperature, for the bias model: one gyro in
+                // turn, half-way between configuration checks.
+                let every = self.cfg.check_every;
+                if self.calibrated
+                    && every != 0
+                    && seq % every == every / 2
+                    && (seq / every) as usize % N == i
+                {
+                    if let Ok(t) = g.temperature_c() {
+                        self.temps[i] = Some(t);
+                    }
                 }
             }
             if self.health[i].flags != before {

@@ -477,6 +477,9 @@ fn board_qemu(seconds: u64) -> bool {
             fails.push(format!("gyro {i}: no typed WrongId error logged"));
         }
     }
+    if !log.contains("calibration record: Missing; running uncalibrated") {
+        fails.push("no typed error for the missing calibration record".into());
+    }
     if !log.contains("gyro 4: ADXRS453 init failed: CheckFailed") {
         fails.push("gyro 4: no typed CheckFailed error logged".into());
     }
