@@ -75,6 +75,24 @@ impl ChipCal {
     }
 }
 
+/// Inverse of a 3×3 matrix (`None` when singular or not finite): the
+/// chip-frame view of board-frame rates for a calibrated chip.
+pub fn inverse3(a: &[[f32; 3]; 3]) -> Option<[[f32; 3]; 3]> {
+    let c = |i: usize, j: usize| {
+        let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
+        let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
+        a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
+    };
+    let det = a[0][0] * c(0, 0) + a[0][1] * c(0, 1) + a[0][2] * c(0, 2);
+    if !(det.abs() > 1e-12) || !det.is_finite() {
+        return None;
+    }
+    // inverse = adjugate / det; adjugate[j][i] = cofactor(i, j).
+    Some(core::array::from_fn(|j| {
+        core::array::from_fn(|i| c(i, j) / det)
+    }))
+}
+
 /// A board's calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CalRecord {
@@ -199,6 +217,19 @@ mod tests {
         let mut b = buf;
         b[4] = 2;
         assert_eq!(CalRecord::decode(&b), Err(CalError::Version(2)));
+    }
+
+    #[test]
+    fn inverse3_inverts() {
+        let m = [[0.0, -1.01, 0.003], [0.99, 0.002, 0.0], [0.001, 0.0, 1.02]];
+        let inv = inverse3(&m).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let v: f32 = (0..3).map(|k| m[i][k] * inv[k][j]).sum();
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-6);
+            }
+        }
+        assert_eq!(inverse3(&[[1.0; 3]; 3]), None);
     }
 
     #[test]

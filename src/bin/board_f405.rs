@@ -272,10 +272,11 @@ fn main() -> ! {
         let ok = selftest::run(
             &mut gyros,
             |_| 2, // z: every chip measures it, so each has four peers
+            |i, r| pipe.board_rates(i, r),
             || {
                 let t = f405::ticks();
                 while f405::ticks() == t {
-                    cortex_m::asm::wfi();
+                    f405::sleep_unless(|| f405::ticks() != t);
                 }
                 watchdog.feed();
             },
@@ -305,9 +306,7 @@ fn main() -> ! {
             }
             port.drain(&mut tx);
             port.receive(&mut rx, &mut pipe);
-            if port.queued() == 0 {
-                cortex_m::asm::wfi();
-            }
+            f405::sleep_unless(|| f405::ticks() != last || port.queued() != 0);
         };
         let elapsed = now.wrapping_sub(last);
         last = now;

@@ -29,6 +29,7 @@ use defmt_semihosting as _;
 use embedded_hal_bus::spi::RefCellDevice;
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::algo::mounting::CalRecord;
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
@@ -36,7 +37,10 @@ use gyro_array::board::stack;
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::{board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile};
+use gyro_array::emu::{
+    board_array, mounted_board, with_bus, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile,
+    TempProfile,
+};
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::Port;
 use gyro_array::pipeline::selftest;
@@ -45,6 +49,8 @@ use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
+/// The board's calibration record, as the procedure wrote it.
+const CALIBRATION: &[u8] = include_bytes!("../../host-tests/vectors/board.gcal");
 /// 60 s of output.
 const SAMPLES: u32 = 60_000;
 /// σ of the link's noise estimates at τ = 1, 8, 64 ms.
@@ -73,7 +79,21 @@ fn main() -> ! {
         sine_start_s: 0.0,
     };
     let cs: [CsLine; 5] = Default::default();
-    let bus = RefCell::new(EmuBus::new(board_array(profile, 1), &cs));
+    // The chips are mounted as a real board's are (rotated, upside down,
+    // misaligned; `emu::mounted_board`), their die warming from 20 to
+    // 35 °C, and the board carries the record the calibration procedure
+    // made for it (`calibrate --out host-tests/vectors/board.gcal`).
+    let mut chips = board_array(profile, 1);
+    let warm_up = TempProfile {
+        start_c: 20.0,
+        ramp_c_per_s: 0.5,
+        ramp_from_s: 5.0,
+        end_c: 35.0,
+    };
+    for (c, m) in chips.iter_mut().zip(mounted_board(warm_up)) {
+        c.set_mount(m);
+    }
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
     let dt = 1.0 / FS_HZ as f32;
     let mut delay = EmuDelay::new(&bus, dt);
 
@@ -90,6 +110,17 @@ fn main() -> ! {
         Method::Adaptive(AdaptiveConfig::default()),
     )
     .unwrap_or_else(|_| exit(false));
+    let calibrated =
+        match pipe.set_calibration(CalRecord::decode(CALIBRATION).as_ref().map_err(|e| *e)) {
+            Ok(()) => {
+                defmt::info!("calibration record in use");
+                true
+            }
+            Err(e) => {
+                defmt::error!("calibration record: {}; running uncalibrated", e);
+                false
+            }
+        };
     start_array(
         [&mut g0, &mut g1, &mut g2, &mut g3],
         &mut g4,
@@ -105,6 +136,7 @@ fn main() -> ! {
         selftest::run(
             &mut gyros,
             |_| 2, // z: every chip measures it, so each has four peers
+            |i, r| pipe.board_rates(i, r),
             || {
                 with_bus(&bus, |b| b.advance(dt));
             },
@@ -150,9 +182,15 @@ fn main() -> ! {
             // Idle time feeds the UART and reads commands.
             port.drain(&mut uart);
             port.receive(&mut uart, &mut pipe);
-            if port.queued() == 0 {
-                cortex_m::asm::wfi();
-            }
+            // Sleep only if the tick has still not come, checked with
+            // interrupts masked: a tick taken between the check above and
+            // the WFI would otherwise be slept through, a missed sample
+            // (WFI still wakes on the pending interrupt).
+            cortex_m::interrupt::free(|_| {
+                if TICKS.load(Ordering::Acquire) == last_tick && port.queued() == 0 {
+                    cortex_m::asm::wfi();
+                }
+            });
         };
         let missed = now.wrapping_sub(last_tick).saturating_sub(1);
         if missed > 0 {
@@ -322,7 +360,7 @@ fn main() -> ! {
             "FAILED"
         }
     );
-    pass &= self_test_ok;
+    pass &= self_test_ok && calibrated;
     pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
     let u = stack::stack_usage();
     defmt::info!("stack: peak {} of {} bytes", u.peak, u.size);

@@ -24,7 +24,7 @@ pub mod tracker;
 use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, Fused, Fusion, Method};
 use crate::algo::mounting::{CalError, CalRecord, ChipCal};
-use crate::drivers::{Gyro, ReadFault, Restart};
+use crate::drivers::{Gyro, ReadFault, Reading, Restart};
 
 /// Health flags of one gyro (bit set = problem).
 pub mod flag {
@@ -291,6 +291,20 @@ impl<const N: usize> Pipeline<N> {
         Ok(())
     }
 
+    /// Board-axis rates of gyro `i`'s reading `r`: the static calibration
+    /// applied when one is in use, the chip's own axes otherwise.
+    pub fn board_rates(&self, i: usize, r: &Reading) -> [f32; 3] {
+        match (self.calibrated, self.static_cal.get(i)) {
+            (true, Some(c)) => c.apply(r.rate_dps, r.axes, self.temps.get(i).copied().flatten()),
+            _ => r.rate_dps,
+        }
+    }
+
+    /// The static calibration per gyro, when one is in use.
+    pub fn static_calibration(&self) -> Option<&[ChipCal; N]> {
+        self.calibrated.then_some(&self.static_cal)
+    }
+
     /// Whether a static calibration record is in use.
     pub fn calibrated(&self) -> bool {
         self.calibrated
@@ -350,11 +364,7 @@ impl<const N: usize> Pipeline<N> {
                     }
                 }
                 if let Ok(r) = r {
-                    out.rate_dps[i] = if self.calibrated {
-                        self.static_cal[i].apply(r.rate_dps, r.axes, self.temps[i])
-                    } else {
-                        r.rate_dps
-                    };
+                    out.rate_dps[i] = self.board_rates(i, &r);
                 }
                 // The die temperature, for the bias model: one gyro in
                 // turn, half-way between configuration checks.

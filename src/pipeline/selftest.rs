@@ -23,7 +23,7 @@ use crate::algo::qualify::hurst::{hurst_rs, octave_windows};
 use crate::algo::qualify::moments::{mean_var, skew_kurtosis};
 use crate::algo::qualify::trend::reverse_arrangement;
 use crate::algo::qualify::QualifyError;
-use crate::drivers::Gyro;
+use crate::drivers::{Gyro, Reading};
 
 /// Samples per self-test block.
 pub const BLOCK: usize = 2048;
@@ -86,9 +86,14 @@ pub fn noise_health(block: &[f32]) -> Result<NoiseHealth, QualifyError> {
 /// board must then be still). A read error leaves NaN, which the analysis
 /// reports as `NonFinite`. Results are logged with defmt when enabled;
 /// returns whether every gyro is stationary and normal.
+///
+/// `to_board` turns gyro g's reading into board-axis rates (the pipeline's
+/// [`super::Pipeline::board_rates`]: a chip mounted rotated is compared
+/// with its peers on the same board axis).
 pub fn run<const N: usize>(
     gyros: &mut [&mut dyn Gyro; N],
     axis: impl Fn(usize) -> usize,
+    to_board: impl Fn(usize, &Reading) -> [f32; 3],
     mut tick: impl FnMut(),
     blocks: &mut [[f32; BLOCK]; N],
     results: &mut [Result<NoiseHealth, QualifyError>; N],
@@ -96,7 +101,9 @@ pub fn run<const N: usize>(
     for i in 0..BLOCK {
         tick();
         for (g, gyro) in gyros.iter_mut().enumerate() {
-            blocks[g][i] = gyro.read().map_or(f32::NAN, |r| r.rate_dps[axis(g).min(2)]);
+            blocks[g][i] = gyro
+                .read()
+                .map_or(f32::NAN, |r| to_board(g, &r)[axis(g).min(2)]);
         }
     }
     analyse(blocks, axis, results)

@@ -23,6 +23,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 
 use super::Pipeline;
+use crate::algo::mounting::{inverse3, ChipCal};
 use crate::drivers::adxrs453::Adxrs453;
 use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
 
@@ -63,7 +64,14 @@ where
         }
     }
     let tests = match self_test {
-        Some(n) => array_self_test(&mut icm, !failed & 0b1111, delay, n),
+        Some(n) => {
+            // With a static calibration, the motion is compared in board
+            // axes: a chip mounted rotated sees it on other axes.
+            let mounts = pipe
+                .static_calibration()
+                .map(|c| core::array::from_fn(|i| c.get(i).map_or(ChipCal::IDENTITY.m, |c| c.m)));
+            array_self_test(&mut icm, !failed & 0b1111, delay, n, mounts)
+        }
         None => [const { Ok(None) }; 4],
     };
     for (i, r) in tests.iter().enumerate() {
@@ -105,6 +113,10 @@ where
     failed
 }
 
+fn mul3(m: &[[f32; 3]; 3], v: &[f32; 3]) -> [f32; 3] {
+    m.map(|r| r[0] * v[0] + r[1] * v[1] + r[2] * v[2])
+}
+
 /// Chips whose actuation is on in phases 1 and 2 of the array self-test.
 const ST_SETS: [u8; 2] = [0b0101, 0b1010];
 
@@ -113,11 +125,15 @@ type StResult<E> = Result<Option<SelfTest>, Error<E>>;
 
 /// The array self-test (module docs) on the chips in `alive`, `n` samples
 /// per phase. A chip not in `alive` gets `Ok(None)`.
+///
+/// `mounts` (chip axes to board axes, from the static calibration) lets
+/// the chips' changes be compared in board axes; `None`: chips aligned.
 pub fn array_self_test<SPI: SpiDevice>(
     icm: &mut [&mut Icm42688<SPI>; 4],
     alive: u8,
     delay: &mut impl DelayNs,
     n: u16,
+    mounts: Option<[[[f32; 3]; 3]; 4]>,
 ) -> [StResult<SPI::Error>; 4] {
     let mut out: [StResult<SPI::Error>; 4] = [const { Ok(None) }; 4];
     if n == 0 {
@@ -204,13 +220,18 @@ pub fn array_self_test<SPI: SpiDevice>(
                 *x = pv - bv;
             }
         }
-        // The chips that stayed off in this phase saw the same motion.
+        // The chips that stayed off in this phase saw the same motion (in
+        // board axes when the chips are mounted otherwise).
         let refs = live & !set;
         let count = refs.count_ones() as f32;
         let mut motion = [0.0f32; 3];
         if count > 0.0 {
             for (h, d) in delta.iter().enumerate() {
                 if refs & (1 << h) != 0 {
+                    let d = match (mounts, h) {
+                        (Some(m), h) if h < 4 => mul3(&m[h], d),
+                        _ => *d,
+                    };
                     for (m, v) in motion.iter_mut().zip(d) {
                         *m += v / count;
                     }
@@ -226,8 +247,13 @@ pub fn array_self_test<SPI: SpiDevice>(
                 continue;
             }
             let Some(s) = *sv else { continue };
+            // The motion as this chip sees it.
+            let seen = match mounts.and_then(|m| m.get(i).and_then(inverse3)) {
+                Some(a) => mul3(&a, &motion),
+                None => motion,
+            };
             let mut response = [0.0f32; 3];
-            for ((r, dv), m) in response.iter_mut().zip(d).zip(motion) {
+            for ((r, dv), m) in response.iter_mut().zip(d).zip(seen) {
                 *r = dv - m;
             }
             let end = g.self_test_end(s, response);
