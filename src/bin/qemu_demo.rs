@@ -5,7 +5,9 @@
 //! E-DAVAR (segmented, λ2 = 512) tracks the noise of each fused axis
 //! and logs its window length, entropy deficit and σ(τ) every 500 samples
 //! (z slews in a 20 °/s sine from power-up, so its long-τ σ and deficit
-//! show the motion). The board boots while it sways: the ICM-42688-P
+//! show the motion). The chips are mounted rotated and misaligned, and
+//! the board applies the calibration record made for it by the host
+//! procedure (`calibrate`). The board boots while it sways: the ICM-42688-P
 //! self-test runs across the array, and the noise-health self-test takes
 //! 2048 samples of every gyro's z axis and checks trend, long memory and
 //! normality of each against the median of the others.
