@@ -193,6 +193,97 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
     out
 }
 
+/// Class (g), issue 9: slow bias drift on one chip. Four chips at rest;
+/// from 5 s chip 2's bias ramps at `rate` °/s per s. For each of 10 seeds:
+/// the time from the drift reaching 3σ of the chip's white noise until
+/// adaptive gives it under 5 % of the weight (and keeps it there), and
+/// the RMS error of mean, zhang and adaptive from 5 s on. Returns (name,
+/// worst time in s, adaptive, mean, zhang).
+fn drift_class(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
+    let mut out = Vec::new();
+    println!("\n(g) slow bias drift on chip 2 from 5 s, 10 seeds x {SAMPLES} samples");
+    for rate in [0.02f32, 0.2] {
+        let (mut times, mut rms) = (Vec::new(), vec![Vec::new(); 3]);
+        for s in 0..10u64 {
+            let mut rng = Rng::new(seed * 1000 + 700 + s);
+            let params = [NoiseParams::ICM42688; 4];
+            let sigma = params[2].white_sigma_dps(FS);
+            let mut noise = [AxisNoise::default(); 4];
+            let fusers: Vec<Fusion<4>> = methods()
+                .iter()
+                .filter(|(n, _)| ["mean", "zhang", "adaptive"].contains(n))
+                .map(|(_, m)| Fusion::<4>::new(*m).expect("valid method"))
+                .collect();
+            let mut states = vec![AxisState::<4>::default(); fusers.len()];
+            let mut sums = [0.0f64; 3];
+            let (mut reached, mut low_since) = (None, None::<usize>);
+            let start = 5 * FS as usize;
+            for k in 0..SAMPLES {
+                let drift = if k >= start {
+                    rate * (k - start) as f32 / FS
+                } else {
+                    0.0
+                };
+                if drift >= 3.0 * sigma && reached.is_none() {
+                    reached = Some(k);
+                }
+                let y = [0, 1, 2, 3].map(|i| {
+                    let v = noise[i].step(&params[i], &mut rng, 0.0, 1.0 / FS)
+                        + if i == 2 { drift } else { 0.0 };
+                    quantise(v, LSB) as f32 / LSB
+                });
+                for (j, f) in fusers.iter().enumerate() {
+                    let r = f.fuse(&mut states[j], &y, 0b1111).expect("valid input");
+                    if k >= start {
+                        sums[j] += (r.rate_dps as f64).powi(2);
+                    }
+                    if j == 2 && reached.is_some() {
+                        if r.weights[2] < 0.05 {
+                            low_since.get_or_insert(k);
+                        } else {
+                            low_since = None;
+                        }
+                    }
+                }
+            }
+            let t = match (reached, low_since) {
+                (Some(r), Some(l)) => (l.saturating_sub(r)) as f64 / FS as f64,
+                _ => f64::INFINITY,
+            };
+            times.push(t);
+            for (r, s) in rms.iter_mut().zip(sums) {
+                r.push((s / (SAMPLES - start) as f64).sqrt());
+            }
+        }
+        let ms = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+            (m, sd)
+        };
+        let worst = times.iter().cloned().fold(0.0, f64::max);
+        println!(
+            "  drift {rate} deg/s per s (3 sigma = {:.3} deg/s):",
+            3.0 * NoiseParams::ICM42688.white_sigma_dps(FS)
+        );
+        let (tm, tsd) = ms(&times);
+        println!(
+            "    time from 3 sigma to weight < 5 %: {tm:.3} +- {tsd:.3} s, worst {worst:.3} s"
+        );
+        for (n, r) in ["mean", "zhang", "adaptive"].iter().zip(&rms) {
+            let (m, sd) = ms(r);
+            println!("    {n:<14} {m:>10.5} +- {sd:.5}");
+        }
+        out.push((
+            format!("(g) drift {rate} deg/s per s"),
+            worst,
+            ms(&rms[2]).0,
+            ms(&rms[0]).0,
+            ms(&rms[1]).0,
+        ));
+    }
+    out
+}
+
 fn main() {
     let seed: u64 = std::env::args()
         .nth(1)
@@ -270,6 +361,7 @@ fn main() {
         println!("  {:<14} {:>6} {:>6}", name, f(e[0]), f(e[1]));
     }
     let motion = scale_class(seed);
+    let drift = drift_class(seed);
     println!("\ntargets:");
     let r = |si: usize, n: &str| rms[&(si, n.to_string())];
     let mut all = true;
@@ -328,6 +420,16 @@ fn main() {
                 cal / mean
             ),
             *cal <= 1.005 * mean,
+        );
+    }
+    for (name, worst, a, m, z) in &drift {
+        target(
+            format!("{name}: drifting chip under 5 % of the weight within 2 s of reaching 3 sigma (worst {worst:.3} s)"),
+            *worst <= 2.0,
+        );
+        target(
+            format!("{name}: adaptive {a:.5} <= mean {m:.5} and zhang {z:.5}"),
+            a <= m && a <= z,
         );
     }
     let (a, o) = (r(2, "adaptive"), r(2, "oracle"));
