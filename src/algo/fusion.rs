@@ -265,6 +265,9 @@ pub struct AxisState<const N: usize> {
     /// Gyros whose noise estimate has had `warmup` updates (n_upd ≥ warmup),
     /// kept as a mask so the per-sample "all warm" test is one AND.
     warm: u8,
+    /// Prior noise variances ((°/s)², 0 = none): how two gyros share the
+    /// variance of their difference ([`AxisState::set_noise_priors`]).
+    prior: [f32; N],
 }
 
 impl<const N: usize> Default for AxisState<N> {
@@ -280,11 +283,26 @@ impl<const N: usize> Default for AxisState<N> {
             frozen: [0; N],
             n_upd: [0; N],
             warm: 0,
+            prior: [0.0; N],
         }
     }
 }
 
 impl<const N: usize> AxisState<N> {
+    /// Prior noise σ per gyro, °/s (from the datasheet or the start-up
+    /// noise test; `None` or non-finite: no prior). With exactly two good
+    /// gyros the residuals only tell the sum of their variances, not how
+    /// it splits (both estimates get the same update, and the method falls
+    /// back to the mean): the split then follows the priors.
+    pub fn set_noise_priors(&mut self, sigma_dps: [Option<f32>; N]) {
+        for (p, s) in self.prior.iter_mut().zip(sigma_dps) {
+            *p = match s {
+                Some(s) if s.is_finite() && s > 0.0 => s * s,
+                _ => 0.0,
+            };
+        }
+    }
+
     /// Current noise standard deviation estimates of the adaptive method,
     /// °/s (NaN before any update).
     pub fn sigma_dps(&self, cfg: &AdaptiveConfig) -> [f32; N] {
@@ -1027,6 +1045,20 @@ fn consensus_gate<const N: usize>(
     best
 }
 
+/// Sum of the priors of the two gyros in `good`, or 0 unless both have one.
+fn pair_prior_sum<const N: usize>(prior: &[f32; N], good: u8) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..N {
+        if has(good, i) {
+            if !(prior[i] > 0.0) {
+                return 0.0;
+            }
+            sum += prior[i];
+        }
+    }
+    sum
+}
+
 /// Huber's c² for the noise update (c = 2).
 const HUBER_C2: f32 = 4.0;
 /// 1 / E[min(z², c²)] for z ~ N(0, 1) and c = 2: 1 / (P(|z| < 2) − 4φ(2)
@@ -1216,6 +1248,14 @@ fn update_and_fuse<const N: usize>(
         sw += if on { w[i] } else { 0.0 };
         swy += if on { w[i] * (y[i] - med) } else { 0.0 };
     }
+    // Exactly two good gyros with priors for both: the variance of their
+    // difference is shared in proportion to the priors.
+    let rest = good & good.wrapping_sub(1);
+    let pair_prior = if rest != 0 && rest & rest.wrapping_sub(1) == 0 {
+        pair_prior_sum(&st.prior, good)
+    } else {
+        0.0
+    };
     // At least two good gyros (one AND, no popcount).
     if good & good.wrapping_sub(1) != 0 {
         for i in 0..N {
@@ -1261,7 +1301,12 @@ fn update_and_fuse<const N: usize>(
                 st.warm |= ((st.n_upd[i] >= c.warmup) as u8) << i;
                 1.0 / st.n_upd[i] as f32
             };
-            st.var[i] += a * (e2 - v_others - st.var[i]);
+            let target = if pair_prior > 0.0 && has(good, i) {
+                e2 * st.prior[i] / pair_prior
+            } else {
+                e2 - v_others
+            };
+            st.var[i] += a * (target - st.var[i]);
         }
     }
     // Inverse-variance weights over the good set.

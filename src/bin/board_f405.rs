@@ -288,6 +288,9 @@ fn main() -> ! {
         } else {
             defmt::warn!("noise-health self-test: FAILED (see above)");
         }
+        // Each gyro's measured noise: fusion's priors for an axis left
+        // with two gyros.
+        pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
     }
 
     let u = stack::stack_usage();

@@ -147,6 +147,9 @@ fn main() -> ! {
         )
     };
 
+    // Each gyro's measured noise: fusion's priors for an axis left with
+    // two gyros.
+    pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
     let mut noise = Tracker::new(tracker::config(512)).unwrap_or_else(|_| exit(false));
     let mut sigma_x_1ms = f32::NAN;
 

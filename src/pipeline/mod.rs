@@ -305,6 +305,15 @@ impl<const N: usize> Pipeline<N> {
         self.calibrated.then_some(&self.static_cal)
     }
 
+    /// Prior noise σ per gyro, °/s (the start-up noise test's, or the
+    /// datasheet's), for every axis: fusion needs them when only two gyros
+    /// are left on an axis ([`crate::algo::fusion::AxisState::set_noise_priors`]).
+    pub fn set_noise_priors(&mut self, sigma_dps: [Option<f32>; N]) {
+        for st in self.axes.iter_mut() {
+            st.set_noise_priors(sigma_dps);
+        }
+    }
+
     /// Whether a static calibration record is in use.
     pub fn calibrated(&self) -> bool {
         self.calibrated
