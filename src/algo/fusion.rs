@@ -214,7 +214,9 @@ pub enum FuseError {
 pub struct Fused<const N: usize> {
     /// The fused rate, °/s.
     pub rate_dps: f32,
-    /// Normalised weights (sum 1 over the used gyros, 0 elsewhere).
+    /// Normalised weights (sum 1 over the used gyros, 0 elsewhere; all 0
+    /// when the gyros split with no majority and the last output is held,
+    /// `fallback` set).
     pub weights: [f32; N],
     /// Gyros that were offered but rejected this sample (non-finite input,
     /// Grubbs-isolated, gated, frozen).
@@ -268,6 +270,8 @@ pub struct AxisState<const N: usize> {
     /// Prior noise variances ((°/s)², 0 = none): how two gyros share the
     /// variance of their difference ([`AxisState::set_noise_priors`]).
     prior: [f32; N],
+    /// The last output, held when the gyros split with no majority.
+    last_out: f32,
 }
 
 impl<const N: usize> Default for AxisState<N> {
@@ -284,6 +288,7 @@ impl<const N: usize> Default for AxisState<N> {
             n_upd: [0; N],
             warm: 0,
             prior: [0.0; N],
+            last_out: f32::NAN,
         }
     }
 }
@@ -972,7 +977,8 @@ fn regate_without_worst<const N: usize>(
 
 /// The first gate kept fewer than two gyros or left two or more out
 /// (rare, so out of line): [`regate_without_worst`] for the first, then
-/// [`consensus_gate`] if two or more are out.
+/// [`consensus_gate`] if two or more are out. Also says whether the gyros
+/// split with no majority.
 #[cold]
 #[inline(never)]
 fn regate<const N: usize>(
@@ -983,15 +989,15 @@ fn regate<const N: usize>(
     med: f32,
     k2: f32,
     v_med: f32,
-) -> u8 {
+) -> (u8, bool) {
     if good & good.wrapping_sub(1) == 0 {
         good = regate_without_worst(y, v, active, med, k2, v_med);
     }
     let off = active & !good;
     if off & off.wrapping_sub(1) != 0 {
-        good = consensus_gate(y, v, active, good, k2, v_med);
+        return consensus_gate(y, v, active, good, k2, v_med);
     }
-    good
+    (good, false)
 }
 
 /// The gate rejected two or more gyros. With an even count the median
@@ -1004,8 +1010,10 @@ fn regate<const N: usize>(
 /// reference's own variance must not widen the gate, or a chip the noise
 /// model already distrusts would vouch for everybody), and keep the
 /// consistent set of largest total inverse variance; the first gate's
-/// choice stands unless another set outweighs it. Two rejections are rare (two faulty
-/// chips at once), so this is out of line.
+/// choice stands unless another set has more gyros or, as many, outweighs
+/// it. Returns the set, and whether it is no majority of the active gyros
+/// (a split: two against two). Two rejections are rare (two faulty chips
+/// at once), so this is out of line.
 #[cold]
 #[inline(never)]
 fn consensus_gate<const N: usize>(
@@ -1015,7 +1023,7 @@ fn consensus_gate<const N: usize>(
     first: u8,
     k2: f32,
     v_med: f32,
-) -> u8 {
+) -> (u8, bool) {
     let weight = |set: u8| -> f32 {
         let mut w = 0.0;
         for i in 0..N {
@@ -1025,7 +1033,8 @@ fn consensus_gate<const N: usize>(
         }
         w
     };
-    let (mut best, mut best_w) = (first, weight(first));
+    // Majority logic first (more gyros agreeing wins), weight second.
+    let (mut best, mut best_n, mut best_w) = (first, first.count_ones(), weight(first));
     for j in 0..N {
         if !has(active, j) {
             continue;
@@ -1037,12 +1046,13 @@ fn consensus_gate<const N: usize>(
                 set |= 1 << i;
             }
         }
-        let w = weight(set);
-        if set.count_ones() >= 2 && w > best_w {
-            (best, best_w) = (set, w);
+        let (n, w) = (set.count_ones(), weight(set));
+        if n >= 2 && (n > best_n || (n == best_n && w > best_w)) {
+            (best, best_n, best_w) = (set, n, w);
         }
     }
-    best
+    // Split: the largest consistent set is not a majority of the gyros.
+    (best, 2 * best_n <= active.count_ones())
 }
 
 /// Sum of the priors of the two gyros in `good`, or 0 unless both have one.
@@ -1164,8 +1174,25 @@ fn adaptive_active<const N: usize>(
         // each, no popcount): rare, out of line.
         let out_active = active & offm;
         if support & support.wrapping_sub(1) == 0 || out_active & out_active.wrapping_sub(1) != 0 {
-            good = regate(y, &v, active, good, med, k2, v_med);
+            let split;
+            (good, split) = regate(y, &v, active, good, med, k2, v_med);
             support = good | (voters & !active & !offm);
+            if split {
+                // No majority agrees (two chips against two): nothing
+                // tells which pair is right. Hold the last output, flagged
+                // as degraded, rather than follow either pair (the pair
+                // that is wrong together also looks quieter to the noise
+                // model, and was followed).
+                out.fallback = true;
+                out.rejected |= valid & !good;
+                // No gyro is used (weights 0): nothing learns from a
+                // sample nobody can vouch for (the online calibration
+                // learns from the gyros fusion used).
+                let held = st.last_out;
+                if held.is_finite() {
+                    return Some((held, [0.0; N]));
+                }
+            }
         }
         if good == 0 || support & support.wrapping_sub(1) == 0 {
             // Still fewer than two: everybody disagrees, nothing to single
@@ -1215,11 +1242,15 @@ fn adaptive_active<const N: usize>(
     // campaign, seed 7 780 514: one chip stuck, one garbling bytes, and
     // the noisy ADXRS453 widening the MAD). The noise model still learns
     // from the gated set; the weights reported are its equal weights.
-    if !all_warm && n >= 3 {
+    let r = if !all_warm && n >= 3 {
         r.map(|(_, wts)| (med, wts))
     } else {
         r
+    };
+    if let Some((x, _)) = r {
+        st.last_out = x;
     }
+    r
 }
 
 /// Noise update and inverse-variance fusion over `good` (⊆ `active`).
