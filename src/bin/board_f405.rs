@@ -297,6 +297,7 @@ fn main() -> ! {
     defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
     watchdog.start(100.millis());
     let mut meter = stack::StackMeter::new();
+    let mut status_for: Option<(u32, u64)> = None;
     let mut last = f405::ticks();
     // Sample clock, µs (64-bit: the tick counter wraps after 49 days).
     let mut t_us: u64 = 0;
@@ -306,6 +307,10 @@ fn main() -> ! {
             let t = f405::ticks();
             if t != last {
                 break t;
+            }
+            if let Some((seq, t)) = status_for.take() {
+                let st = port.status(&pipe, seq, t, [1, 16, 256], 1_000_000 / FS_HZ, meter.peak());
+                port.send(&st);
             }
             port.drain(&mut tx);
             port.receive(&mut rx, &mut pipe);
@@ -324,16 +329,10 @@ fn main() -> ! {
         noise.push(&out);
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         meter.step(64);
+        // A status frame is built in the idle time that follows, not in
+        // the sample's own time.
         if port.status_due(out.seq) {
-            let st = port.status(
-                &pipe,
-                out.seq,
-                t_us,
-                [1, 16, 256],
-                1_000_000 / FS_HZ,
-                meter.peak(),
-            );
-            port.send(&st);
+            status_for = Some((out.seq, t_us));
         }
         // A completed sample is the only thing that feeds the watchdog.
         watchdog.feed();

@@ -173,6 +173,7 @@ fn main() -> ! {
     let mut digest = crc32.digest();
     let mut sample_frames = 0u32;
 
+    let mut status_for: Option<(u32, u64)> = None;
     let mut last_tick = TICKS.load(Ordering::Acquire);
     let mut stuck_at = None;
     let mut excluded_at = None;
@@ -184,7 +185,13 @@ fn main() -> ! {
             if t != last_tick {
                 break t;
             }
-            // Idle time feeds the UART and reads commands.
+            // Idle time builds the status frame, feeds the UART and reads
+            // commands.
+            if let Some((seq, t)) = status_for.take() {
+                let peak = stack::stack_usage().peak;
+                let st = port.status(&pipe, seq, t, [1, 8, 64], 1_000_000 / FS_HZ, peak);
+                port.send(&st);
+            }
             port.drain(&mut uart);
             port.receive(&mut uart, &mut pipe);
             // Sleep only if the tick has still not come, checked with
@@ -240,10 +247,9 @@ fn main() -> ! {
                 digest.update(&r.to_le_bytes());
             }
         }
+        // Built in the idle time that follows, as on the board.
         if port.status_due(out.seq) {
-            let peak = stack::stack_usage().peak;
-            let st = port.status(&pipe, out.seq, t_us, [1, 8, 64], 1_000_000 / FS_HZ, peak);
-            port.send(&st);
+            status_for = Some((out.seq, t_us));
         }
         let log_now = if n < 3000 {
             n % 500 == 499
