@@ -383,6 +383,11 @@ fn check(
     Ok(fails.is_empty())
 }
 
+/// The first three CSV columns of a sample or raw frame.
+fn lead(link_seq: u32, seq: u32, t_us: u64) -> Vec<String> {
+    vec![link_seq.to_string(), seq.to_string(), t_us.to_string()]
+}
+
 fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
     let (frames, dec) = read_recording(file)?;
     let sink: Box<dyn Write> = match &out {
@@ -405,11 +410,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     w.write_record(&h)?;
                     header_done = true;
                 }
-                let mut r = vec![
-                    d.link_seq.to_string(),
-                    s.seq.to_string(),
-                    s.t_us.to_string(),
-                ];
+                let mut r = lead(d.link_seq, s.seq, s.t_us);
                 r.extend(s.rate_dps.iter().map(|v| v.to_string()));
                 r.extend([s.valid, s.degraded].iter().map(|v| v.to_string()));
                 r.extend(s.used.iter().map(|v| v.to_string()));
@@ -449,11 +450,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     w.write_record(&h)?;
                     header_done = true;
                 }
-                let mut r = vec![
-                    d.link_seq.to_string(),
-                    s.seq.to_string(),
-                    s.t_us.to_string(),
-                ];
+                let mut r = lead(d.link_seq, s.seq, s.t_us);
                 for g in &s.rate_dps {
                     r.extend(g.iter().map(|v| v.to_string()));
                 }

@@ -92,31 +92,17 @@ pub fn open(src: &Source, wait: Duration) -> io::Result<Conn> {
                 writer: Some(Box::new(w)),
             })
         }
-        Source::Tcp(addr) => loop {
-            match std::net::TcpStream::connect(addr) {
-                Ok(s) => {
-                    let w = s.try_clone()?;
-                    return Ok(Conn {
-                        reader: Box::new(s),
-                        writer: Some(Box::new(w)),
-                    });
-                }
-                Err(e) => retry(e)?,
-            }
-        },
+        Source::Tcp(addr) => socket(
+            || std::net::TcpStream::connect(addr),
+            std::net::TcpStream::try_clone,
+            retry,
+        ),
         #[cfg(unix)]
-        Source::Unix(path) => loop {
-            match std::os::unix::net::UnixStream::connect(path) {
-                Ok(s) => {
-                    let w = s.try_clone()?;
-                    return Ok(Conn {
-                        reader: Box::new(s),
-                        writer: Some(Box::new(w)),
-                    });
-                }
-                Err(e) => retry(e)?,
-            }
-        },
+        Source::Unix(path) => socket(
+            || std::os::unix::net::UnixStream::connect(path),
+            std::os::unix::net::UnixStream::try_clone,
+            retry,
+        ),
         #[cfg(not(unix))]
         Source::Unix(_) => Err(io::Error::other("Unix sockets need a Unix host")),
         Source::File(path) => Ok(Conn {
@@ -127,6 +113,27 @@ pub fn open(src: &Source, wait: Duration) -> io::Result<Conn> {
             reader: Box::new(io::stdin()),
             writer: None,
         }),
+    }
+}
+
+/// Connect a socket, asking `retry` after each failure whether to go on;
+/// its second handle carries the commands.
+fn socket<S: Read + Write + Send + 'static>(
+    connect: impl Fn() -> io::Result<S>,
+    clone: impl Fn(&S) -> io::Result<S>,
+    retry: impl Fn(io::Error) -> io::Result<()>,
+) -> io::Result<Conn> {
+    loop {
+        match connect() {
+            Ok(s) => {
+                let w = clone(&s)?;
+                return Ok(Conn {
+                    reader: Box::new(s),
+                    writer: Some(Box::new(w)),
+                });
+            }
+            Err(e) => retry(e)?,
+        }
     }
 }
 

@@ -16,7 +16,7 @@ pub mod calibration {
     //! - b(T) = b₂₅ + k·(T − 25): a least-squares line through the three
     //!   still runs against the temperature the drivers read.
 
-    use gyro_array::algo::mounting::{CalRecord, ChipCal};
+    use gyro_array::algo::mounting::{inverse3, CalRecord, ChipCal};
     use gyro_array::checks::run_array;
     use gyro_array::emu::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
 
@@ -90,24 +90,6 @@ pub mod calibration {
         (mean, temp)
     }
 
-    fn inverse(a: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-        let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
-            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-        if !(det.abs() > 1e-9) {
-            return None;
-        }
-        let c = |i: usize, j: usize| {
-            let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
-            let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
-            a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
-        };
-        // inverse = adjugate / det; adjugate[j][i] = cofactor(i, j).
-        Some(core::array::from_fn(|j| {
-            core::array::from_fn(|i| c(i, j) / det)
-        }))
-    }
-
     /// Run the procedure; the record for the emulated board.
     pub fn calibrate(hold: u32, seed: u64) -> Option<CalRecord> {
         let w = OMEGA as f64;
@@ -150,7 +132,7 @@ pub mod calibration {
             }
             c.t_ref_c = 25.0;
             if i < 4 {
-                let m = inverse(a[i])?;
+                let m = inverse3(&a[i])?;
                 c.m = m.map(|r| r.map(|v| v as f32));
             } else {
                 c.m[2][2] = (1.0 / a[i][2][2]) as f32;

@@ -15,6 +15,8 @@
 //! [`CalError::Missing`], never as a calibration.
 
 use crc::{Crc, CRC_32_ISO_HDLC};
+
+use crate::algo::qualify::Real;
 use heapless::Vec;
 use serde::{Deserialize, Serialize};
 
@@ -62,7 +64,7 @@ impl ChipCal {
             *v = chip[i] - self.bias_dps[i] - self.bias_tc_dps_per_c[i] * dt;
         }
         if axes == 0b111 {
-            self.m.map(|r| r[0] * c[0] + r[1] * c[1] + r[2] * c[2])
+            mul3(&self.m, &c)
         } else {
             let mut out = [f32::NAN; 3];
             for a in 0..3 {
@@ -76,21 +78,27 @@ impl ChipCal {
 }
 
 /// Inverse of a 3×3 matrix (`None` when singular or not finite): the
-/// chip-frame view of board-frame rates for a calibrated chip.
-pub fn inverse3(a: &[[f32; 3]; 3]) -> Option<[[f32; 3]; 3]> {
+/// chip-frame view of board-frame rates for a calibrated chip (f32 on the
+/// board), and M = A⁻¹ in the host's calibration procedure (f64).
+pub fn inverse3<F: Real>(a: &[[F; 3]; 3]) -> Option<[[F; 3]; 3]> {
     let c = |i: usize, j: usize| {
         let (r0, r1) = ((i + 1) % 3, (i + 2) % 3);
         let (c0, c1) = ((j + 1) % 3, (j + 2) % 3);
         a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]
     };
     let det = a[0][0] * c(0, 0) + a[0][1] * c(0, 1) + a[0][2] * c(0, 2);
-    if !(det.abs() > 1e-12) || !det.is_finite() {
+    if !(det.abs() > F::of(1e-12)) || !det.f64().is_finite() {
         return None;
     }
     // inverse = adjugate / det; adjugate[j][i] = cofactor(i, j).
     Some(core::array::from_fn(|j| {
         core::array::from_fn(|i| c(i, j) / det)
     }))
+}
+
+/// m · v for a 3×3 matrix: chip axes to board axes (or back).
+pub fn mul3(m: &[[f32; 3]; 3], v: &[f32; 3]) -> [f32; 3] {
+    m.map(|r| r[0] * v[0] + r[1] * v[1] + r[2] * v[2])
 }
 
 /// A board's calibration.

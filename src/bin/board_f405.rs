@@ -44,7 +44,7 @@ use gyro_array::algo::mounting::{self, CalRecord};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, RxQueue};
 use gyro_array::board::record::Cause;
-use gyro_array::board::{persist, stack};
+use gyro_array::board::{idle, persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
@@ -276,7 +276,7 @@ fn main() -> ! {
             || {
                 let t = f405::ticks();
                 while f405::ticks() == t {
-                    f405::sleep_unless(|| f405::ticks() != t);
+                    idle::sleep_unless(|| f405::ticks() != t);
                 }
                 watchdog.feed();
             },
@@ -314,7 +314,7 @@ fn main() -> ! {
             }
             port.drain(&mut tx);
             port.receive(&mut rx, &mut pipe);
-            f405::sleep_unless(|| f405::ticks() != last || port.queued() != 0);
+            idle::sleep_unless(|| f405::ticks() != last || port.queued() != 0);
         };
         let elapsed = now.wrapping_sub(last);
         last = now;

@@ -35,7 +35,7 @@ use gyro_array::algo::mounting::CalRecord;
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
-use gyro_array::board::stack;
+use gyro_array::board::{idle, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
@@ -198,11 +198,7 @@ fn main() -> ! {
             // interrupts masked: a tick taken between the check above and
             // the WFI would otherwise be slept through, a missed sample
             // (WFI still wakes on the pending interrupt).
-            cortex_m::interrupt::free(|_| {
-                if TICKS.load(Ordering::Acquire) == last_tick && port.queued() == 0 {
-                    cortex_m::asm::wfi();
-                }
-            });
+            idle::sleep_unless(|| TICKS.load(Ordering::Acquire) != last_tick || port.queued() != 0);
         };
         let missed = now.wrapping_sub(last_tick).saturating_sub(1);
         if missed > 0 {

@@ -127,17 +127,6 @@ pub fn start_ticks(mut syst: SYST, core_hz: u32, rate_hz: u32) -> SYST {
     syst
 }
 
-/// Wait for an interrupt unless `ready()` (checked with interrupts
-/// masked, so that an interrupt taken just before cannot be slept through:
-/// WFI still wakes on a pending one). The idle step of the main loop.
-pub fn sleep_unless(ready: impl FnOnce() -> bool) {
-    cortex_m::interrupt::free(|_| {
-        if !ready() {
-            cortex_m::asm::wfi();
-        }
-    });
-}
-
 /// Sample ticks so far.
 pub fn ticks() -> u32 {
     TICKS.load(Ordering::Acquire)

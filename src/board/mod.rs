@@ -5,6 +5,8 @@
 pub mod cmsdk_uart;
 #[cfg(feature = "board")]
 pub mod f405;
+#[cfg(any(feature = "qemu", feature = "board"))]
+pub mod idle;
 #[cfg(feature = "persist")]
 pub mod persist;
 #[cfg(feature = "qemu")]

@@ -4,6 +4,8 @@
 //! default is a chip aligned with the board at a constant 25 °C, which
 //! leaves every earlier result bit for bit as it was.
 
+use crate::algo::mounting::mul3;
+
 /// Mounting and temperature terms of one chip.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mount {
@@ -25,7 +27,7 @@ impl Mount {
 
     /// Rates in the chip's axes of board-frame rates `w`.
     pub fn chip_rate(&self, w: [f32; 3]) -> [f32; 3] {
-        self.m.map(|r| r[0] * w[0] + r[1] * w[1] + r[2] * w[2])
+        mul3(&self.m, &w)
     }
 
     /// The bias added by the temperature at `t_s`, per chip axis, and the

@@ -270,6 +270,23 @@ fn command_bytes(id: u8, op: Op) -> std::vec::Vec<u8> {
     buf[..n].to_vec()
 }
 
+/// A UART that takes every byte the port sends.
+struct Tx(std::vec::Vec<u8>);
+
+impl embedded_hal_nb::serial::ErrorType for Tx {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for Tx {
+    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        self.0.push(b);
+        Ok(())
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
 /// Feed `bytes` to the port as received, then decode what it sent.
 fn exchange(port: &mut Port<1024>, pipe: &mut Pipeline<4>, bytes: &[u8]) -> std::vec::Vec<Frame> {
     struct Rx<'a>(&'a [u8]);
@@ -284,19 +301,6 @@ fn exchange(port: &mut Port<1024>, pipe: &mut Pipeline<4>, bytes: &[u8]) -> std:
                 .ok_or(embedded_hal_nb::nb::Error::WouldBlock)?;
             self.0 = rest;
             Ok(b)
-        }
-    }
-    struct Tx(std::vec::Vec<u8>);
-    impl embedded_hal_nb::serial::ErrorType for Tx {
-        type Error = core::convert::Infallible;
-    }
-    impl embedded_hal_nb::serial::Write<u8> for Tx {
-        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-            self.0.push(b);
-            Ok(())
-        }
-        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-            Ok(())
         }
     }
     let mut rx = Rx(bytes);
@@ -391,19 +395,6 @@ fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
     assert!(port.send(&f));
     assert!(!port.send(&f), "no room for a second");
     assert_eq!(port.counters().dropped, 1);
-    struct Tx(std::vec::Vec<u8>);
-    impl embedded_hal_nb::serial::ErrorType for Tx {
-        type Error = core::convert::Infallible;
-    }
-    impl embedded_hal_nb::serial::Write<u8> for Tx {
-        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-            self.0.push(b);
-            Ok(())
-        }
-        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-            Ok(())
-        }
-    }
     let mut tx = Tx(std::vec::Vec::new());
     port.drain(&mut tx);
     assert!(port.send(&f));

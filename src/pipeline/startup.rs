@@ -23,7 +23,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 
 use super::Pipeline;
-use crate::algo::mounting::{inverse3, ChipCal};
+use crate::algo::mounting::{inverse3, mul3, ChipCal};
 use crate::drivers::adxrs453::Adxrs453;
 use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
 
@@ -111,10 +111,6 @@ where
         }
     }
     failed
-}
-
-fn mul3(m: &[[f32; 3]; 3], v: &[f32; 3]) -> [f32; 3] {
-    m.map(|r| r[0] * v[0] + r[1] * v[1] + r[2] * v[2])
 }
 
 /// Chips whose actuation is on in phases 1 and 2 of the array self-test.

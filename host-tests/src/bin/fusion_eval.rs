@@ -113,6 +113,13 @@ fn simulate(sc: Scenario, seed: u64) -> (Vec<[f32; 4]>, f32, [f32; 4]) {
     (frames, truth, sig)
 }
 
+/// Mean and sample standard deviation over the seeds.
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+    (m, sd)
+}
+
 /// Class (f), issue 9: a 95 °/s, 2 Hz sway with per-chip scale errors
 /// (drawn in ±1 %, and the worst pattern +1/−1/+1/−1 %), 10 seeds × 20 000
 /// samples each. Prints mean ± sd of the RMS error of the oracle (true
@@ -174,20 +181,15 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
             }
         }
         println!("  scale errors {pattern}:");
-        let ms = |v: &[f64]| {
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-            (m, sd)
-        };
         for (n, r) in names.iter().zip(&res) {
-            let (m, sd) = ms(r);
+            let (m, sd) = mean_sd(r);
             println!("    {n:<14} {m:>10.5} +- {sd:.5}");
         }
         out.push((
             format!("(f) scale errors {pattern}"),
-            ms(&res[4]).0,
-            ms(&res[0]).0,
-            ms(&res[1]).0,
+            mean_sd(&res[4]).0,
+            mean_sd(&res[0]).0,
+            mean_sd(&res[1]).0,
         ));
     }
     out
@@ -255,30 +257,25 @@ fn drift_class(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
                 r.push((s / (SAMPLES - start) as f64).sqrt());
             }
         }
-        let ms = |v: &[f64]| {
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-            (m, sd)
-        };
         let worst = times.iter().cloned().fold(0.0, f64::max);
         println!(
             "  drift {rate} deg/s per s (3 sigma = {:.3} deg/s):",
             3.0 * NoiseParams::ICM42688.white_sigma_dps(FS)
         );
-        let (tm, tsd) = ms(&times);
+        let (tm, tsd) = mean_sd(&times);
         println!(
             "    time from 3 sigma to weight < 5 %: {tm:.3} +- {tsd:.3} s, worst {worst:.3} s"
         );
         for (n, r) in ["mean", "zhang", "adaptive"].iter().zip(&rms) {
-            let (m, sd) = ms(r);
+            let (m, sd) = mean_sd(r);
             println!("    {n:<14} {m:>10.5} +- {sd:.5}");
         }
         out.push((
             format!("(g) drift {rate} deg/s per s"),
             worst,
-            ms(&rms[2]).0,
-            ms(&rms[0]).0,
-            ms(&rms[1]).0,
+            mean_sd(&rms[2]).0,
+            mean_sd(&rms[0]).0,
+            mean_sd(&rms[1]).0,
         ));
     }
     out
@@ -339,11 +336,6 @@ fn class4(
             r.push((s / SAMPLES as f64).sqrt());
         }
     }
-    let ms = |v: &[f64]| {
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-        (m, sd)
-    };
     println!("  {name}:");
     let mut out = [0.0; 4];
     for ((n, r), o) in ["oracle", "mean", "zhang", "adaptive+cal"]
@@ -351,7 +343,7 @@ fn class4(
         .zip(&res)
         .zip(out.iter_mut())
     {
-        let (m, sd) = ms(r);
+        let (m, sd) = mean_sd(r);
         *o = m;
         println!("    {n:<14} {m:>10.5} +- {sd:.5}");
     }
@@ -465,19 +457,19 @@ fn pair_class(seed: u64) -> (f64, f64, f64, f64) {
             r.push((s / SAMPLES as f64).sqrt());
         }
     }
-    let ms = |v: &[f64]| {
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-        (m, sd)
-    };
     for (n, r) in ["adaptive+priors", "oracle", "mean", "adaptive"]
         .iter()
         .zip(&res)
     {
-        let (m, sd) = ms(r);
+        let (m, sd) = mean_sd(r);
         println!("    {n:<16} {m:>10.5} +- {sd:.5}");
     }
-    (ms(&res[0]).0, ms(&res[1]).0, ms(&res[2]).0, ms(&res[3]).0)
+    (
+        mean_sd(&res[0]).0,
+        mean_sd(&res[1]).0,
+        mean_sd(&res[2]).0,
+        mean_sd(&res[3]).0,
+    )
 }
 
 fn main() {
