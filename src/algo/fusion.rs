@@ -312,6 +312,31 @@ impl<const N: usize> AxisState<N> {
         }
     }
 
+    /// Forget the noise estimates of the gyros in `mask`: they learn again
+    /// from the next sample, as at power-up (warm-up gate, plain average,
+    /// then the EWMA). For residuals that were measured against readings
+    /// that have since been corrected ([`crate::algo::calib::RelCal`]):
+    /// a scale error of 1 % at 100 °/s reads as 1 °/s of noise, which an
+    /// EWMA of 1/256 would take a thousand samples to forget.
+    pub fn forget_noise(&mut self, mask: u8) {
+        if mask == 0 {
+            return;
+        }
+        for i in 0..N {
+            if mask & (1 << i) != 0 {
+                self.n_upd[i] = 0;
+                self.var[i] = 0.0;
+            }
+        }
+        self.warm &= !mask;
+    }
+
+    /// The adaptive method's raw noise variance estimate of gyro `i`,
+    /// (°/s)² (0 before any update or out of range).
+    pub fn noise_var(&self, i: usize) -> f32 {
+        self.var.get(i).copied().unwrap_or(0.0)
+    }
+
     /// Current noise standard deviation estimates of the adaptive method,
     /// °/s (NaN before any update).
     pub fn sigma_dps(&self, cfg: &AdaptiveConfig) -> [f32; N] {

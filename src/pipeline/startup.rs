@@ -18,6 +18,16 @@
 //! mismatch times the rate change (1 % of 40 °/s is 0.4 °/s, against a
 //! pass threshold of 1.25 °/s). With a single chip alive there is no
 //! reference and the test is the datasheet's (the board must be still).
+//!
+//! A faulty chip present at power-up must not fail the healthy ones. Each
+//! chip's level in a phase is therefore not a mean but the median, over
+//! the phase's samples, of its reading minus the array's common motion at
+//! that instant (per board axis, the median over the live chips): a chip
+//! spiking ±200 °/s moves neither. A chip whose output never changes
+//! within a phase (stuck, saturated) is no reference, and fails. Before
+//! this, a chip spiking from power-up failed two or three healthy chips
+//! on every board tried, and a stuck one the two it served as reference
+//! for (`fusion-eval`, class (l)).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
@@ -116,6 +126,49 @@ where
 /// Chips whose actuation is on in phases 1 and 2 of the array self-test.
 const ST_SETS: [u8; 2] = [0b0101, 0b1010];
 
+/// Most samples per phase of the array self-test (each is kept for the
+/// phase's median: 3 KiB of stack at 64).
+pub const ST_MAX: usize = 64;
+
+/// Median of the values in `m` (a mask over four), 0 for none.
+fn median4(v: [f32; 4], m: u8) -> f32 {
+    let mut s = [0.0f32; 4];
+    let mut k = 0;
+    for (i, x) in v.iter().enumerate() {
+        if m & (1 << i) != 0 {
+            if let Some(slot) = s.get_mut(k) {
+                *slot = *x;
+                k += 1;
+            }
+        }
+    }
+    median_of(s.get_mut(..k).unwrap_or(&mut []))
+}
+
+/// Median of a slice (reordered in place); the mean of the two middle
+/// values for an even length, 0 for an empty slice.
+fn median_of(v: &mut [f32]) -> f32 {
+    // Insertion sort: at most 64 values, once per phase at start-up.
+    for i in 1..v.len() {
+        let mut j = i;
+        while j > 0 {
+            let (Some(&a), Some(&b)) = (v.get(j - 1), v.get(j)) else {
+                break;
+            };
+            if a.total_cmp(&b).is_le() {
+                break;
+            }
+            v.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+    let k = v.len();
+    match (v.get(k.wrapping_sub(1) / 2), v.get(k / 2)) {
+        (Some(a), Some(b)) if k > 0 => 0.5 * (a + b),
+        _ => 0.0,
+    }
+}
+
 /// Outcome of one chip's self-test (`None`: not run).
 type StResult<E> = Result<Option<SelfTest>, Error<E>>;
 
@@ -132,7 +185,7 @@ pub fn array_self_test<SPI: SpiDevice>(
     mounts: Option<[[[f32; 3]; 3]; 4]>,
 ) -> [StResult<SPI::Error>; 4] {
     let mut out: [StResult<SPI::Error>; 4] = [const { Ok(None) }; 4];
-    if n == 0 {
+    if n == 0 || usize::from(n) > ST_MAX {
         return [0, 1, 2, 3].map(|i| {
             if alive & (1 << i) != 0 {
                 Err(Error::InvalidArgument)
@@ -164,8 +217,17 @@ pub fn array_self_test<SPI: SpiDevice>(
         }
     }
     delay.delay_ms(20);
-    // Mean raw reading per phase, chip and axis.
+    // Chip axes to board axes and back, per chip (identity: aligned, or a
+    // singular matrix).
+    let to_board = mounts.unwrap_or([ChipCal::IDENTITY.m; 4]);
+    let to_chip = to_board.map(|m| inverse3(&m).unwrap_or(ChipCal::IDENTITY.m));
+    // Robust level per phase, chip and axis (raw LSB): the median over the
+    // phase's samples of the chip's reading minus the array's common
+    // motion at that instant (below).
     let mut means = [[[0.0f32; 3]; 4]; 3];
+    let mut resid = [[[0.0f32; ST_MAX]; 3]; 4];
+    let mut frozen = 0u8;
+    let n = usize::from(n);
     for (phase, mean) in means.iter_mut().enumerate() {
         if let Some(&on) = phase.checked_sub(1).and_then(|k| ST_SETS.get(k)) {
             for (i, (g, o)) in icm.iter_mut().zip(out.iter_mut()).enumerate() {
@@ -178,22 +240,32 @@ pub fn array_self_test<SPI: SpiDevice>(
             }
             delay.delay_ms(200); // datasheet: settle before reading
         }
-        let mut acc = [[0i32; 3]; 4];
-        for _ in 0..n {
+        let mut first = [[0i16; 3]; 4];
+        let mut moving = 0u8;
+        for t in 0..n {
             delay.delay_us(1000); // one sample at 1 kHz, every chip
-            for (i, ((g, o), ac)) in icm
+            let mut raw = [[0.0f32; 3]; 4];
+            for (i, ((g, o), r)) in icm
                 .iter_mut()
                 .zip(out.iter_mut())
-                .zip(acc.iter_mut())
+                .zip(raw.iter_mut())
                 .enumerate()
             {
                 if live & (1 << i) == 0 {
                     continue;
                 }
                 match g.read_raw() {
-                    Ok(r) => {
-                        for (a, v) in ac.iter_mut().zip(r) {
-                            *a += v as i32;
+                    Ok(v) => {
+                        *r = v.map(f32::from);
+                        // A chip whose output never changes within a
+                        // phase (stuck, saturated: real noise moves it by
+                        // ~12 LSB every sample) is no reference.
+                        if let Some(f) = first.get_mut(i) {
+                            if t == 0 {
+                                *f = v;
+                            } else if *f != v {
+                                moving |= 1 << i;
+                            }
                         }
                     }
                     Err(e) => {
@@ -202,9 +274,43 @@ pub fn array_self_test<SPI: SpiDevice>(
                     }
                 }
             }
+            // The motion common to the array at this instant: per board
+            // axis, the median over the live chips (a chip spiking from
+            // power-up moves it by nothing). Taken out of every chip
+            // sample by sample, it leaves each chip's offset, whatever the
+            // vehicle does within the phase; the same for every chip, it
+            // cancels in the comparison with the reference chips below.
+            // With one chip there is nothing to compare with: none is
+            // taken out (the datasheet's test, on a still board).
+            let mut common = [0.0f32; 3];
+            if live.count_ones() >= 2 {
+                let board: [[f32; 3]; 4] = core::array::from_fn(|i| {
+                    let (m, r) = (&to_board[i], &raw[i]);
+                    mul3(m, r)
+                });
+                for (a, c) in common.iter_mut().enumerate() {
+                    *c = median4(board.map(|b| b[a]), live);
+                }
+            }
+            for (i, (r, rs)) in raw.iter().zip(resid.iter_mut()).enumerate() {
+                if live & (1 << i) == 0 {
+                    continue;
+                }
+                let seen = mul3(&to_chip[i], &common);
+                for ((slot, v), c) in rs.iter_mut().zip(r).zip(seen) {
+                    if let Some(x) = slot.get_mut(t) {
+                        *x = v - c;
+                    }
+                }
+            }
         }
-        for (m, a) in mean.iter_mut().zip(acc) {
-            *m = a.map(|v| v as f32 / n as f32);
+        if n >= 2 {
+            frozen |= live & !moving;
+        }
+        for (m, rs) in mean.iter_mut().zip(resid.iter_mut()) {
+            for (mv, r) in m.iter_mut().zip(rs.iter_mut()) {
+                *mv = median_of(r.get_mut(..n).unwrap_or(&mut []));
+            }
         }
     }
     let [base, on1, on2] = means;
@@ -218,7 +324,7 @@ pub fn array_self_test<SPI: SpiDevice>(
         }
         // The chips that stayed off in this phase saw the same motion (in
         // board axes when the chips are mounted otherwise).
-        let refs = live & !set;
+        let refs = live & !set & !frozen;
         let count = refs.count_ones() as f32;
         let mut motion = [0.0f32; 3];
         if count > 0.0 {
@@ -249,8 +355,11 @@ pub fn array_self_test<SPI: SpiDevice>(
                 None => motion,
             };
             let mut response = [0.0f32; 3];
-            for ((r, dv), m) in response.iter_mut().zip(d).zip(seen) {
-                *r = dv - m;
+            // A frozen output has no response, whatever the motion did.
+            if frozen & (1 << i) == 0 {
+                for ((r, dv), m) in response.iter_mut().zip(d).zip(seen) {
+                    *r = dv - m;
+                }
             }
             let end = g.self_test_end(s, response);
             if live & (1 << i) != 0 {

@@ -13,6 +13,9 @@ use gyro_array::checks::methods;
 use gyro_array::emu::noise::{quantise, AxisNoise};
 use gyro_array::emu::{NoiseParams, Rng};
 
+#[path = "fusion_eval/array.rs"]
+mod array;
+
 const FS: f32 = 1000.0;
 const SAMPLES: usize = 20_000;
 const LSB: f32 = 131.0;
@@ -552,6 +555,9 @@ fn main() {
     let drift = drift_class(seed);
     let pair = pair_class(seed);
     let more = more_classes(seed);
+    let arrays = array::array_classes(seed);
+    let board = array::board_fault_classes(seed);
+    let boot = array::boot_classes(seed);
     println!("\ntargets:");
     let r = |si: usize, n: &str| rms[&(si, n.to_string())];
     let mut all = true;
@@ -614,7 +620,7 @@ fn main() {
     }
     // Sampling error of an RMS over 10 × 20 000 samples: about 1/√(2n)
     // = 0.16 %; "no worse than" allows 0.5 %.
-    for (name, [o, m, z, a], fault_free) in &more {
+    for (name, [o, m, z, a], fault_free) in more.iter().chain(&arrays) {
         target(
             format!("{name}: adaptive {a:.5} <= mean {m:.5} and zhang {z:.5} (tolerance 1.005)"),
             *a <= 1.005 * m && *a <= 1.005 * z,
@@ -639,6 +645,18 @@ fn main() {
         target(
             format!("{name}: adaptive {a:.5} <= mean {m:.5} and zhang {z:.5}"),
             a <= m && a <= z,
+        );
+    }
+    for (name, worst, rms) in &board {
+        target(
+            format!("{name}: fused within 1 deg/s of the truth where a healthy majority exists (worst {worst:.3}, RMS {rms:.4})"),
+            *worst <= 1.0,
+        );
+    }
+    for (name, failed, chips, _) in &boot {
+        target(
+            format!("{name}: no healthy chip fails start-up ({failed} of {chips})"),
+            *failed == 0,
         );
     }
     let (a, o) = (r(2, "adaptive"), r(2, "oracle"));
