@@ -252,13 +252,19 @@ impl<const N: usize> RelCal<N> {
         // every `EVERY` samples halves the cost and changes nothing.
         self.tick = self.tick.wrapping_add(1);
         if self.tick.is_multiple_of(EVERY) || (self.warming != 0 && self.newly_warm()) {
-            self.estimate();
+            self.estimate(mask);
         }
     }
 
     /// Scale and bias of every started chip from the moments, then the
     /// correction (against the average chip).
-    fn estimate(&mut self) {
+    ///
+    /// A chip outside `used` (not trusted by fusion on this sample) keeps
+    /// the correction it has: a stuck chip's corrected reading must stay
+    /// frozen for fusion to see it frozen. Re-solved with the others, its
+    /// correction moved with the array's mean scale, and a stuck chip was
+    /// readmitted for ~13 samples per 15 s on a sway (`fusion-eval`, (n)).
+    fn estimate(&mut self, used: u8) {
         for i in 0..N {
             if self.started & (1 << i) == 0 {
                 continue;
@@ -299,6 +305,10 @@ impl<const N: usize> RelCal<N> {
             let (ms, mb) = (ms / n, mb / n);
             let mut applied = 0u8;
             for i in 0..N {
+                if used & (1 << i) == 0 {
+                    applied |= self.applied & (1 << i);
+                    continue;
+                }
                 if warm(i) {
                     applied |= 1 << i;
                     self.inv_scale[i] = ms / self.scale[i];
@@ -434,5 +444,28 @@ mod tests {
         assert!(s.iter().all(|s| (s / 0.09 - 1.0).abs() < 0.3), "{s:?}");
         let rms = (se / 500.0).sqrt();
         assert!(rms < 0.07, "fused rms {rms}");
+    }
+    /// A chip fusion no longer uses (stuck) keeps its correction while the
+    /// others' estimates move: its corrected reading stays frozen, so
+    /// fusion's frozen-output check keeps it out.
+    #[test]
+    fn an_unused_chip_keeps_its_correction() {
+        let scale = [1.01f32, 0.99, 1.015, 0.98];
+        let mut rng = Rng::new(9);
+        let mut cal = RelCal::<4>::new(CalConfig::default());
+        let w = |k: usize| 30.0 * libm::sinf(2.0 * core::f32::consts::PI * k as f32 * 1e-3);
+        for k in 0..3000 {
+            let y = [0, 1, 2, 3].map(|i| scale[i] * w(k) + 0.09 * rng.gaussian());
+            cal.update(&y, 0b1111);
+        }
+        let held = 7.5f32;
+        let first = cal.correct(&[held, 0.0, 0.0, 0.0])[0];
+        for k in 3000..6000 {
+            let mut y = [0, 1, 2, 3]
+                .map(|i| scale[i] * w(k) * (1.0 + 2e-3 * i as f32) + 0.09 * rng.gaussian());
+            y[0] = held;
+            cal.update(&y, 0b1110);
+            assert_eq!(cal.correct(&y)[0], first, "sample {k}");
+        }
     }
 }

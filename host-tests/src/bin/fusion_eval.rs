@@ -558,6 +558,7 @@ fn main() {
     let arrays = array::array_classes(seed);
     let board = array::board_fault_classes(seed);
     let boot = array::boot_classes(seed);
+    let stuck = array::stuck_classes(seed);
     println!("\ntargets:");
     let r = |si: usize, n: &str| rms[&(si, n.to_string())];
     let mut all = true;
@@ -651,6 +652,12 @@ fn main() {
         target(
             format!("{name}: fused within 1 deg/s of the truth where a healthy majority exists (worst {worst:.3}, RMS {rms:.4})"),
             *worst <= 1.0,
+        );
+    }
+    for (n, worst, back) in &stuck {
+        target(
+            format!("(n) N = {n}: stuck chip out within 5 samples ({worst}) and never back while stuck ({back} samples)"),
+            *worst <= 5 && *back == 0,
         );
     }
     for (name, failed, chips, _) in &boot {

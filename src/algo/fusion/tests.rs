@@ -495,6 +495,55 @@ fn gated_spikes_do_not_inflate_the_noise_estimate() {
     assert!((s[1] / others - 1.0).abs() < 0.1, "{s:?}");
 }
 
+/// Two chips with priors: what the priors explain is split in their
+/// proportion, the excess equally. At rest (no excess) a 5× noisier chip
+/// gets about 1/26 of the weight; on a 30 °/s, 1 Hz sway with scale errors
+/// of +1 % and −1 % (an excess the priors cannot explain, and cannot pin on
+/// either chip) the split moves towards equal, near the optimum for those
+/// errors, and the fused error is no worse than the mean's.
+#[test]
+fn a_pair_splits_the_unexplained_disagreement_equally() {
+    let run = |moving: bool| {
+        let f = Fusion::<2>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+        let mut st = AxisState::<2>::default();
+        st.set_noise_priors([Some(0.09), Some(0.45)]);
+        let mut rng = Rng::new(5);
+        let (mut w1, mut se, mut se_mean) = (0.0f64, 0.0f64, 0.0f64);
+        for k in 0..20_000 {
+            let t = if moving {
+                30.0 * libm::sinf(2.0 * core::f32::consts::PI * k as f32 * 1e-3)
+            } else {
+                0.0
+            };
+            let y = [
+                1.01 * t + 0.09 * rng.gaussian(),
+                0.99 * t + 0.45 * rng.gaussian(),
+            ];
+            let r = f.fuse(&mut st, &y, 0b11).unwrap();
+            if k >= 5000 {
+                w1 += f64::from(r.weights[1]);
+                se += f64::from(r.rate_dps - t).powi(2);
+                se_mean += f64::from(0.5 * (y[0] + y[1]) - t).powi(2);
+            }
+        }
+        (w1 / 15_000.0, (se / se_mean).sqrt())
+    };
+    let (w_still, _) = run(false);
+    assert!(
+        (w_still - 1.0 / 26.0).abs() < 0.01,
+        "weight at rest {w_still}"
+    );
+    let (w_moving, ratio) = run(true);
+    // Optimal for these errors (each chip's scale error adds (0.01·r)² of
+    // variance, 0.045 (°/s)² over the sway): 1/(σ² + 0.045), 0.18 for the
+    // noisier chip. The priors' proportion alone would give it 0.04.
+    assert!(
+        (0.12..0.3).contains(&w_moving),
+        "weight of the noisier chip under motion {w_moving}"
+    );
+    assert!(ratio <= 1.0, "fused / mean RMS {ratio}");
+}
+
 /// Two of four chips spiking the same way on the same sample: no majority,
 /// so the output holds its last value, flagged, instead of following the
 /// pair (which the noise model also finds the quieter one: it was

@@ -318,3 +318,66 @@ pub fn boot_classes(seed: u64) -> Vec<(String, u32, u32, f64)> {
     }
     out
 }
+
+/// A stuck chip in arrays of N = 2…8 (the default path: relative
+/// calibration and adaptive fusion, priors set): chip 0 holds its last
+/// reading from 5 s under a 20 °/s 1 Hz sway, 10 seeds. Returns per N the
+/// worst number of samples until its weight is 0, and how many samples
+/// after that it had weight again while still stuck (summed over seeds).
+pub fn stuck_classes(seed: u64) -> Vec<(usize, usize, u32)> {
+    println!(
+        "\n(n) a chip stuck from 5 s, N = 2..8, 20 deg/s 1 Hz sway, 10 seeds x {SAMPLES} samples"
+    );
+    let mut out = Vec::new();
+    macro_rules! each {
+        ($($n:literal),*) => {$( out.push(stuck_n::<$n>(seed)); )*};
+    }
+    each!(2, 3, 4, 5, 6, 7, 8);
+    for (n, worst, back) in &out {
+        println!("  N = {n}: out after at most {worst} samples; weight again while stuck: {back} samples");
+    }
+    out
+}
+
+fn stuck_n<const N: usize>(seed: u64) -> (usize, usize, u32) {
+    let mask = ((1u16 << N) - 1) as u8;
+    let (mut worst, mut back) = (0usize, 0u32);
+    for s in 0..10u64 {
+        let mut rng = Rng::new(seed * 1000 + 800 + 13 * N as u64 + s);
+        let params = [NoiseParams::ICM42688; N];
+        let mut noise = [AxisNoise::default(); N];
+        let m = methods()
+            .iter()
+            .find(|(m, _)| *m == "adaptive")
+            .expect("method")
+            .1;
+        let f = Fusion::<N>::new(m).expect("valid method");
+        let mut st = AxisState::<N>::default();
+        st.set_noise_priors([Some(params[0].white_sigma_dps(FS)); N]);
+        let mut cal = RelCal::<N>::new(CalConfig::default());
+        let (mut held, mut out_at) = (0.0f32, None);
+        for k in 0..SAMPLES {
+            let t = 20.0 * (2.0 * std::f32::consts::PI * k as f32 / FS).sin();
+            let mut y = [0.0f32; N];
+            for i in 0..N {
+                y[i] = quantise(noise[i].step(&params[i], &mut rng, t, 1.0 / FS), LSB) as f32 / LSB;
+            }
+            if k == 5000 {
+                held = y[0];
+            }
+            if k >= 5000 {
+                y[0] = held;
+            }
+            let r = cal.fuse(&f, &mut st, &y, mask).expect("valid input");
+            if k >= 5000 {
+                match out_at {
+                    None if r.weights[0] == 0.0 => out_at = Some(k - 5000),
+                    Some(_) if r.weights[0] > 0.0 => back += 1,
+                    _ => {}
+                }
+            }
+        }
+        worst = worst.max(out_at.unwrap_or(SAMPLES));
+    }
+    (N, worst, back)
+}
