@@ -459,7 +459,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
             }
             (Frame::Status(s), What::Status) => {
                 if !header_done {
-                    w.write_record([
+                    let mut h: Vec<String> = [
                         "seq",
                         "t_us",
                         "mode",
@@ -471,10 +471,19 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                         "accepted",
                         "rejected",
                         "stack_peak",
-                    ])?;
+                    ]
+                    .map(String::from)
+                    .to_vec();
+                    // The online relative calibration of every gyro.
+                    for i in 0..s.gyros.len() {
+                        for q in ["scale_ppm", "bias_mdps"] {
+                            h.extend(["x", "y", "z"].map(|a| format!("g{i}_{q}_{a}")));
+                        }
+                    }
+                    w.write_record(&h)?;
                     header_done = true;
                 }
-                w.write_record([
+                let mut r = vec![
                     s.seq.to_string(),
                     s.t_us.to_string(),
                     format!("{:?}", s.settings.mode),
@@ -486,7 +495,12 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     s.link.accepted.to_string(),
                     s.link.rejected.to_string(),
                     s.stack_peak.to_string(),
-                ])?;
+                ];
+                for g in &s.gyros {
+                    r.extend(g.scale_ppm.iter().map(|v| v.to_string()));
+                    r.extend(g.bias_mdps.iter().map(|v| v.to_string()));
+                }
+                w.write_record(&r)?;
             }
             _ => {}
         }

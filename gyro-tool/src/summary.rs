@@ -155,8 +155,14 @@ pub fn status_line(st: &Status) -> String {
         .iter()
         .map(|g| format!("{:#04x}", g.flags))
         .collect();
+    // The online relative calibration on z (every gyro is on z).
+    let cal: Vec<String> = st
+        .gyros
+        .iter()
+        .map(|g| format!("{:+}ppm/{:+}m", g.scale_ppm[2], g.bias_mdps[2]))
+        .collect();
     format!(
-        "seq {} t {:.3} s | {:?} {:?} div {} | overruns {} | link sent {} dropped {} cmds {}/{} | stack {} B | gyro flags [{}]",
+        "seq {} t {:.3} s | {:?} {:?} div {} | overruns {} | link sent {} dropped {} cmds {}/{} | stack {} B | gyro flags [{}] | z calibration [{}]",
         st.seq,
         st.t_us as f64 * 1e-6,
         st.settings.mode,
@@ -168,6 +174,7 @@ pub fn status_line(st: &Status) -> String {
         st.link.accepted,
         st.link.rejected,
         st.stack_peak,
-        flags.join(" ")
+        flags.join(" "),
+        cal.join(" ")
     )
 }

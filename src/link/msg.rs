@@ -15,6 +15,10 @@ use serde::{Deserialize, Serialize};
 pub const MAX_GYROS: usize = 8;
 
 /// A frame from the board.
+// The status variant (8 gyros' counters and calibration, ~470 B) is the
+// large one. There is no heap to box it in; a frame lives on the stack
+// only while it is encoded, and status frames are built in idle time.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Frame {
     /// One fused sample (mode [`Mode::Fused`]).
@@ -97,6 +101,13 @@ pub struct GyroStatus {
     pub restarts: u32,
     /// Restarts completed.
     pub restarted: u32,
+    /// Online relative calibration per board axis: the chip's scale against
+    /// the array's median chip, (s − 1) in parts per million (0: not
+    /// estimated, or the chip is not on that axis).
+    pub scale_ppm: [i32; 3],
+    /// Online relative calibration per board axis: the chip's bias against
+    /// the median chip, m°/s.
+    pub bias_mdps: [i16; 3],
 }
 
 /// Counters and settings.

@@ -219,7 +219,23 @@ impl<const TX: usize> Port<TX> {
         stack_peak: u32,
     ) -> Frame {
         let mut gyros = Vec::<GyroStatus, MAX_GYROS>::new();
-        for (h, c) in pipe.health().iter().zip(pipe.counters()).take(MAX_GYROS) {
+        let cal = pipe.calibration();
+        for (i, (h, c)) in pipe
+            .health()
+            .iter()
+            .zip(pipe.counters())
+            .enumerate()
+            .take(MAX_GYROS)
+        {
+            // (Saturating float-to-int casts; NaN gives 0.)
+            let scale_ppm = cal.each_ref().map(|a| {
+                let s = a.scale().get(i).copied().unwrap_or(1.0);
+                ((s - 1.0) * 1e6) as i32
+            });
+            let bias_mdps = cal.each_ref().map(|a| {
+                let b = a.bias().get(i).copied().unwrap_or(0.0);
+                (b * 1e3) as i16
+            });
             let _ = gyros.push(GyroStatus {
                 flags: h.flags,
                 reads: c.reads,
@@ -227,6 +243,8 @@ impl<const TX: usize> Port<TX> {
                 excluded: c.excluded,
                 restarts: c.restarts,
                 restarted: c.restarted,
+                scale_ppm,
+                bias_mdps,
             });
         }
         Frame::Status(Status {
