@@ -38,8 +38,12 @@
 //!   to λ1 where it is shorter. Several changes per span are found; ν is
 //!   measured from the data (see [`Davar::nu`]), so coloured noise does not
 //!   raise false alarms the way a white-noise threshold does. The
-//!   partitioning runs one row per sample during the next hop, so these
-//!   estimates come one hop later.
+//!   partitioning runs one row per sample after it starts, and the hop's
+//!   own work is spread too: the hop notes the new span, the last span's
+//!   window is placed `PLACE_AT` = 17 samples later, published on the
+//!   next sample, and the new segmentation starts on the one after, so
+//!   these estimates come one hop and 18 samples later (at λ2 = 1024 the
+//!   worst sample went from 6 920 to 3 880 instructions).
 //!
 //! # Reading of the paper (SEEDS.md seed 000)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
@@ -68,6 +72,15 @@ const STRONG: f32 = 3.0;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 16;
+/// Segmented placement: samples after the hop at which the last span's
+/// window is placed, then published, then the next span's segmentation
+/// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
+/// and the last segmentation's rows (which run on the samples after its
+/// start: CELLS of them, from START_AT + 1 around to the next hop's
+/// sample 4).
+const PLACE_AT: usize = 17;
+const PUBLISH_AT: usize = PLACE_AT + 1;
+const START_AT: usize = PUBLISH_AT + 1;
 /// Memory of the lag-correlation estimates, frames.
 const RHO_FRAMES: f32 = 32.0;
 /// Prior for ν before enough frames are seen: 32 first differences of white
@@ -291,6 +304,12 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
 struct Segmentation {
     /// First frame of the span being segmented, if any.
     first: Option<u64>,
+    /// First frame of the span to segment next (noted at the hop, started
+    /// [`START_AT`] samples later).
+    next_first: Option<u64>,
+    /// The window placed at [`PLACE_AT`] (span's first frame, window
+    /// frames), published at [`PUBLISH_AT`].
+    placed: Option<(u64, usize, usize)>,
     /// Frames per cell and cells.
     group: usize,
     cells: usize,
@@ -380,6 +399,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             ln_n: [0.0; FRAMES],
             dp: Segmentation {
                 first: None,
+                next_first: None,
+                placed: None,
                 group: span.div_ceil(CELLS).max(1),
                 cells: span.div_ceil(span.div_ceil(CELLS).max(1)),
                 sum: [0.0; CELLS + 1],
@@ -430,6 +451,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.win_f0 = None;
         self.pending = None;
         self.dp.first = None;
+        self.dp.next_first = None;
+        self.dp.placed = None;
         self.dp.row = 0;
         self.dp.hist_len = [0; LAG];
     }
@@ -459,9 +482,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
 
     /// Samples between an estimate's time and the sample that published it
     /// (the price of a window around t): λ2/2 and one hop, the time the
-    /// terms and the segmentation take to compute.
+    /// terms and the segmentation take to compute (segmented: and the
+    /// `PUBLISH_AT` samples by which its publication follows the hop).
     pub fn latency(&self) -> u64 {
-        (SEG * self.span).div_ceil(2) as u64 + self.hop_phase as u64 + SEG as u64
+        let publish = match self.cfg.placement {
+            Placement::Segmented => PUBLISH_AT as u64,
+            Placement::Centred => 0,
+        };
+        (SEG * self.span).div_ceil(2) as u64 + self.hop_phase as u64 + SEG as u64 + publish
     }
 
     /// Do the hop's work `phase` samples (1..=31, clamped) after each frame
@@ -591,7 +619,29 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             self.add_terms(rel);
         }
         if rel != 0 {
-            if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
+            let segmented = self.cfg.placement == Placement::Segmented;
+            if segmented && rel == PLACE_AT {
+                // The last segmentation's window (its rows finished long
+                // ago; `while` only guards the invariant).
+                if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
+                    while self.dp.row <= self.dp.cells {
+                        self.dp_row();
+                    }
+                    let (lo, hi) = self.segment_window(prev);
+                    self.dp.placed = Some((prev, lo, hi));
+                }
+            } else if segmented && rel == PUBLISH_AT {
+                if let Some((prev, lo, hi)) = self.dp.placed.take() {
+                    let half = (SEG * self.span / 2) as u64;
+                    let t =
+                        self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64);
+                    return Ok(Some(t));
+                }
+            } else if segmented && rel == START_AT {
+                if let Some(first) = self.dp.next_first.take() {
+                    self.dp_start(first);
+                }
+            } else if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
                 self.dp_row();
             }
             return Ok(None);
@@ -618,15 +668,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 done
             }
             Placement::Segmented => {
-                let done = self.dp.first.map(|prev| {
-                    while self.dp.row <= self.dp.cells {
-                        self.dp_row();
-                    }
-                    let (lo, hi) = self.segment_window(prev);
-                    self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
-                });
-                self.dp_start(first);
-                done
+                // The hop only notes the new span: the last span's window
+                // is placed and published PUBLISH_AT samples later and the
+                // new segmentation starts on the sample after, so no
+                // sample carries all three (5 650 instructions on one
+                // sample at λ2 = 1024 when they did).
+                self.dp.next_first = Some(first);
+                let _ = half;
+                None
             }
         };
         Ok(done)

@@ -20,9 +20,12 @@ pub const fn config(lambda2: u16) -> DavarConfig {
     DavarConfig::segmented(lambda2 / 2, lambda2)
 }
 
-/// Hops 11 samples apart, so the three axes never do their heaviest
-/// sample together.
-const HOP_PHASES: [u8; 3] = [1, 12, 23];
+/// The three axes' hop phases. Each axis's heavy samples are the hop and
+/// the τ terms after it (samples 0–8 of its hop) and the placement,
+/// publication and segmentation start (17–19); this stagger keeps them
+/// apart best of those measured (`cargo xtask bench`, board tracker:
+/// worst 5 480 instructions on one sample; 6 720 with hops 11 apart).
+pub const HOP_PHASES: [u8; 3] = [1, 3, 29];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's
 /// temporaries reuse one frame.

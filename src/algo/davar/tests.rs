@@ -114,8 +114,9 @@ fn nothing_is_published_before_the_span_fills() {
         assert!(d.estimate().is_none());
     }
     // 25 frames of span: its segmentation runs over the hop after frame 25
-    // ends, and the window is published one hop later.
-    for i in 800..832 {
+    // ends, and the window is published one hop and PUBLISH_AT (18)
+    // samples later.
+    for i in 800..850 {
         assert_eq!(d.push(0).unwrap(), None, "sample {i}");
     }
     assert_eq!(d.push(0).unwrap(), Some(400));
