@@ -4,7 +4,8 @@
 //! The sifting follows PyEMD's `EMD` (defaults), so that results can be
 //! compared 1:1: "simple" extrema with plateau midpoints, two extrema
 //! mirrored at each end (Rilling's rule), not-a-knot cubic-spline envelopes
-//! (natural for three points), and its stopping rules: an IMF is accepted
+//! (natural for three points), and its stopping rules, applied from the
+//! first sift: an IMF is accepted
 //! when its maxima are positive and minima negative, extrema and zero
 //! crossings differ by at most one, and one of scaled variance < 0.001,
 //! Σ((h_k − h_{k−1})/h_k)² < 0.2 (Huang's SD, Cauchy-type) or energy ratio
@@ -67,6 +68,16 @@ pub struct Decomposition {
     pub sifts: [u16; 16],
 }
 
+/// `twice / 2` rounded half to even (np.round).
+fn round_half_even(twice: usize) -> usize {
+    let half = twice / 2;
+    if twice % 2 == 1 && half % 2 == 1 {
+        half + 1
+    } else {
+        half
+    }
+}
+
 /// Local extrema (PyEMD "simple"): indices of maxima and minima; returns
 /// (maxima, minima, zero crossings).
 fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usize, usize) {
@@ -98,6 +109,32 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
     let mut i = 0;
     // Walk the differences; a run of zero differences (a plateau) counts
     // at its rounded midpoint when the slope changes sign across it.
+    //
+    // Two edge rules of PyEMD 1.10 are kept, so that integer gyro counts
+    // decompose as it does: a signal that starts on a plateau judges it
+    // against its *last* difference (numpy's d[debs − 1] with debs = 0
+    // wraps around), and when the first plateau starts at the second
+    // sample it is dropped (its `debs[0] == 1` test, a 1-based leftover).
+    let mut lead = 0;
+    while lead < n - 1 && d(lead) == zero {
+        lead += 1;
+    }
+    if lead > 0 && lead < n - 1 {
+        let (before, after) = (d(n - 2), d(lead));
+        if before * after < zero {
+            let pos = round_half_even(lead);
+            if before > zero {
+                if nmax < maxs.len() {
+                    maxs[nmax] = pos as u32;
+                    nmax += 1;
+                }
+            } else if nmin < mins.len() {
+                mins[nmin] = pos as u32;
+                nmin += 1;
+            }
+        }
+    }
+    let mut first_run = lead == 0;
     while i + 1 < n - 1 {
         let d1 = d(i);
         if d1 == zero {
@@ -112,18 +149,19 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
             break;
         }
         let d2 = d(j);
-        if d1 * d2 < zero {
-            // Plateau indices i+1 ..= j; PyEMD rounds (fins + debs)/2 half to even.
+        let dropped = first_run && i == 0 && j > 1;
+        if j > i + 1 {
+            first_run = false;
+        }
+        if d1 * d2 < zero && !dropped {
+            // Plateau samples i+1 ..= j (PyEMD: debs = i+1, fins = j); its
+            // extremum is at round((debs + fins)/2), half to even
+            // (np.round). Rounding (debs + fins + 1)/2 moved it one sample
+            // on every plateau of four or more samples.
             let pos = if j == i + 1 {
                 i + 1
             } else {
-                let twice = (i + 1) + (j + 1);
-                let half = twice / 2;
-                if twice % 2 == 1 && half % 2 == 1 {
-                    half + 1
-                } else {
-                    half
-                }
+                round_half_even((i + 1) + j)
             };
             if d1 > zero {
                 if nmax < maxs.len() {
@@ -460,7 +498,6 @@ pub fn emd<F: Real>(
             }
         }
         imf.copy_from_slice(residue);
-        let mut have_old = false;
         let mut it = 0;
         loop {
             it += 1;
@@ -503,10 +540,10 @@ pub fn emd<F: Real>(
             }
             let (nmax2, nmin2, nz) = extrema(imf, idx_max, idx_min);
             let ext2 = nmax2 + nmin2;
-            if !have_old {
-                have_old = true;
-                continue;
-            }
+            // The stop test applies from the first sift, as PyEMD's (its
+            // "imf_old is nan" guard never fires: imf_old is assigned just
+            // before it). Skipping it on the first sift made every IMF
+            // sift at least twice and split a chirp into 7 rows, not 5.
             let f1 = signs_ok && check_imf(imf, old, cfg);
             let f2 = (ext2 as isize - nz as isize).abs() < 2;
             if f1 && f2 {
@@ -606,6 +643,7 @@ pub fn masm<F: Real>(
     if rows.len() < count {
         return Err(QualifyError::Buffer);
     }
+    check_finite(imfs.get(..count * n).unwrap_or(&[]))?;
     for v in acc.iter_mut() {
         *v = F::of(0.0);
     }

@@ -40,6 +40,13 @@ pub fn rs<F: Real>(x: &[F], n: usize) -> Option<F> {
 /// H by R/S: least-squares slope of ln (R/S)_n on ln n over `ns`.
 pub fn hurst_rs<F: Real>(x: &[F], ns: &[usize]) -> Result<F, QualifyError> {
     check_finite(x)?;
+    // A constant series has no R/S at any n: `Constant`, as documented
+    // (it fell through to `TooShort`).
+    if let (true, Some(&x0)) = (x.len() >= 2, x.first()) {
+        if x.iter().all(|&v| v == x0) {
+            return Err(QualifyError::Constant);
+        }
+    }
     let (mut sx, mut sy, mut sxx, mut sxy, mut k) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
     for &n in ns {
         if let Some(v) = rs(x, n) {
@@ -159,6 +166,7 @@ pub fn frac_diff<F: Real>(x: &[F], h: &[F], y: &mut [F]) -> Result<(), QualifyEr
         return Err(QualifyError::Parameter);
     }
     check_finite(x)?;
+    check_finite(h)?;
     for n in 0..x.len() {
         let mut s = F::of(0.0);
         for k in 0..=n.min(h.len() - 1) {
