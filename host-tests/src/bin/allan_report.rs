@@ -2,20 +2,50 @@
 //! confidence intervals (EDF for the noise type read from the local
 //! slope) and the IEEE Std 952 noise terms with their units.
 //!
-//! `cargo run -p host-tests --profile host --bin allan-report -- [FILE TAU0_S]`
+//! `cargo run -p host-tests --profile host --bin allan-report -- FILE TAU0_S`
+//! or `-- --demo`
 //!
-//! FILE holds one rate sample (°/s) per line. Without FILE, the report runs
-//! on 4 h at 100 Hz of the emulated ICM-42688-P noise model and compares
-//! the terms it reads with the model's settings.
+//! FILE holds one rate sample (°/s) per line; TAU0_S, the sample period in
+//! seconds, is required with it (finite, > 0, ≤ 1e6). `--demo` runs the
+//! report on 4 h at 100 Hz of the emulated ICM-42688-P noise model and
+//! compares the terms it reads with the model's settings (it used to run
+//! whenever TAU0 was missing, even for a file that does not exist).
 
 use gyro_array::algo::allan::{edf, local_slope, noise_terms, oavar_octave, AdevPoint, NoiseType};
 use gyro_array::emu::noise::AxisNoise;
 use gyro_array::emu::{NoiseParams, Rng};
 
+/// The sample period: a finite number of seconds in (0, 1e6].
+fn tau0_arg(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 && v <= 1e6 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: the sample period must be in (0, 1e6] s"))
+    }
+}
+
+/// Allan deviation report of a rate log.
+#[derive(clap::Parser)]
+#[command(name = "allan-report")]
+struct Cli {
+    /// One rate sample (°/s) per line; `#` comments and blank lines skipped.
+    #[arg(required_unless_present = "demo", requires = "tau0")]
+    file: Option<String>,
+    /// Sample period, seconds.
+    #[arg(value_parser = tau0_arg, requires = "file")]
+    tau0: Option<f64>,
+    /// Report on the emulated ICM-42688-P instead of a file.
+    #[arg(long, conflicts_with_all = ["file", "tau0"])]
+    demo: bool,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let (rate, tau0, model) = match (args.get(1), args.get(2)) {
-        (Some(path), Some(t)) => {
+    let cli = <Cli as clap::Parser>::parse();
+    let (rate, tau0, model) = match (cli.file.as_ref(), cli.tau0) {
+        (Some(path), Some(tau0)) => {
             let text = std::fs::read_to_string(path).unwrap_or_else(|e| {
                 eprintln!("allan-report: {path}: {e}");
                 std::process::exit(2)
@@ -34,10 +64,6 @@ fn main() {
                     }
                 }
             }
-            let tau0: f64 = t.parse().unwrap_or_else(|_| {
-                eprintln!("allan-report: TAU0_S must be a number of seconds");
-                std::process::exit(2)
-            });
             (rate, tau0, None)
         }
         _ => {

@@ -351,47 +351,23 @@ fn pipe_backoff(pipe: &gyro_array::pipeline::Pipeline<5>, chip: usize, n: u32) -
     }
 }
 
+/// Randomised fault injection on the emulated board (issue 10).
+#[derive(clap::Parser)]
+#[command(name = "fault-campaign")]
 struct Args {
+    /// Runs (each a random board, faults and motion).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
     runs: u64,
+    /// Seed of the campaign.
+    #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Samples per run (at least 1000: the faults are placed in them).
+    #[arg(long, default_value_t = SAMPLES, value_parser = clap::value_parser!(u32).range(1000..))]
     samples: u32,
 }
 
-fn parse() -> Result<Args, String> {
-    let mut a = Args {
-        runs: 1000,
-        seed: 1,
-        samples: SAMPLES,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        let v = it.next().ok_or(format!("{k} needs a value"))?;
-        let num = |v: &str| {
-            v.parse::<u64>()
-                .map_err(|_| format!("{k}: {v:?} is not a number"))
-        };
-        match k.as_str() {
-            "--runs" => a.runs = num(&v)?.max(1),
-            "--seed" => a.seed = num(&v)?,
-            "--samples" => a.samples = (num(&v)? as u32).max(1000),
-            _ => {
-                return Err(format!(
-                    "unknown argument {k:?} (--runs N, --seed S, --samples N)"
-                ))
-            }
-        }
-    }
-    Ok(a)
-}
-
 fn main() -> ExitCode {
-    let args = match parse() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("fault-campaign: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    let args = <Args as clap::Parser>::parse();
     // Panics are caught per run and counted; keep their default message off
     // the terminal.
     std::panic::set_hook(Box::new(|_| {}));

@@ -1,6 +1,7 @@
 //! Fusion evaluation harness (issue: gyro-array fusion, seed 004).
 //!
-//! `cargo run -p host-tests --profile host --bin fusion-eval [SEED]`
+//! `cargo run -p host-tests --profile host --bin fusion-eval -- [SEED]`
+//! (a SEED that is not an unsigned integer is an error, not the default)
 //!
 //! Simulates a 4-gyro array with the emulated ICM-42688-P noise model
 //! (ARW, bias instability, rate random walk, 131 LSB/°/s quantisation) at
@@ -8,6 +9,7 @@
 //! oracle that knows each chip's true white-noise variance, and prints mean
 //! error, std and RMS error against the true rate.
 #![allow(clippy::needless_range_loop)] // scenario indices key the result map too
+use clap::Parser;
 use gyro_array::algo::fusion::{AxisState, Fusion};
 use gyro_array::checks::methods;
 use gyro_array::emu::noise::{quantise, AxisNoise};
@@ -15,6 +17,15 @@ use gyro_array::emu::{NoiseParams, Rng};
 
 #[path = "fusion_eval/array.rs"]
 mod array;
+
+/// Fusion evaluation over the scenario classes of issues 4 and 9.
+#[derive(Parser)]
+#[command(name = "fusion-eval")]
+struct Cli {
+    /// Seed of the scenarios (every class derives its own from it).
+    #[arg(default_value_t = 1)]
+    seed: u64,
+}
 
 const FS: f32 = 1000.0;
 const SAMPLES: usize = 20_000;
@@ -476,10 +487,7 @@ fn pair_class(seed: u64) -> (f64, f64, f64, f64) {
 }
 
 fn main() {
-    let seed: u64 = std::env::args()
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1);
+    let seed = Cli::parse().seed;
     println!("fusion-eval: seed {seed}, 4 gyros, {SAMPLES} samples at {FS} Hz per scenario, errors in deg/s");
     let scenarios = [
         Scenario::Equal,

@@ -298,16 +298,34 @@ fn seed003(seed: u64) {
 /// gives no threshold).
 const MASM_THRESHOLD: f64 = 0.2;
 
+/// Which seed paper's experiment.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Experiment {
+    /// Seed 002: fractal-noise pre-whitening.
+    #[value(name = "002")]
+    Seed002,
+    /// Seed 003: EMD stationarisation.
+    #[value(name = "003")]
+    Seed003,
+}
+
+/// The seed 002 and 003 experiments on emulated data.
+#[derive(clap::Parser)]
+#[command(name = "qualify-eval")]
+struct Cli {
+    /// The experiment.
+    #[arg(value_enum, default_value = "002")]
+    experiment: Experiment,
+    /// Seed of the generated series.
+    #[arg(default_value_t = 1)]
+    seed: u64,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let which = args.get(1).map_or("002", String::as_str);
-    let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
-    match which {
-        "002" => seed002(seed),
-        "003" => seed003(seed),
-        other => {
-            eprintln!("qualify-eval: unknown experiment {other:?} (002 or 003)");
-            std::process::exit(2);
-        }
+    use clap::Parser;
+    let cli = Cli::parse();
+    match cli.experiment {
+        Experiment::Seed002 => seed002(cli.seed),
+        Experiment::Seed003 => seed003(cli.seed),
     }
 }
