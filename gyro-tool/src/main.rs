@@ -16,8 +16,10 @@
 //! or `-`. Protocol: `docs/link.md`.
 
 mod analyse;
+mod dev;
 mod source;
 mod summary;
+mod table;
 
 use std::io::{Read, Write};
 use std::path::PathBuf;
@@ -93,6 +95,41 @@ enum Cmd {
     Analyse {
         /// The recording.
         file: PathBuf,
+    },
+    /// Allan-family deviations of a rate log: CSV or whitespace text with
+    /// a header line, one column per series.
+    Allan {
+        /// The log.
+        file: PathBuf,
+        /// Columns to analyse (repeat; default: every column but the time
+        /// column).
+        #[arg(long = "column", short = 'c')]
+        columns: Vec<String>,
+        /// The time column, s: τ0 is its median step, and gaps (steps over
+        /// 1.5 τ0) and non-monotonic times are reported.
+        #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
+        time: Option<String>,
+        /// Sample period, s (finite, in (0, 1e6]).
+        #[arg(long, value_parser = tau0_arg)]
+        tau0: Option<f64>,
+        /// Unit of the rate columns.
+        #[arg(long, value_enum, default_value = "dps")]
+        unit: table::Unit,
+        /// Counts per °/s, with `--unit lsb`.
+        #[arg(long)]
+        lsb_per_dps: Option<f64>,
+        /// Deviations, comma-separated.
+        #[arg(long, value_enum, value_delimiter = ',', default_value = "oadev")]
+        dev: Vec<dev::Kind>,
+        /// Averaging factors: all, octave, decade or per-decade=N.
+        #[arg(long, default_value = "octave")]
+        grid: dev::Grid,
+        /// Output format.
+        #[arg(long, value_enum, default_value = "table")]
+        format: OutFormat,
+        /// Write here instead of standard output.
+        #[arg(short, long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -187,6 +224,28 @@ fn main() -> ExitCode {
         } => check(&file, (samples, min_samples), fused_crc32, acks),
         Cmd::Decode { file, what, out } => decode(&file, what, out),
         Cmd::Analyse { file } => analyse::run(&file),
+        Cmd::Allan {
+            file,
+            columns,
+            time,
+            tau0,
+            unit,
+            lsb_per_dps,
+            dev,
+            grid,
+            format,
+            out,
+        } => allan(
+            &file,
+            &columns,
+            time.as_deref(),
+            tau0,
+            (unit, lsb_per_dps),
+            &dev,
+            grid,
+            format,
+            out,
+        ),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,
@@ -199,6 +258,149 @@ fn main() -> ExitCode {
 }
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Output formats of `gyro allan`.
+#[derive(Clone, Copy, ValueEnum)]
+enum OutFormat {
+    /// Aligned text.
+    Table,
+    /// CSV: column, deviation, m, tau_s, value, terms.
+    Csv,
+    /// JSON: one object per column and deviation, with its points.
+    Json,
+}
+
+/// A sample period: a finite number of seconds in (0, 1e6].
+fn tau0_arg(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 && v <= 1e6 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: the sample period must be in (0, 1e6] s"))
+    }
+}
+
+/// One curve of `gyro allan`'s JSON output.
+#[derive(serde::Serialize)]
+struct CurveOut<'a> {
+    column: &'a str,
+    deviation: dev::Kind,
+    unit: &'static str,
+    tau0_s: f64,
+    samples: usize,
+    points: Vec<dev::Point>,
+}
+
+/// `gyro allan`: read, compute every deviation of every column, write.
+#[allow(clippy::too_many_arguments)]
+fn allan(
+    file: &std::path::Path,
+    columns: &[String],
+    time: Option<&str>,
+    tau0: Option<f64>,
+    (unit, lsb): (table::Unit, Option<f64>),
+    kinds: &[dev::Kind],
+    grid: dev::Grid,
+    format: OutFormat,
+    out: Option<PathBuf>,
+) -> Res<bool> {
+    let s = table::read(file, columns, time, tau0, unit, lsb)?;
+    for (line, step) in &s.gaps {
+        eprintln!(
+            "gyro: {}:{line}: gap of {step} s ({:.1} samples)",
+            file.display(),
+            step / s.tau0
+        );
+    }
+    let total = (s.rates.len() * kinds.len()) as u64;
+    let bar = if s.rates.first().map_or(0, Vec::len) >= 1_000_000 {
+        ProgressBar::new(total)
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut curves = Vec::new();
+    for (name, rate) in s.names.iter().zip(&s.rates) {
+        let x = dev::phase_from_rate(rate, s.tau0)?;
+        for &k in kinds {
+            let points = dev::curve(k, &x, s.tau0, grid)?;
+            curves.push(CurveOut {
+                column: name,
+                deviation: k,
+                // TDEV is in the phase's unit (°); the others in °/s.
+                unit: if k == dev::Kind::Tdev { "deg" } else { "deg/s" },
+                tau0_s: s.tau0,
+                samples: rate.len(),
+                points,
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    let mut w: Box<dyn Write> = match &out {
+        Some(p) => Box::new(std::io::BufWriter::new(std::fs::File::create(p)?)),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    match format {
+        OutFormat::Json => {
+            serde_json::to_writer_pretty(&mut w, &curves)?;
+            writeln!(w)?;
+        }
+        OutFormat::Csv => {
+            let mut c = csv::Writer::from_writer(w);
+            c.write_record([
+                "column",
+                "deviation",
+                "m",
+                "tau_s",
+                "value",
+                "unit",
+                "terms",
+            ])?;
+            for cv in &curves {
+                for p in &cv.points {
+                    c.write_record([
+                        cv.column.to_string(),
+                        cv.deviation.name().to_string(),
+                        p.m.to_string(),
+                        format!("{:e}", p.tau),
+                        format!("{:e}", p.dev),
+                        cv.unit.to_string(),
+                        p.terms.to_string(),
+                    ])?;
+                }
+            }
+            c.flush()?;
+        }
+        OutFormat::Table => {
+            for cv in &curves {
+                writeln!(
+                    w,
+                    "{} {} ({}), {} samples at tau0 = {} s",
+                    cv.column,
+                    cv.deviation.name().to_uppercase(),
+                    cv.unit,
+                    cv.samples,
+                    cv.tau0_s
+                )?;
+                writeln!(
+                    w,
+                    "{:>10} {:>14} {:>14} {:>9}",
+                    "m", "tau (s)", "deviation", "terms"
+                )?;
+                for p in &cv.points {
+                    writeln!(
+                        w,
+                        "{:>10} {:>14.6e} {:>14.6e} {:>9}",
+                        p.m, p.tau, p.dev, p.terms
+                    )?;
+                }
+            }
+        }
+    }
+    Ok(true)
+}
 /// Every decoder result of a recording, and the decoder with its counts.
 type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
 

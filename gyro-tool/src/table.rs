@@ -1,0 +1,266 @@
+//! Reading rate logs: CSV or whitespace-separated text with a header line,
+//! one column per series (axes, gyros), optionally a time column; units
+//! °/s, rad/s, °/h or raw LSB with a scale. Every problem is a typed error
+//! with the file and line; gaps and non-monotonic time are found and
+//! reported, never skipped silently.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Units of the rate columns.
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
+pub enum Unit {
+    /// Degrees per second.
+    Dps,
+    /// Radians per second.
+    Rads,
+    /// Degrees per hour.
+    Dph,
+    /// Raw counts (give `--lsb-per-dps`).
+    Lsb,
+}
+
+/// A problem with the input.
+#[derive(Debug)]
+pub enum TableError {
+    /// The file could not be read.
+    Io(PathBuf, std::io::Error),
+    /// No header line, or an empty file.
+    NoHeader(PathBuf),
+    /// A named column is not in the header.
+    NoColumn(PathBuf, String, Vec<String>),
+    /// A field is not a finite number (file, line, column, text).
+    Number(PathBuf, usize, String, String),
+    /// A line has a different number of fields than the header.
+    Fields(PathBuf, usize, usize, usize),
+    /// Time goes backwards or repeats (file, line, t before, t).
+    Time(PathBuf, usize, f64, f64),
+    /// Fewer than 3 samples.
+    TooShort(PathBuf, usize),
+    /// Unit LSB without a positive scale, or a bad scale.
+    Scale,
+    /// Neither a sample period nor a time column with two samples.
+    NoTau0,
+}
+
+impl fmt::Display for TableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TableError::Io(p, e) => write!(f, "{}: {e}", p.display()),
+            TableError::NoHeader(p) => write!(f, "{}: no header line", p.display()),
+            TableError::NoColumn(p, c, have) => {
+                write!(
+                    f,
+                    "{}: no column {c:?} (columns: {})",
+                    p.display(),
+                    have.join(", ")
+                )
+            }
+            TableError::Number(p, l, c, t) => {
+                write!(
+                    f,
+                    "{}:{l}: column {c:?}: {t:?} is not a finite number",
+                    p.display()
+                )
+            }
+            TableError::Fields(p, l, got, want) => {
+                write!(
+                    f,
+                    "{}:{l}: {got} fields, the header has {want}",
+                    p.display()
+                )
+            }
+            TableError::Time(p, l, a, b) => write!(
+                f,
+                "{}:{l}: time {b} does not follow {a} (non-monotonic)",
+                p.display()
+            ),
+            TableError::TooShort(p, n) => {
+                write!(f, "{}: {n} samples, at least 3 are needed", p.display())
+            }
+            TableError::Scale => write!(f, "--unit lsb needs --lsb-per-dps > 0 (finite)"),
+            TableError::NoTau0 => write!(f, "give --tau0, or --time with a time column"),
+        }
+    }
+}
+
+impl std::error::Error for TableError {}
+
+/// The series read, in °/s.
+#[derive(Debug)]
+pub struct Series {
+    /// Column names.
+    pub names: Vec<String>,
+    /// One vector per column, °/s.
+    pub rates: Vec<Vec<f64>>,
+    /// Sample period, s (given, or the median step of the time column).
+    pub tau0: f64,
+    /// Gaps found in the time column: (line, step in s) where a step
+    /// exceeds 1.5 τ0.
+    pub gaps: Vec<(usize, f64)>,
+}
+
+/// Read `path`: the named `columns` (all but the time column when empty),
+/// with `time` the time column in s (or `tau0` given).
+pub fn read(
+    path: &Path,
+    columns: &[String],
+    time: Option<&str>,
+    tau0: Option<f64>,
+    unit: Unit,
+    lsb_per_dps: Option<f64>,
+) -> Result<Series, TableError> {
+    let scale = match unit {
+        Unit::Dps => 1.0,
+        Unit::Rads => 180.0 / std::f64::consts::PI,
+        Unit::Dph => 1.0 / 3600.0,
+        Unit::Lsb => match lsb_per_dps {
+            Some(s) if s.is_finite() && s > 0.0 => 1.0 / s,
+            _ => return Err(TableError::Scale),
+        },
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| TableError::Io(path.to_path_buf(), e))?;
+    let p = || path.to_path_buf();
+    // Comma-separated if the header has a comma, else whitespace.
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let (_, head) = lines.next().ok_or_else(|| TableError::NoHeader(p()))?;
+    let comma = head.contains(',');
+    let split = |l: &str| -> Vec<String> {
+        let mut r = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .delimiter(if comma { b',' } else { b' ' })
+            .flexible(true)
+            .from_reader(l.as_bytes());
+        r.records()
+            .next()
+            .and_then(Result::ok)
+            .map(|rec| {
+                rec.iter()
+                    .map(|f| f.trim().to_string())
+                    .filter(|f| comma || !f.is_empty())
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let header = split(head);
+    let find = |c: &str| {
+        header
+            .iter()
+            .position(|h| h == c)
+            .ok_or_else(|| TableError::NoColumn(p(), c.to_string(), header.clone()))
+    };
+    let tcol = time.map(find).transpose()?;
+    let cols: Vec<usize> = if columns.is_empty() {
+        (0..header.len()).filter(|&i| Some(i) != tcol).collect()
+    } else {
+        columns.iter().map(|c| find(c)).collect::<Result<_, _>>()?
+    };
+    let mut rates = vec![Vec::new(); cols.len()];
+    let mut times: Vec<(usize, f64)> = Vec::new();
+    for (ln, l) in lines {
+        let f = split(l);
+        if f.len() != header.len() {
+            return Err(TableError::Fields(p(), ln, f.len(), header.len()));
+        }
+        let num = |i: usize| -> Result<f64, TableError> {
+            f[i].parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| TableError::Number(p(), ln, header[i].clone(), f[i].clone()))
+        };
+        if let Some(t) = tcol {
+            let v = num(t)?;
+            if let Some(&(_, prev)) = times.last() {
+                if v <= prev {
+                    return Err(TableError::Time(p(), ln, prev, v));
+                }
+            }
+            times.push((ln, v));
+        }
+        for (r, &c) in rates.iter_mut().zip(&cols) {
+            r.push(num(c)? * scale);
+        }
+    }
+    let n = rates.first().map_or(0, Vec::len);
+    if n < 3 {
+        return Err(TableError::TooShort(p(), n));
+    }
+    let (tau0, gaps) = match (tau0, times.len()) {
+        (Some(t), _) => (t, Vec::new()),
+        (None, k) if k >= 2 => {
+            let mut steps: Vec<f64> = times.windows(2).map(|w| w[1].1 - w[0].1).collect();
+            steps.sort_by(f64::total_cmp);
+            let med = steps[steps.len() / 2];
+            let gaps = times
+                .windows(2)
+                .filter(|w| w[1].1 - w[0].1 > 1.5 * med)
+                .map(|w| (w[1].0, w[1].1 - w[0].1))
+                .collect();
+            (med, gaps)
+        }
+        _ => return Err(TableError::NoTau0),
+    };
+    Ok(Series {
+        names: cols.iter().map(|&c| header[c].clone()).collect(),
+        rates,
+        tau0,
+        gaps,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> PathBuf {
+        let p = std::env::temp_dir().join(format!("gyro-table-{}-{name}", std::process::id()));
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn csv_and_whitespace_units_time_and_errors() {
+        let p = write("a.csv", "t,x,y\n0,1,2\n0.01,1.5,2\n0.02,1,2\n0.05,1,2\n");
+        let s = read(&p, &[], Some("t"), None, Unit::Dps, None).unwrap();
+        assert_eq!(s.names, ["x", "y"]);
+        assert_eq!(s.rates[0], [1.0, 1.5, 1.0, 1.0]);
+        assert!((s.tau0 - 0.01).abs() < 1e-12);
+        assert_eq!(s.gaps.len(), 1, "{:?}", s.gaps);
+        let p = write("b.txt", "# comment\nz   w\n3600 7200\n0 0\n-3600 1\n");
+        let s = read(&p, &["z".into()], None, Some(1.0), Unit::Dph, None).unwrap();
+        assert_eq!(s.rates[0], [1.0, 0.0, -1.0]);
+        let s = read(&p, &["w".into()], None, Some(1.0), Unit::Lsb, Some(2.0)).unwrap();
+        assert_eq!(s.rates[0], [3600.0, 0.0, 0.5]);
+        assert!(matches!(
+            read(&p, &[], None, Some(1.0), Unit::Lsb, None),
+            Err(TableError::Scale)
+        ));
+        let bad = write("c.csv", "t,x\n0,1\n0.01,nan\n");
+        let e = read(&bad, &[], Some("t"), None, Unit::Dps, None).unwrap_err();
+        assert!(matches!(e, TableError::Number(_, 3, _, _)), "{e}");
+        assert!(e.to_string().contains(":3:"), "{e}");
+        let back = write("d.csv", "t,x\n0,1\n0.02,1\n0.01,1\n");
+        assert!(matches!(
+            read(&back, &[], Some("t"), None, Unit::Dps, None),
+            Err(TableError::Time(_, 4, _, _))
+        ));
+        let short = write("e.csv", "t,x\n0,1\n1\n");
+        assert!(matches!(
+            read(&short, &[], Some("t"), None, Unit::Dps, None),
+            Err(TableError::Fields(_, 3, 1, 2))
+        ));
+        assert!(matches!(
+            read(&p, &["q".into()], None, Some(1.0), Unit::Dps, None),
+            Err(TableError::NoColumn(..))
+        ));
+        let missing = std::env::temp_dir().join("gyro-table-no-such-file");
+        assert!(matches!(
+            read(&missing, &[], None, Some(1.0), Unit::Dps, None),
+            Err(TableError::Io(..))
+        ));
+    }
+}
