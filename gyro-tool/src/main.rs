@@ -17,6 +17,7 @@
 
 mod analyse;
 mod dev;
+mod fit;
 mod source;
 mod summary;
 mod table;
@@ -130,6 +131,14 @@ enum Cmd {
         /// Write here instead of standard output.
         #[arg(short, long)]
         out: Option<PathBuf>,
+        /// Also fit the IEEE 952 noise model (Q, N, B, K, R with standard
+        /// errors, next to the tangent readings) to each column's OADEV.
+        #[arg(long)]
+        fit: bool,
+        /// Write a Kalibr imu.yaml (gyroscope_noise_density,
+        /// gyroscope_random_walk) from the first column's fit.
+        #[arg(long)]
+        kalibr: Option<PathBuf>,
     },
 }
 
@@ -235,6 +244,8 @@ fn main() -> ExitCode {
             grid,
             format,
             out,
+            fit,
+            kalibr,
         } => allan(
             &file,
             &columns,
@@ -245,6 +256,7 @@ fn main() -> ExitCode {
             grid,
             format,
             out,
+            (fit, kalibr),
         ),
     };
     match r {
@@ -305,6 +317,7 @@ fn allan(
     grid: dev::Grid,
     format: OutFormat,
     out: Option<PathBuf>,
+    (want_fit, kalibr): (bool, Option<PathBuf>),
 ) -> Res<bool> {
     let s = table::read(file, columns, time, tau0, unit, lsb)?;
     for (line, step) in &s.gaps {
@@ -338,13 +351,58 @@ fn allan(
         }
     }
     bar.finish_and_clear();
+    // The noise model per column, on its OADEV at 8 points per decade.
+    let mut fits = Vec::new();
+    if want_fit || kalibr.is_some() {
+        for (name, rate) in s.names.iter().zip(&s.rates) {
+            let x = dev::phase_from_rate(rate, s.tau0)?;
+            let c = dev::curve(dev::Kind::Oadev, &x, s.tau0, dev::Grid::PerDecade(8))?;
+            match fit::fit(&c, x.len()) {
+                Some(t) => fits.push((name.clone(), t)),
+                None => eprintln!(
+                    "gyro: {name}: too few points with {} clusters to fit",
+                    fit::MIN_CLUSTERS
+                ),
+            }
+        }
+    }
+    if let Some(path) = &kalibr {
+        let Some((_, t)) = fits.first() else {
+            return Err("no fit for a Kalibr file".into());
+        };
+        std::fs::write(path, fit::kalibr_yaml(t, 1.0 / s.tau0, "/imu0"))?;
+    }
     let mut w: Box<dyn Write> = match &out {
         Some(p) => Box::new(std::io::BufWriter::new(std::fs::File::create(p)?)),
         None => Box::new(std::io::stdout().lock()),
     };
     match format {
         OutFormat::Json => {
-            serde_json::to_writer_pretty(&mut w, &curves)?;
+            #[derive(serde::Serialize)]
+            struct FitOut<'a> {
+                column: &'a str,
+                /// Q deg, N deg/s*sqrt(s), B deg/s, K deg/s/sqrt(s), R deg/s^2.
+                terms: &'a fit::Terms,
+            }
+            #[derive(serde::Serialize)]
+            struct Out<'a> {
+                curves: &'a [CurveOut<'a>],
+                fits: Vec<FitOut<'a>>,
+            }
+            let fits = fits
+                .iter()
+                .map(|(c, t)| FitOut {
+                    column: c,
+                    terms: t,
+                })
+                .collect();
+            serde_json::to_writer_pretty(
+                &mut w,
+                &Out {
+                    curves: &curves,
+                    fits,
+                },
+            )?;
             writeln!(w)?;
         }
         OutFormat::Csv => {
@@ -394,6 +452,35 @@ fn allan(
                         w,
                         "{:>10} {:>14.6e} {:>14.6e} {:>9}",
                         p.m, p.tau, p.dev, p.terms
+                    )?;
+                }
+            }
+            // The terms in the units gyro datasheets use.
+            let units = [
+                ("Q", 1.0, "deg"),
+                ("N", 60.0, "deg/sqrt(h)"),
+                ("B", 3600.0, "deg/h"),
+                ("K", 3600.0 * 60.0, "deg/h/sqrt(h)"),
+                ("R", 3600.0 * 3600.0, "deg/h^2"),
+            ];
+            for (name, t) in &fits {
+                writeln!(
+                    w,
+                    "{name}: IEEE 952 model, weighted least squares over {} OADEV points",
+                    t.points
+                )?;
+                writeln!(
+                    w,
+                    "{:>4} {:>14} {:>12} {:>16}  unit",
+                    "term", "fit", "+- sd", "IEEE 952 tangent"
+                )?;
+                for (i, (n, k, u)) in units.iter().enumerate() {
+                    writeln!(
+                        w,
+                        "{n:>4} {:>14.6e} {:>12.3e} {:>16.6e}  {u}",
+                        t.value[i] * k,
+                        t.sd[i] * k,
+                        t.tangent[i] * k
                     )?;
                 }
             }
