@@ -17,7 +17,7 @@ use crate::dev::Point;
 /// Points averaging fewer clusters than this are left out of the fit
 /// (their σ² has a few degrees of freedom: a handful of them decided K
 /// on 4 h logs, off by −14 to +150 %).
-pub const MIN_CLUSTERS: usize = 16;
+pub use crate::dev::MIN_CLUSTERS;
 
 /// The model's terms, in the curve's rate unit (°/s below): Q in °, N in
 /// °/s·√s (= °/√s, ×60 for °/√h), B in °/s, K in °/s/√s, R in °/s².

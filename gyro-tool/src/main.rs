@@ -415,6 +415,8 @@ fn allan(
                 "value",
                 "unit",
                 "terms",
+                "alpha",
+                "few_clusters",
             ])?;
             for cv in &curves {
                 for p in &cv.points {
@@ -426,6 +428,8 @@ fn allan(
                         format!("{:e}", p.dev),
                         cv.unit.to_string(),
                         p.terms.to_string(),
+                        p.alpha.map_or(String::new(), |a| a.to_string()),
+                        p.few_clusters.to_string(),
                     ])?;
                 }
             }
@@ -444,14 +448,19 @@ fn allan(
                 )?;
                 writeln!(
                     w,
-                    "{:>10} {:>14} {:>14} {:>9}",
-                    "m", "tau (s)", "deviation", "terms"
+                    "{:>10} {:>14} {:>14} {:>9} {:>6}",
+                    "m", "tau (s)", "deviation", "terms", "alpha"
                 )?;
                 for p in &cv.points {
                     writeln!(
                         w,
-                        "{:>10} {:>14.6e} {:>14.6e} {:>9}",
-                        p.m, p.tau, p.dev, p.terms
+                        "{:>10} {:>14.6e} {:>14.6e} {:>9} {:>6}{}",
+                        p.m,
+                        p.tau,
+                        p.dev,
+                        p.terms,
+                        p.alpha.map_or("-".to_string(), |a| a.to_string()),
+                        if p.few_clusters { "  few clusters" } else { "" }
                     )?;
                 }
             }
