@@ -18,6 +18,7 @@
 mod analyse;
 mod dev;
 mod fit;
+mod plot;
 mod source;
 mod summary;
 mod table;
@@ -139,6 +140,9 @@ enum Cmd {
         /// gyroscope_random_walk) from the first column's fit.
         #[arg(long)]
         kalibr: Option<PathBuf>,
+        /// Draw the curves (and the fits) as SVG.
+        #[arg(long)]
+        svg: Option<PathBuf>,
     },
 }
 
@@ -246,6 +250,7 @@ fn main() -> ExitCode {
             out,
             fit,
             kalibr,
+            svg,
         } => allan(
             &file,
             &columns,
@@ -256,7 +261,7 @@ fn main() -> ExitCode {
             grid,
             format,
             out,
-            (fit, kalibr),
+            (fit, kalibr, svg),
         ),
     };
     match r {
@@ -280,6 +285,12 @@ enum OutFormat {
     Csv,
     /// JSON: one object per column and deviation, with its points.
     Json,
+}
+
+/// `v` to 7 significant digits, then as short as it prints (a τ0 taken
+/// from a time column is 0.00999999999999 rather than 0.01).
+fn short(v: f64) -> f64 {
+    format!("{v:.6e}").parse().unwrap_or(v)
 }
 
 /// A sample period: a finite number of seconds in (0, 1e6].
@@ -317,7 +328,7 @@ fn allan(
     grid: dev::Grid,
     format: OutFormat,
     out: Option<PathBuf>,
-    (want_fit, kalibr): (bool, Option<PathBuf>),
+    (want_fit, kalibr, svg): (bool, Option<PathBuf>, Option<PathBuf>),
 ) -> Res<bool> {
     let s = table::read(file, columns, time, tau0, unit, lsb)?;
     for (line, step) in &s.gaps {
@@ -370,7 +381,24 @@ fn allan(
         let Some((_, t)) = fits.first() else {
             return Err("no fit for a Kalibr file".into());
         };
-        std::fs::write(path, fit::kalibr_yaml(t, 1.0 / s.tau0, "/imu0"))?;
+        std::fs::write(path, fit::kalibr_yaml(t, short(1.0 / s.tau0), "/imu0"))?;
+    }
+    if let Some(path) = &svg {
+        let cs: Vec<plot::Curve> = curves
+            .iter()
+            .map(|c| plot::Curve {
+                label: format!("{} {}", c.column, c.deviation.name().to_uppercase()),
+                points: &c.points,
+            })
+            .collect();
+        let title = format!(
+            "{}: {} samples at τ0 = {} s",
+            file.file_name()
+                .map_or("log".into(), |f| f.to_string_lossy()),
+            s.rates.first().map_or(0, Vec::len),
+            short(s.tau0)
+        );
+        plot::draw(path, &title, "°/s", &cs, &fits)?;
     }
     let mut w: Box<dyn Write> = match &out {
         Some(p) => Box::new(std::io::BufWriter::new(std::fs::File::create(p)?)),
@@ -444,7 +472,7 @@ fn allan(
                     cv.deviation.name().to_uppercase(),
                     cv.unit,
                     cv.samples,
-                    cv.tau0_s
+                    short(cv.tau0_s)
                 )?;
                 writeln!(
                     w,
