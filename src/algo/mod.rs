@@ -4,6 +4,7 @@ pub mod allan;
 pub mod calib;
 pub mod davar;
 pub mod fusion;
+pub mod kalman;
 pub mod math;
 pub mod mounting;
 pub mod qualify;
