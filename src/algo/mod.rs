@@ -6,6 +6,7 @@ pub mod davar;
 pub mod fusion;
 pub mod kalman;
 pub mod math;
+pub mod mixture;
 pub mod mounting;
 pub mod qualify;
 pub mod stats;
