@@ -144,14 +144,25 @@ pub fn idwt<F: Real>(w: &Wavelet, a: &[F], d: &[F], out: &mut [F]) -> Result<usi
     }
     let f = w.filters::<F>();
     let half = taps / 2;
-    for (o, i) in (half - 1..n).enumerate() {
+    // (Pairs of `out`, so that no index of it can panic.)
+    let pairs = out
+        .get_mut(..len)
+        .ok_or(QualifyError::Buffer)?
+        .chunks_exact_mut(2);
+    for (pair, i) in pairs.zip(half - 1..n) {
         let (mut even, mut odd) = (F::of(0.0), F::of(0.0));
         for j in 0..half {
-            even += f[2][2 * j] * a[i - j] + f[3][2 * j] * d[i - j];
-            odd += f[2][2 * j + 1] * a[i - j] + f[3][2 * j + 1] * d[i - j];
+            // (i − j is in 0..n; `get` keeps that from being a panic path.)
+            let (av, dv) = (
+                a.get(i - j).copied().unwrap_or(F::of(0.0)),
+                d.get(i - j).copied().unwrap_or(F::of(0.0)),
+            );
+            even += f[2][2 * j] * av + f[3][2 * j] * dv;
+            odd += f[2][2 * j + 1] * av + f[3][2 * j + 1] * dv;
         }
-        out[2 * o] = even;
-        out[2 * o + 1] = odd;
+        if let [e, o] = pair {
+            (*e, *o) = (even, odd);
+        }
     }
     Ok(len)
 }
@@ -334,7 +345,12 @@ fn median_abs<F: Real>(v: &mut [F]) -> F {
         sift(v, start, n);
     }
     for end in (1..n).rev() {
-        v.swap(0, end);
+        // v.swap(0, end) without its bounds panic.
+        if let Some((first, rest)) = v.split_first_mut() {
+            if let Some(e) = rest.get_mut(end - 1) {
+                core::mem::swap(first, e);
+            }
+        }
         sift(v, 0, end);
     }
     let mid = |i: usize| v.get(i).copied().unwrap_or(F::of(0.0));
