@@ -93,8 +93,12 @@ pub struct RelCal<const N: usize> {
     fresh: u8,
     /// Chips started but not yet [`WARM`].
     warming: u8,
-    /// Which sample of the pair [`RelCal::fuse`] is on.
-    odd: bool,
+    /// Which sample of [`LEARN_STRIDE`] [`RelCal::fuse`] is on.
+    phase: u8,
+    /// The raw readings of the update before the next solve.
+    last_raw: [f32; N],
+    /// Samples of the growing window: 1/α (bounded), as an integer.
+    grow: u32,
 }
 
 impl<const N: usize> RelCal<N> {
@@ -117,7 +121,9 @@ impl<const N: usize> RelCal<N> {
             applied: 0,
             fresh: 0,
             warming: 0,
-            odd: false,
+            phase: 0,
+            last_raw: [f32::NAN; N],
+            grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
         }
     }
 
@@ -146,8 +152,9 @@ impl<const N: usize> RelCal<N> {
         // The calibration learns on every other sample: what it tracks
         // moves over seconds, and the consensus and moments of every
         // sample cost 330 instructions per axis on the Cortex-M4.
-        self.odd = !self.odd;
-        if self.odd {
+        let learn_now = self.phase == 0;
+        self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
+        if learn_now {
             self.learn(y, r.used(), LEARN_STRIDE);
         }
         // A chip whose correction starts now was judged by fusion on its
@@ -218,7 +225,7 @@ impl<const N: usize> RelCal<N> {
         }
         let c = median(y, mask);
         // (Bounded: α = 0 must not count samples until n overflows.)
-        let grow = 1.0 / self.cfg.alpha.max(1e-6);
+        let grow = self.grow;
         let step = stride as f32;
         for i in 0..N {
             if mask & (1 << i) == 0 {
@@ -235,7 +242,7 @@ impl<const N: usize> RelCal<N> {
             // A growing window until it reaches 1/α samples: the first
             // estimate after a start or a restart is ready in a second
             // rather than a time constant.
-            let a = if (self.n[i] as f32) < grow {
+            let a = if self.n[i] < grow {
                 self.n[i] = self.n[i].saturating_add(stride);
                 step / self.n[i] as f32
             } else {
@@ -252,8 +259,28 @@ impl<const N: usize> RelCal<N> {
         // every `EVERY` samples halves the cost and changes nothing.
         self.tick = self.tick.wrapping_add(1);
         if self.tick.is_multiple_of(EVERY) || (self.warming != 0 && self.newly_warm()) {
-            self.estimate(mask);
+            self.solve(y, mask);
+        } else if (self.tick + 1).is_multiple_of(EVERY) {
+            // The readings the next solve compares with (kept only then).
+            self.last_raw = *y;
         }
+    }
+
+    /// Solve for the estimates (see [`RelCal::estimate`]). A chip whose
+    /// reading repeats since the update before keeps its correction too
+    /// (as one fusion does not use): a frozen output must stay frozen
+    /// through the correction, or fusion's frozen check starts over (a
+    /// stuck chip was out after 6 samples, not 3, when a solve fell just
+    /// after it stuck: `fusion-eval` (n), seed 3). Out of line: it runs
+    /// once per `EVERY` updates.
+    #[cold]
+    #[inline(never)]
+    fn solve(&mut self, y: &[f32; N], used: u8) {
+        let mut held = 0u8;
+        for i in 0..N {
+            held |= u8::from(y[i].to_bits() == self.last_raw[i].to_bits()) << i;
+        }
+        self.estimate(used & !held);
     }
 
     /// Scale and bias of every started chip from the moments, then the
@@ -467,5 +494,46 @@ mod tests {
             cal.update(&y, 0b1110);
             assert_eq!(cal.correct(&y)[0], first, "sample {k}");
         }
+    }
+    /// A chip that sticks is out of fusion within 5 samples whatever the
+    /// phase of the calibration's re-solve (every offset of its 64-sample
+    /// cycle tried): a repeated raw reading keeps its corrected value.
+    #[test]
+    fn a_stuck_chip_is_out_quickly_at_every_solve_phase() {
+        use crate::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
+        let f = Fusion::<3>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+        let scale = [1.01f32, 0.99, 1.005];
+        let mut worst = 0;
+        for offset in 0..64 {
+            let mut st = AxisState::<3>::default();
+            st.set_noise_priors([Some(0.09); 3]);
+            let mut cal = RelCal::<3>::new(CalConfig::default());
+            let mut rng = Rng::new(100 + offset as u64);
+            let stick = 3000 + offset;
+            let mut held = 0.0f32;
+            let mut out_after = None;
+            for k in 0..stick + 20 {
+                let w = 20.0 * libm::sinf(2.0 * core::f32::consts::PI * k as f32 * 1e-3);
+                // Quantised as the ICM-42688-P's 131 LSB/°/s.
+                let mut y = [0, 1, 2]
+                    .map(|i| libm::roundf((scale[i] * w + 0.09 * rng.gaussian()) * 131.0) / 131.0);
+                if k == stick {
+                    held = y[0];
+                }
+                if k >= stick {
+                    y[0] = held;
+                }
+                let r = cal.fuse(&f, &mut st, &y, 0b111).unwrap();
+                if k >= stick && out_after.is_none() && r.weights[0] == 0.0 {
+                    out_after = Some(k - stick);
+                }
+            }
+            assert!(
+                out_after.is_some_and(|n| n <= 5),
+                "offset {offset}: {out_after:?}"
+            );
+            worst = worst.max(out_after.unwrap_or(99));
+        }
+        println!("stuck chip out after at most {worst} samples");
     }
 }
