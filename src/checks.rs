@@ -261,6 +261,26 @@ pub fn fusion_digest() -> u64 {
             }
         }
     }
+    // Seed 001's local filters (entropy and covariance weights, f32 through
+    // nalgebra) on the same kind of frames.
+    use crate::algo::mixture::{ChipFilters, ChipWeights};
+    for weights in [ChipWeights::Entropy, ChipWeights::Covariance] {
+        let Ok(mut cf) = ChipFilters::<4>::new([0.05, 0.05, 0.05, 0.25], 6.3, 1e-4, weights) else {
+            return 0;
+        };
+        let mut rng = Rng::new(43);
+        for k in 0..512 {
+            let truth = 95.0 * libm::sinf(k as f32 * 0.01);
+            let y = [0.05f32, 0.05, 0.05, 0.25].map(|s| truth + s * rng.gaussian());
+            match cf.fuse(&y, 0b1111) {
+                Some((r, w)) => {
+                    d.f32(r);
+                    w.iter().for_each(|v| d.f32(*v));
+                }
+                None => d.word(0xDEAD),
+            }
+        }
+    }
     d.0
 }
 

@@ -297,3 +297,125 @@ mod tests {
         assert_eq!(xf[0], fused.0);
     }
 }
+
+/// How [`ChipFilters`] weighs its local filters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ChipWeights {
+    /// The seed's entropy weights α ∝ 1/SH(σ), σ of each filter's rate in
+    /// m°/s (in °/s a gyro's σ is below 0.242 and SH < 0: ambiguity 1),
+    /// SH floored at 1e-6.
+    Entropy,
+    /// Covariance (inverse-variance) weights, the paper's baseline.
+    Covariance,
+}
+
+/// Seed 001 on the board (issue 14, item 4): each chip of an axis is a
+/// local Kalman filter of [rate, its bias] (rate: a random walk as fast as
+/// the platform can turn; bias: a slow random walk), measured by the
+/// chip's reading with its noise prior; the local rates are fused by
+/// [`ChipWeights`]; the fused rate is fed back to every local filter as in
+/// the seed's step 4 (a measurement of its rate with the federated share
+/// of the fused variance, β_i = α_i), which is what makes each bias
+/// observable. f32, no heap.
+#[derive(Clone, Copy, Debug)]
+pub struct ChipFilters<const N: usize> {
+    filters: [crate::algo::kalman::Kf<f32, 2>; N],
+    r: [f32; N],
+    q: nalgebra::Matrix2<f32>,
+    weights: ChipWeights,
+}
+
+impl<const N: usize> ChipFilters<N> {
+    /// Local filters for chips of white-noise σ `sigma_dps` (°/s per
+    /// sample), a rate that may change by `rate_step_dps` per sample (1σ)
+    /// and a bias that wanders by `bias_step_dps` per sample.
+    pub fn new(
+        sigma_dps: [f32; N],
+        rate_step_dps: f32,
+        bias_step_dps: f32,
+        weights: ChipWeights,
+    ) -> Result<Self, crate::algo::kalman::KfError> {
+        use crate::algo::kalman::Kf;
+        let p0 = nalgebra::Matrix2::new(1e4, 0.0, 0.0, 1.0);
+        let kf = Kf::new(nalgebra::Vector2::zeros(), p0)?;
+        Ok(Self {
+            filters: [kf; N],
+            r: sigma_dps.map(|s| s * s),
+            q: nalgebra::Matrix2::new(
+                rate_step_dps * rate_step_dps,
+                0.0,
+                0.0,
+                bias_step_dps * bias_step_dps,
+            ),
+            weights,
+        })
+    }
+
+    /// One sample: readings `y` (°/s), chips in `mask`. The fused rate and
+    /// each chip's weight; None if no chip could be used.
+    pub fn fuse(&mut self, y: &[f32; N], mask: u8) -> Option<(f32, [f32; N])> {
+        let f = nalgebra::Matrix2::identity();
+        let h = nalgebra::Matrix1x2::new(1.0f32, 1.0);
+        let mut w = [0.0f32; N];
+        let mut ok = 0u8;
+        for (i, kf) in self.filters.iter_mut().enumerate() {
+            if mask & (1 << i) == 0 || !y[i].is_finite() {
+                continue;
+            }
+            let before = *kf;
+            let z = nalgebra::Vector1::new(y[i]);
+            let r = nalgebra::Matrix1::new(self.r[i]);
+            if kf.predict(&f, &self.q).is_err() || kf.update(&z, &h, &r).is_err() {
+                *kf = before;
+                continue;
+            }
+            ok |= 1 << i;
+            let var = kf.p[(0, 0)];
+            w[i] = match self.weights {
+                ChipWeights::Covariance => 1.0 / var,
+                ChipWeights::Entropy => {
+                    let s = crate::algo::math::sqrtf(var) * 1000.0;
+                    let sh = s
+                        * (0.5
+                            * crate::algo::math::lnf(
+                                2.0 * core::f32::consts::PI * core::f32::consts::E * s * s,
+                            ));
+                    1.0 / if sh > 1e-6 { sh } else { 1e-6 }
+                }
+            };
+        }
+        let sw: f32 = w.iter().sum();
+        if ok == 0 || !(sw > 0.0) {
+            return None;
+        }
+        let mut rate = 0.0f32;
+        let mut pg = 0.0f32;
+        for i in 0..N {
+            w[i] /= sw;
+            if ok & (1 << i) != 0 {
+                rate += w[i] * self.filters[i].x[0];
+                pg += w[i] * w[i] * self.filters[i].p[(0, 0)];
+            }
+        }
+        // Step 4, the feedback: the fused rate goes back to each local
+        // filter as a measurement of its rate with the federated share of
+        // the fused variance, P_g/β_i (β_i = α_i). Without it a chip's bias
+        // is unobservable (its reading is rate + bias, and the rate may
+        // change by rate_step every sample); with it, each filter learns
+        // its bias against the array.
+        let hr = nalgebra::Matrix1x2::new(1.0f32, 0.0);
+        for i in 0..N {
+            if ok & (1 << i) == 0 || !(w[i] > 0.0) {
+                continue;
+            }
+            let kf = &mut self.filters[i];
+            let before = *kf;
+            let r = nalgebra::Matrix1::new((pg / w[i]).max(1e-12));
+            if kf.update(&nalgebra::Vector1::new(rate), &hr, &r).is_err() {
+                *kf = before;
+            }
+        }
+        Some((rate, w))
+    }
+}

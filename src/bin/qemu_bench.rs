@@ -403,6 +403,38 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
     );
     ok &= all > 0.0;
 
+    // Seed 001 on the array: a local rate+bias Kalman filter per chip,
+    // fused by entropy or covariance weights, the fused rate fed back.
+    use gyro_array::algo::mixture::{ChipFilters, ChipWeights};
+    for (name, weights) in [
+        ("entropy", ChipWeights::Entropy),
+        ("covariance", ChipWeights::Covariance),
+    ] {
+        let Ok(cf) = ChipFilters::<4>::new([0.1, 0.1, 0.1, 0.5], 6.3, 1e-4, weights) else {
+            exit(false)
+        };
+        let mut cfs = [cf; 3];
+        for f in frames.iter() {
+            for (a, axis) in f.iter().enumerate() {
+                black_box(cfs[a].fuse(black_box(axis), 0b1111));
+            }
+        }
+        let t0 = t.now();
+        for f in frames.iter() {
+            for (a, axis) in f.iter().enumerate() {
+                black_box(cfs[a].fuse(black_box(axis), 0b1111));
+            }
+        }
+        let ticks = (t.now() - t0).saturating_sub(overhead);
+        let per = ticks as f32 * ipt / FRAMES as f32;
+        defmt::info!(
+            "bench fusion seed 001 local filters ({=str} weights): {=u32} instructions per 3-axis sample (N = 4)",
+            name,
+            per as u32
+        );
+        ok &= per > 0.0;
+    }
+
     ok
 }
 

@@ -567,6 +567,7 @@ fn main() {
     let board = array::board_fault_classes(seed);
     let boot = array::boot_classes(seed);
     let stuck = array::stuck_classes(seed);
+    let _seed001 = array::seed001_classes(seed);
     println!("\ntargets:");
     let r = |si: usize, n: &str| rms[&(si, n.to_string())];
     let mut all = true;

@@ -381,3 +381,84 @@ fn stuck_n<const N: usize>(seed: u64) -> (usize, usize, u32) {
     }
     (N, worst, back)
 }
+
+/// Seed 001 on the array (issue 14, item 4): each chip a local Kalman
+/// filter of rate and bias, fused by the seed's entropy weights or by
+/// covariance weights, with the fused rate fed back (`algo::mixture::
+/// ChipFilters`), next to the mean, the oracle and the default path; four
+/// ICM-42688-P (one 5× noisier in the second case) at rest and under a
+/// 30 °/s 1 Hz sway, 10 seeds. Reported, no target: it is the seed's
+/// method, measured.
+pub fn seed001_classes(seed: u64) -> Vec<(String, [f64; 5])> {
+    use gyro_array::algo::mixture::{ChipFilters, ChipWeights};
+    println!("\n(o) seed 001 on the array: local rate+bias filters fused by entropy or covariance weights, 10 seeds x {SAMPLES} samples (RMS mean +- sd)");
+    let mut out = Vec::new();
+    for (noisy, nname) in [(false, "four equal chips"), (true, "chip 3 5x noisier")] {
+        for (amp, mname) in [(0.0f32, "at rest"), (30.0, "30 deg/s 1 Hz sway")] {
+            let name = format!("(o) {nname}, {mname}");
+            let mut res = vec![Vec::new(); 5];
+            for s in 0..10u64 {
+                let mut rng = Rng::new(seed * 1000 + 600 + s);
+                let mut params = [NoiseParams::ICM42688; 4];
+                if noisy {
+                    params[3].arw_deg_rt_h *= 5.0;
+                }
+                let sig = params.map(|p| p.white_sigma_dps(FS));
+                let w = sig.map(|s| 1.0 / (s as f64 * s as f64));
+                let ws: f64 = w.iter().sum();
+                let mut noise = [AxisNoise::default(); 4];
+                let pick = |n: &str| {
+                    let m = methods().iter().find(|(m, _)| *m == n).expect("method").1;
+                    Fusion::<4>::new(m).expect("valid method")
+                };
+                let (mean, adaptive) = (pick("mean"), pick("adaptive"));
+                let mut st = [AxisState::<4>::default(); 2];
+                st[1].set_noise_priors(sig.map(Some));
+                let mut cal = RelCal::<4>::new(CalConfig::default());
+                let mut ent =
+                    ChipFilters::<4>::new(sig, 6.3, 1e-4, ChipWeights::Entropy).expect("valid");
+                let mut cov =
+                    ChipFilters::<4>::new(sig, 6.3, 1e-4, ChipWeights::Covariance).expect("valid");
+                let mut sums = [0.0f64; 5];
+                for k in 0..SAMPLES {
+                    let t = amp * (2.0 * std::f32::consts::PI * k as f32 / FS).sin();
+                    let y = [0, 1, 2, 3].map(|i| {
+                        quantise(noise[i].step(&params[i], &mut rng, t, 1.0 / FS), LSB) as f32 / LSB
+                    });
+                    let o: f64 = (0..4).map(|i| w[i] * y[i] as f64).sum::<f64>() / ws;
+                    sums[0] += (o - t as f64).powi(2);
+                    let r = mean.fuse(&mut st[0], &y, 0b1111).expect("valid");
+                    sums[1] += ((r.rate_dps - t) as f64).powi(2);
+                    let r = cal.fuse(&adaptive, &mut st[1], &y, 0b1111).expect("valid");
+                    sums[2] += ((r.rate_dps - t) as f64).powi(2);
+                    let e = ent.fuse(&y, 0b1111).map_or(f32::NAN, |v| v.0);
+                    sums[3] += ((e - t) as f64).powi(2);
+                    let c = cov.fuse(&y, 0b1111).map_or(f32::NAN, |v| v.0);
+                    sums[4] += ((c - t) as f64).powi(2);
+                }
+                for (r, s) in res.iter_mut().zip(sums) {
+                    r.push((s / SAMPLES as f64).sqrt());
+                }
+            }
+            println!("  {name}:");
+            let mut m5 = [0.0; 5];
+            for ((n, r), o) in [
+                "oracle",
+                "mean",
+                "default",
+                "seed 001 entropy",
+                "seed 001 covariance",
+            ]
+            .iter()
+            .zip(&res)
+            .zip(m5.iter_mut())
+            {
+                let (m, sd) = mean_sd(r);
+                *o = m;
+                println!("    {n:<20} {m:>10.5} +- {sd:.5}");
+            }
+            out.push((name, m5));
+        }
+    }
+    out
+}
