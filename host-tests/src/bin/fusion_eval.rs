@@ -134,6 +134,40 @@ fn mean_sd(v: &[f64]) -> (f64, f64) {
     (m, sd)
 }
 
+/// The method `name` of `checks::methods()`, for N gyros.
+fn method<const N: usize>(name: &str) -> Fusion<N> {
+    let m = methods()
+        .iter()
+        .find(|(n, _)| *n == name)
+        .expect("a method of checks::methods")
+        .1;
+    Fusion::<N>::new(m).expect("valid method")
+}
+
+/// Mean, zhang and adaptive, the methods most classes compare.
+fn mean_zhang_adaptive<const N: usize>() -> [Fusion<N>; 3] {
+    [method("mean"), method("zhang"), method("adaptive")]
+}
+
+/// Print a class: `  name:`, then per label the mean ± sd over seeds of
+/// its RMS errors `res`; returns the means.
+fn report<const K: usize>(name: &str, labels: [&str; K], res: &[Vec<f64>]) -> [f64; K] {
+    println!("  {name}:");
+    let width = labels
+        .iter()
+        .map(|l| l.len() + 1)
+        .max()
+        .unwrap_or(0)
+        .max(14);
+    let mut out = [0.0; K];
+    for ((n, r), o) in labels.iter().zip(res).zip(out.iter_mut()) {
+        let (m, sd) = mean_sd(r);
+        *o = m;
+        println!("    {n:<width$} {m:>10.5} +- {sd:.5}");
+    }
+    out
+}
+
 /// Class (f), issue 9: a 95 °/s, 2 Hz sway with per-chip scale errors
 /// (drawn in ±1 %, and the worst pattern +1/−1/+1/−1 %), 10 seeds × 20 000
 /// samples each. Prints mean ± sd of the RMS error of the oracle (true
@@ -163,11 +197,7 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
             let w: Vec<f64> = sig.iter().map(|s| 1.0 / (s * s)).collect();
             let ws: f64 = w.iter().sum();
             let mut noise = [AxisNoise::default(); 4];
-            let fusers: Vec<Fusion<4>> = methods()
-                .iter()
-                .filter(|(n, _)| ["mean", "zhang", "adaptive"].contains(n))
-                .map(|(_, m)| Fusion::<4>::new(*m).expect("valid method"))
-                .collect();
+            let fusers = mean_zhang_adaptive::<4>();
             let adaptive = *fusers.last().expect("adaptive");
             let mut states = vec![AxisState::<4>::default(); fusers.len() + 1];
             let mut cal = RelCal::<4>::new(CalConfig::default());
@@ -194,17 +224,8 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
                 r.push((s / SAMPLES as f64).sqrt());
             }
         }
-        println!("  scale errors {pattern}:");
-        for (n, r) in names.iter().zip(&res) {
-            let (m, sd) = mean_sd(r);
-            println!("    {n:<14} {m:>10.5} +- {sd:.5}");
-        }
-        out.push((
-            format!("(f) scale errors {pattern}"),
-            mean_sd(&res[4]).0,
-            mean_sd(&res[0]).0,
-            mean_sd(&res[1]).0,
-        ));
+        let m = report(&format!("scale errors {pattern}"), names, &res);
+        out.push((format!("(f) scale errors {pattern}"), m[4], m[0], m[1]));
     }
     out
 }
@@ -225,11 +246,7 @@ fn drift_class(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
             let params = [NoiseParams::ICM42688; 4];
             let sigma = params[2].white_sigma_dps(FS);
             let mut noise = [AxisNoise::default(); 4];
-            let fusers: Vec<Fusion<4>> = methods()
-                .iter()
-                .filter(|(n, _)| ["mean", "zhang", "adaptive"].contains(n))
-                .map(|(_, m)| Fusion::<4>::new(*m).expect("valid method"))
-                .collect();
+            let fusers = mean_zhang_adaptive::<4>();
             let mut states = vec![AxisState::<4>::default(); fusers.len()];
             let mut sums = [0.0f64; 3];
             let (mut reached, mut low_since) = (None, None::<usize>);
@@ -318,11 +335,7 @@ fn class4(
         let w = sig.map(|s| 1.0 / (s * s));
         let ws: f64 = w.iter().sum();
         let mut noise = [AxisNoise::default(); 4];
-        let fusers: Vec<Fusion<4>> = methods()
-            .iter()
-            .filter(|(n, _)| ["mean", "zhang", "adaptive"].contains(n))
-            .map(|(_, m)| Fusion::<4>::new(*m).expect("valid method"))
-            .collect();
+        let fusers = mean_zhang_adaptive::<4>();
         let mut states = vec![AxisState::<4>::default(); 3];
         let mut cal = RelCal::<4>::new(CalConfig::default());
         let mut sums = [0.0f64; 4];
@@ -350,18 +363,7 @@ fn class4(
             r.push((s / SAMPLES as f64).sqrt());
         }
     }
-    println!("  {name}:");
-    let mut out = [0.0; 4];
-    for ((n, r), o) in ["oracle", "mean", "zhang", "adaptive+cal"]
-        .iter()
-        .zip(&res)
-        .zip(out.iter_mut())
-    {
-        let (m, sd) = mean_sd(r);
-        *o = m;
-        println!("    {n:<14} {m:>10.5} +- {sd:.5}");
-    }
-    out
+    report(name, ["oracle", "mean", "zhang", "adaptive+cal"], &res)
 }
 
 /// Class (i), issue 9: spikes, small (3σ ≈ 0.27 °/s) and large (20 °/s),

@@ -6,12 +6,12 @@
 //! pipeline with its online calibration).
 
 use gyro_array::algo::calib::{CalConfig, RelCal};
-use gyro_array::algo::fusion::{AxisState, Fusion};
-use gyro_array::checks::{methods, run_board_array_with};
+use gyro_array::algo::fusion::AxisState;
+use gyro_array::checks::run_board_array_with;
 use gyro_array::emu::noise::{quantise, AxisNoise};
 use gyro_array::emu::{Fault, NoiseParams, RateProfile, Rng};
 
-use super::{mean_sd, FS, LSB, SAMPLES};
+use super::{mean_zhang_adaptive, method, report, FS, LSB, SAMPLES};
 
 /// One class's result: name, RMS means over the seeds of [oracle, mean,
 /// zhang, default], and whether the class is fault-free (then the default
@@ -53,11 +53,7 @@ fn class_n<const N: usize>(
         let w = sig.map(|s| 1.0 / (s * s));
         let ws: f64 = w.iter().sum();
         let mut noise = [AxisNoise::default(); N];
-        let pick = |n: &str| {
-            let m = methods().iter().find(|(m, _)| *m == n).expect("method").1;
-            Fusion::<N>::new(m).expect("valid method")
-        };
-        let (mean, zhang, adaptive) = (pick("mean"), pick("zhang"), pick("adaptive"));
+        let [mean, zhang, adaptive] = mean_zhang_adaptive::<N>();
         let mut st = [AxisState::<N>::default(); 3];
         let mut priors = [None; N];
         for (p, s) in priors.iter_mut().zip(sig) {
@@ -90,17 +86,7 @@ fn class_n<const N: usize>(
             r.push((s / SAMPLES as f64).sqrt());
         }
     }
-    println!("  {name}:");
-    let mut out = [0.0; 4];
-    for ((n, r), o) in ["oracle", "mean", "zhang", "default"]
-        .iter()
-        .zip(&res)
-        .zip(out.iter_mut())
-    {
-        let (m, sd) = mean_sd(r);
-        *o = m;
-        println!("    {n:<14} {m:>10.5} +- {sd:.5}");
-    }
+    let out = report(name, ["oracle", "mean", "zhang", "default"], &res);
     (name.to_string(), out, true)
 }
 
@@ -346,12 +332,7 @@ fn stuck_n<const N: usize>(seed: u64) -> (usize, usize, u32) {
         let mut rng = Rng::new(seed * 1000 + 800 + 13 * N as u64 + s);
         let params = [NoiseParams::ICM42688; N];
         let mut noise = [AxisNoise::default(); N];
-        let m = methods()
-            .iter()
-            .find(|(m, _)| *m == "adaptive")
-            .expect("method")
-            .1;
-        let f = Fusion::<N>::new(m).expect("valid method");
+        let f = method::<N>("adaptive");
         let mut st = AxisState::<N>::default();
         st.set_noise_priors([Some(params[0].white_sigma_dps(FS)); N]);
         let mut cal = RelCal::<N>::new(CalConfig::default());
@@ -407,11 +388,7 @@ pub fn seed001_classes(seed: u64) -> Vec<(String, [f64; 5])> {
                 let w = sig.map(|s| 1.0 / (s as f64 * s as f64));
                 let ws: f64 = w.iter().sum();
                 let mut noise = [AxisNoise::default(); 4];
-                let pick = |n: &str| {
-                    let m = methods().iter().find(|(m, _)| *m == n).expect("method").1;
-                    Fusion::<4>::new(m).expect("valid method")
-                };
-                let (mean, adaptive) = (pick("mean"), pick("adaptive"));
+                let (mean, adaptive) = (method::<4>("mean"), method::<4>("adaptive"));
                 let mut st = [AxisState::<4>::default(); 2];
                 st[1].set_noise_priors(sig.map(Some));
                 let mut cal = RelCal::<4>::new(CalConfig::default());
@@ -440,23 +417,17 @@ pub fn seed001_classes(seed: u64) -> Vec<(String, [f64; 5])> {
                     r.push((s / SAMPLES as f64).sqrt());
                 }
             }
-            println!("  {name}:");
-            let mut m5 = [0.0; 5];
-            for ((n, r), o) in [
-                "oracle",
-                "mean",
-                "default",
-                "seed 001 entropy",
-                "seed 001 covariance",
-            ]
-            .iter()
-            .zip(&res)
-            .zip(m5.iter_mut())
-            {
-                let (m, sd) = mean_sd(r);
-                *o = m;
-                println!("    {n:<20} {m:>10.5} +- {sd:.5}");
-            }
+            let m5 = report(
+                &name,
+                [
+                    "oracle",
+                    "mean",
+                    "default",
+                    "seed 001 entropy",
+                    "seed 001 covariance",
+                ],
+                &res,
+            );
             out.push((name, m5));
         }
     }
