@@ -318,27 +318,76 @@ pub fn curve(kind: Kind, x: &[f64], tau0: f64, grid: Grid) -> Result<Vec<Point>,
         .collect()
 }
 
+/// Power-law noise type α (frequency PSD ∝ f^α: 2 white PM, 1 flicker PM,
+/// 0 white FM, −1 flicker FM, −2 random-walk FM) of phase `x` at averaging
+/// factor `m`, by the lag-1 autocorrelation method (Riley & Greenhall
+/// 2004): decimate the phase by m, difference it d times until
+/// δ = r₁/(1 + r₁) < 0.25 (d ≤ 2 for the Allan family), then
+/// α = 2 − round(2δ) − 2d. None with fewer than 30 decimated points (the
+/// method needs them; Stable32 switches to another test there).
+pub fn noise_alpha(x: &[f64], m: usize) -> Option<i32> {
+    if m == 0 {
+        return None;
+    }
+    let mut z: Vec<f64> = x.iter().step_by(m).copied().collect();
+    if z.len() < 30 || z.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let dmax = 2;
+    let mut d = 0;
+    loop {
+        let n = z.len() as f64;
+        let mean = z.iter().sum::<f64>() / n;
+        let (mut num, mut den) = (0.0, 0.0);
+        for w in z.windows(2) {
+            num += (w[0] - mean) * (w[1] - mean);
+        }
+        for v in &z {
+            den += (v - mean) * (v - mean);
+        }
+        if den <= 0.0 || !den.is_finite() {
+            return None;
+        }
+        let r1 = num / den;
+        let delta = r1 / (1.0 + r1);
+        if delta < 0.25 || d >= dmax {
+            return Some(2 - (2.0 * delta).round() as i32 - 2 * d);
+        }
+        z = z.windows(2).map(|w| w[1] - w[0]).collect();
+        d += 1;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn phase_dat() -> Vec<f64> {
-        include_str!("../tests/stable32/PHASE.DAT")
-            .lines()
+    /// The lines of `text` that are neither comments nor blank.
+    fn data_lines(text: &str) -> impl Iterator<Item = &str> {
+        text.lines()
             .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+    }
+
+    /// One number per data line.
+    fn values(text: &str) -> Vec<f64> {
+        data_lines(text)
             .map(|l| l.trim().parse().unwrap())
             .collect()
     }
 
-    /// (AF, #, sigma) rows of a Stable32 table.
-    fn table(text: &str) -> Vec<(usize, usize, f64)> {
-        text.lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+    fn phase_dat() -> Vec<f64> {
+        values(include_str!("../tests/stable32/PHASE.DAT"))
+    }
+
+    /// (AF, #, alpha, sigma) rows of a Stable32 table.
+    fn table(text: &str) -> Vec<(usize, usize, i32, f64)> {
+        data_lines(text)
             .map(|l| {
                 let f: Vec<&str> = l.split_whitespace().collect();
                 (
                     f[0].parse().unwrap(),
                     f[2].parse().unwrap(),
+                    f[3].parse().unwrap(),
                     f[5].parse().unwrap(),
                 )
             })
@@ -382,7 +431,7 @@ mod tests {
                 include_str!("../tests/stable32/phase_dat_totdev.txt"),
             ),
         ] {
-            for (af, terms, sigma) in table(text) {
+            for (af, terms, _, sigma) in table(text) {
                 let p = deviation(kind, &x, 1.0, af).unwrap();
                 // Printed as d.dddde±xx: half a unit of the fourth decimal
                 // of the mantissa, plus 1e-7 relative for a value that sits
@@ -439,63 +488,6 @@ mod tests {
         let c = curve(Kind::Oadev, &[0.0; 100], 1.0, Grid::Octave).unwrap();
         assert_eq!(c.len(), 6); // 1..32 (max factor 49)
     }
-}
-
-/// Power-law noise type α (frequency PSD ∝ f^α: 2 white PM, 1 flicker PM,
-/// 0 white FM, −1 flicker FM, −2 random-walk FM) of phase `x` at averaging
-/// factor `m`, by the lag-1 autocorrelation method (Riley & Greenhall
-/// 2004): decimate the phase by m, difference it d times until
-/// δ = r₁/(1 + r₁) < 0.25 (d ≤ 2 for the Allan family), then
-/// α = 2 − round(2δ) − 2d. None with fewer than 30 decimated points (the
-/// method needs them; Stable32 switches to another test there).
-pub fn noise_alpha(x: &[f64], m: usize) -> Option<i32> {
-    if m == 0 {
-        return None;
-    }
-    let mut z: Vec<f64> = x.iter().step_by(m).copied().collect();
-    if z.len() < 30 || z.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let dmax = 2;
-    let mut d = 0;
-    loop {
-        let n = z.len() as f64;
-        let mean = z.iter().sum::<f64>() / n;
-        let (mut num, mut den) = (0.0, 0.0);
-        for w in z.windows(2) {
-            num += (w[0] - mean) * (w[1] - mean);
-        }
-        for v in &z {
-            den += (v - mean) * (v - mean);
-        }
-        if den <= 0.0 || !den.is_finite() {
-            return None;
-        }
-        let r1 = num / den;
-        let delta = r1 / (1.0 + r1);
-        if delta < 0.25 || d >= dmax {
-            return Some(2 - (2.0 * delta).round() as i32 - 2 * d);
-        }
-        z = z.windows(2).map(|w| w[1] - w[0]).collect();
-        d += 1;
-    }
-}
-
-#[cfg(test)]
-mod noise_id_tests {
-    use super::*;
-    use std::io::Read;
-
-    /// (AF, alpha) rows of a Stable32 table.
-    fn alphas(text: &str) -> Vec<(usize, i32)> {
-        text.lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-            .map(|l| {
-                let f: Vec<&str> = l.split_whitespace().collect();
-                (f[0].parse().unwrap(), f[3].parse().unwrap())
-            })
-            .collect()
-    }
 
     /// The lag-1 autocorrelation noise identification against Stable32's
     /// on real data: a GPS receiver's 1PPS against an H-maser (241 218
@@ -503,33 +495,25 @@ mod noise_id_tests {
     /// points.
     #[test]
     fn noise_type_matches_stable32_on_gps_and_phase_dat() {
+        use std::io::Read;
         let mut gz = Vec::new();
         flate2::read::GzDecoder::new(
             &include_bytes!("../tests/stable32/gps_1pps_phase_data.txt.gz")[..],
         )
         .read_to_end(&mut gz)
         .unwrap();
-        let gps: Vec<f64> = String::from_utf8(gz)
-            .unwrap()
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-            .map(|l| l.trim().parse().unwrap())
-            .collect();
+        let gps = values(&String::from_utf8(gz).unwrap());
         assert_eq!(gps.len(), 241_218);
-        let pd: Vec<f64> = include_str!("../tests/stable32/PHASE.DAT")
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
-            .map(|l| l.trim().parse().unwrap())
-            .collect();
+        let pd = phase_dat();
         let (mut same, mut all) = (0, 0);
-        for (x, table) in [
+        for (x, text) in [
             (&gps, include_str!("../tests/stable32/gps_oadev_octave.txt")),
             (
                 &pd,
                 include_str!("../tests/stable32/phase_dat_oadev_octave.txt"),
             ),
         ] {
-            for (af, want) in alphas(table) {
+            for (af, _, want, _) in table(text) {
                 if let Some(got) = noise_alpha(x, af) {
                     println!("AF {af}: alpha {got}, Stable32 {want}");
                     all += 1;

@@ -33,6 +33,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::SpiDevice;
 
 use super::Pipeline;
+use crate::algo::fusion::median;
 use crate::algo::mounting::{inverse3, mul3, ChipCal};
 use crate::drivers::adxrs453::Adxrs453;
 use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
@@ -129,21 +130,6 @@ const ST_SETS: [u8; 2] = [0b0101, 0b1010];
 /// Most samples per phase of the array self-test (each is kept for the
 /// phase's median: 3 KiB of stack at 64).
 pub const ST_MAX: usize = 64;
-
-/// Median of the values in `m` (a mask over four), 0 for none.
-fn median4(v: [f32; 4], m: u8) -> f32 {
-    let mut s = [0.0f32; 4];
-    let mut k = 0;
-    for (i, x) in v.iter().enumerate() {
-        if m & (1 << i) != 0 {
-            if let Some(slot) = s.get_mut(k) {
-                *slot = *x;
-                k += 1;
-            }
-        }
-    }
-    median_of(s.get_mut(..k).unwrap_or(&mut []))
-}
 
 /// Median of a slice (reordered in place); the mean of the two middle
 /// values for an even length, 0 for an empty slice.
@@ -289,7 +275,7 @@ pub fn array_self_test<SPI: SpiDevice>(
                     mul3(m, r)
                 });
                 for (a, c) in common.iter_mut().enumerate() {
-                    *c = median4(board.map(|b| b[a]), live);
+                    *c = median(&board.map(|b| b[a]), live);
                 }
             }
             for (i, (r, rs)) in raw.iter().zip(resid.iter_mut()).enumerate() {

@@ -115,6 +115,18 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
     // against its *last* difference (numpy's d[debs − 1] with debs = 0
     // wraps around), and when the first plateau starts at the second
     // sample it is dropped (its `debs[0] == 1` test, a 1-based leftover).
+    // A maximum (`up`) or a minimum at `pos`, while there is room.
+    let mut push = |up: bool, pos: usize| {
+        let (list, count) = if up {
+            (&mut *maxs, &mut nmax)
+        } else {
+            (&mut *mins, &mut nmin)
+        };
+        if let Some(slot) = list.get_mut(*count) {
+            *slot = pos as u32;
+            *count += 1;
+        }
+    };
     let mut lead = 0;
     while lead < n - 1 && d(lead) == zero {
         lead += 1;
@@ -122,19 +134,9 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
     if lead > 0 && lead < n - 1 {
         let (before, after) = (d(n - 2), d(lead));
         if before * after < zero {
-            let pos = round_half_even(lead);
-            if before > zero {
-                if nmax < maxs.len() {
-                    maxs[nmax] = pos as u32;
-                    nmax += 1;
-                }
-            } else if nmin < mins.len() {
-                mins[nmin] = pos as u32;
-                nmin += 1;
-            }
+            push(before > zero, round_half_even(lead));
         }
     }
-    let mut first_run = lead == 0;
     while i + 1 < n - 1 {
         let d1 = d(i);
         if d1 == zero {
@@ -149,10 +151,9 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
             break;
         }
         let d2 = d(j);
-        let dropped = first_run && i == 0 && j > 1;
-        if j > i + 1 {
-            first_run = false;
-        }
+        // (i = 0 with a non-zero d(0): the signal does not start on a
+        // plateau, so this is its first.)
+        let dropped = i == 0 && j > 1;
         if d1 * d2 < zero && !dropped {
             // Plateau samples i+1 ..= j (PyEMD: debs = i+1, fins = j); its
             // extremum is at round((debs + fins)/2), half to even
@@ -163,15 +164,7 @@ fn extrema<F: Real>(s: &[F], maxs: &mut [u32], mins: &mut [u32]) -> (usize, usiz
             } else {
                 round_half_even((i + 1) + j)
             };
-            if d1 > zero {
-                if nmax < maxs.len() {
-                    maxs[nmax] = pos as u32;
-                    nmax += 1;
-                }
-            } else if nmin < mins.len() {
-                mins[nmin] = pos as u32;
-                nmin += 1;
-            }
+            push(d1 > zero, pos);
         }
         i = j;
     }

@@ -367,17 +367,7 @@ fn emd_matches_pyemd() {
     for r in 0..rows {
         let a = &out[r * n..(r + 1) * n];
         let b = &v::EMD_OUT[r * n..(r + 1) * n];
-        let (ma, mb) = (
-            a.iter().sum::<f64>() / n as f64,
-            b.iter().sum::<f64>() / n as f64,
-        );
-        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-        for (p, q) in a.iter().zip(b) {
-            sab += (p - ma) * (q - mb);
-            saa += (p - ma) * (p - ma);
-            sbb += (q - mb) * (q - mb);
-        }
-        let corr = sab / (saa * sbb).sqrt();
+        let corr = corr(a, b);
         println!("row {r}: correlation {corr:.6}");
         assert!(corr >= 0.99, "row {r}: correlation {corr}");
     }
