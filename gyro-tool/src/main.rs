@@ -345,10 +345,15 @@ fn allan(
         ProgressBar::hidden()
     };
     let mut curves = Vec::new();
-    for (name, rate) in s.names.iter().zip(&s.rates) {
-        let x = dev::phase_from_rate(rate, s.tau0)?;
+    // Each column's phase, once: the curves and the fit both read it.
+    let phases = s
+        .rates
+        .iter()
+        .map(|rate| dev::phase_from_rate(rate, s.tau0))
+        .collect::<Result<Vec<_>, _>>()?;
+    for ((name, rate), x) in s.names.iter().zip(&s.rates).zip(&phases) {
         for &k in kinds {
-            let points = dev::curve(k, &x, s.tau0, grid)?;
+            let points = dev::curve(k, x, s.tau0, grid)?;
             curves.push(CurveOut {
                 column: name,
                 deviation: k,
@@ -365,9 +370,8 @@ fn allan(
     // The noise model per column, on its OADEV at 8 points per decade.
     let mut fits = Vec::new();
     if want_fit || kalibr.is_some() {
-        for (name, rate) in s.names.iter().zip(&s.rates) {
-            let x = dev::phase_from_rate(rate, s.tau0)?;
-            let c = dev::curve(dev::Kind::Oadev, &x, s.tau0, dev::Grid::PerDecade(8))?;
+        for (name, x) in s.names.iter().zip(&phases) {
+            let c = dev::curve(dev::Kind::Oadev, x, s.tau0, dev::Grid::PerDecade(8))?;
             match fit::fit(&c, x.len()) {
                 Some(t) => fits.push((name.clone(), t)),
                 None => eprintln!(

@@ -632,10 +632,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 }
             } else if segmented && rel == PUBLISH_AT {
                 if let Some((prev, lo, hi)) = self.dp.placed.take() {
-                    let half = (SEG * self.span / 2) as u64;
-                    let t =
-                        self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64);
-                    return Ok(Some(t));
+                    return Ok(Some(self.publish_placed(prev, lo, hi)));
                 }
             } else if segmented && rel == START_AT {
                 if let Some(first) = self.dp.next_first.take() {
@@ -655,14 +652,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let c = n / SEG as u64; // frames 0..c are complete
         self.learn_nu();
         let first = c - self.span as u64;
-        let half = (SEG * self.span / 2) as u64;
-        // The window placed at the last hop is published now: by then the
-        // terms of every τ up to its end have been added.
         let done = match self.cfg.placement {
+            // The window placed at the last hop is published now: by then
+            // the terms of every τ up to its end have been added.
             Placement::Centred => {
-                let done = self.pending.map(|(prev, lo, hi)| {
-                    self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
-                });
+                let done = self
+                    .pending
+                    .map(|(prev, lo, hi)| self.publish_placed(prev, lo, hi));
                 let (lo, hi) = self.centred(first, centred_adaptive);
                 self.pending = Some((first, lo, hi));
                 done
@@ -674,7 +670,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // sample carries all three (5 650 instructions on one
                 // sample at λ2 = 1024 when they did).
                 self.dp.next_first = Some(first);
-                let _ = half;
                 None
             }
         };
@@ -811,6 +806,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 *r += (f(s) / s0 - *r) / RHO_FRAMES;
             }
         }
+    }
+
+    /// Publish the window [lo, hi) (frames) of the span starting at frame
+    /// `prev`: its estimate describes the span's centre.
+    fn publish_placed(&mut self, prev: u64, lo: usize, hi: usize) -> u64 {
+        let half = (SEG * self.span / 2) as u64;
+        self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
     }
 
     /// Sum the exact window sums of frames [f0, f1), keep them, return t.

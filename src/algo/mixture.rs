@@ -16,7 +16,9 @@
 //!
 //! Ambiguity 1 (SH ≤ 0 for σ < 0.242 in whatever unit σ has: the weights
 //! turn negative, infinite or inverted) is [`Guard`]: refuse with a typed
-//! error, or floor SH. σ is in metres (the caller converts).
+//! error, or floor SH. σ is in metres (the caller converts); which σ
+//! (ambiguity 3: per axis, or the position block's RMS) is the caller's
+//! choice of what it passes to [`entropy_weights`].
 
 use nalgebra::{RealField, SMatrix, SVector};
 
@@ -42,16 +44,6 @@ pub enum Guard {
     /// Use max(SH, floor): every σ below the crossing gets the same,
     /// largest weight.
     Floor(f64),
-}
-
-/// Which σ enters SH (ambiguity 3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum SigmaSource {
-    /// One weight per position axis, from that axis's σ.
-    PerAxis,
-    /// One weight for the block, from √(trace(P_pos)/3).
-    RmsOfBlock,
 }
 
 /// Covariance reset after fusion (step 5, ambiguity 4).
