@@ -6,7 +6,7 @@
 //! (Q quantisation, N angle random walk, B bias instability, K rate random
 //! walk, R rate ramp). The model is linear in the five squared terms; each
 //! point is weighted by 1/Var(σ²) = EDF/(2σ⁴) with the EDF of the
-//! overlapping estimator for white noise (Greenhall), points from fewer
+//! overlapping estimator for white noise (SP 1065), points from fewer
 //! than `MIN_CLUSTERS` clusters left out, and the non-negative solution
 //! found exactly (every subset of the five terms, the feasible one with the
 //! least weighted residual). Each term carries its standard error from the
@@ -46,11 +46,11 @@ fn basis(tau: f64) -> [f64; 5] {
 }
 
 /// EDF of an overlapping Allan variance at factor m over n phase points,
-/// white FM (Greenhall & Riley's simple form).
-pub fn edf_oadev(n: usize, m: usize) -> f64 {
-    let (n, m) = (n as f64, m as f64);
-    ((3.0 * (n - 1.0) / (2.0 * m)) - 2.0 * (n - 2.0) / n).max(1.0)
-        * (4.0 * m * m / (4.0 * m * m + 5.0))
+/// white FM (SP 1065's simple form, `gyro_array::algo::allan::edf`), at
+/// least 1.
+fn edf_oadev(n: usize, m: usize) -> f64 {
+    use gyro_array::algo::allan::{edf, NoiseType};
+    edf(NoiseType::WhiteFm, n as u64, m as u64).map_or(1.0, |e| e.max(1.0))
 }
 
 /// Solve the weighted normal equations on the terms in `mask`; None if
