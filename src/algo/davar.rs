@@ -40,10 +40,12 @@
 //!   raise false alarms the way a white-noise threshold does. The
 //!   partitioning runs one row per sample after it starts, and the hop's
 //!   own work is spread too: the hop notes the new span, the last span's
-//!   window is placed `PLACE_AT` = 17 samples later, published on the
-//!   next sample, and the new segmentation starts on the one after, so
-//!   these estimates come one hop and 18 samples later (at λ2 = 1024 the
-//!   worst sample went from 6 920 to 3 880 instructions).
+//!   window is placed `PLACE_AT` = 17 samples later, its window sums are
+//!   computed over the next three samples (a third of the τ each) and
+//!   published on the last, and the new segmentation starts on the one
+//!   after, so these estimates come one hop and 20 samples later (at
+//!   λ2 = 1024 the worst sample went from 6 920 to 3 880 instructions
+//!   with one publication sample, and to 2 080 with three).
 //!
 //! # Reading of the paper (SEEDS.md seed 000)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
@@ -80,7 +82,9 @@ const CELLS: usize = 16;
 /// sample 4).
 const PLACE_AT: usize = 17;
 const PUBLISH_AT: usize = PLACE_AT + 1;
-const START_AT: usize = PUBLISH_AT + 1;
+/// Samples the publication's window sums are spread over.
+const PUB_PARTS: usize = 3;
+const START_AT: usize = PUBLISH_AT + PUB_PARTS;
 /// Memory of the lag-correlation estimates, frames.
 const RHO_FRAMES: f32 = 32.0;
 /// Prior for ν before enough frames are seen: 32 first differences of white
@@ -483,10 +487,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Samples between an estimate's time and the sample that published it
     /// (the price of a window around t): λ2/2 and one hop, the time the
     /// terms and the segmentation take to compute (segmented: and the
-    /// `PUBLISH_AT` samples by which its publication follows the hop).
+    /// samples by which its publication follows the hop, up to the last
+    /// of its `PUB_PARTS`).
     pub fn latency(&self) -> u64 {
         let publish = match self.cfg.placement {
-            Placement::Segmented => PUBLISH_AT as u64,
+            Placement::Segmented => (START_AT - 1) as u64,
             Placement::Centred => 0,
         };
         (SEG * self.span).div_ceil(2) as u64 + self.hop_phase as u64 + SEG as u64 + publish
@@ -630,9 +635,18 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     let (lo, hi) = self.segment_window(prev);
                     self.dp.placed = Some((prev, lo, hi));
                 }
-            } else if segmented && rel == PUBLISH_AT {
-                if let Some((prev, lo, hi)) = self.dp.placed.take() {
-                    return Ok(Some(self.publish_placed(prev, lo, hi)));
+            } else if segmented && (PUBLISH_AT..START_AT).contains(&rel) {
+                // The window sums, a third of the τ on each of three
+                // samples; the estimate is out on the last.
+                let part = rel - PUBLISH_AT;
+                let taus = T * part / PUB_PARTS..T * (part + 1) / PUB_PARTS;
+                if let Some((prev, lo, hi)) = self.dp.placed {
+                    let (t, f0, f1) = self.placed_window(prev, lo, hi);
+                    self.window_sums(f0, f1, taus);
+                    if part + 1 == PUB_PARTS {
+                        self.dp.placed = None;
+                        return Ok(Some(self.finish_publish(t, f0, f1)));
+                    }
                 }
             } else if segmented && rel == START_AT {
                 if let Some(first) = self.dp.next_first.take() {
@@ -782,14 +796,28 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         mut hi: u8,
     ) -> (usize, i32, i32, u64, u8) {
         let mask = CAP - 1;
-        for _ in 0..count {
-            let x0 = ring[i & mask];
-            let x1 = ring[i.wrapping_add(m) & mask];
-            let x2 = ring[i.wrapping_add(2 * m) & mask];
-            b += x1 - x0;
-            a += x2 - x1;
-            (lo, hi) = add_sq(lo, hi, a - b);
-            i = i.wrapping_add(1);
+        let mut left = count;
+        // In runs where none of the three samples wraps around the ring:
+        // plain slices, so the loop walks three pointers (about 12
+        // instructions a term on the Cortex-M4 instead of 22 with a mask
+        // per read).
+        while left > 0 {
+            let (i0, i1, i2) = (
+                i & mask,
+                i.wrapping_add(m) & mask,
+                i.wrapping_add(2 * m) & mask,
+            );
+            let run = left.min(CAP - i0).min(CAP - i1).min(CAP - i2);
+            let s0 = ring.get(i0..i0 + run).unwrap_or(&[]);
+            let s1 = ring.get(i1..i1 + run).unwrap_or(&[]);
+            let s2 = ring.get(i2..i2 + run).unwrap_or(&[]);
+            for ((x0, x1), x2) in s0.iter().zip(s1).zip(s2) {
+                b += x1 - x0;
+                a += x2 - x1;
+                (lo, hi) = add_sq(lo, hi, a - b);
+            }
+            i = i.wrapping_add(run);
+            left -= run;
         }
         (i, a, b, lo, hi)
     }
@@ -811,35 +839,53 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Publish the window [lo, hi) (frames) of the span starting at frame
     /// `prev`: its estimate describes the span's centre.
     fn publish_placed(&mut self, prev: u64, lo: usize, hi: usize) -> u64 {
+        let (t, f0, f1) = self.placed_window(prev, lo, hi);
+        self.publish(t, f0, f1)
+    }
+
+    /// The time and frames [f0, f1) of window [lo, hi) of the span at
+    /// `prev`.
+    fn placed_window(&self, prev: u64, lo: usize, hi: usize) -> (u64, u64, u64) {
         let half = (SEG * self.span / 2) as u64;
-        self.publish(SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
+        (SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
     }
 
     /// Sum the exact window sums of frames [f0, f1), keep them, return t.
     fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
-        let (s, e) = (f0 * SEG as u64, f1 * SEG as u64);
-        // Slots relative to f0's (blocks within FRAMES of it either way).
-        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
-        let slot = |b: u64| -> usize {
-            if b >= f0 {
-                let d = (b - f0) as usize; // < FRAMES: b is in or next to the window
-                if s_f0 + d >= FRAMES {
-                    s_f0 + d - FRAMES
-                } else {
-                    s_f0 + d
-                }
+        self.window_sums(f0, f1, 0..T);
+        self.finish_publish(t, f0, f1)
+    }
+
+    /// Slot of block `b`, from f0's slot `s_f0` (blocks within FRAMES of
+    /// f0 either way).
+    fn slot_near(f0: u64, s_f0: usize, b: u64) -> usize {
+        if b >= f0 {
+            let d = (b - f0) as usize; // < FRAMES: b is in or next to the window
+            if s_f0 + d >= FRAMES {
+                s_f0 + d - FRAMES
             } else {
-                let d = (f0 - b) as usize;
-                if s_f0 >= d {
-                    s_f0 - d
-                } else {
-                    s_f0 + FRAMES - d
-                }
+                s_f0 + d
             }
-        };
+        } else {
+            let d = (f0 - b) as usize;
+            if s_f0 >= d {
+                s_f0 - d
+            } else {
+                s_f0 + FRAMES - d
+            }
+        }
+    }
+
+    /// The whole-block sums of window [f0, f1) for the τ in `taus`, kept in
+    /// `win_q`/`win_sum`; the board spreads the τ over two samples. Until
+    /// [`Self::finish_publish`] the last window (`win_f0`) stays the base
+    /// of the update, for every τ alike.
+    fn window_sums(&mut self, f0: u64, f1: u64, taus: core::ops::Range<usize>) {
+        let e = f1 * SEG as u64;
+        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
+        let slot = |b: u64| Self::slot_near(f0, s_f0, b);
         let old_f0 = self.win_f0;
-        let mut acc = [0u128; T];
-        for (j, a) in acc.iter_mut().enumerate() {
+        for j in taus.start..taus.end.min(T) {
             let m = 1u64 << j;
             // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
             let q = (e - 2 * m) / SEG as u64;
@@ -865,13 +911,24 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             };
             self.win_q[j] = q;
             self.win_sum[j] = full;
-            *a = full + self.pre[j][slot(q).min(FRAMES - 1)] as u128;
+        }
+    }
+
+    /// Publish window [f0, f1) at time t from its whole-block sums (all τ
+    /// done by [`Self::window_sums`]) and the last blocks' prefixes.
+    fn finish_publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
+        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
+        let mut acc = [0u128; T];
+        for (j, a) in acc.iter_mut().enumerate() {
+            let q = self.win_q[j];
+            *a =
+                self.win_sum[j] + self.pre[j][Self::slot_near(f0, s_f0, q).min(FRAMES - 1)] as u128;
         }
         self.win_f0 = Some(f0);
         self.last = Some(Published {
             t,
-            start: s,
-            end: e,
+            start: f0 * SEG as u64,
+            end: f1 * SEG as u64,
             acc,
         });
         t
@@ -895,10 +952,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 .zip(hi_j.get(r).unwrap_or(&[]))
         };
         let (mut lo, mut hi) = (0u64, 0u32);
-        for (l, h) in run(s0..s0 + first_run).chain(run(0..count - first_run)) {
-            let (v, c) = lo.overflowing_add(*l);
-            lo = v;
-            hi += c as u32 + *h as u32;
+        // Two plain loops rather than a chained iterator (whose every step
+        // asks which half it is in).
+        for r in [s0..s0 + first_run, 0..count - first_run] {
+            for (l, h) in run(r) {
+                let (v, c) = lo.overflowing_add(*l);
+                lo = v;
+                hi += c as u32 + *h as u32;
+            }
         }
         ((hi as u128) << 64) | lo as u128
     }
@@ -944,9 +1005,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let m = 1u64 << j;
         let terms = (len + 1).saturating_sub(2 * m);
         match p.acc.get(j) {
+            // In f32 (the board's FPU): the exact integer sum and the term
+            // count rounded once each, one division, then the exact power
+            // of two 1/(2m²). Within 2 ulp of the f64 quotient (checked by
+            // `avar_in_f32_is_within_two_ulp_of_f64`), and a tenth of the
+            // soft-f64 cost on the Cortex-M4 (`cargo xtask bench`).
             Some(&acc) if terms > 0 => {
-                let mf = m as f64;
-                (acc as f64 / (2.0 * mf * mf * terms as f64)) as f32
+                let inv_2m2 = f32::from_bits((127 - 1 - 2 * j as u32) << 23);
+                acc as f32 / terms as f32 * inv_2m2
             }
             _ => 0.0,
         }
@@ -964,9 +1030,18 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let run = k.min(FRAMES - s0);
         let mut acc = 0.0f32;
         self.px[0] = 0.0;
-        let xs = self.x0.get(s0..s0 + run).unwrap_or(&[]).iter();
-        let xs = xs.chain(self.x0.get(..k - run).unwrap_or(&[]));
-        for (p, &x) in self.px[1..=k].iter_mut().zip(xs) {
+        // The span's frames wrap the ring at most once: two plain loops
+        // (a chained iterator cost ~1 000 more instructions at λ2 = 4096).
+        let (head, tail) = self.px[1..=k].split_at_mut(run.min(k));
+        let xs = (
+            self.x0.get(s0..s0 + run).unwrap_or(&[]),
+            self.x0.get(..k - run).unwrap_or(&[]),
+        );
+        for (p, &x) in head.iter_mut().zip(xs.0) {
+            acc += x;
+            *p = acc;
+        }
+        for (p, &x) in tail.iter_mut().zip(xs.1) {
             acc += x;
             *p = acc;
         }

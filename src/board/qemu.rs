@@ -46,15 +46,22 @@ impl Ticks {
         Self { _syst: syst }
     }
 
-    /// Ticks since start (monotonic, 64-bit). The wrap handler runs right
-    /// after a wrap, so a changed counter means the read raced it: retry.
+    /// Ticks since start (monotonic, 64-bit).
     pub fn now(&self) -> u64 {
-        loop {
-            let w = WRAPS.load(Ordering::Acquire);
-            let v = SYST::get_current();
-            if WRAPS.load(Ordering::Acquire) == w {
-                return w as u64 * (RELOAD as u64 + 1) + (RELOAD - v) as u64;
-            }
+        ticks()
+    }
+}
+
+/// Ticks of the SysTick started by [`Ticks::start`] (for code that cannot
+/// hold the [`Ticks`], such as a metered emulated bus). The wrap handler
+/// runs right after a wrap, so a changed counter means the read raced it:
+/// retry.
+pub fn ticks() -> u64 {
+    loop {
+        let w = WRAPS.load(Ordering::Acquire);
+        let v = SYST::get_current();
+        if WRAPS.load(Ordering::Acquire) == w {
+            return w as u64 * (RELOAD as u64 + 1) + (RELOAD - v) as u64;
         }
     }
 }

@@ -240,6 +240,23 @@ pub struct EmuBus<'a, const N: usize> {
     t_s: f32,
     /// Bytes exchanged so far (a bus-load figure for benchmarks).
     pub bytes: u32,
+    /// A benchmark's clock: when set, the time spent inside the bus
+    /// operations (the chip models standing in for the SPI peripheral and
+    /// the silicon) is summed in [`Meter`], so that it can be told apart
+    /// from the firmware's own instructions.
+    pub clock: Option<fn() -> u64>,
+    /// What [`EmuBus::clock`] measured.
+    pub meter: Meter,
+}
+
+/// Time inside the emulated bus's operations, in the clock's units, and
+/// how many operations were timed (each adds one clock read's overhead).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Meter {
+    /// Clock units inside the operations.
+    pub ticks: u64,
+    /// Operations timed.
+    pub ops: u32,
 }
 
 impl<'a, const N: usize> EmuBus<'a, N> {
@@ -251,7 +268,22 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             seen: [0; N],
             t_s: 0.0,
             bytes: 0,
+            clock: None,
+            meter: Meter::default(),
         }
+    }
+
+    /// Run one bus operation, timed when a clock is set.
+    fn metered<R>(&mut self, op: impl FnOnce(&mut Self) -> R) -> R {
+        let Some(clock) = self.clock else {
+            return op(self);
+        };
+        let t0 = clock();
+        let r = op(self);
+        let dt = clock().wrapping_sub(t0);
+        self.meter.ticks = self.meter.ticks.wrapping_add(dt);
+        self.meter.ops = self.meter.ops.wrapping_add(1);
+        r
     }
 
     /// Advance every chip by one sample period.
@@ -306,31 +338,39 @@ impl<const N: usize> ErrorType for EmuBus<'_, N> {
 
 impl<const N: usize> SpiBus<u8> for EmuBus<'_, N> {
     fn read(&mut self, words: &mut [u8]) -> Result<(), BusError> {
-        for w in words.iter_mut() {
-            *w = self.exchange(0)?;
-        }
-        Ok(())
+        self.metered(|b| {
+            for w in words.iter_mut() {
+                *w = b.exchange(0)?;
+            }
+            Ok(())
+        })
     }
     fn write(&mut self, words: &[u8]) -> Result<(), BusError> {
-        for w in words {
-            self.exchange(*w)?;
-        }
-        Ok(())
+        self.metered(|b| {
+            for w in words {
+                b.exchange(*w)?;
+            }
+            Ok(())
+        })
     }
     fn transfer(&mut self, read: &mut [u8], write: &[u8]) -> Result<(), BusError> {
-        for i in 0..read.len().max(write.len()) {
-            let r = self.exchange(write.get(i).copied().unwrap_or(0))?;
-            if let Some(slot) = read.get_mut(i) {
-                *slot = r;
+        self.metered(|b| {
+            for i in 0..read.len().max(write.len()) {
+                let r = b.exchange(write.get(i).copied().unwrap_or(0))?;
+                if let Some(slot) = read.get_mut(i) {
+                    *slot = r;
+                }
             }
-        }
-        Ok(())
+            Ok(())
+        })
     }
     fn transfer_in_place(&mut self, words: &mut [u8]) -> Result<(), BusError> {
-        for w in words.iter_mut() {
-            *w = self.exchange(*w)?;
-        }
-        Ok(())
+        self.metered(|b| {
+            for w in words.iter_mut() {
+                *w = b.exchange(*w)?;
+            }
+            Ok(())
+        })
     }
     fn flush(&mut self) -> Result<(), BusError> {
         Ok(())

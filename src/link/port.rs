@@ -17,7 +17,7 @@ use super::msg::{
     Sample, Settings, Status, MAX_GYROS,
 };
 use super::ring::ByteRing;
-use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use super::wire::{encode_with, Decoded, Decoder, FrameError, MAX_FRAME, MAX_PAYLOAD};
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Output, Pipeline};
 
@@ -66,6 +66,9 @@ pub struct Port<const TX: usize> {
     /// Per axis, the described sequence number last sent.
     noise_sent: [Option<u32>; 3],
     status_requested: bool,
+    /// Encoding scratch, kept so that a frame zeroes no buffers.
+    payload: [u8; MAX_PAYLOAD],
+    frame: [u8; MAX_FRAME],
 }
 
 impl<const TX: usize> Port<TX> {
@@ -80,6 +83,8 @@ impl<const TX: usize> Port<TX> {
             noise_turn: 0,
             noise_sent: [None; 3],
             status_requested: false,
+            payload: [0; MAX_PAYLOAD],
+            frame: [0; MAX_FRAME],
         }
     }
 
@@ -101,11 +106,10 @@ impl<const TX: usize> Port<TX> {
     /// Queue `frame` whole, or drop it (counted) if the queue lacks room.
     /// Either way it uses a link sequence number. True if queued.
     pub fn send(&mut self, frame: &Frame) -> bool {
-        let mut buf = [0u8; MAX_FRAME];
         let seq = self.link_seq;
         self.link_seq = self.link_seq.wrapping_add(1);
-        let ok = match encode(seq, frame, &mut buf) {
-            Ok(n) => self.tx.push(buf.get(..n).unwrap_or(&[])),
+        let ok = match encode_with(seq, frame, &mut self.payload, &mut self.frame) {
+            Ok(n) => self.tx.push(self.frame.get(..n).unwrap_or(&[])),
             Err(_) => false,
         };
         if ok {

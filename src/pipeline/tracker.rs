@@ -22,10 +22,11 @@ pub const fn config(lambda2: u16) -> DavarConfig {
 
 /// The three axes' hop phases. Each axis's heavy samples are the hop and
 /// the τ terms after it (samples 0–8 of its hop) and the placement,
-/// publication and segmentation start (17–19); this stagger keeps them
-/// apart best of those measured (`cargo xtask bench`, board tracker:
-/// worst 5 480 instructions on one sample; 6 720 with hops 11 apart).
-pub const HOP_PHASES: [u8; 3] = [1, 3, 29];
+/// publication and segmentation start (17–21). Chosen by measuring one
+/// axis's cost at every sample (`cargo xtask bench` input, stationary and
+/// with a variance step) and taking the stagger whose worst 3-axis sample
+/// is least: [1, 12, 22]; the [1, 3, 29] used before came to 5 480.
+pub const HOP_PHASES: [u8; 3] = [1, 12, 22];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's
 /// temporaries reuse one frame.

@@ -114,9 +114,9 @@ fn nothing_is_published_before_the_span_fills() {
         assert!(d.estimate().is_none());
     }
     // 25 frames of span: its segmentation runs over the hop after frame 25
-    // ends, and the window is published one hop and PUBLISH_AT (18)
-    // samples later.
-    for i in 800..850 {
+    // ends, and the window is published one hop and 20 samples later (its
+    // sums are spread over samples 18, 19 and 20 after the hop).
+    for i in 800..852 {
         assert_eq!(d.push(0).unwrap(), None, "sample {i}");
     }
     assert_eq!(d.push(0).unwrap(), Some(400));
@@ -382,4 +382,36 @@ fn ln_fast_accuracy() {
         bits += 61;
     }
     assert!(worst < 8e-5, "{worst}");
+}
+
+/// The published Allan variance is computed in f32 (one rounding of the
+/// exact sum, one of the term count, one division, an exact power of two):
+/// within 2 ulp of the f64 quotient over sums from 1 to 2^100, every τ and
+/// term counts up to 2^16.
+#[test]
+fn avar_in_f32_is_within_two_ulp_of_f64() {
+    let mut rng = Rng::new(21);
+    let mut worst = 0u32;
+    for _ in 0..20_000 {
+        let j = (rng.next_u32() % 8) as usize;
+        let m = 1u64 << j;
+        let terms = 1 + u64::from(rng.next_u32() % 65_536);
+        let bits = rng.next_u32() % 100;
+        let acc = (u128::from(rng.next_u32()) << 64 | u128::from(rng.next_u32()) << 32)
+            >> (128 - 1 - bits)
+            | 1;
+        let mut p = Published::<8> {
+            t: 0,
+            start: 0,
+            end: terms - 1 + 2 * m,
+            acc: [0; 8],
+        };
+        p.acc[j] = acc;
+        let got = D::avar_of(&p, j);
+        let mf = m as f64;
+        let want = (acc as f64 / (2.0 * mf * mf * terms as f64)) as f32;
+        let ulp = (got.to_bits() as i64 - want.to_bits() as i64).unsigned_abs() as u32;
+        worst = worst.max(ulp);
+    }
+    assert!(worst <= 2, "worst {worst} ulp");
 }
