@@ -13,11 +13,13 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, Command, Frame, FusionMethod, GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject,
-    Sample, Settings, Status, MAX_GYROS,
+    Ack, Command, Frame, FrameRef, FusionMethod, GyroStatus, LinkCounters, Mode, Noise, Op, Raw,
+    Reject, Sample, Settings, Status, MAX_GYROS,
 };
 use super::ring::ByteRing;
-use super::wire::{encode_with, Decoded, Decoder, FrameError, MAX_FRAME, MAX_PAYLOAD};
+use super::wire::{
+    encode_payload, frame_payload, framed_len, Decoded, Decoder, FrameError, MAX_FRAME, MAX_PAYLOAD,
+};
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Output, Pipeline};
 
@@ -106,10 +108,27 @@ impl<const TX: usize> Port<TX> {
     /// Queue `frame` whole, or drop it (counted) if the queue lacks room.
     /// Either way it uses a link sequence number. True if queued.
     pub fn send(&mut self, frame: &Frame) -> bool {
+        self.send_ref(frame.as_ref())
+    }
+
+    /// [`Port::send`] of a borrowed frame.
+    pub fn send_ref(&mut self, frame: FrameRef<'_>) -> bool {
         let seq = self.link_seq;
         self.link_seq = self.link_seq.wrapping_add(1);
-        let ok = match encode_with(seq, frame, &mut self.payload, &mut self.frame) {
-            Ok(n) => self.tx.push(self.frame.get(..n).unwrap_or(&[])),
+        // Straight into the queue where it has the room in one piece (no
+        // copy); else through the scratch frame, which the queue takes in
+        // two pieces around its end.
+        let ok = match encode_payload(seq, &frame, &mut self.payload) {
+            Ok(k) => {
+                let payload = self.payload.get(..k).unwrap_or(&[]);
+                if self.tx.tail_mut().len() >= framed_len(k) {
+                    let n = frame_payload(payload, self.tx.tail_mut());
+                    n.map(|n| self.tx.commit(n)).is_ok()
+                } else {
+                    frame_payload(payload, &mut self.frame)
+                        .is_ok_and(|n| self.tx.push(self.frame.get(..n).unwrap_or(&[])))
+                }
+            }
             Err(_) => false,
         };
         if ok {
@@ -138,7 +157,7 @@ impl<const TX: usize> Port<TX> {
         for h in pipe.health().iter().take(MAX_GYROS) {
             let _ = health.push(h.flags);
         }
-        let frame = match self.settings.mode {
+        match self.settings.mode {
             Mode::Fused => {
                 let mut s = Sample {
                     seq: out.seq,
@@ -161,22 +180,22 @@ impl<const TX: usize> Port<TX> {
                 // Bit 7: no static calibration record in use.
                 s.degraded |= u8::from(!pipe.calibrated()) << 7;
                 s.noise = self.next_noise(noise);
-                Frame::Sample(s)
+                self.send_ref(FrameRef::Sample(&s));
             }
             Mode::Raw => {
                 let mut rates = Vec::<[f32; 3], MAX_GYROS>::new();
                 for r in out.rate_dps.iter().take(MAX_GYROS) {
                     let _ = rates.push(*r);
                 }
-                Frame::Raw(Raw {
+                let r = Raw {
                     seq: out.seq,
                     t_us,
                     rate_dps: rates,
                     health,
-                })
+                };
+                self.send_ref(FrameRef::Raw(&r));
             }
-        };
-        self.send(&frame);
+        }
     }
 
     /// The next axis (in turn) with an estimate not sent yet, finite.
@@ -326,7 +345,7 @@ impl<const TX: usize> Port<TX> {
         } else {
             self.counters.rejected = self.counters.rejected.wrapping_add(1);
         }
-        self.send(&Frame::Ack(Ack { id, result }));
+        self.send_ref(FrameRef::Ack(&Ack { id, result }));
     }
 
     fn apply<const N: usize>(&mut self, c: Command, pipe: &mut Pipeline<N>) -> Result<(), Reject> {

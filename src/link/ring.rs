@@ -59,6 +59,27 @@ impl<const N: usize> ByteRing<N> {
         true
     }
 
+    /// The free bytes right after the queued ones, up to the end of the
+    /// buffer or the oldest queued byte: a frame can be written here in
+    /// place and [`ByteRing::commit`]ted, with no copy.
+    pub fn tail_mut(&mut self) -> &mut [u8] {
+        let tail = (self.head + self.len) % N.max(1);
+        let end = if tail >= self.head && self.len < N {
+            N
+        } else {
+            self.head
+        };
+        let end = if self.len == N { tail } else { end };
+        self.buf.get_mut(tail..end).unwrap_or(&mut [])
+    }
+
+    /// Queue the first `n` bytes of [`ByteRing::tail_mut`] (at most what
+    /// it offered).
+    pub fn commit(&mut self, n: usize) {
+        let n = n.min(self.tail_mut().len());
+        self.len += n;
+    }
+
     /// The oldest queued bytes that are contiguous in the ring.
     pub fn front(&self) -> &[u8] {
         let end = (self.head + self.len).min(N);
@@ -91,8 +112,17 @@ mod tests {
                     x
                 })
                 .collect();
-            let ok = r.push(&bytes);
+            // Every other frame written in place where it fits whole.
+            let in_place = step % 2 == 0 && r.tail_mut().len() >= n;
+            let ok = if in_place {
+                r.tail_mut()[..n].copy_from_slice(&bytes);
+                r.commit(n);
+                true
+            } else {
+                r.push(&bytes)
+            };
             assert_eq!(ok, m.len() + n <= 37);
+            assert!(r.tail_mut().len() <= r.free());
             if ok {
                 m.extend(&bytes);
             }

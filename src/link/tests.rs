@@ -127,6 +127,25 @@ fn every_frame_kind_round_trips() {
     }
 }
 
+#[test]
+fn frame_ref_encodes_as_the_frame() {
+    let frames = [
+        big_sample(5),
+        big_raw(3),
+        big_status(5),
+        Frame::Ack(Ack {
+            id: Some(2),
+            result: Err(Reject::OutOfRange),
+        }),
+    ];
+    for f in &frames {
+        let (mut a, mut b) = ([0u8; MAX_FRAME], [0u8; MAX_FRAME]);
+        let n = encode(9, f, &mut a).unwrap();
+        let m = encode(9, &f.as_ref(), &mut b).unwrap();
+        assert_eq!(a[..n], b[..m], "{f:?}");
+    }
+}
+
 /// The largest frames the board (5 gyros) sends at 1 kHz fit the budget
 /// with room for an acknowledgement in the same period; printed for the
 /// specification.
@@ -441,4 +460,54 @@ fn the_specification_examples_are_what_the_code_sends() {
         buf[..n],
         [0x03, 0x02, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x3c, 0x26, 0x00]
     );
+}
+
+proptest::proptest! {
+    /// Our COBS encoder writes what the cobs crate writes, for inputs with
+    /// zeros anywhere and non-zero runs past 254 (the block limit), and
+    /// the crate decodes it back.
+    #[test]
+    fn cobs_encode_is_the_cobs_crates(
+        runs in proptest::collection::vec((0usize..300, proptest::bool::ANY), 0..6),
+        fill in 1u8..=255,
+    ) {
+        let mut src = std::vec::Vec::new();
+        for (len, zero) in runs {
+            src.extend(std::iter::repeat_n(fill, len));
+            if zero {
+                src.push(0);
+            }
+        }
+        let mut want = vec![0u8; src.len() + src.len() / 254 + 2];
+        let n = cobs::try_encode(&src, &mut want).unwrap();
+        let mut got = vec![0u8; src.len() + src.len() / 254 + 2];
+        let m = super::wire::cobs_encode(&src, &mut got).unwrap();
+        proptest::prop_assert_eq!(&got[..m], &want[..n]);
+        if !src.is_empty() {
+            let mut back = vec![0u8; src.len() + 1];
+            let k = cobs::decode(&got[..m], &mut back).unwrap();
+            proptest::prop_assert_eq!(&back[..k], &src[..]);
+        }
+        // One byte short is refused, never written past.
+        if m > 0 {
+            proptest::prop_assert!(super::wire::cobs_encode(&src, &mut got[..m - 1]).is_none());
+        }
+    }
+}
+
+/// The block limit exactly: non-zero runs of every length around 254 and
+/// 508, with and without a zero after them.
+#[test]
+fn cobs_encode_matches_the_crate_at_every_block_edge() {
+    for len in (1..=4).chain(250..=260).chain(505..=511) {
+        for tail in [None, Some(0u8), Some(7)] {
+            let mut src = vec![0x5Au8; len];
+            src.extend(tail);
+            let mut want = vec![0u8; src.len() + src.len() / 254 + 2];
+            let n = cobs::try_encode(&src, &mut want).unwrap();
+            let mut got = vec![0u8; want.len()];
+            let m = super::wire::cobs_encode(&src, &mut got).unwrap();
+            assert_eq!(got[..m], want[..n], "len {len} tail {tail:?}");
+        }
+    }
 }

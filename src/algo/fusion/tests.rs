@@ -565,3 +565,34 @@ fn two_of_four_chips_wrong_together_give_a_held_flagged_output() {
     let r = f.fuse(&mut st, &[1.02, 21.0, 1.05, 0.97], 0b1111).unwrap();
     assert!(!r.fallback && (r.rate_dps - 1.0).abs() < 0.1, "{r:?}");
 }
+
+/// `used` reads w > 0 off the weights' bits: the same as the float compare
+/// for zeros of both signs, subnormals, infinities and NaNs.
+#[test]
+fn used_agrees_with_the_float_compare() {
+    let odd = [
+        0.0f32,
+        -0.0,
+        f32::MIN_POSITIVE / 2.0,
+        -f32::MIN_POSITIVE / 2.0,
+        1.0,
+        -1.0,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        -f32::NAN,
+        f32::MAX,
+    ];
+    for &a in &odd {
+        for &b in &odd {
+            let f = Fused::<2> {
+                rate_dps: 0.0,
+                weights: [a, b],
+                rejected: 0,
+                fallback: false,
+            };
+            let want = u8::from(a > 0.0) | u8::from(b > 0.0) << 1;
+            assert_eq!(f.used(), want, "{a} {b}");
+        }
+    }
+}
