@@ -98,6 +98,13 @@ pub struct Point {
     /// Fewer than [`MIN_CLUSTERS`] clusters of m samples: a point to read
     /// with care (few degrees of freedom).
     pub few_clusters: bool,
+    /// Equivalent degrees of freedom ([`crate::edf::of`]: Greenhall's
+    /// algorithm, SP 1065 Table 7 for TOTDEV) for `alpha`, or where that
+    /// is None the α identified at the nearest shorter τ.
+    pub edf: Option<f64>,
+    /// The confidence interval's bounds at [`curve_with`]'s confidence.
+    pub lo: Option<f64>,
+    pub hi: Option<f64>,
 }
 
 /// See [`Point::few_clusters`].
@@ -219,6 +226,9 @@ pub fn deviation(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, De
         terms,
         alpha: None,
         few_clusters: n / m < MIN_CLUSTERS,
+        edf: None,
+        lo: None,
+        hi: None,
     })
 }
 
@@ -304,15 +314,48 @@ impl Grid {
     }
 }
 
-/// The deviation over a grid (factors past the data's reach are left out).
+/// The deviation over a grid (factors past the data's reach are left out),
+/// with 1σ intervals (confidence 0.683, exact χ²).
 pub fn curve(kind: Kind, x: &[f64], tau0: f64, grid: Grid) -> Result<Vec<Point>, DevError> {
+    curve_with(
+        kind,
+        x,
+        tau0,
+        grid,
+        crate::edf::ONE_SIGMA,
+        crate::edf::Chi2::Exact,
+    )
+}
+
+/// [`curve`] with intervals at confidence `cf` and χ² quantiles by
+/// `chi2`. A point whose noise type cannot be identified (fewer than 30
+/// decimated points) takes the last identified at a shorter τ for its EDF,
+/// as the slope of the curve changes slowly there; none before the first.
+pub fn curve_with(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    grid: Grid,
+    cf: f64,
+    chi2: crate::edf::Chi2,
+) -> Result<Vec<Point>, DevError> {
     check(x, tau0)?;
+    let mut last_alpha = None;
     grid.factors(kind.max_factor(x.len()))
         .into_iter()
         .map(|m| {
-            deviation(kind, x, tau0, m).map(|p| Point {
-                alpha: noise_alpha(x, m),
-                ..p
+            deviation(kind, x, tau0, m).map(|p| {
+                let alpha = noise_alpha(x, m);
+                last_alpha = alpha.or(last_alpha);
+                let edf = last_alpha.and_then(|a| crate::edf::of(kind, a, m, x.len()));
+                let ci = edf.and_then(|e| crate::edf::interval_with(p.dev, e, cf, chi2));
+                Point {
+                    alpha,
+                    edf,
+                    lo: ci.map(|c| c.0),
+                    hi: ci.map(|c| c.1),
+                    ..p
+                }
             })
         })
         .collect()

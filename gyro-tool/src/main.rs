@@ -17,6 +17,7 @@
 
 mod analyse;
 mod dev;
+mod edf;
 mod fit;
 mod plot;
 mod source;
@@ -143,7 +144,22 @@ enum Cmd {
         /// Draw the curves (and the fits) as SVG.
         #[arg(long)]
         svg: Option<PathBuf>,
+        /// Confidence of the intervals (default 1σ, 0.6827: Stable32's
+        /// "0.683").
+        #[arg(long, default_value_t = edf::ONE_SIGMA, value_parser = confidence_arg)]
+        confidence: f64,
+        /// χ² quantiles of the intervals: exact, or as Stable32 computes
+        /// them (an approximation beyond EDF 100, to reproduce its tables).
+        #[arg(long, value_enum, default_value = "exact")]
+        chi2: edf::Chi2,
     },
+}
+
+fn confidence_arg(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!("{s}: the confidence must be a number in (0, 1)")),
+    }
 }
 
 #[derive(clap::Args)]
@@ -251,6 +267,8 @@ fn main() -> ExitCode {
             fit,
             kalibr,
             svg,
+            confidence,
+            chi2,
         } => allan(
             &file,
             &columns,
@@ -262,6 +280,7 @@ fn main() -> ExitCode {
             format,
             out,
             (fit, kalibr, svg),
+            (confidence, chi2),
         ),
     };
     match r {
@@ -329,6 +348,7 @@ fn allan(
     format: OutFormat,
     out: Option<PathBuf>,
     (want_fit, kalibr, svg): (bool, Option<PathBuf>, Option<PathBuf>),
+    (cf, chi2): (f64, edf::Chi2),
 ) -> Res<bool> {
     let s = table::read(file, columns, time, tau0, unit, lsb)?;
     for (line, step) in &s.gaps {
@@ -353,7 +373,7 @@ fn allan(
         .collect::<Result<Vec<_>, _>>()?;
     for ((name, rate), x) in s.names.iter().zip(&s.rates).zip(&phases) {
         for &k in kinds {
-            let points = dev::curve(k, x, s.tau0, grid)?;
+            let points = dev::curve_with(k, x, s.tau0, grid, cf, chi2)?;
             curves.push(CurveOut {
                 column: name,
                 deviation: k,
@@ -449,6 +469,9 @@ fn allan(
                 "terms",
                 "alpha",
                 "few_clusters",
+                "edf",
+                "lo",
+                "hi",
             ])?;
             for cv in &curves {
                 for p in &cv.points {
@@ -462,6 +485,9 @@ fn allan(
                         p.terms.to_string(),
                         p.alpha.map_or(String::new(), |a| a.to_string()),
                         p.few_clusters.to_string(),
+                        p.edf.map_or(String::new(), |e| format!("{e:e}")),
+                        p.lo.map_or(String::new(), |v| format!("{v:e}")),
+                        p.hi.map_or(String::new(), |v| format!("{v:e}")),
                     ])?;
                 }
             }
@@ -480,16 +506,20 @@ fn allan(
                 )?;
                 writeln!(
                     w,
-                    "{:>10} {:>14} {:>14} {:>9} {:>6}",
-                    "m", "tau (s)", "deviation", "terms", "alpha"
+                    "{:>10} {:>14} {:>14} {:>14} {:>14} {:>12} {:>9} {:>6}",
+                    "m", "tau (s)", "min", "deviation", "max", "edf", "terms", "alpha"
                 )?;
+                let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.6e}"));
                 for p in &cv.points {
                     writeln!(
                         w,
-                        "{:>10} {:>14.6e} {:>14.6e} {:>9} {:>6}{}",
+                        "{:>10} {:>14.6e} {:>14} {:>14.6e} {:>14} {:>12} {:>9} {:>6}{}",
                         p.m,
                         p.tau,
+                        opt(p.lo),
                         p.dev,
+                        opt(p.hi),
+                        p.edf.map_or("-".to_string(), |e| format!("{e:.4}")),
                         p.terms,
                         p.alpha.map_or("-".to_string(), |a| a.to_string()),
                         if p.few_clusters { "  few clusters" } else { "" }

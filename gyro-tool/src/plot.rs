@@ -48,7 +48,12 @@ pub fn draw(
     let (t0, t1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.tau), b.max(p.tau)));
     let (lo, hi) = pts()
         .filter(|p| p.dev > 0.0)
-        .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.dev), b.max(p.dev)));
+        .fold((f64::MAX, 0.0f64), |(a, b), p| {
+            (
+                a.min(p.lo.unwrap_or(p.dev).max(p.dev / 10.0)),
+                b.max(p.hi.unwrap_or(p.dev).min(p.dev * 10.0)),
+            )
+        });
     if !(t1 > 0.0 && hi > 0.0) {
         return Err("nothing to plot".into());
     }
@@ -79,6 +84,14 @@ pub fn draw(
             ))?
             .label(c.label.clone())
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(2)));
+        // The confidence intervals, as bars.
+        chart.draw_series(c.points.iter().filter_map(|p| {
+            let (lo, hi) = (p.lo?, p.hi?);
+            Some(PathElement::new(
+                [(p.tau, lo), (p.tau, hi)],
+                col.stroke_width(1),
+            ))
+        }))?;
         chart.draw_series(c.points.iter().map(|p| {
             let style = if p.few_clusters {
                 col.stroke_width(1)

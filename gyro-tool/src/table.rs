@@ -122,31 +122,34 @@ pub fn read(
     let text = std::fs::read_to_string(path).map_err(|e| TableError::Io(path.to_path_buf(), e))?;
     let p = || path.to_path_buf();
     // Comma-separated if the header has a comma, else whitespace.
-    let mut lines = text
+    let head_line = text
         .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-    let (_, head) = lines.next().ok_or_else(|| TableError::NoHeader(p()))?;
-    let comma = head.contains(',');
-    let split = |l: &str| -> Vec<String> {
-        let mut r = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .delimiter(if comma { b',' } else { b' ' })
-            .flexible(true)
-            .from_reader(l.as_bytes());
-        r.records()
-            .next()
-            .and_then(Result::ok)
-            .map(|rec| {
-                rec.iter()
-                    .map(|f| f.trim().to_string())
-                    .filter(|f| comma || !f.is_empty())
-                    .collect()
-            })
-            .unwrap_or_default()
-    };
-    let header = split(head);
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'))
+        .ok_or_else(|| TableError::NoHeader(p()))?;
+    let comma = head_line.contains(',');
+    // One reader over the whole file (one per line cost 90 % of the time
+    // of a 360 000-line log): comment lines skipped, fields trimmed, and
+    // in whitespace mode the empty fields between repeated blanks dropped.
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .delimiter(if comma { b',' } else { b' ' })
+        .comment(Some(b'#'))
+        .flexible(true)
+        .from_reader(text.as_bytes());
+    let mut lines = reader.records().filter_map(|r| {
+        let rec = r.ok()?;
+        let ln = rec.position().map_or(0, |q| q.line() as usize);
+        let f: Vec<String> = rec
+            .iter()
+            .map(|f| f.trim().to_string())
+            .filter(|f| comma || !f.is_empty())
+            .collect();
+        // A line of blanks (or of empty fields only) is no record.
+        (!f.iter().all(String::is_empty)).then_some((ln, f))
+    });
+    let (_, header) = lines.next().ok_or_else(|| TableError::NoHeader(p()))?;
+
     let find = |c: &str| {
         header
             .iter()
@@ -161,8 +164,7 @@ pub fn read(
     };
     let mut rates = vec![Vec::new(); cols.len()];
     let mut times: Vec<(usize, f64)> = Vec::new();
-    for (ln, l) in lines {
-        let f = split(l);
+    for (ln, f) in lines {
         if f.len() != header.len() {
             return Err(TableError::Fields(p(), ln, f.len(), header.len()));
         }
