@@ -20,8 +20,10 @@ mod dev;
 mod edf;
 mod fit;
 mod plot;
+mod replay;
 mod source;
 mod summary;
+mod surface;
 mod table;
 
 use std::io::{Read, Write};
@@ -153,6 +155,91 @@ enum Cmd {
         #[arg(long, value_enum, default_value = "exact")]
         chi2: edf::Chi2,
     },
+    /// The E-DAVAR t–τ–σ surface of one column of a rate log (the board's
+    /// segmented window), with σ(τ0) and the window over time.
+    Davar {
+        #[command(flatten)]
+        log: LogArgs,
+        /// The column.
+        #[arg(long = "column", short = 'c')]
+        column: String,
+        /// The longest window λ2, samples (λ1 = λ2/2).
+        #[arg(long, value_enum, default_value = "1024")]
+        lambda2: surface::Lambda2,
+        /// The picture.
+        #[arg(long)]
+        svg: PathBuf,
+        /// Also the rows as CSV (t, window, σ per τ).
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
+    /// Replay the board's fusion over a multi-gyro log: one column per
+    /// chip, the same axis (at most 8).
+    Replay {
+        #[command(flatten)]
+        log: LogArgs,
+        /// The chips' columns (default: every column but the time column
+        /// and --truth).
+        #[arg(long = "column", short = 'c')]
+        columns: Vec<String>,
+        /// A reference rate column, if the log has one: errors are printed
+        /// against it.
+        #[arg(long)]
+        truth: Option<String>,
+        /// The picture.
+        #[arg(long)]
+        svg: PathBuf,
+        /// Also the fused rate and each chip's weight per sample, as CSV.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
+}
+
+/// A rate log and how to read it (shared by `davar` and `replay`).
+#[derive(clap::Args)]
+struct LogArgs {
+    /// The log: CSV or whitespace text with a header line.
+    file: PathBuf,
+    /// The time column, s (τ0 its median step).
+    #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
+    time: Option<String>,
+    /// Sample period, s (finite, in (0, 1e6]).
+    #[arg(long, value_parser = tau0_arg)]
+    tau0: Option<f64>,
+    /// Unit of the rate columns.
+    #[arg(long, value_enum, default_value = "dps")]
+    unit: table::Unit,
+    /// Counts per °/s, with `--unit lsb`.
+    #[arg(long)]
+    lsb_per_dps: Option<f64>,
+}
+
+impl LogArgs {
+    /// Read `columns`; with `missing`, empty cells are NaN.
+    fn read(&self, columns: &[String], missing: bool) -> Res<table::Series> {
+        let s = table::read_with(
+            &self.file,
+            columns,
+            self.time.as_deref(),
+            self.tau0,
+            (self.unit, self.lsb_per_dps),
+            missing,
+        )?;
+        for (line, step) in &s.gaps {
+            eprintln!(
+                "gyro: {}:{line}: gap of {step} s ({:.1} samples)",
+                self.file.display(),
+                step / s.tau0
+            );
+        }
+        Ok(s)
+    }
+
+    fn name(&self) -> String {
+        self.file
+            .file_name()
+            .map_or("log".into(), |f| f.to_string_lossy().into_owned())
+    }
 }
 
 fn confidence_arg(s: &str) -> Result<f64, String> {
@@ -282,6 +369,20 @@ fn main() -> ExitCode {
             (fit, kalibr, svg),
             (confidence, chi2),
         ),
+        Cmd::Davar {
+            log,
+            column,
+            lambda2,
+            svg,
+            csv,
+        } => davar(&log, &column, lambda2, &svg, csv.as_deref()),
+        Cmd::Replay {
+            log,
+            columns,
+            truth,
+            svg,
+            csv,
+        } => replay_log(&log, &columns, truth.as_deref(), &svg, csv.as_deref()),
     };
     match r {
         Ok(true) => ExitCode::SUCCESS,
@@ -322,6 +423,125 @@ fn tau0_arg(s: &str) -> Result<f64, String> {
     } else {
         Err(format!("{s}: the sample period must be in (0, 1e6] s"))
     }
+}
+
+/// `gyro davar`: the E-DAVAR surface of one column.
+fn davar(
+    log: &LogArgs,
+    column: &str,
+    l2: surface::Lambda2,
+    svg: &std::path::Path,
+    csv_out: Option<&std::path::Path>,
+) -> Res<bool> {
+    let s = log.read(&[column.to_string()], false)?;
+    let rate = s.rates.first().ok_or("no column")?;
+    let (rows, lsb, lambda2) = surface::surface(rate, s.tau0, l2)?;
+    let shortened = rows
+        .iter()
+        .filter(|r| ((r.end_s - r.start_s) / s.tau0).round() < f64::from(lambda2) - 32.0)
+        .count();
+    println!(
+        "{column}: {} samples at tau0 = {} s, E-DAVAR lambda2 = {lambda2}: {} estimates, window shortened in {shortened}; quantisation step {lsb:e} (adds {:.1e} to sigma^2(tau0))",
+        rate.len(),
+        short(s.tau0),
+        rows.len(),
+        lsb * lsb / 6.0
+    );
+    if let Some(p) = csv_out {
+        let mut w = csv::Writer::from_path(p)?;
+        let taus = rows.first().map_or(0, |r| r.adev.len());
+        let mut head = vec!["t_s".to_string(), "start_s".into(), "end_s".into()];
+        head.extend((0..taus).map(|j| format!("adev_tau{}", short(s.tau0 * f64::from(1u32 << j)))));
+        w.write_record(&head)?;
+        for r in &rows {
+            let mut rec = vec![
+                short(r.t_s).to_string(),
+                short(r.start_s).to_string(),
+                short(r.end_s).to_string(),
+            ];
+            rec.extend(r.adev.iter().map(|v| format!("{v:e}")));
+            w.write_record(&rec)?;
+        }
+        w.flush()?;
+    }
+    surface::draw(svg, &log.name(), "°/s", &rows, lambda2, s.tau0)?;
+    Ok(true)
+}
+
+/// `gyro replay`: the board's fusion over a multi-gyro log.
+fn replay_log(
+    log: &LogArgs,
+    columns: &[String],
+    truth: Option<&str>,
+    svg: &std::path::Path,
+    csv_out: Option<&std::path::Path>,
+) -> Res<bool> {
+    let mut s = log.read(columns, true)?;
+    let truth_col = match truth {
+        Some(t) => {
+            let i = s
+                .names
+                .iter()
+                .position(|n| n == t)
+                .map(Ok)
+                .unwrap_or_else(|| {
+                    // Not among the chips: read it on its own.
+                    let r = log.read(&[t.to_string()], false)?;
+                    s.names.push(t.to_string());
+                    s.rates.extend(r.rates);
+                    Ok::<usize, Box<dyn std::error::Error>>(s.names.len() - 1)
+                })?;
+            s.names.remove(i);
+            Some(s.rates.remove(i))
+        }
+        None => None,
+    };
+    let r = replay::replay(&s.rates)?;
+    let n = r.fused.len();
+    let valid = r.fused.iter().filter(|v| v.is_finite()).count();
+    println!(
+        "{} chips, {n} samples at tau0 = {} s: fused on {valid} samples",
+        s.rates.len(),
+        short(s.tau0)
+    );
+    for (c, name) in s.names.iter().enumerate() {
+        let err = truth_col.as_ref().map(|t| {
+            let e: Vec<f64> = (0..n)
+                .filter(|&i| r.weights[i][c] > 0.0)
+                .map(|i| s.rates[c][i] - t[i])
+                .collect();
+            (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
+        });
+        println!(
+            "  {name}: answered {} samples, in the fusion {}{}",
+            r.offered[c],
+            r.used[c],
+            err.map_or(String::new(), |e| format!(", error RMS while in {e:.4}"))
+        );
+    }
+    if let Some(t) = &truth_col {
+        let e: Vec<f64> = (0..n)
+            .filter(|&i| r.fused[i].is_finite())
+            .map(|i| r.fused[i] - t[i])
+            .collect();
+        let rms = (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt();
+        let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        println!("  fused: error RMS {rms:.4}, max {max:.4}");
+    }
+    if let Some(p) = csv_out {
+        let mut w = csv::Writer::from_path(p)?;
+        let mut head = vec!["t_s".to_string(), "fused".into()];
+        head.extend(s.names.iter().map(|n| format!("w_{n}")));
+        w.write_record(&head)?;
+        for i in 0..n {
+            let mut rec = vec![short(i as f64 * s.tau0).to_string(), r.fused[i].to_string()];
+            rec.extend((0..s.names.len()).map(|c| r.weights[i][c].to_string()));
+            w.write_record(&rec)?;
+        }
+        w.flush()?;
+    }
+    replay::draw(svg, &log.name(), &s.names, &s.rates, &r, s.tau0)?;
+    Ok(true)
 }
 
 /// One curve of `gyro allan`'s JSON output.

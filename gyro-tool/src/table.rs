@@ -110,6 +110,19 @@ pub fn read(
     unit: Unit,
     lsb_per_dps: Option<f64>,
 ) -> Result<Series, TableError> {
+    read_with(path, columns, time, tau0, (unit, lsb_per_dps), false)
+}
+
+/// [`read`], where with `missing` an empty or `nan` cell of a rate column
+/// reads as NaN (a chip that did not answer) instead of an error.
+pub fn read_with(
+    path: &Path,
+    columns: &[String],
+    time: Option<&str>,
+    tau0: Option<f64>,
+    (unit, lsb_per_dps): (Unit, Option<f64>),
+    missing: bool,
+) -> Result<Series, TableError> {
     let scale = match unit {
         Unit::Dps => 1.0,
         Unit::Rads => 180.0 / std::f64::consts::PI,
@@ -184,7 +197,8 @@ pub fn read(
             times.push((ln, v));
         }
         for (r, &c) in rates.iter_mut().zip(&cols) {
-            r.push(num(c)? * scale);
+            let absent = missing && (f[c].is_empty() || f[c].eq_ignore_ascii_case("nan"));
+            r.push(if absent { f64::NAN } else { num(c)? * scale });
         }
     }
     let n = rates.first().map_or(0, Vec::len);
