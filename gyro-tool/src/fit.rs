@@ -18,6 +18,10 @@ use crate::dev::Point;
 /// (their σ² has a few degrees of freedom: a handful of them decided K
 /// on 4 h logs, off by −14 to +150 %).
 pub use crate::dev::MIN_CLUSTERS;
+/// Points of at least this many clusters go into the fit, weighted by
+/// their EDF (16 read K 6 % lower on average on 4 h of the emulated
+/// ICM-42688-P; its longest τ carry K).
+const FIT_CLUSTERS: usize = 8;
 
 /// The model's terms, in the curve's rate unit (°/s below): Q in °, N in
 /// °/s·√s (= °/√s, ×60 for °/√h), B in °/s, K in °/s/√s, R in °/s².
@@ -33,6 +37,10 @@ pub struct Terms {
     /// touches the curve from below (the least value it could have), over
     /// the same points. An upper bound for each term, not an estimate.
     pub tangent: [f64; 5],
+    /// The term is visible in the curve: it carries at least half of the
+    /// fitted σ² at some fitted τ, and its value is more than twice its
+    /// standard error. A term that is not is an upper bound at best.
+    pub visible: [bool; 5],
 }
 
 fn basis(tau: f64) -> [f64; 5] {
@@ -124,28 +132,15 @@ fn solve(rows: &[([f64; 5], f64, f64)], mask: u8) -> Option<Solved> {
     Some((sol, inv, rss))
 }
 
-/// Fit the model to an overlapping Allan deviation curve of `n` phase
-/// points (rate samples + 1). None if fewer than two usable points.
-pub fn fit(curve: &[Point], n: usize) -> Option<Terms> {
-    let rows: Vec<([f64; 5], f64, f64)> = curve
-        .iter()
-        .filter(|p| n / p.m.max(1) >= MIN_CLUSTERS && p.dev > 0.0 && p.dev.is_finite())
-        .map(|p| {
-            let v = p.dev * p.dev;
-            let w = edf_oadev(n, p.m) / (2.0 * v * v);
-            (basis(p.tau), v, w)
-        })
-        .collect();
-    if rows.len() < 2 {
-        return None;
-    }
-    // Every subset: the feasible (all ≥ 0) one with the least residual.
+/// Every subset of the terms: the feasible (all ≥ 0) fit with the least
+/// weighted residual, and its mask.
+fn best_subset(rows: &[([f64; 5], f64, f64)]) -> Option<(Solved, u8)> {
     let mut best: Option<(Solved, u8)> = None;
     for mask in 1u8..32 {
         if mask.count_ones() as usize > rows.len() {
             continue;
         }
-        let Some(solved) = solve(&rows, mask) else {
+        let Some(solved) = solve(rows, mask) else {
             continue;
         };
         let feasible = (0..5).all(|i| mask & (1 << i) == 0 || solved.0[i] >= 0.0);
@@ -153,7 +148,46 @@ pub fn fit(curve: &[Point], n: usize) -> Option<Terms> {
             best = Some((solved, mask));
         }
     }
-    let ((sol, inv, rss), mask) = best?;
+    best
+}
+
+/// Fit the model to an overlapping Allan deviation curve of `n` phase
+/// points (rate samples + 1). None if fewer than two usable points.
+///
+/// The weights are 1/Var(σ²) = EDF/(2σ⁴) with each point's own EDF
+/// (Greenhall's, for its noise type; white FM's where it has none) and σ²
+/// from the fitted model, refitted until the weights settle (iteratively
+/// reweighted). Weights from the observed σ² favour the points that came
+/// out low, and with the white-FM EDF everywhere the few-cluster points at
+/// long τ weigh too much: together they read K 6 % low on average
+/// (`noise_terms_of_the_emulated_icm42688`).
+pub fn fit(curve: &[Point], n: usize) -> Option<Terms> {
+    let pts: Vec<(&Point, f64)> = curve
+        .iter()
+        .filter(|p| n / p.m.max(1) >= FIT_CLUSTERS && p.dev > 0.0 && p.dev.is_finite())
+        .map(|p| (p, p.edf.unwrap_or_else(|| edf_oadev(n, p.m)).max(1.0)))
+        .collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let mut rows: Vec<([f64; 5], f64, f64)> = pts
+        .iter()
+        .map(|(p, e)| {
+            let v = p.dev * p.dev;
+            (basis(p.tau), v, e / (2.0 * v * v))
+        })
+        .collect();
+    let mut best = best_subset(&rows)?;
+    for _ in 0..4 {
+        let sol = best.0 .0;
+        for ((x, v, w), (_, e)) in rows.iter_mut().zip(&pts) {
+            let model: f64 = (0..5).map(|k| x[k] * sol[k].max(0.0)).sum();
+            let m = if model > 0.0 { model } else { *v };
+            *w = e / (2.0 * m * m);
+        }
+        best = best_subset(&rows)?;
+    }
+    let ((sol, inv, rss), mask) = best;
     // Tangent readings: min over τ of the term that σ(τ) alone would need.
     let mut tangent = [f64::INFINITY; 5];
     for (x, v, _) in &rows {
@@ -184,6 +218,20 @@ pub fn fit(curve: &[Point], n: usize) -> Option<Terms> {
         } else {
             sdc.sqrt()
         };
+    }
+    for (i, vis) in t.visible.iter_mut().enumerate() {
+        // Judged on the points of at least MIN_CLUSTERS clusters: the
+        // longest τ also weigh in the fit, but a term that only they carry
+        // (a rate ramp out of a few clusters) is not seen.
+        let solid = rows
+            .iter()
+            .zip(&pts)
+            .filter(|(_, (p, _))| n / p.m.max(1) >= MIN_CLUSTERS);
+        let dominant = solid.map(|(r, _)| r).any(|(x, _, _)| {
+            let model: f64 = (0..5).map(|k| x[k] * sol[k].max(0.0)).sum();
+            model > 0.0 && x[i] * sol[i].max(0.0) >= 0.5 * model
+        });
+        *vis = mask & (1 << i) != 0 && dominant && t.value[i] > 2.0 * t.sd[i];
     }
     Some(t)
 }
@@ -241,5 +289,90 @@ mod tests {
         assert!(t.value[2] < 0.2 * n_true, "B {}", t.value[2]);
         let y = kalibr_yaml(&t, fs, "/imu0");
         assert!(y.contains("gyroscope_noise_density") && y.contains("update_rate: 100.000000"));
+    }
+
+    /// Four hours at 100 Hz of the emulated ICM-42688-P (`emu::noise`) of
+    /// `p` from seed `seed`, at rest: its OADEV fit.
+    fn fit_emulated(p: &gyro_array::emu::NoiseParams, seed: u64) -> Terms {
+        let (fs, secs) = (100.0f32, 4.0 * 3600.0f32);
+        let dt = 1.0 / fs;
+        let mut rng = gyro_array::emu::Rng::new(seed);
+        let mut axis = gyro_array::emu::noise::AxisNoise::default();
+        let rate: Vec<f64> = (0..(fs * secs) as usize)
+            .map(|_| f64::from(axis.step(p, &mut rng, 0.0, dt)))
+            .collect();
+        let x = phase_from_rate(&rate, f64::from(dt)).unwrap();
+        let c = curve(Kind::Oadev, &x, f64::from(dt), Grid::PerDecade(8)).unwrap();
+        fit(&c, x.len()).unwrap()
+    }
+
+    /// The noise terms of 4 h of the emulated ICM-42688-P with all three
+    /// of N, B and K visible in its model (0.168 °/√h; 5 °/h flicker; a
+    /// rate random walk of 40 °/h/√h, which crosses the floor at 74 s),
+    /// over five seeds: N within 2 %, B within 10 %, K within 10 %, each
+    /// flagged visible, and Q and R not. With the datasheet's 2 °/h/√h (it
+    /// would cross the floor at 8 h), K is not flagged visible.
+    /// `cargo test -p gyro-tool --profile host noise_terms -- --nocapture`
+    /// prints the table.
+    #[test]
+    fn noise_terms_of_the_emulated_icm42688() {
+        use gyro_array::emu::NoiseParams;
+        let p = NoiseParams {
+            bias_tau_s: 0.0,
+            rrw_deg_h_rt_h: 40.0,
+            ..NoiseParams::ICM42688
+        };
+        let truth = [
+            f64::from(p.arw_deg_rt_h),
+            f64::from(p.bias_instability_deg_h),
+            f64::from(p.rrw_deg_h_rt_h),
+        ];
+        // °/s·√s → °/√h, °/s → °/h, °/s/√s → °/h/√h.
+        let unit = [60.0, 3600.0, 3600.0 * 60.0];
+        println!("seed   N (deg/rt h)      B (deg/h)   K (deg/h/rt h)   visible Q N B K R");
+        // SEEDS=20 runs more seeds (printed and summarised; the assertions
+        // hold for the first five).
+        let last: u64 = std::env::var("SEEDS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(5);
+        let mut k_err = Vec::new();
+        for seed in 1..=last.max(5) {
+            let t = fit_emulated(&p, seed);
+            let v: Vec<f64> = (0..3).map(|k| t.value[k + 1] * unit[k]).collect();
+            let err: Vec<f64> = (0..3).map(|k| v[k] / truth[k] - 1.0).collect();
+            println!(
+                "{seed:>4} {:>8.4} ({:+.1} %) {:>6.3} ({:+.1} %) {:>7.2} ({:+.1} %)   {:?}",
+                v[0],
+                100.0 * err[0],
+                v[1],
+                100.0 * err[1],
+                v[2],
+                100.0 * err[2],
+                t.visible
+            );
+            k_err.push(err[2]);
+            if seed > 5 {
+                continue;
+            }
+            assert!(err[0].abs() < 0.02, "seed {seed}: N {}", v[0]);
+            assert!(err[1].abs() < 0.10, "seed {seed}: B {}", v[1]);
+            assert!(err[2].abs() < 0.10, "seed {seed}: K {}", v[2]);
+            assert_eq!(t.visible, [false, true, true, true, false], "seed {seed}");
+        }
+        let rms = (k_err.iter().map(|e| e * e).sum::<f64>() / k_err.len() as f64).sqrt();
+        let within = k_err.iter().filter(|e| e.abs() < 0.1).count();
+        println!(
+            "K over {} seeds: RMS error {:.1} %, {within} within 10 %",
+            k_err.len(),
+            100.0 * rms
+        );
+        let stock = NoiseParams {
+            bias_tau_s: 0.0,
+            ..NoiseParams::ICM42688
+        };
+        let t = fit_emulated(&stock, 1);
+        println!("K = 2 deg/h/rt h: visible {:?}", t.visible);
+        assert!(!t.visible[3], "K of 2 is not visible in 4 h");
     }
 }
