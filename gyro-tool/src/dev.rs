@@ -135,8 +135,53 @@ fn check(x: &[f64], tau0: f64) -> Result<(), DevError> {
 
 /// Deviation `kind` of phase `x` (sample period `tau0`, s) at averaging
 /// factor `m`.
+#[cfg_attr(not(test), allow(dead_code))]
 pub fn deviation(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, DevError> {
     check(x, tau0)?;
+    deviation_checked(kind, x, tau0, m)
+}
+
+/// Σ over i of (x[i + 2m] − 2x[i + m] + x[i])² for i in `from..to` by
+/// `stride`: three slices zipped, so the stride-1 loop vectorises.
+fn second_diff_sum(x: &[f64], m: usize, from: usize, to: usize, stride: usize) -> f64 {
+    if to <= from {
+        return 0.0;
+    }
+    let (a, b, c) = (
+        &x[from..to],
+        &x[from + m..to + m],
+        &x[from + 2 * m..to + 2 * m],
+    );
+    if stride == 1 {
+        // Four partial sums: the adds then need not wait on each other.
+        let mut acc = [0.0f64; 4];
+        let (ca, cb, cc) = (a.chunks_exact(4), b.chunks_exact(4), c.chunks_exact(4));
+        let rest: f64 = ca
+            .remainder()
+            .iter()
+            .zip(cb.remainder())
+            .zip(cc.remainder())
+            .map(|((p, q), r)| (r - 2.0 * q + p) * (r - 2.0 * q + p))
+            .sum();
+        for ((p, q), r) in ca.zip(cb).zip(cc) {
+            for l in 0..4 {
+                let d = r[l] - 2.0 * q[l] + p[l];
+                acc[l] += d * d;
+            }
+        }
+        acc.iter().sum::<f64>() + rest
+    } else {
+        a.iter()
+            .zip(b)
+            .zip(c)
+            .step_by(stride)
+            .map(|((p, q), r)| (r - 2.0 * q + p) * (r - 2.0 * q + p))
+            .sum()
+    }
+}
+
+/// [`deviation`] of phase already checked finite.
+fn deviation_checked(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, DevError> {
     if m == 0 {
         return Err(DevError::Factor);
     }
@@ -148,14 +193,9 @@ pub fn deviation(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, De
             if n < 2 * m + 1 {
                 return Err(DevError::TooShort);
             }
-            let (mut s, mut k) = (0.0, 0usize);
-            let mut i = 0;
-            while i + 2 * m < n {
-                let d = x[i + 2 * m] - 2.0 * x[i + m] + x[i];
-                s += d * d;
-                k += 1;
-                i += stride;
-            }
+            let span = n - 2 * m; // terms with stride 1
+            let k = span.div_ceil(stride);
+            let s = second_diff_sum(x, m, 0, span, stride);
             (s / (2.0 * k as f64 * tau * tau), k)
         }
         Kind::Mdev | Kind::Tdev => {
@@ -211,8 +251,16 @@ pub fn deviation(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, De
                 }
             };
             let mi = m as isize;
-            let mut s = 0.0;
-            for i in 1..(n as isize - 1) {
+            // The centres i in 1..n − 1 whose three points are all inside
+            // (m ≤ i ≤ n − 1 − m) in one vectorised sweep; the reflected
+            // ones at both ends point by point.
+            let (lo, hi) = (m.max(1), (n - 1).saturating_sub(m).max(m.max(1)));
+            let mut s = if hi > lo {
+                second_diff_sum(x, m, lo - m, hi - m, 1)
+            } else {
+                0.0
+            };
+            for i in (1..(n as isize - 1)).filter(|&i| (i as usize) < lo || (i as usize) >= hi) {
                 let d = at(i - mi) - 2.0 * at(i) + at(i + mi);
                 s += d * d;
             }
@@ -317,15 +365,14 @@ impl Grid {
 /// The deviation over a grid (factors past the data's reach are left out),
 /// with 1σ intervals (confidence 0.683, exact χ²).
 pub fn curve(kind: Kind, x: &[f64], tau0: f64, grid: Grid) -> Result<Vec<Point>, DevError> {
-    curve_with(
-        kind,
-        x,
-        tau0,
-        grid,
-        crate::edf::ONE_SIGMA,
-        crate::edf::Chi2::Exact,
-    )
+    let mut alphas = Alphas::new();
+    let ci = (crate::edf::ONE_SIGMA, crate::edf::Chi2::Exact);
+    curve_with(kind, x, tau0, grid, ci, &mut alphas)
 }
+
+/// The noise types already identified for one phase series, by factor m
+/// (the curves of several deviations share them).
+pub type Alphas = std::collections::HashMap<usize, Option<i32>>;
 
 /// [`curve`] with intervals at confidence `cf` and χ² quantiles by
 /// `chi2`. A point whose noise type cannot be identified (fewer than 30
@@ -336,18 +383,26 @@ pub fn curve_with(
     x: &[f64],
     tau0: f64,
     grid: Grid,
-    cf: f64,
-    chi2: crate::edf::Chi2,
+    (cf, chi2): (f64, crate::edf::Chi2),
+    alphas: &mut Alphas,
 ) -> Result<Vec<Point>, DevError> {
     check(x, tau0)?;
     let mut last_alpha = None;
     grid.factors(kind.max_factor(x.len()))
         .into_iter()
         .map(|m| {
-            deviation(kind, x, tau0, m).map(|p| {
-                let alpha = noise_alpha(x, m);
+            deviation_checked(kind, x, tau0, m).map(|p| {
+                let alpha = *alphas.entry(m).or_insert_with(|| noise_alpha(x, m));
                 last_alpha = alpha.or(last_alpha);
-                let edf = last_alpha.and_then(|a| crate::edf::of(kind, a, m, x.len()));
+                // The Allan family converges for α > −3 and its EDF tables
+                // stop at random-walk FM: a steeper identification (drift
+                // at the longest τ) is read as −2 there; Hadamard's go to −4.
+                let floor = if matches!(kind, Kind::Hdev | Kind::Ohdev) {
+                    -4
+                } else {
+                    -2
+                };
+                let edf = last_alpha.and_then(|a| crate::edf::of(kind, a.max(floor), m, x.len()));
                 let ci = edf.and_then(|e| crate::edf::interval_with(p.dev, e, cf, chi2));
                 Point {
                     alpha,

@@ -155,6 +155,32 @@ enum Cmd {
         #[arg(long, value_enum, default_value = "exact")]
         chi2: edf::Chi2,
     },
+    /// Write a rate log of an emulated chip at rest (`emu::noise`), one
+    /// axis: the analysis tools' test input, of any length.
+    Emulate {
+        /// The chip's noise model.
+        #[arg(long, value_enum, default_value = "icm42688")]
+        chip: EmuChip,
+        /// Length, hours.
+        #[arg(long, default_value_t = 1.0)]
+        hours: f64,
+        /// Sample rate, Hz.
+        #[arg(long, default_value_t = 100.0)]
+        hz: f64,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Flicker bias instability (a flat Allan floor) instead of the
+        /// default Gauss–Markov one.
+        #[arg(long)]
+        flicker: bool,
+        /// Rate random walk K, °/h/√h (default: the chip's).
+        #[arg(long)]
+        rrw: Option<f32>,
+        /// The log (one column, `z`, in °/s; τ0 = 1/hz).
+        #[arg(short, long)]
+        out: PathBuf,
+    },
     /// The E-DAVAR t–τ–σ surface of one column of a rate log (the board's
     /// segmented window), with σ(τ0) and the window over time.
     Davar {
@@ -193,6 +219,12 @@ enum Cmd {
         #[arg(long)]
         csv: Option<PathBuf>,
     },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum EmuChip {
+    Icm42688,
+    Adxrs453,
 }
 
 /// A rate log and how to read it (shared by `davar` and `replay`).
@@ -369,6 +401,15 @@ fn main() -> ExitCode {
             (fit, kalibr, svg),
             (confidence, chi2),
         ),
+        Cmd::Emulate {
+            chip,
+            hours,
+            hz,
+            seed,
+            flicker,
+            rrw,
+            out,
+        } => emulate(chip, hours, hz, seed, flicker, rrw, &out),
         Cmd::Davar {
             log,
             column,
@@ -423,6 +464,82 @@ fn tau0_arg(s: &str) -> Result<f64, String> {
     } else {
         Err(format!("{s}: the sample period must be in (0, 1e6] s"))
     }
+}
+
+/// `gyro emulate`: a log of an emulated chip at rest.
+fn emulate(
+    chip: EmuChip,
+    hours: f64,
+    hz: f64,
+    seed: u64,
+    flicker: bool,
+    rrw: Option<f32>,
+    out: &std::path::Path,
+) -> Res<bool> {
+    use gyro_array::emu::noise::AxisNoise;
+    use gyro_array::emu::{NoiseParams, Rng};
+    if !(hours > 0.0 && hours <= 1000.0 && hz > 0.0 && hz <= 1e5) {
+        return Err("hours must be in (0, 1000] and hz in (0, 1e5]".into());
+    }
+    let mut p = match chip {
+        EmuChip::Icm42688 => NoiseParams::ICM42688,
+        EmuChip::Adxrs453 => NoiseParams::ADXRS453,
+    };
+    if flicker {
+        p.bias_tau_s = 0.0;
+    }
+    if let Some(k) = rrw {
+        if !(k >= 0.0 && k.is_finite()) {
+            return Err("--rrw must be a finite K >= 0".into());
+        }
+        p.rrw_deg_h_rt_h = k;
+    }
+    let n = (hours * 3600.0 * hz).round() as u64;
+    let dt = (1.0 / hz) as f32;
+    let mut rng = Rng::new(seed);
+    let mut axis = AxisNoise::default();
+    let mut w = std::io::BufWriter::new(std::fs::File::create(out)?);
+    writeln!(
+        w,
+        "# gyro emulate: {chip:?} at rest, {hours} h at {hz} Hz, seed {seed}, N {} deg/rt h, B {} deg/h ({}), K {} deg/h/rt h",
+        p.arw_deg_rt_h,
+        p.bias_instability_deg_h,
+        if flicker { "flicker" } else { "Gauss-Markov" },
+        p.rrw_deg_h_rt_h
+    )?;
+    writeln!(w, "z")?;
+    let bar = if n >= 10_000_000 {
+        ProgressBar::new(n)
+    } else {
+        ProgressBar::hidden()
+    };
+    for i in 0..n {
+        writeln!(w, "{}", axis.step(&p, &mut rng, 0.0, dt))?;
+        if i % 1_000_000 == 0 {
+            bar.set_position(i);
+        }
+    }
+    bar.finish_and_clear();
+    w.flush()?;
+    eprintln!(
+        "gyro: wrote {n} samples to {} (tau0 = {} s)",
+        out.display(),
+        1.0 / hz
+    );
+    Ok(true)
+}
+
+/// Peak resident memory of this process, MiB (Linux; None elsewhere).
+fn peak_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: f64 = s
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()?;
+    Some(kb / 1024.0)
 }
 
 /// `gyro davar`: the E-DAVAR surface of one column.
@@ -570,7 +687,9 @@ fn allan(
     (want_fit, kalibr, svg): (bool, Option<PathBuf>, Option<PathBuf>),
     (cf, chi2): (f64, edf::Chi2),
 ) -> Res<bool> {
+    let started = Instant::now();
     let s = table::read(file, columns, time, tau0, unit, lsb)?;
+    let read_s = started.elapsed().as_secs_f64();
     for (line, step) in &s.gaps {
         eprintln!(
             "gyro: {}:{line}: gap of {step} s ({:.1} samples)",
@@ -592,8 +711,9 @@ fn allan(
         .map(|rate| dev::phase_from_rate(rate, s.tau0))
         .collect::<Result<Vec<_>, _>>()?;
     for ((name, rate), x) in s.names.iter().zip(&s.rates).zip(&phases) {
+        let mut alphas = dev::Alphas::new();
         for &k in kinds {
-            let points = dev::curve_with(k, x, s.tau0, grid, cf, chi2)?;
+            let points = dev::curve_with(k, x, s.tau0, grid, (cf, chi2), &mut alphas)?;
             curves.push(CurveOut {
                 column: name,
                 deviation: k,
@@ -631,7 +751,12 @@ fn allan(
         let cs: Vec<plot::Curve> = curves
             .iter()
             .map(|c| plot::Curve {
-                label: format!("{} {}", c.column, c.deviation.name().to_uppercase()),
+                // TDEV is a time (angle) deviation: its unit is on its label.
+                label: if c.deviation == dev::Kind::Tdev {
+                    format!("{} TDEV (deg, not deg/s)", c.column)
+                } else {
+                    format!("{} {}", c.column, c.deviation.name().to_uppercase())
+                },
                 points: &c.points,
             })
             .collect();
@@ -768,15 +893,24 @@ fn allan(
                 for (i, (n, k, u)) in units.iter().enumerate() {
                     writeln!(
                         w,
-                        "{n:>4} {:>14.6e} {:>12.3e} {:>16.6e}  {u}",
+                        "{n:>4} {:>14.6e} {:>12.3e} {:>16.6e}  {u}{}",
                         t.value[i] * k,
                         t.sd[i] * k,
-                        t.tangent[i] * k
+                        t.tangent[i] * k,
+                        if t.visible[i] { "  visible" } else { "" }
                     )?;
                 }
             }
         }
     }
+    // What the run cost: the check of a long log's handling.
+    eprintln!(
+        "gyro: {} samples x {} columns: read in {read_s:.1} s, analysed in {:.1} s in all; peak memory {}",
+        s.rates.first().map_or(0, Vec::len),
+        s.rates.len(),
+        started.elapsed().as_secs_f64(),
+        peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+    );
     Ok(true)
 }
 /// Every decoder result of a recording, and the decoder with its counts.

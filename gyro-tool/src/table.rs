@@ -41,6 +41,8 @@ pub enum TableError {
     Scale,
     /// Neither a sample period nor a time column with two samples.
     NoTau0,
+    /// A line could not be read as a record (file, line, why).
+    Record(PathBuf, usize, String),
 }
 
 impl fmt::Display for TableError {
@@ -48,6 +50,7 @@ impl fmt::Display for TableError {
         match self {
             TableError::Io(p, e) => write!(f, "{}: {e}", p.display()),
             TableError::NoHeader(p) => write!(f, "{}: no header line", p.display()),
+            TableError::Record(p, l, e) => write!(f, "{}:{l}: {e}", p.display()),
             TableError::NoColumn(p, c, have) => {
                 write!(
                     f,
@@ -132,26 +135,47 @@ pub fn read_with(
             _ => return Err(TableError::Scale),
         },
     };
-    let text = std::fs::read_to_string(path).map_err(|e| TableError::Io(path.to_path_buf(), e))?;
     let p = || path.to_path_buf();
+    let open = || {
+        std::fs::File::open(path)
+            .map(std::io::BufReader::new)
+            .map_err(|e| TableError::Io(path.to_path_buf(), e))
+    };
     // Comma-separated if the header has a comma, else whitespace.
-    let head_line = text
-        .lines()
-        .map(str::trim)
-        .find(|l| !l.is_empty() && !l.starts_with('#'))
-        .ok_or_else(|| TableError::NoHeader(p()))?;
+    let head_line = {
+        use std::io::BufRead;
+        let mut found = None;
+        for l in open()?.lines() {
+            let l = l.map_err(|e| TableError::Io(p(), e))?;
+            let l = l.trim();
+            if !l.is_empty() && !l.starts_with('#') {
+                found = Some(l.to_string());
+                break;
+            }
+        }
+        found.ok_or_else(|| TableError::NoHeader(p()))?
+    };
     let comma = head_line.contains(',');
-    // One reader over the whole file (one per line cost 90 % of the time
-    // of a 360 000-line log): comment lines skipped, fields trimmed, and
-    // in whitespace mode the empty fields between repeated blanks dropped.
+    // One reader over the whole file, streamed (one reader per line cost
+    // 90 % of the time of a 360 000-line log, and holding a 24 h log's text
+    // 2 GB): comment lines skipped, fields trimmed, and in whitespace mode
+    // the empty fields between repeated blanks dropped.
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .delimiter(if comma { b',' } else { b' ' })
         .comment(Some(b'#'))
         .flexible(true)
-        .from_reader(text.as_bytes());
+        .from_reader(open()?);
+    // A record that cannot be read (not UTF-8, an I/O error) is an error
+    // with its line, never skipped.
     let mut lines = reader.records().filter_map(|r| {
-        let rec = r.ok()?;
+        let rec = match r {
+            Ok(rec) => rec,
+            Err(e) => {
+                let ln = e.position().map_or(0, |q| q.line() as usize);
+                return Some(Err(TableError::Record(p(), ln, e.to_string())));
+            }
+        };
         let ln = rec.position().map_or(0, |q| q.line() as usize);
         let f: Vec<String> = rec
             .iter()
@@ -159,9 +183,9 @@ pub fn read_with(
             .filter(|f| comma || !f.is_empty())
             .collect();
         // A line of blanks (or of empty fields only) is no record.
-        (!f.iter().all(String::is_empty)).then_some((ln, f))
+        (!f.iter().all(String::is_empty)).then_some(Ok((ln, f)))
     });
-    let (_, header) = lines.next().ok_or_else(|| TableError::NoHeader(p()))?;
+    let (_, header) = lines.next().ok_or_else(|| TableError::NoHeader(p()))??;
 
     let find = |c: &str| {
         header
@@ -177,7 +201,8 @@ pub fn read_with(
     };
     let mut rates = vec![Vec::new(); cols.len()];
     let mut times: Vec<(usize, f64)> = Vec::new();
-    for (ln, f) in lines {
+    for line in lines {
+        let (ln, f) = line?;
         if f.len() != header.len() {
             return Err(TableError::Fields(p(), ln, f.len(), header.len()));
         }
