@@ -566,10 +566,10 @@ fn two_of_four_chips_wrong_together_give_a_held_flagged_output() {
     assert!(!r.fallback && (r.rate_dps - 1.0).abs() < 0.1, "{r:?}");
 }
 
-/// `used` reads w > 0 off the weights' bits: the same as the float compare
-/// for zeros of both signs, subnormals, infinities and NaNs.
+/// `used` is w > 0: zeros of both signs, NaN and negative weights are out;
+/// subnormal and infinite positive weights are in.
 #[test]
-fn used_agrees_with_the_float_compare() {
+fn used_is_the_positive_weights() {
     let odd = [
         0.0f32,
         -0.0,
