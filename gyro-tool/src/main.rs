@@ -104,25 +104,12 @@ enum Cmd {
     /// Allan-family deviations of a rate log: CSV or whitespace text with
     /// a header line, one column per series.
     Allan {
-        /// The log.
-        file: PathBuf,
+        #[command(flatten)]
+        log: LogArgs,
         /// Columns to analyse (repeat; default: every column but the time
         /// column).
         #[arg(long = "column", short = 'c')]
         columns: Vec<String>,
-        /// The time column, s: τ0 is its median step, and gaps (steps over
-        /// 1.5 τ0) and non-monotonic times are reported.
-        #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
-        time: Option<String>,
-        /// Sample period, s (finite, in (0, 1e6]).
-        #[arg(long, value_parser = tau0_arg)]
-        tau0: Option<f64>,
-        /// Unit of the rate columns.
-        #[arg(long, value_enum, default_value = "dps")]
-        unit: table::Unit,
-        /// Counts per °/s, with `--unit lsb`.
-        #[arg(long)]
-        lsb_per_dps: Option<f64>,
         /// Deviations, comma-separated.
         #[arg(long, value_enum, value_delimiter = ',', default_value = "oadev")]
         dev: Vec<dev::Kind>,
@@ -232,7 +219,8 @@ enum EmuChip {
 struct LogArgs {
     /// The log: CSV or whitespace text with a header line.
     file: PathBuf,
-    /// The time column, s (τ0 its median step).
+    /// The time column, s: τ0 is its median step, and gaps (steps over
+    /// 1.5 τ0) and non-monotonic times are reported.
     #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
     time: Option<String>,
     /// Sample period, s (finite, in (0, 1e6]).
@@ -373,12 +361,8 @@ fn main() -> ExitCode {
         Cmd::Decode { file, what, out } => decode(&file, what, out),
         Cmd::Analyse { file } => analyse::run(&file),
         Cmd::Allan {
-            file,
+            log,
             columns,
-            time,
-            tau0,
-            unit,
-            lsb_per_dps,
             dev,
             grid,
             format,
@@ -389,11 +373,11 @@ fn main() -> ExitCode {
             confidence,
             chi2,
         } => allan(
-            &file,
+            &log.file,
             &columns,
-            time.as_deref(),
-            tau0,
-            (unit, lsb_per_dps),
+            log.time.as_deref(),
+            log.tau0,
+            (log.unit, log.lsb_per_dps),
             &dev,
             grid,
             format,

@@ -16,13 +16,16 @@ pub struct Curve<'a> {
     pub points: &'a [Point],
 }
 
-const COLOURS: [RGBColor; 6] = [
+/// The curves' colours, in turn (also the replay's chips).
+pub const COLOURS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
     RGBColor(255, 127, 14),
     RGBColor(23, 190, 207),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
 ];
 
 fn model(t: &Terms, tau: f64) -> [f64; 5] {

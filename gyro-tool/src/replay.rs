@@ -19,6 +19,7 @@ use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use plotters::prelude::*;
 
+use crate::plot::COLOURS;
 use crate::Res;
 
 /// Most chips a replay takes (the firmware's fixed array size).
@@ -89,16 +90,6 @@ pub fn draw(
     r: &Replay,
     tau0: f64,
 ) -> Res<()> {
-    const COLOURS: [RGBColor; 8] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(127, 127, 127),
-        RGBColor(188, 189, 34),
-    ];
     let n = r.fused.len();
     let t = |i: usize| i as f64 * tau0;
     let span = 0.0..t(n.max(1));
@@ -127,7 +118,7 @@ pub fn draw(
         .build_cartesian_2d(span.clone(), (lo - pad)..(hi + pad))?;
     chart.configure_mesh().y_desc("rate").draw()?;
     for (c, col) in chips.iter().enumerate() {
-        let colour = COLOURS[c % 8];
+        let colour = COLOURS[c % COLOURS.len()];
         chart
             .draw_series(LineSeries::new(
                 col.iter()
@@ -173,7 +164,7 @@ pub fn draw(
                 .enumerate()
                 .step_by(stride)
                 .map(|(i, w)| (t(i), f64::from(w[c]))),
-            COLOURS[c % 8].stroke_width(2),
+            COLOURS[c % COLOURS.len()].stroke_width(2),
         ))?;
     }
 
@@ -218,7 +209,7 @@ pub fn draw(
                 j += 1;
             }
             let fill = match s {
-                2 => COLOURS[c % 8].filled(),
+                2 => COLOURS[c % COLOURS.len()].filled(),
                 1 => RGBColor(190, 190, 190).filled(),
                 _ => WHITE.filled(),
             };

@@ -66,6 +66,48 @@ fn ours_all(rate: &[f64], threads: usize) -> Vec<AdevPoint> {
     all
 }
 
+/// Run a timing script of allantools on `data`: its time (first line) and
+/// its (m, deviation) lines.
+fn allantools(py: &Path, script: &str, data: &Path) -> (f64, Vec<(u32, f64)>) {
+    let out = Command::new(py)
+        .args(["-c", script])
+        .arg(data)
+        .output()
+        .expect("run python");
+    if !out.status.success() {
+        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+        std::process::exit(1);
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut lines = text.lines();
+    let time: f64 = lines
+        .next()
+        .and_then(|l| l.trim().parse().ok())
+        .expect("time");
+    let devs = lines
+        .filter_map(|l| {
+            let mut it = l.split_whitespace();
+            Some((it.next()?.parse().ok()?, it.next()?.parse().ok()?))
+        })
+        .collect();
+    (time, devs)
+}
+
+/// The worst relative difference of `curve` (sorted by m) from
+/// allantools' points with the same m, and how many were compared.
+fn agreement(curve: &[AdevPoint], theirs: &[(u32, f64)]) -> (f64, usize) {
+    let (mut worst, mut compared) = (0.0f64, 0);
+    for &(m, d) in theirs {
+        // (Both curves are sorted by m.)
+        if let Ok(i) = curve.binary_search_by_key(&m, |p| p.m) {
+            let p = &curve[i];
+            worst = worst.max((p.adev() - d).abs() / d);
+            compared += 1;
+        }
+    }
+    (worst, compared)
+}
+
 const PY_ALL: &str = r#"
 import sys, time, numpy as np, allantools
 y = np.fromfile(sys.argv[1], dtype='<f8')
@@ -154,34 +196,8 @@ fn main() {
         .map(|(a, b)| ((a.avar - b.avar) / a.avar).abs())
         .fold(0.0, f64::max);
 
-    let out = Command::new(&py)
-        .args(["-c", PY])
-        .arg(&data)
-        .output()
-        .expect("run python");
-    if !out.status.success() {
-        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
-        std::process::exit(1);
-    }
-    let text = String::from_utf8_lossy(&out.stdout);
-    let mut lines = text.lines();
-    let theirs: f64 = lines
-        .next()
-        .and_then(|l| l.trim().parse().ok())
-        .expect("time");
-    let mut worst = 0.0f64;
-    let mut compared = 0;
-    for l in lines {
-        let mut it = l.split_whitespace();
-        let (Some(m), Some(d)) = (it.next(), it.next()) else {
-            continue;
-        };
-        let (m, d): (u32, f64) = (m.parse().expect("m"), d.parse().expect("dev"));
-        if let Some(p) = curve.iter().find(|p| p.m == m) {
-            worst = worst.max((p.adev() - d).abs() / d);
-            compared += 1;
-        }
-    }
+    let (theirs, ref_devs) = allantools(&py, PY, &data);
+    let (worst, compared) = agreement(curve, &ref_devs);
     println!(
         "OADEV, octave tau, {N} samples ({} tau), best of 3, same run:\n  \
          allantools {theirs:.3} s\n  ours, 1 thread  {best:.3} s: {:.1}x faster\n  \
@@ -213,34 +229,9 @@ fn main() {
         two = two.min(t0.elapsed().as_secs_f64());
         assert_eq!(c2.len(), curve.len());
     }
-    let out = Command::new(&py)
-        .args(["-c", PY_ALL])
-        .arg(&data)
-        .output()
-        .expect("run python");
+    let (theirs, ref_devs) = allantools(&py, PY_ALL, &data);
     let _ = std::fs::remove_file(&data);
-    if !out.status.success() {
-        eprintln!("{}", String::from_utf8_lossy(&out.stderr));
-        std::process::exit(1);
-    }
-    let text = String::from_utf8_lossy(&out.stdout);
-    let mut lines = text.lines();
-    let theirs: f64 = lines
-        .next()
-        .and_then(|l| l.trim().parse().ok())
-        .expect("time");
-    let (mut worst, mut compared) = (0.0f64, 0);
-    for l in lines {
-        let mut it = l.split_whitespace();
-        let (Some(m), Some(d)) = (it.next(), it.next()) else {
-            continue;
-        };
-        let (m, d): (u32, f64) = (m.parse().expect("m"), d.parse().expect("dev"));
-        if let Some(p) = curve.get(m as usize - 1).filter(|p| p.m == m) {
-            worst = worst.max((p.adev() - d).abs() / d);
-            compared += 1;
-        }
-    }
+    let (worst, compared) = agreement(&curve, &ref_devs);
     println!(
         "OADEV, every tau, {N_ALL} samples ({} tau), same run:\n  \
          allantools {theirs:.3} s\n  ours, 1 thread  {one:.3} s: {:.1}x faster\n  \
