@@ -388,7 +388,7 @@ pub struct ChipFilters<const N: usize> {
 /// One chip's local filter of [rate, bias], both random walks: the
 /// general filter's steps (`algo::kalman::Kf`, predict with F = I and a
 /// diagonal Q, the Joseph update of one scalar reading) written out for two
-/// states, P kept as its three distinct elements: 2 500–3 800 instructions
+/// states, P kept as its three distinct elements: about 2 500 and 3 800 instructions
 /// per 3-axis sample (N = 4) where the general filter cost 8 900–10 200;
 /// equal to it to f32 rounding (`chip_filter_equals_the_general_filter`).
 #[derive(Clone, Copy, Debug, PartialEq)]

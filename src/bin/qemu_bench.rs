@@ -317,6 +317,30 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
     c.dropped == 0 && c.sent >= SAMPLES
 }
 
+/// Instructions per frame of `step` over `frames` (after one untimed pass
+/// over them first when `warm`), less the loop's own `overhead` ticks.
+fn per_frame(
+    t: &Ticks,
+    ipt: f32,
+    overhead: u64,
+    frames: &[[[f32; 4]; 3]],
+    warm: bool,
+    mut step: impl FnMut(&[[f32; 4]; 3]),
+) -> f32 {
+    if warm {
+        frames.iter().for_each(&mut step);
+    }
+    let ticks = ticks_of(t, frames, step).saturating_sub(overhead);
+    ticks as f32 * ipt / frames.len() as f32
+}
+
+/// Ticks of one pass of `step` over `frames`.
+fn ticks_of(t: &Ticks, frames: &[[[f32; 4]; 3]], step: impl FnMut(&[[f32; 4]; 3])) -> u64 {
+    let t0 = t.now();
+    frames.iter().for_each(step);
+    t.now() - t0
+}
+
 /// Instructions per fused 3-axis sample of every fusion method (N = 4).
 /// Not inlined: its frames stay out of main's stack.
 #[inline(never)]
@@ -334,14 +358,12 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
         }
     }
 
-    // Loop overhead: the same loop with the fusion call replaced.
-    let t0 = t.now();
-    for f in frames.iter() {
+    // Loop overhead: the same loop (`per_frame`'s) with the call replaced.
+    let overhead = ticks_of(t, &frames, |f| {
         for axis in f.iter() {
             black_box(axis);
         }
-    }
-    let overhead = t.now() - t0;
+    });
 
     let mut ok = true;
     for (name, m) in methods() {
@@ -349,20 +371,12 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
             exit(false)
         };
         let mut st = [AxisState::<4>::default(); 3];
-        // Warm up the state (memory windows, noise estimates) first.
-        for f in frames.iter() {
+        // Warmed up first (memory windows, noise estimates).
+        let per_sample = per_frame(t, ipt, overhead, &frames, true, |f| {
             for (a, axis) in f.iter().enumerate() {
                 let _ = black_box(fusion.fuse(&mut st[a], black_box(axis), 0b1111));
             }
-        }
-        let t0 = t.now();
-        for f in frames.iter() {
-            for (a, axis) in f.iter().enumerate() {
-                let _ = black_box(fusion.fuse(&mut st[a], black_box(axis), 0b1111));
-            }
-        }
-        let ticks = (t.now() - t0).saturating_sub(overhead);
-        let per_sample = ticks as f32 * ipt / FRAMES as f32;
+        });
         defmt::info!(
             "bench fusion {=str}: {=u32} instructions per 3-axis sample (N = 4)",
             name,
@@ -384,15 +398,9 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
             let _ = black_box(cal[a].fuse(&fusion, &mut st[a], y, 0b1111));
         }
     };
-    for f in frames.iter() {
-        step(&mut st, &mut cal, f);
-    }
-    let t0 = t.now();
-    for f in frames.iter() {
-        step(&mut st, &mut cal, f);
-    }
-    let ticks = (t.now() - t0).saturating_sub(overhead);
-    let per_sample = ticks as f32 * ipt / FRAMES as f32;
+    let per_sample = per_frame(t, ipt, overhead, &frames, true, |f| {
+        step(&mut st, &mut cal, f)
+    });
     defmt::info!(
         "bench fusion adaptive + online relative calibration: {=u32} instructions per 3-axis sample (N = 4)",
         per_sample as u32
@@ -425,21 +433,13 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
         }
         out
     };
-    let t0 = t.now();
-    for f in frames.iter() {
+    let st_i = per_frame(t, ipt, overhead, &frames, false, |f| {
         black_box(apply(black_box(f)));
-    }
-    let static_ticks = (t.now() - t0).saturating_sub(overhead);
-    let t0 = t.now();
-    for f in frames.iter() {
+    });
+    let all = per_frame(t, ipt, overhead, &frames, false, |f| {
         let c = apply(black_box(f));
         step(&mut st, &mut cal, &c);
-    }
-    let ticks = (t.now() - t0).saturating_sub(overhead);
-    let (st_i, all) = (
-        static_ticks as f32 * ipt / FRAMES as f32,
-        ticks as f32 * ipt / FRAMES as f32,
-    );
+    });
     defmt::info!(
         "bench fusion default path (static calibration + online relative calibration + adaptive fusion): {=u32} instructions per 3-axis sample (N = 4; static calibration alone {=u32}, target <= 2500)",
         all as u32,
@@ -458,19 +458,11 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
             exit(false)
         };
         let mut cfs = [cf; 3];
-        for f in frames.iter() {
+        let per = per_frame(t, ipt, overhead, &frames, true, |f| {
             for (a, axis) in f.iter().enumerate() {
                 black_box(cfs[a].fuse(black_box(axis), 0b1111));
             }
-        }
-        let t0 = t.now();
-        for f in frames.iter() {
-            for (a, axis) in f.iter().enumerate() {
-                black_box(cfs[a].fuse(black_box(axis), 0b1111));
-            }
-        }
-        let ticks = (t.now() - t0).saturating_sub(overhead);
-        let per = ticks as f32 * ipt / FRAMES as f32;
+        });
         defmt::info!(
             "bench fusion seed 001 local filters ({=str} weights): {=u32} instructions per 3-axis sample (N = 4)",
             name,
