@@ -67,10 +67,22 @@ fn main() -> ! {
 }
 
 /// Ticks of an empty `t.now()` pair.
-fn overhead_of(t: &Ticks) -> u64 {
-    let t0 = t.now();
-    let t1 = t.now();
-    t1 - t0
+/// Ticks of an empty `t.now()` pair, averaged over 4096 (one pair is a
+/// fraction of a tick, so a single reading says 0 or 1): what every timed
+/// interval holds besides the code it times.
+fn pair_cost(t: &Ticks) -> f32 {
+    const PAIRS: u32 = 4096;
+    let mut sum = 0u64;
+    for _ in 0..PAIRS {
+        let t0 = t.now();
+        sum += t.now() - t0;
+    }
+    sum as f32 / PAIRS as f32
+}
+
+/// An interval of `ticks` less the timer's own `pair` cost (not below 0).
+fn net(ticks: u64, pair: f32) -> f32 {
+    (ticks as f32 - pair).max(0.0)
 }
 
 /// A UART that takes every byte at once (the board writes one data
@@ -160,7 +172,8 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
     };
     // The reads alone (drivers and the emulated SPI exchange), fault-free:
     // the share of "read + fuse" that is bus traffic.
-    let mut read_ticks = 0u64;
+    let pair = pair_cost(t);
+    let mut read_ticks = 0.0f32;
     const READS: u32 = 500;
     for _ in 0..READS {
         with_bus(&bus, |b| b.advance(dt));
@@ -168,11 +181,11 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         for g in [&mut g0 as &mut dyn Gyro, &mut g1, &mut g2, &mut g3, &mut g4] {
             let _ = black_box(g.read());
         }
-        read_ticks += (t.now() - t0).saturating_sub(overhead_of(t));
+        read_ticks += net(t.now() - t0, pair);
     }
     defmt::info!(
         "bench whole loop: reading the 5 gyros alone (drivers + emulated SPI): mean {=u32} instructions",
-        (read_ticks as f32 * ipt / READS as f32) as u32
+        (read_ticks * ipt / READS as f32) as u32
     );
     let mut port = Port::<2048>::new(Settings::default());
     let mut uart = NullUart(0);
@@ -191,21 +204,16 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         }
         (t.now() - t0) as f32 / READS as f32
     };
-    let (mut fw_sum, mut fw_worst, mut fw_worst_at) = (0u64, 0u64, 0u32);
-    let mut fw_worst_parts = [0u64; 3];
-    let mut bus_sum = 0u64;
+    let (mut fw_sum, mut fw_worst, mut fw_worst_at) = (0.0f32, 0.0f32, 0u32);
+    let mut fw_worst_parts = [0.0f32; 3];
+    let mut bus_sum = 0.0f32;
     let bytes0 = meter().1;
     // Parts: read + calibrate + fuse, E-DAVAR, link.
-    let mut sum = [0u64; 3];
-    let (mut worst, mut worst_at) = (0u64, 0u32);
-    let mut worst_parts = [0u64; 3];
-    let mut status_worst = 0u64;
-    let (mut drain_sum, mut drain_worst) = (0u64, 0u64);
-    let overhead = {
-        let t0 = t.now();
-        let t1 = t.now();
-        t1 - t0
-    };
+    let mut sum = [0.0f32; 3];
+    let (mut worst, mut worst_at) = (0.0f32, 0u32);
+    let mut worst_parts = [0.0f32; 3];
+    let mut status_worst = 0.0f32;
+    let (mut drain_sum, mut drain_worst) = (0.0f32, 0.0f32);
     for n in 0..SAMPLES {
         with_bus(&bus, |b| {
             match n {
@@ -229,7 +237,7 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         // The bus operations' ticks, and one clock read's overhead for
         // each (the outer interval holds two reads per operation, the
         // operation's own interval one).
-        let in_bus = (m1.ticks - m0.ticks) + ((m1.ops - m0.ops) as f32 * clock_cost + 0.5) as u64;
+        let in_bus = (m1.ticks - m0.ticks) as f32 + (m1.ops - m0.ops) as f32 * clock_cost;
         noise.push(&out);
         let t2 = t.now();
         port.publish(&out, u64::from(n) * 1000, &pipe, &noise.at_taus([0, 4, 8]));
@@ -239,7 +247,7 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         // own).
         let d0 = t.now();
         port.drain(&mut uart);
-        let dt_drain = (t.now() - d0).saturating_sub(overhead);
+        let dt_drain = net(t.now() - d0, pair);
         drain_sum += dt_drain;
         drain_worst = drain_worst.max(dt_drain);
         // The status frame, as the board builds it: in the idle time after
@@ -249,22 +257,18 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
             let st = port.status(&pipe, out.seq, u64::from(n) * 1000, [1, 16, 256], 1000, 0);
             port.send(&st);
             port.drain(&mut uart);
-            status_worst = status_worst.max((t.now() - s0).saturating_sub(overhead));
+            status_worst = status_worst.max(net(t.now() - s0, pair));
         }
-        let parts = [
-            (t1 - t0).saturating_sub(overhead),
-            (t2 - t1).saturating_sub(overhead),
-            (t3 - t2).saturating_sub(overhead),
-        ];
-        let total: u64 = parts.iter().sum();
+        let parts = [net(t1 - t0, pair), net(t2 - t1, pair), net(t3 - t2, pair)];
+        let total: f32 = parts.iter().sum();
         for (s, p) in sum.iter_mut().zip(parts) {
             *s += p;
         }
         if total > worst {
             (worst, worst_at, worst_parts) = (total, n, parts);
         }
-        let fw_parts = [parts[0].saturating_sub(in_bus), parts[1], parts[2]];
-        let fw: u64 = fw_parts.iter().sum();
+        let fw_parts = [(parts[0] - in_bus).max(0.0), parts[1], parts[2]];
+        let fw: f32 = fw_parts.iter().sum();
         fw_sum += fw;
         bus_sum += in_bus.min(parts[0]);
         if fw > fw_worst {
@@ -272,8 +276,8 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         }
     }
     let bus_bytes = meter().1 - bytes0;
-    let f = |ticks: u64| (ticks as f32 * ipt) as u32;
-    let mean = |ticks: u64| (ticks as f32 * ipt / SAMPLES as f32) as u32;
+    let f = |ticks: f32| (ticks * ipt) as u32;
+    let mean = |ticks: f32| (ticks * ipt / SAMPLES as f32) as u32;
     defmt::info!(
         "bench whole loop (5 gyros read, calibrated and fused on 3 axes, 3 E-DAVARs at lambda2 = 1024, link frame built and queued), {=u32} samples with faults and a variance step: mean {=u32} instructions per sample (read+fuse {=u32}, e-davar {=u32}, link {=u32}), worst {=u32} at sample {=u32} (read+fuse {=u32}, e-davar {=u32}, link {=u32})",
         SAMPLES,
@@ -605,21 +609,14 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
     name: &str,
     axes: &mut [&mut Davar<CAP, FRAMES, T, STFT>],
 ) -> bool {
-    // Cost of the timing itself: two reads back to back.
-    let read_pair = {
-        let mut least = u64::MAX;
-        for _ in 0..64 {
-            let t0 = t.now();
-            least = least.min(t.now() - t0);
-        }
-        least
-    };
+    // Cost of the timing itself: two reads back to back, averaged.
+    let pair = pair_cost(t);
     let mut ok = true;
-    let (mut total, mut counted) = (0u64, 0u32);
-    let (mut worst, mut worst_at) = (0u64, 0usize);
+    let (mut total, mut counted) = (0.0f32, 0u32);
+    let (mut worst, mut worst_at) = (0.0f32, 0usize);
     let mut published = false;
     // Mean cost by position in the 32-sample hop (after the first estimate).
-    let mut by_phase = [0u64; 32];
+    let mut by_phase = [0.0f32; 32];
     // White noise generated on the fly (no sample array on the stack),
     // with σ doubled from the middle on when `step`.
     let mut rng = Rng::new(99);
@@ -636,7 +633,7 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
             ok &= r.is_ok();
             published |= matches!(r, Ok(Some(_)));
         }
-        let ticks = (t.now() - t0).saturating_sub(read_pair);
+        let ticks = net(t.now() - t0, pair);
         if ticks > worst {
             worst = ticks;
             worst_at = i;
@@ -647,14 +644,14 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
             by_phase[(i + 1) % 32] += ticks;
         }
     }
-    let f = |ticks: u64| (ticks as f32 * ipt) as u32;
+    let f = |ticks: f32| (ticks * ipt) as u32;
     defmt::info!(
         "bench e-davar {=str} lambda2 = {=usize} ({=usize} tau, {=usize} axis/axes): mean {=u32} instructions per sample, worst {=u32} at sample {=usize} (hop phase {=usize}), {=usize} B RAM per axis",
         name,
         CAP,
         T,
         axes.len(),
-        (total as f32 * ipt / counted.max(1) as f32) as u32,
+        (total * ipt / counted.max(1) as f32) as u32,
         f(worst),
         worst_at,
         (worst_at + 1) % 32,
@@ -662,7 +659,7 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
     );
     if axes.len() == 1 && STFT == 0 {
         let hops = (counted / 32).max(1) as f32;
-        let p = by_phase.map(|x| (x as f32 * ipt / hops) as u32);
+        let p = by_phase.map(|x| (x * ipt / hops) as u32);
         defmt::info!(
             "  mean by hop phase (0 = frame end, 1 = hop, 2.. = one tau each): {=[?]}",
             p[..]

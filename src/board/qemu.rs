@@ -53,15 +53,24 @@ impl Ticks {
 }
 
 /// Ticks of the SysTick started by [`Ticks::start`] (for code that cannot
-/// hold the [`Ticks`], such as a metered emulated bus). The wrap handler
-/// runs right after a wrap, so a changed counter means the read raced it:
-/// retry.
+/// hold the [`Ticks`], such as a metered emulated bus). A changed wrap
+/// counter means the read raced the wrap handler: retry. The handler can
+/// also still be pending when VAL has already reloaded (QEMU takes
+/// exceptions between translation blocks): then the wrap is counted here,
+/// or the clock steps back by 2²⁴ ticks and the next interval gains them
+/// (one bench run showed a 671-million-instruction "sample" that way).
+#[inline]
 pub fn ticks() -> u64 {
     loop {
         let w = WRAPS.load(Ordering::Acquire);
         let v = SYST::get_current();
+        // Pending with VAL just reloaded: the wrap came before this read
+        // (the handler runs within a few instructions of it, so only a VAL
+        // in the top 4096 ticks needs the pending flag read at all).
+        let missed = v > RELOAD - 4096 && cortex_m::peripheral::SCB::is_pendst_pending();
         if WRAPS.load(Ordering::Acquire) == w {
-            return w as u64 * (RELOAD as u64 + 1) + (RELOAD - v) as u64;
+            let w = w as u64 + u64::from(missed);
+            return w * (RELOAD as u64 + 1) + (RELOAD - v) as u64;
         }
     }
 }
