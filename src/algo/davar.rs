@@ -877,7 +877,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     }
 
     /// The whole-block sums of window [f0, f1) for the τ in `taus`, kept in
-    /// `win_q`/`win_sum`; the board spreads the τ over two samples. Until
+    /// `win_q`/`win_sum`; the board spreads the τ over `PUB_PARTS` samples. Until
     /// [`Self::finish_publish`] the last window (`win_f0`) stays the base
     /// of the update, for every τ alike.
     fn window_sums(&mut self, f0: u64, f1: u64, taus: core::ops::Range<usize>) {

@@ -64,12 +64,13 @@ impl<const N: usize> ByteRing<N> {
     /// place and [`ByteRing::commit`]ted, with no copy.
     pub fn tail_mut(&mut self) -> &mut [u8] {
         let tail = (self.head + self.len) % N.max(1);
+        // Up to the buffer's end unless the queued bytes wrap (or fill the
+        // ring, when tail = head and nothing is free).
         let end = if tail >= self.head && self.len < N {
             N
         } else {
             self.head
         };
-        let end = if self.len == N { tail } else { end };
         self.buf.get_mut(tail..end).unwrap_or(&mut [])
     }
 

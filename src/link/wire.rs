@@ -42,26 +42,16 @@ pub enum EncodeError {
 }
 
 /// Encode `body` with `link_seq` into `out`: the whole frame, 0x00
-/// included. Returns its length.
+/// included. Returns its length. (The board's port runs the two steps,
+/// [`encode_payload`] and [`frame_payload`], with scratch it keeps, and
+/// frames straight into its transmit ring.)
 pub fn encode<T: Serialize>(link_seq: u32, body: &T, out: &mut [u8]) -> Result<usize, EncodeError> {
-    encode_with(link_seq, body, &mut [0u8; MAX_PAYLOAD], out)
-}
-
-/// [`encode`] with the caller's `payload` scratch (≥ [`MAX_PAYLOAD`] bytes
-/// for any message; its old contents do not matter). The board's port
-/// keeps one, so a frame costs no zeroing of stack buffers (about 900
-/// instructions a sample, measured by `cargo xtask bench`).
-pub fn encode_with<T: Serialize>(
-    link_seq: u32,
-    body: &T,
-    payload: &mut [u8],
-    out: &mut [u8],
-) -> Result<usize, EncodeError> {
-    let k = encode_payload(link_seq, body, payload)?;
+    let mut payload = [0u8; MAX_PAYLOAD];
+    let k = encode_payload(link_seq, body, &mut payload)?;
     frame_payload(payload.get(..k).ok_or(EncodeError::TooLong)?, out)
 }
 
-/// The first step of [`encode_with`]: the payload (version, envelope,
+/// The first step of [`encode`]: the payload (version, envelope,
 /// CRC) into `payload`; its length.
 pub fn encode_payload<T: Serialize>(
     link_seq: u32,
@@ -86,11 +76,11 @@ pub fn encode_payload<T: Serialize>(
     Ok(n + 2)
 }
 
-/// The second step of [`encode_with`]: a payload COBS-encoded into `out`
+/// The second step of [`encode`]: a payload COBS-encoded into `out`
 /// with its 0x00 delimiter; the frame's length. At most
 /// [`framed_len`]`(payload.len())` bytes.
 pub fn frame_payload(payload: &[u8], out: &mut [u8]) -> Result<usize, EncodeError> {
-    let m = cobs_encode(payload, out).ok_or(EncodeError::TooLong)?;
+    let m = cobs::try_encode(payload, out).map_err(|_| EncodeError::TooLong)?;
     let end = out.get_mut(m).ok_or(EncodeError::TooLong)?;
     *end = 0;
     Ok(m + 1)
@@ -100,46 +90,6 @@ pub fn frame_payload(payload: &[u8], out: &mut [u8]) -> Result<usize, EncodeErro
 /// the delimiter).
 pub const fn framed_len(k: usize) -> usize {
     k + k / 254 + 2
-}
-
-/// COBS-encode `src` into `out` (no 0x00 delimiter); the encoded length,
-/// or `None` if `out` is too short. Byte for byte what `cobs::try_encode`
-/// (0.3) writes, a 254-byte run at the very end included
-/// (`cobs_encode_is_the_cobs_crates`); the board's frames are encoded here
-/// because the crate's streaming encoder spends about 14 instructions a
-/// byte on the Cortex-M4 and this loop half as many (`cargo xtask bench`).
-/// Decoding stays with the crate.
-pub fn cobs_encode(src: &[u8], out: &mut [u8]) -> Option<usize> {
-    if src.is_empty() {
-        return Some(0); // (the crate writes nothing either)
-    }
-    // The code byte of the open block sits at `at`; `code` is one more than
-    // the bytes in the block so far.
-    let (mut at, mut o, mut code) = (0usize, 1usize, 1u8);
-    // A block closed by reaching 254 bytes on the last input byte gets no
-    // code byte of its own after it (as the crate does).
-    let mut closed_full = false;
-    for &b in src {
-        closed_full = false;
-        if b == 0 {
-            *out.get_mut(at)? = code;
-            (at, o, code) = (o, o + 1, 1);
-        } else {
-            *out.get_mut(o)? = b;
-            o += 1;
-            code += 1;
-            if code == 0xFF {
-                *out.get_mut(at)? = code;
-                (at, o, code) = (o, o + 1, 1);
-                closed_full = true;
-            }
-        }
-    }
-    if closed_full {
-        return Some(o - 1);
-    }
-    *out.get_mut(at)? = code;
-    Some(o)
 }
 
 /// Why a received frame was discarded.
