@@ -578,23 +578,16 @@ fn replay_log(
     csv_out: Option<&std::path::Path>,
 ) -> Res<bool> {
     let mut s = log.read(columns, true)?;
+    // The reference: out of the chips' columns if it is among them (no -c
+    // given), else read on its own.
     let truth_col = match truth {
-        Some(t) => {
-            let i = s
-                .names
-                .iter()
-                .position(|n| n == t)
-                .map(Ok)
-                .unwrap_or_else(|| {
-                    // Not among the chips: read it on its own.
-                    let r = log.read(&[t.to_string()], false)?;
-                    s.names.push(t.to_string());
-                    s.rates.extend(r.rates);
-                    Ok::<usize, Box<dyn std::error::Error>>(s.names.len() - 1)
-                })?;
-            s.names.remove(i);
-            Some(s.rates.remove(i))
-        }
+        Some(t) => Some(match s.names.iter().position(|n| n == t) {
+            Some(i) => {
+                s.names.remove(i);
+                s.rates.remove(i)
+            }
+            None => log.read(&[t.to_string()], false)?.rates.remove(0),
+        }),
         None => None,
     };
     let r = replay::replay(&s.rates)?;

@@ -39,7 +39,7 @@ mod methods;
 #[path = "nav_eval/model.rs"]
 mod model;
 
-use methods::{Belief, Central, Est, Meas, Ours, Pair};
+use methods::{Central, Est, Meas, Ours, Pair};
 use model::{epoch, p0, Motion, Params, N};
 
 #[derive(Parser)]
@@ -251,25 +251,24 @@ fn run(scn: Scenario, seed: u64, epochs: usize, st: &mut Stats) {
             Some(dvl)
         };
         let z = Meas { usbl, dvl };
-        let b = Belief { e: &ef };
-        indep.step(&b, &z);
-        ent.step(&b, &z);
-        ent_fed.step(&b, &z);
-        ent_m.step(&b, &z);
-        fed.step_shared(&b, &z, [0.5, 0.5]);
+        // The filters' model: F, Q and R as the filters believe them.
+        let b = &ef;
+        indep.step(b, &z);
+        ent.step(b, &z);
+        ent_fed.step(b, &z);
+        ent_m.step(b, &z);
+        fed.step_shared(b, &z, [0.5, 0.5]);
         // σ in millimetres (SH > 0 for any σ above 0.24 mm): the faithful
         // reading; in metres the same method, SH ≤ 0 floored.
         let (e_ent, alpha, _) =
             methods::entropy_step(&mut ent, CovReset::PaperLiteral, true, 1000.0);
         let (e_entf, _, _) = methods::entropy_step(&mut ent_fed, CovReset::Federated, true, 1000.0);
-        let (e_open, _, _) = {
-            let mut copy = indep;
-            methods::entropy_step(&mut copy, CovReset::None, false, 1000.0)
-        };
+        // (Neither reset nor fed back: the independent pair is left as it is.)
+        let (e_open, _, _) = methods::entropy_step(&mut indep, CovReset::None, false, 1000.0);
         let (e_m, _, nonpos) = methods::entropy_step(&mut ent_m, CovReset::PaperLiteral, true, 1.0);
         let ests: [Est; M] = [
-            central.step(&b, &z),
-            ours.step(&b, &z),
+            central.step(b, &z),
+            ours.step(b, &z),
             methods::weighted(&indep, false),
             methods::weighted(&indep, true),
             e_ent,

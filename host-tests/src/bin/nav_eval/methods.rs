@@ -19,11 +19,6 @@ pub struct Meas {
     pub dvl: Option<Vector3<f64>>,
 }
 
-/// The filters' model of an epoch: F, Q and R as the filters believe them.
-pub struct Belief<'a> {
-    pub e: &'a Epoch,
-}
-
 fn sub15(m: &M) -> M15 {
     m.fixed_view::<NS, NS>(0, 0).into_owned()
 }
@@ -66,14 +61,13 @@ impl Pair {
     /// Predict both, update each with its sensor. A refused step leaves a
     /// filter as it was (counted by the caller as nothing here: the model
     /// keeps every matrix finite and definite).
-    pub fn step(&mut self, b: &Belief, z: &Meas) {
-        self.step_shared(b, z, [1.0, 1.0]);
+    pub fn step(&mut self, e: &Epoch, z: &Meas) {
+        self.step_shared(e, z, [1.0, 1.0]);
     }
 
     /// [`Pair::step`] with the common states' process noise shared as in a
     /// federated filter: Q_i = Q/β_i on the 15 common states.
-    pub fn step_shared(&mut self, b: &Belief, z: &Meas, beta: [f64; 2]) {
-        let e = b.e;
+    pub fn step_shared(&mut self, e: &Epoch, z: &Meas, beta: [f64; 2]) {
         let q1 = sub15(&e.q) / beta[0];
         let mut q2 = e.q;
         q2.fixed_view_mut::<NS, NS>(0, 0)
@@ -228,8 +222,7 @@ impl Central {
         }
     }
 
-    pub fn step(&mut self, b: &Belief, z: &Meas) -> Est {
-        let e = b.e;
+    pub fn step(&mut self, e: &Epoch, z: &Meas) -> Est {
         let _ = self.f.predict(&e.f, &e.q);
         if let Some(u) = z.usbl {
             let _ = self.f.update(&u, &e.h_usbl, &e.r_usbl);
@@ -302,8 +295,7 @@ impl Ours {
         let _ = f.update(z, h, &reff);
     }
 
-    pub fn step(&mut self, b: &Belief, z: &Meas) -> Est {
-        let e = b.e;
+    pub fn step(&mut self, e: &Epoch, z: &Meas) -> Est {
         // The DVL's Markov error driven by c_DVL × its nominal noise.
         let mut q = e.q;
         for i in 15..18 {
