@@ -345,16 +345,24 @@ fn wavelet_bad_input_is_typed() {
     assert!(big.band(99).is_empty());
 }
 
-#[test]
-fn emd_matches_pyemd() {
+/// EMD of `x` with the default settings: the rows (IMFs, then the
+/// residue), and the decomposition's summary.
+fn run_emd(x: &[f64]) -> (Vec<f64>, super::emd::Decomposition) {
     use super::emd::{emd, work_len, EmdConfig};
-    let x = v::EMD_SIGNAL;
     let n = x.len();
     let cfg = EmdConfig::default();
     let mut out = vec![0.0; (cfg.max_imfs + 1) * n];
     let mut work = vec![0.0; work_len(n)];
     let mut idx = vec![0u32; n];
     let d = emd(x, &cfg, &mut out, &mut work, &mut idx).unwrap();
+    (out, d)
+}
+
+#[test]
+fn emd_matches_pyemd() {
+    let x = v::EMD_SIGNAL;
+    let n = x.len();
+    let (out, d) = run_emd(x);
     let rows = d.imfs + d.residue as usize;
     println!(
         "ours: {} IMFs + residue {} (sifts {:?}); PyEMD rows {}",
@@ -708,7 +716,6 @@ fn corr(a: &[f64], b: &[f64]) -> f64 {
 /// ≥ 0.999 with PyEMD's.
 #[test]
 fn emd_matches_pyemd_on_every_signal_class() {
-    use super::emd::{emd, work_len, EmdConfig};
     let cases: [(&str, &[f64], usize, &[f64]); 6] = [
         (
             "chirp",
@@ -745,11 +752,7 @@ fn emd_matches_pyemd_on_every_signal_class() {
     let mut worst = 1.0f64;
     for (name, x, rows_py, out_py) in cases {
         let n = x.len();
-        let cfg = EmdConfig::default();
-        let mut out = vec![0.0; (cfg.max_imfs + 1) * n];
-        let mut work = vec![0.0; work_len(n)];
-        let mut idx = vec![0u32; n];
-        let d = emd(x, &cfg, &mut out, &mut work, &mut idx).unwrap();
+        let (out, d) = run_emd(x);
         let rows = d.imfs + d.residue as usize;
         let cs: Vec<f64> = (0..rows.min(rows_py))
             .map(|r| corr(&out[r * n..(r + 1) * n], &out_py[r * n..(r + 1) * n]))
