@@ -188,18 +188,25 @@ pub fn oavar_octave(
 
 /// Phase (angle in units of rate·τ0, mean rate removed) of `rate` into
 /// `phase[..=rate.len()]`.
+///
+/// The mean is summed in independent lanes (vectorised; one chain of
+/// dependent additions waits ~4 cycles per sample on a host core, and
+/// two such passes were 0.03 s of the 0.13 s for 10⁷ samples). The
+/// running sum stays one chain: running sums side by side, each from the
+/// sum of the parts before it, met with a jump of 2e-3 where the parts
+/// meet (the quantised test data rounds the same way for millions of
+/// additions), and the OADEV moved by 8e-9. Non-finite data, or data so
+/// large that its sum overflows, is refused.
 pub fn fill_phase(rate: &[f64], phase: &mut [f64]) -> Result<(), AllanError> {
-    if phase.len() < rate.len() + 1 {
+    let n = rate.len();
+    let Some(phase) = phase.get_mut(..n + 1) else {
         return Err(AllanError::Scratch);
+    };
+    let total = lane_sum(rate);
+    if !total.is_finite() {
+        return Err(AllanError::NonFinite);
     }
-    let mut mean = 0.0;
-    for &w in rate {
-        if !w.is_finite() {
-            return Err(AllanError::NonFinite);
-        }
-        mean += w;
-    }
-    mean /= rate.len().max(1) as f64;
+    let mean = total / n.max(1) as f64;
     let mut x = 0.0;
     phase[0] = 0.0;
     for (p, &w) in phase[1..].iter_mut().zip(rate) {
@@ -207,6 +214,19 @@ pub fn fill_phase(rate: &[f64], phase: &mut [f64]) -> Result<(), AllanError> {
         *p = x;
     }
     Ok(())
+}
+
+/// Σ `x` in [`LANES`] independent partial sums (vectorised, no chain).
+fn lane_sum(x: &[f64]) -> f64 {
+    let mut l = [0.0f64; LANES];
+    let c = x.chunks_exact(LANES);
+    let r = c.remainder();
+    for a in c {
+        for q in 0..LANES {
+            l[q] += a[q];
+        }
+    }
+    l.iter().sum::<f64>() + r.iter().sum::<f64>()
 }
 
 /// Overlapping AVAR from phase filled by [`fill_phase`] (θ in rate units ×
@@ -253,7 +273,11 @@ pub fn oavar_octave_phase(phase: &[f64], tau0_s: f64, out: &mut [AdevPoint]) -> 
 /// The sweep goes block by block and, inside a block, τ by τ: τ j reads θ
 /// at offsets 0, m and 2m, and τ j + 1 reads 0, 2m and 4m, so two of its
 /// three streams are still in cache. Memory is read about once for all τ
-/// whose offsets fit in the cache, instead of once per τ.
+/// whose offsets fit in the cache, instead of once per τ. Short blocks
+/// (64 points) keep the ~24 streams advancing together, as the hardware
+/// prefetchers follow them: on 10⁷ points (`allan-speed`'s host) the sweep
+/// took 0.069 s with 64, 0.072 with 128, 0.084 with 512 and 0.098 with
+/// 2048.
 #[derive(Clone, Debug)]
 pub struct OctaveSums {
     phase_len: usize,
@@ -263,7 +287,7 @@ pub struct OctaveSums {
 
 impl OctaveSums {
     const MAX_J: usize = 48;
-    const BLOCK: usize = 2048;
+    const BLOCK: usize = 64;
 
     /// Sums for phase data of `phase_len` points (rate samples + 1).
     pub fn new(phase_len: usize) -> Self {
@@ -281,12 +305,18 @@ impl OctaveSums {
         if phase.len() != self.phase_len {
             return;
         }
+        let n = phase.len();
+        // The sums in a local copy: summed in place in `self`, the sweep
+        // took 0.087 s instead of 0.070 (the same loop; likely the stores
+        // falsely aliasing the loads).
+        let mut local = self.acc;
+        let acc = &mut local[..self.count];
         let mut k0 = from;
         while k0 < to {
             let k1 = (k0 + Self::BLOCK).min(to);
-            for (j, a) in self.acc.iter_mut().enumerate().take(self.count) {
+            for (j, a) in acc.iter_mut().enumerate() {
                 let m = 1usize << j;
-                let terms = self.phase_len - 2 * m;
+                let terms = n - 2 * m;
                 if k0 >= terms {
                     break;
                 }
@@ -302,6 +332,7 @@ impl OctaveSums {
             }
             k0 = k1;
         }
+        self.acc = local;
     }
 
     /// Add another part's sums (same `phase_len`).
@@ -335,7 +366,7 @@ const LANES: usize = 8;
 /// Σ (x2 − 2·x1 + x0)² over equal-length slices, in [`LANES`] partial sums.
 /// Exact chunks and independent lanes let the compiler use SIMD without
 /// reassociating anything itself (the result is deterministic).
-#[inline]
+#[inline(always)]
 fn second_diff_sq(x0: &[f64], x1: &[f64], x2: &[f64]) -> [f64; LANES] {
     let mut l = [0.0f64; LANES];
     let c0 = x0.chunks_exact(LANES);
