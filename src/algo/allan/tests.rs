@@ -306,3 +306,46 @@ fn huge_cluster_sizes_and_stray_indices_are_errors_not_panics() {
     assert_eq!(local_slope(&[p, p], usize::MAX), None);
     assert_eq!(local_slope(&[], 0), None);
 }
+
+/// The AVX2 builds of the OADEV kernel give the plain build's bits (the
+/// host tool and `allan-speed` take them where the CPU has AVX2).
+#[cfg(target_arch = "x86_64")]
+#[test]
+#[allow(unsafe_code)]
+fn avx2_build_gives_the_same_bits() {
+    if !std::arch::is_x86_feature_detected!("avx2") {
+        return;
+    }
+    let mut rng = crate::emu::Rng::new(5);
+    let mut rw = 0.0f64;
+    let y: Vec<f64> = (0..20_011)
+        .map(|_| {
+            rw += 1e-3 * rng.gaussian() as f64;
+            95.0 + 0.1 * rng.gaussian() as f64 + rw
+        })
+        .collect();
+    let mut phase = vec![0.0; y.len() + 1];
+    fill_phase(&y, &mut phase).unwrap();
+    for m in (1..10_000).step_by(37).chain([1, 2, 3, 7, 8, 9, 10_005]) {
+        let plain = oavar_phase(&phase, 0.01, m);
+        // SAFETY: the CPU has AVX2 (checked above).
+        let fast = unsafe { oavar_phase_avx2(&phase, 0.01, m) };
+        assert_eq!(
+            plain.map(|p| p.avar.to_bits()),
+            fast.map(|p| p.avar.to_bits()),
+            "m={m}"
+        );
+        let (from, to) = (m / 3, phase.len().saturating_sub(2 * m + 5));
+        let plain = second_diff_sum(&phase, m, from, to);
+        // SAFETY: as above.
+        let fast = unsafe { second_diff_sum_avx2(&phase, m, from, to) };
+        assert_eq!(plain.to_bits(), fast.to_bits(), "m={m}");
+    }
+    // Out of range: nothing, in both builds.
+    assert_eq!(second_diff_sum(&phase, 20_000, 0, 10), 0.0);
+    // SAFETY: as above.
+    assert_eq!(
+        unsafe { second_diff_sum_avx2(&phase, usize::MAX, 0, 10) },
+        0.0
+    );
+}
