@@ -95,6 +95,8 @@ pub struct RelCal<const N: usize> {
     warming: u8,
     /// Which sample of [`LEARN_STRIDE`] [`RelCal::fuse`] is on.
     phase: u8,
+    /// The update count's offset for solving (see [`RelCal::for_axis`]).
+    slot: u32,
     /// The raw readings of the update before the next solve.
     last_raw: [f32; N],
     /// Samples of the growing window: 1/α (bounded), as an integer.
@@ -122,9 +124,25 @@ impl<const N: usize> RelCal<N> {
             fresh: 0,
             warming: 0,
             phase: 0,
+            slot: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
         }
+    }
+
+    /// The calibration of board axis `axis` (0 = x) of three, with its work
+    /// spread against the other two: x and z learn on even samples, y on
+    /// odd ones; x solves on even update counts and z on odd ones (its
+    /// scheduled solves half a period later), also when a chip has just
+    /// warmed up, which may wait one update. Started together, the three
+    /// learnt and solved on the same samples: in the board's loop those
+    /// samples cost 1 100 more (learning) and 2 000 more (solving) than
+    /// the others (`cargo xtask bench`).
+    pub fn for_axis(cfg: CalConfig, axis: usize) -> Self {
+        let mut c = Self::new(cfg);
+        c.phase = (axis % LEARN_STRIDE as usize) as u8;
+        c.slot = if axis == 2 { EVERY / 2 + 1 } else { 0 };
+        c
     }
 
     /// The corrected readings `(y − b) / s` of every chip.
@@ -258,9 +276,11 @@ impl<const N: usize> RelCal<N> {
         // The estimates move with the 1/α time constant: solving for them
         // every `EVERY` samples halves the cost and changes nothing.
         self.tick = self.tick.wrapping_add(1);
-        if self.tick.is_multiple_of(EVERY) || (self.warming != 0 && self.newly_warm()) {
+        let t = self.tick.wrapping_sub(self.slot);
+        let warm_turn = self.warming != 0 && t.is_multiple_of(2) && self.newly_warm();
+        if t.is_multiple_of(EVERY) || warm_turn {
             self.solve(y, mask);
-        } else if (self.tick + 1).is_multiple_of(EVERY) {
+        } else if (t + 1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).
             self.last_raw = *y;
         }

@@ -208,7 +208,7 @@ impl<const N: usize> Pipeline<N> {
             cfg,
             fusion: Fusion::new(method)?,
             axes: [AxisState::default(); 3],
-            cal: [RelCal::new(CalConfig::default()); 3],
+            cal: core::array::from_fn(|a| RelCal::for_axis(CalConfig::default(), a)),
             static_cal: [ChipCal::IDENTITY; N],
             calibrated: false,
             temps: [None; N],

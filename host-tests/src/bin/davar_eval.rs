@@ -311,7 +311,7 @@ fn oracle_centred(like: &Run, w: &[i32], truth: &[f64], l1: u16, l2: u16) -> Run
         .map(|&(t, _, _)| {
             let mut best = (f64::INFINITY, t, t);
             // Lengths of the span's parity, so the window is centred on t.
-            for f in (min..=k).filter(|f| (k - f) % 2 == 0) {
+            for f in (min..=k).filter(|f| (k - f).is_multiple_of(2)) {
                 let (s, e) = (t - f * seg / 2, t + f * seg / 2);
                 let span = &truth[s..e - 1];
                 let n = span.len() as f64;
