@@ -742,16 +742,21 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 let pre_k = block * SEG as u64 + pre_off as u64;
                 if from <= end {
                     let i = (from as usize).wrapping_sub(1);
+                    let slide = if carry_free(mu) {
+                        Self::slide::<false>
+                    } else {
+                        Self::slide::<true>
+                    };
                     if (from..=end).contains(&pre_k) {
                         let n1 = (pre_k - from) as usize + 1;
                         let i2;
-                        (i2, a, b, lo, hi) = Self::slide(&self.ring, i, n1, mu, a, b, lo, hi);
+                        (i2, a, b, lo, hi) = slide(&self.ring, i, n1, mu, a, b, lo, hi);
                         self.pre[j][slot] = lo;
                         (_, a, b, lo, hi) =
-                            Self::slide(&self.ring, i2, (end - pre_k) as usize, mu, a, b, lo, hi);
+                            slide(&self.ring, i2, (end - pre_k) as usize, mu, a, b, lo, hi);
                     } else {
                         (_, a, b, lo, hi) =
-                            Self::slide(&self.ring, i, (end - from) as usize + 1, mu, a, b, lo, hi);
+                            slide(&self.ring, i, (end - from) as usize + 1, mu, a, b, lo, hi);
                     }
                 }
                 self.lo[j][slot] = lo;
@@ -783,9 +788,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// `count` terms of τ = m: slide the sums from the term starting at
     /// i + 1 − 1 = i to the next (samples i, i + m, i + 2m), add each d².
     /// The per-term hot loop: everything in registers.
+    ///
+    /// Without `CARRY` the squares are summed in the u64 alone: the caller
+    /// has checked that a whole 32-term block cannot overflow it (see
+    /// [`carry_free`]), and the carry test per term (two more adds and a
+    /// spilled register) goes.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn slide(
+    fn slide<const CARRY: bool>(
         ring: &[i32; CAP],
         mut i: usize,
         count: usize,
@@ -814,7 +824,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             for ((x0, x1), x2) in s0.iter().zip(s1).zip(s2) {
                 b += x1 - x0;
                 a += x2 - x1;
-                (lo, hi) = add_sq(lo, hi, a - b);
+                if CARRY {
+                    (lo, hi) = add_sq(lo, hi, a - b);
+                } else {
+                    let d = (a - b) as i64;
+                    lo = lo.wrapping_add((d * d) as u64);
+                }
             }
             i = i.wrapping_add(run);
             left -= run;
@@ -1365,6 +1380,16 @@ fn ln_fast(x: f32) -> f32 {
 #[inline(always)]
 fn u64_to_f32(x: u64) -> f32 {
     (x >> 32) as u32 as f32 * 4_294_967_296.0 + x as u32 as f32
+}
+
+/// Whether a whole block of τ = m terms sums in a u64 without a carry:
+/// |d| ≤ 2m·[`SAMPLE_MAX`], so 32 terms stay below 32·(2m·S)². True up to
+/// m = 256 (τ up to 2⁸ samples: the board's tracker and the default
+/// configurations); beyond, the carry byte is kept term by term.
+#[inline(always)]
+const fn carry_free(m: usize) -> bool {
+    let bound = 2 * m as u128 * SAMPLE_MAX as u128;
+    SEG as u128 * bound * bound <= u64::MAX as u128
 }
 
 /// lo + hi·2⁶⁴ += d², exactly (a 32-term block of d² < 2⁶² needs 3 carry

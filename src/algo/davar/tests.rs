@@ -371,6 +371,47 @@ fn ring_of_exactly_lambda2_stays_exact_at_full_scale() {
     assert!(checked > 150);
 }
 
+/// The largest terms the carry-free sums take: τ = 256 samples (the
+/// longest the board's tracker has) on a full-scale square wave of period
+/// 512, so |d| = 2·256·SAMPLE_MAX and 32 of its squares come within a
+/// factor of two of 2⁶⁴. An overflow would lose 2⁶⁴ from a block (a
+/// fixed window: a shortened one would hold too few terms to fill one).
+#[test]
+fn carry_free_blocks_hold_the_largest_terms() {
+    // The bound: up to τ = 256, not 512 (where the same test, forced
+    // carry-free, loses 2⁶⁴ from blocks and fails).
+    assert!(super::carry_free(256) && !super::carry_free(512));
+    let w: Vec<i32> = (0..5000)
+        .map(|i| {
+            if (i / 256) % 2 == 0 {
+                SAMPLE_MAX
+            } else {
+                -SAMPLE_MAX
+            }
+        })
+        .collect();
+    let mut d = Davar::<1024, 35, 9>::new(DavarConfig::fixed(1024)).unwrap();
+    let mut checked = 0;
+    for &x in &w {
+        if d.push(x).unwrap().is_some() {
+            let st = d.estimate().unwrap();
+            for j in [0, 7, 8] {
+                let want = batch(&w, st.start as usize, st.end as usize, 1 << j);
+                let got = st.avar[j] as f64;
+                assert!(
+                    ((got - want) / want).abs() < 1e-6,
+                    "[{}, {}) m={}: {got} vs {want}",
+                    st.start,
+                    st.end,
+                    1 << j
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 100);
+}
+
 #[test]
 fn ln_fast_accuracy() {
     // Every 61st f32 bit pattern of the normal positive floats from 0.5 up.
