@@ -968,12 +968,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         };
         let (mut lo, mut hi) = (0u64, 0u32);
         // Two plain loops rather than a chained iterator (whose every step
-        // asks which half it is in).
+        // asks which half it is in). Where the blocks carry nothing
+        // ([`carry_free`]) their high parts are 0 and are not read.
+        let free = carry_free(1 << j);
         for r in [s0..s0 + first_run, 0..count - first_run] {
-            for (l, h) in run(r) {
-                let (v, c) = lo.overflowing_add(*l);
-                lo = v;
-                hi += c as u32 + *h as u32;
+            if free {
+                for l in lo_j.get(r).unwrap_or(&[]) {
+                    let (v, c) = lo.overflowing_add(*l);
+                    lo = v;
+                    hi += c as u32;
+                }
+            } else {
+                for (l, h) in run(r) {
+                    let (v, c) = lo.overflowing_add(*l);
+                    lo = v;
+                    hi += c as u32 + *h as u32;
+                }
             }
         }
         ((hi as u128) << 64) | lo as u128
