@@ -26,6 +26,25 @@ use crate::emu::{
 use crate::pipeline::startup::start_array;
 use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
 
+/// `math::sqrtf` against `libm::sqrtf` over 0, subnormals, every binade
+/// of the normal range (a spread of mantissas in each) and ∞; a negative
+/// input must give NaN in both. On the board `sqrtf` is the FPU's
+/// instruction, so this is what makes it the same function.
+pub fn sqrt_matches_libm() -> bool {
+    use crate::algo::math::sqrtf;
+    let same = |x: f32| sqrtf(x).to_bits() == libm::sqrtf(x).to_bits();
+    let mut ok = same(0.0) && same(-0.0) && same(f32::INFINITY) && same(f32::MIN_POSITIVE);
+    ok &= sqrtf(-1.0).is_nan() && libm::sqrtf(-1.0).is_nan();
+    let mut rng = Rng::new(3);
+    for e in 0u32..255 {
+        for _ in 0..16 {
+            let bits = (e << 23) | (rng.next_u32() & 0x007f_ffff);
+            ok &= same(f32::from_bits(bits));
+        }
+    }
+    ok
+}
+
 /// Golden digests (generated on the host, checked on both sides).
 pub mod golden {
     include!("../host-tests/vectors/digests.in");
@@ -492,6 +511,10 @@ pub fn run_all(report: &mut dyn FnMut(&str, bool)) -> (u32, u32) {
             tally.1 += 1;
         }
     };
+    check(
+        "math: sqrtf (VSQRT on the Cortex-M4F) equals libm's bit for bit",
+        sqrt_matches_libm(),
+    );
     let st = icm_init(Fault::None);
     check(
         "icm42688: init and self-test on the emulated chip",

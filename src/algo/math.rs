@@ -9,20 +9,35 @@
 /// Square root, correctly rounded (IEEE 754). On the Cortex-M4F this is one
 /// `vsqrt.f32` instruction; elsewhere it is `libm::sqrtf`. Both are correctly
 /// rounded, so they agree bit for bit.
+///
+/// The FPU is told by the hard-float ABI (`eabihf`: every such ARM target
+/// has VFP, and VSQRT.F32 is in every VFP). A `target_feature = "vfp2"`
+/// test, used before, is never true on stable Rust (ARM's features are not
+/// reported to `cfg`), so the board ran libm's software square root: no
+/// `vsqrt` was in the firmware.
 #[inline(always)]
 pub fn sqrtf(x: f32) -> f32 {
-    #[cfg(all(target_arch = "arm", target_feature = "vfp2"))]
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
     {
-        let r: f32;
-        // SAFETY: vsqrt.f32 only reads and writes FPU registers.
+        // (The `sreg` operand class needs the double-precision `vfp2`
+        // feature, which the Cortex-M4F lacks: go through a core register
+        // and s15, declared clobbered.)
+        let r: u32;
         #[allow(unsafe_code)]
         unsafe {
-            core::arch::asm!("vsqrt.f32 {r}, {x}", r = out(sreg) r, x = in(sreg) x,
-                options(pure, nomem, nostack));
+            core::arch::asm!(
+                "vmov s15, {x}",
+                "vsqrt.f32 s15, s15",
+                "vmov {r}, s15",
+                x = in(reg) x.to_bits(),
+                r = lateout(reg) r,
+                out("s15") _,
+                options(pure, nomem, nostack),
+            );
         }
-        r
+        f32::from_bits(r)
     }
-    #[cfg(not(all(target_arch = "arm", target_feature = "vfp2")))]
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
     {
         libm::sqrtf(x)
     }
