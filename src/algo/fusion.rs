@@ -793,9 +793,10 @@ pub(crate) fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
             i32::MAX
         };
     }
-    if N == 4 && m == full::<N>() {
-        // The board's array, all in: the middle pair of four keys is
-        // (max of the two minima, min of the two maxima), 6 min/max.
+    if (N == 4 && m == full::<N>()) || (N == 5 && m == all_but_last::<N>()) {
+        // Four keys in k[0..4] (four gyros, all in, or the board's x and
+        // y: five, the last not on the axis): the middle pair is (max of
+        // the two minima, min of the two maxima), 6 min/max.
         let (a, b) = (k[0].min(k[1]), k[0].max(k[1]));
         let (c, d) = (k[2].min(k[3]), k[2].max(k[3]));
         let (lo, hi) = (a.max(c), b.min(d));
@@ -845,7 +846,7 @@ fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
         // (ya/va + yb/vb) / (1/va + 1/vb), without the divisions.
         (ya * vb + yb * va) / (va + vb)
     };
-    if N == 4 && m == full::<N>() {
+    if (N == 4 && m == full::<N>()) || (N == 5 && m == all_but_last::<N>()) {
         let (a, b) = (k[0].min(k[1]), k[0].max(k[1]));
         let (c, d) = (k[2].min(k[3]), k[2].max(k[3]));
         return pick(a.max(c), b.min(d));
@@ -885,6 +886,22 @@ fn full<const N: usize>() -> u8 {
     ((1u16 << N) - 1) as u8
 }
 
+/// Every gyro but the last, for the board's five (else 0, which no
+/// non-empty mask equals): its x and y axes, whose last gyro (the
+/// ADXRS453) measures z only, so they never have all five. A constant like
+/// [`full`], so the phases inlined for it fold their mask tests too: with
+/// the general mask four of five cost 3 406 instructions per 3-axis sample
+/// on the Cortex-M4, more than all five (2 395; `cargo xtask bench`).
+/// Other array sizes keep their code as it was (a third inlined copy made
+/// the all-in path of N = 5 ~40 instructions an axis dearer).
+fn all_but_last<const N: usize>() -> u8 {
+    if N == 5 {
+        full::<N>() >> 1
+    } else {
+        0
+    }
+}
+
 fn adaptive<const N: usize>(
     c: &AdaptiveConfig,
     st: &mut AxisState<N>,
@@ -895,11 +912,15 @@ fn adaptive<const N: usize>(
     if valid == 0 {
         return None;
     }
-    // Each phase is inlined twice: once for the common case where its mask
-    // is every gyro (a constant, so the mask tests fold away) and once for
-    // the general mask. Same arithmetic in the same order either way.
+    // Each phase is inlined for the common cases where its mask is every
+    // gyro or (N = 5) every gyro but the last, constants, so the mask tests
+    // fold away, and for the general mask. Same arithmetic in the same
+    // order either way.
+    let abl = all_but_last::<N>();
     let active = if valid == full::<N>() {
         frozen_check(c, st, y, full::<N>())
+    } else if abl != 0 && valid == abl {
+        frozen_check(c, st, y, all_but_last::<N>())
     } else {
         frozen_check(c, st, y, valid)
     };
@@ -909,6 +930,16 @@ fn adaptive<const N: usize>(
     }
     if active == full::<N>() {
         adaptive_active(c, st, y, valid, full::<N>(), full::<N>(), out)
+    } else if abl != 0 && active == abl && valid == abl {
+        adaptive_active(
+            c,
+            st,
+            y,
+            valid,
+            all_but_last::<N>(),
+            all_but_last::<N>(),
+            out,
+        )
     } else {
         // Frozen candidates are not fused but still vote in the median gate:
         // a healthy chip that repeats a quantised value four times (it
@@ -1263,6 +1294,7 @@ fn adaptive_active<const N: usize>(
         }
     }
     out.rejected |= valid & !good;
+    let abl = all_but_last::<N>();
     let r = if good == full::<N>() {
         update_and_fuse(
             c,
@@ -1270,6 +1302,19 @@ fn adaptive_active<const N: usize>(
             y,
             full::<N>(),
             full::<N>(),
+            (all_warm, warm_cap),
+            med,
+            &v,
+            &w,
+            out,
+        )
+    } else if abl != 0 && good == abl && active == abl {
+        update_and_fuse(
+            c,
+            st,
+            y,
+            all_but_last::<N>(),
+            all_but_last::<N>(),
             (all_warm, warm_cap),
             med,
             &v,
