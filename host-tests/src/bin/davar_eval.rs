@@ -249,6 +249,17 @@ fn run(cfg: DavarConfig, w: &[i32]) -> Run {
     Run { hops }
 }
 
+/// σ²(τ0) of the samples [s, e), in f64 straight from them (the oracles).
+fn avar_tau0(w: &[i32], s: usize, e: usize) -> f64 {
+    let d2: f64 = (s..e - 1)
+        .map(|i| {
+            let d = (w[i + 1] - w[i]) as f64;
+            d * d
+        })
+        .sum();
+    0.5 * d2 / (e - s - 1) as f64 * LSB * LSB
+}
+
 /// The oracle: at each hop time of `like`, the window is the true segment
 /// that holds t inside the λ2 span (frame-aligned as the estimator's), or
 /// the λ1 window nearest to it when the segment is shorter; σ²(τ0) is
@@ -280,14 +291,7 @@ fn oracle(like: &Run, w: &[i32], changes: &[usize], l1: u16, l2: u16) -> Run {
                 s = mid.saturating_sub(min / 2).clamp(lo, hi - min);
                 e = s + min;
             }
-            let d2: f64 = (s..e - 1)
-                .map(|i| {
-                    let d = (w[i + 1] - w[i]) as f64;
-                    d * d
-                })
-                .sum();
-            let avar = 0.5 * d2 / (e - s - 1) as f64 * LSB * LSB;
-            (t, avar, (e - s) as u16)
+            (t, avar_tau0(w, s, e), (e - s) as u16)
         })
         .collect();
     Run { hops }
@@ -323,14 +327,7 @@ fn oracle_centred(like: &Run, w: &[i32], truth: &[f64], l1: u16, l2: u16) -> Run
                 }
             }
             let (_, s, e) = best;
-            let d2: f64 = (s..e - 1)
-                .map(|i| {
-                    let d = (w[i + 1] - w[i]) as f64;
-                    d * d
-                })
-                .sum();
-            let avar = 0.5 * d2 / (e - s - 1) as f64 * LSB * LSB;
-            (t, avar, (e - s) as u16)
+            (t, avar_tau0(w, s, e), (e - s) as u16)
         })
         .collect();
     Run { hops }
@@ -348,6 +345,18 @@ fn rms(r: &Run, truth: &[f64], a: usize, b: usize) -> f64 {
         se += e * e;
     }
     (se / (b - a) as f64).sqrt()
+}
+
+/// One oracle's row: its RMS (mean ± sd over seeds) and its ratio to the
+/// best fixed window's (with the sd of the per-seed ratios).
+fn oracle_row(name: &str, errs: &[f64], best: &[f64]) {
+    let (m, sd) = mean_sd(errs);
+    let ratios: Vec<f64> = errs.iter().zip(best).map(|(x, y)| x / y).collect();
+    let (_, rs) = mean_sd(&ratios);
+    println!(
+        "  {name:<26} {m:>9.4} ± {sd:<6.4} {:>8.3} ± {rs:<5.3}",
+        m / mean_sd(best).0
+    );
 }
 
 fn mean_sd(v: &[f64]) -> (f64, f64) {
@@ -436,33 +445,9 @@ fn main() -> ExitCode {
             let _ = rm;
         }
         if !oracle_errs.is_empty() {
-            let (m, sd) = mean_sd(&oracle_errs);
-            let ratios: Vec<f64> = oracle_errs
-                .iter()
-                .zip(&errs[best])
-                .map(|(x, y)| x / y)
-                .collect();
-            let (_, rs) = mean_sd(&ratios);
-            println!(
-                "  {:<26} {m:>9.4} ± {sd:<6.4} {:>8.3} ± {rs:<5.3}",
-                "(oracle: true changes)",
-                m / mean_sd(&errs[best]).0
-            );
+            oracle_row("(oracle: true changes)", &oracle_errs, &errs[best]);
         }
-        {
-            let (m, sd) = mean_sd(&centred_errs);
-            let ratios: Vec<f64> = centred_errs
-                .iter()
-                .zip(&errs[best])
-                .map(|(x, y)| x / y)
-                .collect();
-            let (_, rs) = mean_sd(&ratios);
-            println!(
-                "  {:<26} {m:>9.4} ± {sd:<6.4} {:>8.3} ± {rs:<5.3}",
-                "(oracle: centred length)",
-                m / mean_sd(&errs[best]).0
-            );
-        }
+        oracle_row("(oracle: centred length)", &centred_errs, &errs[best]);
         let d = ms.len() - 1;
         let ratio = mean_sd(&errs[d]).0 / mean_sd(&errs[best]).0;
         let (target, what) = match class.kind {
