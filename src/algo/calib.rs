@@ -136,7 +136,7 @@ impl<const N: usize> RelCal<N> {
     /// scheduled solves half a period later), also when a chip has just
     /// warmed up, which may wait one update. Started together, the three
     /// learnt and solved on the same samples: in the board's loop those
-    /// samples cost 1 100 more (learning) and 2 000 more (solving) than
+    /// samples cost 1 100 more (learning) and 1 000 more (solving) than
     /// the others (`cargo xtask bench`).
     pub fn for_axis(cfg: CalConfig, axis: usize) -> Self {
         let mut c = Self::new(cfg);

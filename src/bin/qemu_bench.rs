@@ -323,13 +323,13 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
 
 /// Instructions per frame of `step` over `frames` (after one untimed pass
 /// over them first when `warm`), less the loop's own `overhead` ticks.
-fn per_frame(
+fn per_frame<const G: usize>(
     t: &Ticks,
     ipt: f32,
     overhead: u64,
-    frames: &[[[f32; 4]; 3]],
+    frames: &[[[f32; G]; 3]],
     warm: bool,
-    mut step: impl FnMut(&[[f32; 4]; 3]),
+    mut step: impl FnMut(&[[f32; G]; 3]),
 ) -> f32 {
     if warm {
         frames.iter().for_each(&mut step);
@@ -339,7 +339,11 @@ fn per_frame(
 }
 
 /// Ticks of one pass of `step` over `frames`.
-fn ticks_of(t: &Ticks, frames: &[[[f32; 4]; 3]], step: impl FnMut(&[[f32; 4]; 3])) -> u64 {
+fn ticks_of<const G: usize>(
+    t: &Ticks,
+    frames: &[[[f32; G]; 3]],
+    step: impl FnMut(&[[f32; G]; 3]),
+) -> u64 {
     let t0 = t.now();
     frames.iter().for_each(step);
     t.now() - t0
@@ -399,6 +403,11 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
             }
         }
     }
+    let overhead5 = ticks_of(t, &frames5, |f| {
+        for axis in f.iter() {
+            black_box(axis);
+        }
+    });
     for (name, mask) in [
         ("all five", 0b11111u8),
         ("four of five", 0b01111),
@@ -408,20 +417,17 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
             exit(false)
         };
         let mut st = [AxisState::<5>::default(); 3];
-        let mut pass = || {
-            for f in frames5.iter() {
-                for (a, axis) in f.iter().enumerate() {
-                    let _ = black_box(fusion.fuse(&mut st[a], black_box(axis), mask));
-                }
+        let mut step = |f: &[[f32; 5]; 3]| {
+            for (a, axis) in f.iter().enumerate() {
+                let _ = black_box(fusion.fuse(&mut st[a], black_box(axis), mask));
             }
         };
-        // Warmed up first (noise estimates).
-        for _ in 0..3 {
-            pass();
+        // Noise estimates warmed up over three passes (the last in
+        // `per_frame`), the fourth timed.
+        for _ in 0..2 {
+            frames5.iter().for_each(&mut step);
         }
-        let t0 = t.now();
-        pass();
-        let per_sample = (t.now() - t0) as f32 * ipt / frames5.len() as f32;
+        let per_sample = per_frame(t, ipt, overhead5, &frames5, true, step);
         defmt::info!(
             "bench fusion adaptive, N = 5, {=str} offered: {=u32} instructions per 3-axis sample",
             name,
