@@ -18,7 +18,8 @@ use super::msg::{
 };
 use super::ring::ByteRing;
 use super::wire::{
-    encode_payload, frame_payload, framed_len, Decoded, Decoder, FrameError, MAX_FRAME, MAX_PAYLOAD,
+    encode_in_place, encode_payload, frame_payload, framed_len, Decoded, Decoder, FrameError,
+    IN_PLACE_MAX, MAX_PAYLOAD,
 };
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Output, Pipeline};
@@ -70,7 +71,6 @@ pub struct Port<const TX: usize> {
     status_requested: bool,
     /// Encoding scratch, kept so that a frame zeroes no buffers.
     payload: [u8; MAX_PAYLOAD],
-    frame: [u8; MAX_FRAME],
 }
 
 impl<const TX: usize> Port<TX> {
@@ -86,7 +86,6 @@ impl<const TX: usize> Port<TX> {
             noise_sent: [None; 3],
             status_requested: false,
             payload: [0; MAX_PAYLOAD],
-            frame: [0; MAX_FRAME],
         }
     }
 
@@ -115,21 +114,32 @@ impl<const TX: usize> Port<TX> {
     pub fn send_ref(&mut self, frame: FrameRef<'_>) -> bool {
         let seq = self.link_seq;
         self.link_seq = self.link_seq.wrapping_add(1);
-        // Straight into the queue where it has the room in one piece (no
-        // copy); else through the scratch frame, which the queue takes in
-        // two pieces around its end.
-        let ok = match encode_payload(seq, &frame, &mut self.payload) {
-            Ok(k) => {
-                let payload = self.payload.get(..k).unwrap_or(&[]);
-                if self.tx.tail_mut().len() >= framed_len(k) {
-                    let n = frame_payload(payload, self.tx.tail_mut());
-                    n.map(|n| self.tx.commit(n)).is_ok()
-                } else {
-                    frame_payload(payload, &mut self.frame)
-                        .is_ok_and(|n| self.tx.push(self.frame.get(..n).unwrap_or(&[])))
-                }
+        // Straight into the queue (no copy), in room for any frame that
+        // can be encoded in place: the queue is drained every sample
+        // period, so the room is almost always there, at its start. Else
+        // (a backlog, or a frame too long to encode in place) through the
+        // payload scratch into the room the queue finds for it.
+        let placed = self
+            .tx
+            .grant(IN_PLACE_MAX + 2)
+            .map(|room| encode_in_place(seq, &frame, room));
+        let ok = match placed {
+            Some(Ok(n)) => {
+                self.tx.commit(n);
+                true
             }
-            Err(_) => false,
+            _ => match encode_payload(seq, &frame, &mut self.payload) {
+                Ok(k) => {
+                    let payload = self.payload.get(..k).unwrap_or(&[]);
+                    match self.tx.grant(framed_len(k)) {
+                        Some(room) => frame_payload(payload, room)
+                            .map(|n| self.tx.commit(n))
+                            .is_ok(),
+                        None => false,
+                    }
+                }
+                Err(_) => false,
+            },
         };
         if ok {
             self.counters.sent = self.counters.sent.wrapping_add(1);

@@ -6,7 +6,7 @@ use proptest::prelude::*;
 
 use super::msg::*;
 use super::port::Port;
-use super::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use super::wire::{encode, encode_in_place, Decoded, Decoder, FrameError, IN_PLACE_MAX, MAX_FRAME};
 use super::{frame_budget, VERSION};
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::pipeline::{Pipeline, PipelineConfig};
@@ -220,6 +220,31 @@ fn stream(frames: &[Frame]) -> std::vec::Vec<u8> {
 }
 
 proptest! {
+    /// The in-place encoder writes the crate encoder's bytes, for bodies
+    /// with zeros anywhere (runs up to the longest payload it takes), and
+    /// refuses what it cannot take (too long, or too little room) without
+    /// a wrong frame.
+    #[test]
+    fn in_place_frames_are_the_crate_encoders(
+        body in proptest::collection::vec(prop_oneof![Just(0u8), 1u8..=255], 0..260),
+        seq in any::<u32>(),
+        room_len in 0usize..300,
+    ) {
+        let body: &[u8] = &body;
+        let mut want = [0u8; MAX_FRAME];
+        let n = encode(seq, &body, &mut want).unwrap();
+        let mut room = [0xAAu8; 300];
+        match encode_in_place(seq, &body, &mut room[..room_len]) {
+            Ok(m) => prop_assert_eq!(&room[..m], &want[..n]),
+            Err(_) => prop_assert!(n - 2 > IN_PLACE_MAX || n > room_len, "refused {} bytes in {}", n, room_len),
+        }
+        // Every frame it can take fits its room when the room is large.
+        if n - 2 <= IN_PLACE_MAX {
+            let m = encode_in_place(seq, &body, &mut room[..IN_PLACE_MAX + 2]).unwrap();
+            prop_assert_eq!(&room[..m], &want[..n]);
+        }
+    }
+
     /// Garbage never panics the decoder and never yields a frame that was
     /// not sent (the CRC would have to collide: 2⁻¹⁶ per garbage frame;
     /// these inputs are short).

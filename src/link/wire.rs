@@ -58,9 +58,11 @@ pub fn encode_payload<T: Serialize>(
     body: &T,
     payload: &mut [u8],
 ) -> Result<usize, EncodeError> {
-    let payload = payload.get_mut(..MAX_PAYLOAD).ok_or(EncodeError::TooLong)?;
-    let (head, rest) = payload.split_at_mut(1);
-    head[0] = VERSION;
+    let payload = payload
+        .get_mut(..MAX_PAYLOAD.min(payload.len()))
+        .ok_or(EncodeError::TooLong)?;
+    let (head, rest) = payload.split_first_mut().ok_or(EncodeError::TooLong)?;
+    *head = VERSION;
     let env = Envelope { link_seq, body };
     let n = postcard::to_slice(&env, rest)
         .map_err(|_| EncodeError::TooLong)?
@@ -74,6 +76,52 @@ pub fn encode_payload<T: Serialize>(
         .ok_or(EncodeError::TooLong)?
         .copy_from_slice(&crc);
     Ok(n + 2)
+}
+
+/// Longest payload (version to CRC) [`encode_in_place`] takes: COBS
+/// never has to split a run of so few bytes.
+pub const IN_PLACE_MAX: usize = 253;
+
+/// [`encode`] straight into `room`: the payload is serialised at
+/// `room[1..]` and COBS-encoded where it lies, each zero byte becoming the
+/// length code of the run before it. No copy, and about 4 instructions a
+/// byte against 14 for the `cobs` crate's encoder on the Cortex-M4, which
+/// the board pays on every sample frame (`cargo xtask bench`). For
+/// payloads of at most [`IN_PLACE_MAX`] bytes (every sample and raw frame
+/// of up to 8 gyros); a longer one, or one that does not fit in `room`,
+/// is `Err(TooLong)` and goes through [`encode`]. The bytes are those of
+/// [`encode`] (`in_place_frames_are_the_crate_encoders`).
+pub fn encode_in_place<T: Serialize>(
+    link_seq: u32,
+    body: &T,
+    room: &mut [u8],
+) -> Result<usize, EncodeError> {
+    let room = room
+        .get_mut(..room.len().min(IN_PLACE_MAX + 2))
+        .ok_or(EncodeError::TooLong)?;
+    let k = encode_payload(link_seq, body, room.get_mut(1..).unwrap_or(&mut []))?;
+    // The payload is room[1..=k]; the delimiter goes at k + 1.
+    if k > IN_PLACE_MAX {
+        return Err(EncodeError::TooLong);
+    }
+    let buf = room.get_mut(..k + 2).ok_or(EncodeError::TooLong)?;
+    let mut code_at = 0usize;
+    // (An exclusive range: `1..=k` kept an exhausted flag and cost 14
+    // instructions a byte. i ≤ k < buf.len(): no check; `code_at` < i.)
+    #[allow(clippy::range_plus_one)]
+    for i in 1..k + 1 {
+        if buf[i] == 0 {
+            if let Some(c) = buf.get_mut(code_at) {
+                *c = (i - code_at) as u8;
+            }
+            code_at = i;
+        }
+    }
+    if let Some(c) = buf.get_mut(code_at) {
+        *c = (k + 1 - code_at) as u8;
+    }
+    buf[k + 1] = 0;
+    Ok(k + 2)
 }
 
 /// The second step of [`encode`]: a payload COBS-encoded into `out`
