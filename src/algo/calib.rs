@@ -37,6 +37,7 @@ pub const EVERY: u32 = 32;
 pub const LEARN_STRIDE: u32 = 2;
 
 use crate::algo::fusion::{median, AxisState, FuseError, Fused, Fusion};
+use crate::algo::math::bound;
 
 /// Settings of [`RelCal`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -329,9 +330,10 @@ impl<const N: usize> RelCal<N> {
             } else {
                 self.wild |= 1 << i;
             }
-            // max/min, not clamp: clamp panics on a bad bound.
-            self.scale[i] = s.max(1.0 - m).min(1.0 + m);
-            self.bias[i] = b.max(-self.cfg.max_bias_dps).min(self.cfg.max_bias_dps);
+            // `bound`, not clamp: clamp panics on a bad bound.
+            self.scale[i] = bound(s, 1.0 - m, 1.0 + m);
+            let bb = self.cfg.max_bias_dps;
+            self.bias[i] = bound(b, -bb, bb);
         }
         // Align to the average chip, not the median one: the corrected
         // chips then share the mean scale and bias of the array, as an

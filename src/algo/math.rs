@@ -6,6 +6,19 @@
 //! `micromath` is not used where accuracy matters: its `sqrt(9.0)` returns
 //! 3.125. The accuracy of [`lnf`] is measured against f64 in the tests.
 
+/// `v.max(lo).min(hi)` without libm's `fmaxf` and `fminf` (`f32::max` and
+/// `f32::min` are function calls on the Cortex-M4: 230 instructions a turn
+/// in the online calibration's solve); NaN gives `lo`, as `max` does.
+#[inline(always)]
+pub fn bound(v: f32, lo: f32, hi: f32) -> f32 {
+    let v = if v > lo { v } else { lo };
+    if v < hi {
+        v
+    } else {
+        hi
+    }
+}
+
 /// Square root, correctly rounded (IEEE 754). On the Cortex-M4F this is one
 /// `vsqrt.f32` instruction; elsewhere it is `libm::sqrtf`. Both are correctly
 /// rounded, so they agree bit for bit.
