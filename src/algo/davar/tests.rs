@@ -449,3 +449,35 @@ fn avar_in_f32_is_within_two_ulp_of_f64() {
     }
     assert!(worst <= 2, "worst {worst} ulp");
 }
+
+/// The link's conversion of the exact sums equals `as f32` bit for bit:
+/// every magnitude, halfway cases with and without bits below them, and
+/// the ends of the range.
+#[test]
+fn u128_to_f32_is_as_f32() {
+    use super::u128_to_f32;
+    let mut x = 0x9E37_79B9_7F4A_7C15_F39C_C060_5CED_C835u128;
+    let mut check = |v: u128| assert_eq!(u128_to_f32(v).to_bits(), (v as f32).to_bits(), "{v:#x}");
+    for e in 0..128u32 {
+        let p = 1u128 << e;
+        for v in [
+            p,
+            p - 1,
+            p + 1,
+            p | (p >> 24),
+            p | (p >> 24) | 1,
+            p | (p >> 25),
+            p | (p >> 25) | 1,
+        ] {
+            check(v);
+        }
+        for _ in 0..2000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            check(x >> (127 - e));
+        }
+    }
+    check(0);
+    check(u128::MAX);
+}
