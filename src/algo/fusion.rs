@@ -780,9 +780,17 @@ fn floor(v: f32, lo: f32) -> f32 {
 /// fully unrolled for the const N) of order-preserving integer keys, with
 /// gyros outside `m` keyed last. On the Cortex-M4 integer compare-exchanges
 /// are far cheaper than float compares (`vcmp` + `vmrs`) or an insertion
-/// sort's data-dependent loops. NaN when `m` is empty. Also the consensus
-/// of the online calibration and of the self-test.
+/// sort's data-dependent loops; three or four gyros (every set after a
+/// chip or two fails) take a short network on their gathered keys
+/// instead. NaN when `m` is empty. Also the consensus of the online
+/// calibration and of the self-test.
 pub(crate) fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
+    median_of(y, m)
+}
+
+/// [`median`], inlined: the adaptive method's constant sets fold it.
+#[inline(always)]
+fn median_of<const N: usize>(y: &[f32; N], m: u8) -> f32 {
     // Sign-magnitude to two's complement: an involution on the bits.
     let key = |b: i32| b ^ (((b >> 31) as u32) >> 1) as i32;
     let mut k = [i32::MAX; N];
@@ -793,12 +801,18 @@ pub(crate) fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
             i32::MAX
         };
     }
-    if (N == 4 && m == full::<N>()) || (N == 5 && m == all_but_last::<N>()) {
-        // Four keys in k[0..4] (four gyros, all in, or the board's x and
-        // y: five, the last not on the axis): the middle pair is (max of
-        // the two minima, min of the two maxima), 6 min/max.
-        let (a, b) = (k[0].min(k[1]), k[0].max(k[1]));
-        let (c, d) = (k[2].min(k[3]), k[2].max(k[3]));
+    if m.count_ones() == 3 {
+        // Three keys: the middle one, 4 min/max.
+        let [a, b, c, _] = four(&k, m);
+        let mid = a.min(b).max(a.max(b).min(c));
+        return f32::from_bits(key(mid) as u32);
+    }
+    if m.count_ones() == 4 {
+        // Four keys: the middle pair is (max of the two minima, min of the
+        // two maxima), 6 min/max.
+        let [a, b, c, d] = four(&k, m);
+        let (a, b) = (a.min(b), a.max(b));
+        let (c, d) = (c.min(d), c.max(d));
         let (lo, hi) = (a.max(c), b.min(d));
         let f = |j: i32| f32::from_bits(key(j) as u32);
         return 0.5 * (f(lo) + f(hi));
@@ -829,6 +843,7 @@ pub(crate) fn median<const N: usize>(y: &[f32; N], m: u8) -> f32 {
 /// was wild: the fault campaign's last failures). Same sorting as
 /// [`median`], with each gyro's index in the key's three low bits, so the
 /// middle two are known; the values returned are the exact inputs.
+#[inline(always)]
 fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
     let key = |b: i32| b ^ (((b >> 31) as u32) >> 1) as i32;
     let mut k = [i32::MAX; N];
@@ -846,9 +861,15 @@ fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
         // (ya/va + yb/vb) / (1/va + 1/vb), without the divisions.
         (ya * vb + yb * va) / (va + vb)
     };
-    if (N == 4 && m == full::<N>()) || (N == 5 && m == all_but_last::<N>()) {
-        let (a, b) = (k[0].min(k[1]), k[0].max(k[1]));
-        let (c, d) = (k[2].min(k[3]), k[2].max(k[3]));
+    if m.count_ones() == 3 {
+        let [a, b, c, _] = four(&k, m);
+        let mid = a.min(b).max(a.max(b).min(c));
+        return y[(mid & 7) as usize % N];
+    }
+    if m.count_ones() == 4 {
+        let [a, b, c, d] = four(&k, m);
+        let (a, b) = (a.min(b), a.max(b));
+        let (c, d) = (c.min(d), c.max(d));
         return pick(a.max(c), b.min(d));
     }
     for round in 0..N {
@@ -870,6 +891,25 @@ fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
     }
 }
 
+/// The keys of the (up to) four gyros in `m`, in order; `i32::MAX` after
+/// them. With
+/// `m` a constant (the adaptive method's constant sets) the gather folds
+/// to four loads.
+#[inline(always)]
+fn four<const N: usize>(k: &[i32; N], m: u8) -> [i32; 4] {
+    let mut g = [i32::MAX; 4];
+    let mut j = 0usize;
+    for i in 0..N {
+        if has(m, i) {
+            if let Some(s) = g.get_mut(j) {
+                *s = k[i];
+            }
+            j += 1;
+        }
+    }
+    g
+}
+
 /// Median absolute deviation from the median over the masked values.
 fn mad<const N: usize>(y: &[f32; N], m: u8) -> f32 {
     let med = median(y, m);
@@ -886,22 +926,6 @@ fn full<const N: usize>() -> u8 {
     ((1u16 << N) - 1) as u8
 }
 
-/// Every gyro but the last, for the board's five (else 0, which no
-/// non-empty mask equals): its x and y axes, whose last gyro (the
-/// ADXRS453) measures z only, so they never have all five. A constant like
-/// [`full`], so the phases inlined for it fold their mask tests too: with
-/// the general mask four of five cost 3 406 instructions per 3-axis sample
-/// on the Cortex-M4, more than all five (2 395; `cargo xtask bench`).
-/// Other array sizes keep their code as it was: the N = 4 default path
-/// stays within its 2 500-instruction target.
-fn all_but_last<const N: usize>() -> u8 {
-    if N == 5 {
-        full::<N>() >> 1
-    } else {
-        0
-    }
-}
-
 fn adaptive<const N: usize>(
     c: &AdaptiveConfig,
     st: &mut AxisState<N>,
@@ -912,42 +936,103 @@ fn adaptive<const N: usize>(
     if valid == 0 {
         return None;
     }
-    // Each phase is inlined for the common cases where its mask is every
-    // gyro or (N = 5) every gyro but the last, constants, so the mask tests
-    // fold away, and for the general mask. Same arithmetic in the same
-    // order either way.
-    let abl = all_but_last::<N>();
-    let active = if valid == full::<N>() {
-        frozen_check(c, st, y, full::<N>())
-    } else if abl != 0 && valid == abl {
-        frozen_check(c, st, y, all_but_last::<N>())
+    // Sets of three or more gyros run with a constant mask when N ≤ 5 (16
+    // sets for the board's five, 5 for four, 1 for three), and all gyros
+    // do for larger N. With the mask a constant, every phase's mask tests
+    // fold away and its lane loops shrink to the gyros in the set. Before,
+    // only all gyros and (N = 5) all but the last had that, and after a
+    // chip failed every axis ran the general mask: three of five cost
+    // 3 101 instructions per 3-axis sample on the Cortex-M4, against 1 991
+    // for the constant four of five (`cargo xtask bench`). Sets of one or
+    // two have no gate and take the general path. Same arithmetic in the
+    // same order either way.
+    macro_rules! dispatch {
+        ($($m:literal)*) => {
+            match valid {
+                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_set::<N, $m>(c, st, y, out), )*
+                _ if N > 5 && valid == full::<N>() => adaptive_set::<N, 0>(c, st, y, out),
+                _ => adaptive_general(c, st, y, valid, out),
+            }
+        };
+    }
+    dispatch!(7 11 13 14 15 19 21 22 23 25 26 27 28 29 30 31)
+}
+
+/// [`adaptive`] with the constant set `M` valid (0: all N gyros): one copy
+/// per set, its phases inlined with the mask folded in.
+#[inline(never)]
+fn adaptive_set<const N: usize, const M: u8>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    let m = if M == 0 { full::<N>() } else { M };
+    let active = frozen_check(c, st, y, m);
+    if active == m {
+        adaptive_active(c, st, y, m, m, m, (true, true), out)
     } else {
-        frozen_check(c, st, y, valid)
-    };
+        adaptive_frozen(c, st, y, m, active, out)
+    }
+}
+
+/// [`adaptive`] for any set.
+#[inline(never)]
+fn adaptive_general<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    let active = frozen_check(c, st, y, valid);
+    adaptive_frozen(c, st, y, valid, active, out)
+}
+
+/// The rest of [`adaptive`] once the frozen check has left `active` of
+/// `valid`. Frozen candidates are not fused but still vote in the median
+/// gate: a healthy chip that repeats a quantised value four times (it
+/// happens) must not leave a faulty one ungated for want of a quorum
+/// (fault campaign, seed 7 783 687: three gyros on x, one rescaled, one
+/// repeating; the rescaled one was fused). A chip that sticks is frozen
+/// here for the 12 samples until the pipeline flags it stuck, on every
+/// axis: the gyros left to fuse run with a constant mask too (the gate,
+/// over the voters, with the general one), which took 1 750 instructions
+/// off each of those samples.
+#[inline(never)]
+fn adaptive_frozen<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    active: u8,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
     if active == 0 {
         out.rejected |= valid;
         return None;
     }
-    if active == full::<N>() {
-        adaptive_active(c, st, y, valid, full::<N>(), full::<N>(), out)
-    } else if abl != 0 && active == abl && valid == abl {
-        adaptive_active(
-            c,
-            st,
-            y,
-            valid,
-            all_but_last::<N>(),
-            all_but_last::<N>(),
-            out,
-        )
-    } else {
-        // Frozen candidates are not fused but still vote in the median gate:
-        // a healthy chip that repeats a quantised value four times (it
-        // happens) must not leave a faulty one ungated for want of a
-        // quorum (fault campaign, seed 7 783 687: three gyros on x, one
-        // rescaled, one repeating; the rescaled one was fused).
-        adaptive_active(c, st, y, valid, active, valid, out)
+    macro_rules! dispatch {
+        ($($m:literal)*) => {
+            match active {
+                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_fused_set::<N, $m>(c, st, y, valid, out), )*
+                _ => adaptive_active(c, st, y, valid, active, valid, (false, false), out),
+            }
+        };
     }
+    dispatch!(7 11 13 14 15 19 21 22 23 25 26 27 28 29 30)
+}
+
+/// [`adaptive_frozen`] fusing the constant set `M` of `valid`.
+#[inline(never)]
+fn adaptive_fused_set<const N: usize, const M: u8>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    adaptive_active(c, st, y, valid, M, valid, (false, true), out)
 }
 
 /// Frozen outputs: bit-identical for `frozen_after` samples while some
@@ -1196,8 +1281,66 @@ fn warm_up_gate<const N: usize>(
     (good, lim * lim)
 }
 
+/// [`first_gate`] for any voters, out of line.
+#[inline(never)]
+fn first_gate_any<const N: usize>(
+    c: &AdaptiveConfig,
+    y: &[f32; N],
+    v: &[f32; N],
+    voters: u8,
+    n: u32,
+    all_warm: bool,
+) -> (f32, u8, f32) {
+    first_gate(c, y, v, voters, n, all_warm)
+}
+
+/// The median of `voters` (`n` of them) and, once all are warm and there
+/// are three or more, the voters off it and the typical variance term of
+/// the gate (0 and 0 otherwise).
+#[inline(always)]
+fn first_gate<const N: usize>(
+    c: &AdaptiveConfig,
+    y: &[f32; N],
+    v: &[f32; N],
+    voters: u8,
+    n: u32,
+    all_warm: bool,
+) -> (f32, u8, f32) {
+    let med = if all_warm {
+        gate_median(y, v, voters)
+    } else {
+        median_of(y, voters)
+    };
+    if !(n >= 3 && all_warm) {
+        return (med, 0, 0.0);
+    }
+    // The typical variance: the mean of the active gyros' without the
+    // largest. The plain mean let one very noisy or spiking gyro widen
+    // the gate for all (the fault campaign found a second faulty chip
+    // getting through that way); a median of the variances did as well
+    // at ~60 more instructions per 3-axis sample.
+    let (mut vsum, mut vmax) = (0.0f32, 0.0f32);
+    for i in 0..N {
+        let vi = if has(voters, i) { v[i] } else { 0.0 };
+        vsum += vi;
+        vmax = if vi > vmax { vi } else { vmax };
+    }
+    let nm1 = n as f32 - 1.0;
+    let k2 = c.gate_k * c.gate_k;
+    // vbar / (n − 1), with vbar = (vsum − vmax) / (n − 1).
+    let v_med = (vsum - vmax) / (nm1 * nm1);
+    let mut offm = 0u8;
+    for i in 0..N {
+        let e = y[i] - med;
+        let off = has(voters, i) && e * e > k2 * (v[i] + v_med);
+        offm |= (off as u8) << i;
+    }
+    (med, offm, v_med)
+}
+
 /// Weights, median gate, noise update and the fused value over `active`;
 /// the gate's median and quorum are over `voters` (⊇ `active`).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn adaptive_active<const N: usize>(
     c: &AdaptiveConfig,
@@ -1206,6 +1349,7 @@ fn adaptive_active<const N: usize>(
     valid: u8,
     active: u8,
     voters: u8,
+    (fast_gate, fast_fuse): (bool, bool),
     out: &mut Fused<N>,
 ) -> Option<(f32, [f32; N])> {
     let n = voters.count_ones();
@@ -1221,36 +1365,17 @@ fn adaptive_active<const N: usize>(
         w[i] = if has(active, i) { wi } else { 0.0 };
     }
     // Median gate (needs 3 gyros to tell which one is off): the residual
-    // y_i − median has variance about σ_i² + (typical σ²)/(n − 1).
-    let med = if all_warm {
-        gate_median(y, &v, voters)
+    // y_i − median has variance about σ_i² + (typical σ²)/(n − 1). With
+    // `fast_gate`, the voters are `active` and it is a constant.
+    let (med, offm, v_med) = if fast_gate {
+        first_gate(c, y, &v, active, n, all_warm)
     } else {
-        median(y, voters)
+        first_gate_any(c, y, &v, voters, n, all_warm)
     };
+    let k2 = c.gate_k * c.gate_k;
     let mut good = active;
     let mut warm_cap = f32::INFINITY;
     if n >= 3 && all_warm {
-        // The typical variance: the mean of the active gyros' without the
-        // largest. The plain mean let one very noisy or spiking gyro widen
-        // the gate for all (the fault campaign found a second faulty chip
-        // getting through that way); a median of the variances did as well
-        // at ~60 more instructions per 3-axis sample.
-        let (mut vsum, mut vmax) = (0.0f32, 0.0f32);
-        for i in 0..N {
-            let vi = if has(voters, i) { v[i] } else { 0.0 };
-            vsum += vi;
-            vmax = if vi > vmax { vi } else { vmax };
-        }
-        let nm1 = n as f32 - 1.0;
-        let k2 = c.gate_k * c.gate_k;
-        // vbar / (n − 1), with vbar = (vsum − vmax) / (n − 1).
-        let v_med = (vsum - vmax) / (nm1 * nm1);
-        let mut offm = 0u8;
-        for i in 0..N {
-            let e = y[i] - med;
-            let off = has(voters, i) && e * e > k2 * (v[i] + v_med);
-            offm |= (off as u8) << i;
-        }
         good = active & !offm;
         // Voters that agree with the median: the fused ones and any frozen
         // candidate (a healthy chip repeating a value still vouches).
@@ -1294,27 +1419,15 @@ fn adaptive_active<const N: usize>(
         }
     }
     out.rejected |= valid & !good;
-    let abl = all_but_last::<N>();
-    let r = if good == full::<N>() {
+    // With `fast_fuse`, `active` is the caller's constant set: inlined for
+    // it when the gate kept every gyro, out of line otherwise.
+    let r = if fast_fuse && good == active {
         update_and_fuse(
             c,
             st,
             y,
-            full::<N>(),
-            full::<N>(),
-            (all_warm, warm_cap),
-            med,
-            &v,
-            &w,
-            out,
-        )
-    } else if abl != 0 && good == abl && active == abl {
-        update_and_fuse(
-            c,
-            st,
-            y,
-            all_but_last::<N>(),
-            all_but_last::<N>(),
+            active,
+            active,
             (all_warm, warm_cap),
             med,
             &v,
@@ -1322,7 +1435,7 @@ fn adaptive_active<const N: usize>(
             out,
         )
     } else {
-        update_and_fuse(
+        update_and_fuse_general(
             c,
             st,
             y,
@@ -1350,6 +1463,24 @@ fn adaptive_active<const N: usize>(
         st.last_out = x;
     }
     r
+}
+
+/// [`update_and_fuse`] for any sets, out of line.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn update_and_fuse_general<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    active: u8,
+    good: u8,
+    warm: (bool, f32),
+    med: f32,
+    v: &[f32; N],
+    w: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    update_and_fuse(c, st, y, active, good, warm, med, v, w, out)
 }
 
 /// Noise update and inverse-variance fusion over `good` (⊆ `active`).
