@@ -531,7 +531,13 @@ impl<const N: usize> Fusion<N> {
             Method::Mean => (valid != 0).then(|| mean_of(y, valid)),
             Method::Zhang => self.zhang(y, valid, &mut out),
             Method::Seed(c) => self.seed(&c, st, y, valid, &mut out),
-            Method::Adaptive(c) => adaptive(&c, st, y, valid, &mut out),
+            Method::Adaptive(c) => {
+                return if adaptive(&c, st, y, valid, &mut out) {
+                    Ok(out)
+                } else {
+                    Err(FuseError::NoValidInput)
+                };
+            }
         };
         match res {
             Some((x, w)) => {
@@ -897,6 +903,12 @@ fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
 /// to four loads.
 #[inline(always)]
 fn four<const N: usize>(k: &[i32; N], m: u8) -> [i32; 4] {
+    if N == 4 && m == full::<N>() {
+        // All four (the online calibration's usual consensus with four
+        // gyros, a runtime mask): no gather.
+        let at = |j: usize| k.get(j).copied().unwrap_or(i32::MAX);
+        return [at(0), at(1), at(2), at(3)];
+    }
     let mut g = [i32::MAX; 4];
     let mut j = 0usize;
     for i in 0..N {
@@ -926,15 +938,32 @@ fn full<const N: usize>() -> u8 {
     ((1u16 << N) - 1) as u8
 }
 
+/// Store a fused value and its weights in `out`; whether there was one.
+/// The adaptive method's out-of-line parts return through `out` rather
+/// than by value: merging their results by value cost copies of them in
+/// the inlined path (40 instructions per 3-axis sample with N = 4).
+#[inline(always)]
+fn put<const N: usize>(r: Option<(f32, [f32; N])>, out: &mut Fused<N>) -> bool {
+    match r {
+        Some((x, w)) => {
+            out.rate_dps = x;
+            out.weights = w;
+            true
+        }
+        None => false,
+    }
+}
+
+/// The adaptive method over `valid`, into `out`; false if nothing fused.
 fn adaptive<const N: usize>(
     c: &AdaptiveConfig,
     st: &mut AxisState<N>,
     y: &[f32; N],
     valid: u8,
     out: &mut Fused<N>,
-) -> Option<(f32, [f32; N])> {
+) -> bool {
     if valid == 0 {
-        return None;
+        return false;
     }
     // Sets of three or more gyros run with a constant mask when N ≤ 5 (16
     // sets for the board's five, 5 for four, 1 for three), and all gyros
@@ -946,6 +975,26 @@ fn adaptive<const N: usize>(
     // for the constant four of five (`cargo xtask bench`). Sets of one or
     // two have no gate and take the general path. Same arithmetic in the
     // same order either way.
+    // With fewer than five gyros, all of them (the usual case) is inlined
+    // here: out of line, the call cost 60 more per 3-axis sample with N = 4,
+    // over the default path's 2 500. With five, inlining it made the other
+    // sets' calls dearer (four of five 2 011 -> 2 687).
+    if N < 5 && valid == full::<N>() {
+        adaptive_const(c, st, y, full::<N>(), out)
+    } else {
+        adaptive_dispatch(c, st, y, valid, out)
+    }
+}
+
+/// [`adaptive`] for the sets not inlined there: the jump table.
+#[inline(never)]
+fn adaptive_dispatch<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> bool {
     macro_rules! dispatch {
         ($($m:literal)*) => {
             match valid {
@@ -966,11 +1015,22 @@ fn adaptive_set<const N: usize, const M: u8>(
     st: &mut AxisState<N>,
     y: &[f32; N],
     out: &mut Fused<N>,
-) -> Option<(f32, [f32; N])> {
-    let m = if M == 0 { full::<N>() } else { M };
+) -> bool {
+    adaptive_const(c, st, y, if M == 0 { full::<N>() } else { M }, out)
+}
+
+/// [`adaptive`] with the set `m` valid, inlined for a constant `m`.
+#[inline(always)]
+fn adaptive_const<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    m: u8,
+    out: &mut Fused<N>,
+) -> bool {
     let active = frozen_check(c, st, y, m);
     if active == m {
-        adaptive_active(c, st, y, m, m, m, (true, true), out)
+        put(adaptive_active(c, st, y, m, m, m, (true, true), out), out)
     } else {
         adaptive_frozen(c, st, y, m, active, out)
     }
@@ -984,7 +1044,7 @@ fn adaptive_general<const N: usize>(
     y: &[f32; N],
     valid: u8,
     out: &mut Fused<N>,
-) -> Option<(f32, [f32; N])> {
+) -> bool {
     let active = frozen_check(c, st, y, valid);
     adaptive_frozen(c, st, y, valid, active, out)
 }
@@ -1007,16 +1067,16 @@ fn adaptive_frozen<const N: usize>(
     valid: u8,
     active: u8,
     out: &mut Fused<N>,
-) -> Option<(f32, [f32; N])> {
+) -> bool {
     if active == 0 {
         out.rejected |= valid;
-        return None;
+        return false;
     }
     macro_rules! dispatch {
         ($($m:literal)*) => {
             match active {
                 $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_fused_set::<N, $m>(c, st, y, valid, out), )*
-                _ => adaptive_active(c, st, y, valid, active, valid, (false, false), out),
+                _ => put(adaptive_active(c, st, y, valid, active, valid, (false, false), out), out),
             }
         };
     }
@@ -1031,8 +1091,11 @@ fn adaptive_fused_set<const N: usize, const M: u8>(
     y: &[f32; N],
     valid: u8,
     out: &mut Fused<N>,
-) -> Option<(f32, [f32; N])> {
-    adaptive_active(c, st, y, valid, M, valid, (false, true), out)
+) -> bool {
+    put(
+        adaptive_active(c, st, y, valid, M, valid, (false, true), out),
+        out,
+    )
 }
 
 /// Frozen outputs: bit-identical for `frozen_after` samples while some
@@ -1420,7 +1483,7 @@ fn adaptive_active<const N: usize>(
     }
     out.rejected |= valid & !good;
     // With `fast_fuse`, `active` is the caller's constant set: inlined for
-    // it when the gate kept every gyro, out of line otherwise.
+    // it when the gate kept every gyro, out of line otherwise (N ≥ 5).
     let r = if fast_fuse && good == active {
         update_and_fuse(
             c,
@@ -1428,6 +1491,22 @@ fn adaptive_active<const N: usize>(
             y,
             active,
             active,
+            (all_warm, warm_cap),
+            med,
+            &v,
+            &w,
+            out,
+        )
+    } else if N < 5 && fast_fuse {
+        // A gyro gated out of a constant set, with fewer than five: inlined
+        // too (a call cost 47 more per 3-axis sample with N = 4, where the
+        // bench's spiking gyro is gated out of 5 % of the axes).
+        update_and_fuse(
+            c,
+            st,
+            y,
+            active,
+            good,
             (all_warm, warm_cap),
             med,
             &v,
