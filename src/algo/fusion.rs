@@ -1030,10 +1030,28 @@ fn adaptive_const<const N: usize>(
 ) -> bool {
     let active = frozen_check(c, st, y, m);
     if active == m {
-        put(adaptive_active(c, st, y, m, m, m, (true, true), out), out)
+        put(adaptive_active(c, st, y, m, m, m, (true, true), None, out), out)
+    } else if active != 0 {
+        // A frozen chip votes but is not fused: the gate is over the
+        // voters, the constant `m`, so it is taken here, folded, and passed
+        // on (with the general mask it cost 270 more per 3-axis sample in
+        // the 12 samples after a chip sticks).
+        let all_warm = active & !st.warm == 0;
+        let g = first_gate(c, y, &floored(st, c), m, m.count_ones(), all_warm);
+        adaptive_frozen(c, st, y, m, active, Some(g), out)
     } else {
-        adaptive_frozen(c, st, y, m, active, out)
+        adaptive_frozen(c, st, y, m, active, None, out)
     }
+}
+
+/// Each gyro's noise variance, floored: the weights' and the gate's.
+#[inline(always)]
+fn floored<const N: usize>(st: &AxisState<N>, c: &AdaptiveConfig) -> [f32; N] {
+    let mut v = [0.0f32; N];
+    for i in 0..N {
+        v[i] = floor(st.var[i], c.var_floor);
+    }
+    v
 }
 
 /// [`adaptive`] for any set.
@@ -1046,7 +1064,7 @@ fn adaptive_general<const N: usize>(
     out: &mut Fused<N>,
 ) -> bool {
     let active = frozen_check(c, st, y, valid);
-    adaptive_frozen(c, st, y, valid, active, out)
+    adaptive_frozen(c, st, y, valid, active, None, out)
 }
 
 /// The rest of [`adaptive`] once the frozen check has left `active` of
@@ -1066,6 +1084,7 @@ fn adaptive_frozen<const N: usize>(
     y: &[f32; N],
     valid: u8,
     active: u8,
+    gate: Option<Gate>,
     out: &mut Fused<N>,
 ) -> bool {
     if active == 0 {
@@ -1075,8 +1094,8 @@ fn adaptive_frozen<const N: usize>(
     macro_rules! dispatch {
         ($($m:literal)*) => {
             match active {
-                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_fused_set::<N, $m>(c, st, y, valid, out), )*
-                _ => put(adaptive_active(c, st, y, valid, active, valid, (false, false), out), out),
+                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_fused_set::<N, $m>(c, st, y, valid, gate, out), )*
+                _ => put(adaptive_active(c, st, y, valid, active, valid, (false, false), gate, out), out),
             }
         };
     }
@@ -1090,10 +1109,11 @@ fn adaptive_fused_set<const N: usize, const M: u8>(
     st: &mut AxisState<N>,
     y: &[f32; N],
     valid: u8,
+    gate: Option<Gate>,
     out: &mut Fused<N>,
 ) -> bool {
     put(
-        adaptive_active(c, st, y, valid, M, valid, (false, true), out),
+        adaptive_active(c, st, y, valid, M, valid, (false, true), gate, out),
         out,
     )
 }
@@ -1344,6 +1364,10 @@ fn warm_up_gate<const N: usize>(
     (good, lim * lim)
 }
 
+/// The first gate's result: the voters' median, those off it, and the
+/// typical variance term.
+type Gate = (f32, u8, f32);
+
 /// [`first_gate`] for any voters, out of line.
 #[inline(never)]
 fn first_gate_any<const N: usize>(
@@ -1353,7 +1377,7 @@ fn first_gate_any<const N: usize>(
     voters: u8,
     n: u32,
     all_warm: bool,
-) -> (f32, u8, f32) {
+) -> Gate {
     first_gate(c, y, v, voters, n, all_warm)
 }
 
@@ -1368,7 +1392,7 @@ fn first_gate<const N: usize>(
     voters: u8,
     n: u32,
     all_warm: bool,
-) -> (f32, u8, f32) {
+) -> Gate {
     let med = if all_warm {
         gate_median(y, v, voters)
     } else {
@@ -1413,15 +1437,13 @@ fn adaptive_active<const N: usize>(
     active: u8,
     voters: u8,
     (fast_gate, fast_fuse): (bool, bool),
+    gate: Option<Gate>,
     out: &mut Fused<N>,
 ) -> Option<(f32, [f32; N])> {
     let n = voters.count_ones();
     // Current weights: inverse variance once warmed up, equal before.
     let all_warm = active & !st.warm == 0;
-    let mut v = [0.0f32; N];
-    for i in 0..N {
-        v[i] = floor(st.var[i], c.var_floor);
-    }
+    let v = floored(st, c);
     let mut w = [0.0f32; N];
     for i in 0..N {
         let wi = if all_warm { 1.0 / v[i] } else { 1.0 };
@@ -1429,11 +1451,12 @@ fn adaptive_active<const N: usize>(
     }
     // Median gate (needs 3 gyros to tell which one is off): the residual
     // y_i − median has variance about σ_i² + (typical σ²)/(n − 1). With
-    // `fast_gate`, the voters are `active` and it is a constant.
-    let (med, offm, v_med) = if fast_gate {
-        first_gate(c, y, &v, active, n, all_warm)
-    } else {
-        first_gate_any(c, y, &v, voters, n, all_warm)
+    // `fast_gate`, the voters are `active` and it is a constant; `gate`,
+    // the caller took it.
+    let (med, offm, v_med) = match gate {
+        Some(g) => g,
+        None if fast_gate => first_gate(c, y, &v, active, n, all_warm),
+        None => first_gate_any(c, y, &v, voters, n, all_warm),
     };
     let k2 = c.gate_k * c.gate_k;
     let mut good = active;
