@@ -36,6 +36,17 @@ pub const EVERY: u32 = 32;
 /// [`RelCal::fuse`] learns on one sample in `LEARN_STRIDE`.
 pub const LEARN_STRIDE: u32 = 2;
 
+/// Update counts (mod [`EVERY`]) of the three axes' scheduled solves.
+/// The pipeline counts samples from 0 and each axis learns on every other
+/// one (x and z on even samples, y on odd), so x solves on samples ≡ 10
+/// (mod 64), y on ≡ 59 and z on ≡ 62: samples ≡ 10, 27 and 30 (mod 32),
+/// where the E-DAVARs, whose frames are on the same 32-sample grid
+/// (`pipeline::tracker`), cost least (1 558, 1 540 and 1 662 instructions
+/// for the three axes against up to 2 630; `cargo xtask bench`'s whole
+/// loop). Before, z's solve fell on the tracker's segmentation start and
+/// made the loop's worst sample.
+pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
+
 use crate::algo::fusion::{median, AxisState, FuseError, Fused, Fusion};
 use crate::algo::math::bound;
 
@@ -98,6 +109,9 @@ pub struct RelCal<const N: usize> {
     phase: u8,
     /// The update count's offset for solving (see [`RelCal::for_axis`]).
     slot: u32,
+    /// Parity of the update counts on which a chip that has just warmed
+    /// up is solved for.
+    warm_parity: u32,
     /// The raw readings of the update before the next solve.
     last_raw: [f32; N],
     /// Samples of the growing window: 1/α (bounded), as an integer.
@@ -126,6 +140,7 @@ impl<const N: usize> RelCal<N> {
             warming: 0,
             phase: 0,
             slot: 0,
+            warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
         }
@@ -133,16 +148,17 @@ impl<const N: usize> RelCal<N> {
 
     /// The calibration of board axis `axis` (0 = x) of three, with its work
     /// spread against the other two: x and z learn on even samples, y on
-    /// odd ones; x solves on even update counts and z on odd ones (its
-    /// scheduled solves half a period later), also when a chip has just
-    /// warmed up, which may wait one update. Started together, the three
-    /// learnt and solved on the same samples: in the board's loop those
-    /// samples cost 1 100 more (learning) and 1 000 more (solving) than
-    /// the others (`cargo xtask bench`).
+    /// odd ones; each solves at its [`SOLVE_SLOTS`], and when a chip has
+    /// just warmed up x on even update counts, z on odd ones (which may
+    /// wait one update). Started together, the three learnt and solved on
+    /// the same samples: in the board's loop those samples cost 1 100 more
+    /// (learning) and 1 000 more (solving) than the others (`cargo xtask
+    /// bench`).
     pub fn for_axis(cfg: CalConfig, axis: usize) -> Self {
         let mut c = Self::new(cfg);
         c.phase = (axis % LEARN_STRIDE as usize) as u8;
-        c.slot = if axis == 2 { EVERY / 2 + 1 } else { 0 };
+        c.slot = SOLVE_SLOTS.get(axis).copied().unwrap_or(0);
+        c.warm_parity = u32::from(axis == 2);
         c
     }
 
@@ -167,12 +183,22 @@ impl<const N: usize> RelCal<N> {
         y: &[f32; N],
         offered: u8,
     ) -> Result<Fused<N>, FuseError> {
-        let r = fusion.fuse(st, &self.correct(y), offered)?;
         // The calibration learns on every other sample: what it tracks
         // moves over seconds, and the consensus and moments of every
-        // sample cost 330 instructions per axis on the Cortex-M4.
+        // sample cost 330 instructions per axis on the Cortex-M4. Its
+        // schedule counts samples, fused or not, so that its solves stay
+        // on the samples [`RelCal::for_axis`] chose for them.
         let learn_now = self.phase == 0;
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
+        let r = match fusion.fuse(st, &self.correct(y), offered) {
+            Ok(r) => r,
+            Err(e) => {
+                if learn_now {
+                    self.tick = self.tick.wrapping_add(1);
+                }
+                return Err(e);
+            }
+        };
         if learn_now {
             self.learn(y, r.used(), LEARN_STRIDE);
         }
@@ -235,6 +261,9 @@ impl<const N: usize> RelCal<N> {
     /// [`RelCal::update`] for an update that stands for `stride` samples
     /// (the forgetting and the growing window count samples, not updates).
     fn learn(&mut self, y: &[f32; N], used: u8, stride: u32) {
+        // Every update counts, learnt from or not: solves keep their
+        // samples.
+        self.tick = self.tick.wrapping_add(1);
         let mut mask = 0u8;
         for (i, v) in y.iter().enumerate() {
             mask |= ((used & (1 << i) != 0 && v.is_finite()) as u8) << i;
@@ -276,9 +305,8 @@ impl<const N: usize> RelCal<N> {
         }
         // The estimates move with the 1/α time constant: solving for them
         // every `EVERY` samples halves the cost and changes nothing.
-        self.tick = self.tick.wrapping_add(1);
         let t = self.tick.wrapping_sub(self.slot);
-        let warm_turn = self.warming != 0 && t.is_multiple_of(2) && self.newly_warm();
+        let warm_turn = self.warming != 0 && t % 2 == self.warm_parity && self.newly_warm();
         if t.is_multiple_of(EVERY) || warm_turn {
             self.solve(y, mask);
         } else if (t + 1).is_multiple_of(EVERY) {

@@ -1030,7 +1030,10 @@ fn adaptive_const<const N: usize>(
 ) -> bool {
     let active = frozen_check(c, st, y, m);
     if active == m {
-        put(adaptive_active(c, st, y, m, m, m, (true, true), None, out), out)
+        put(
+            adaptive_active(c, st, y, m, m, m, (true, true), None, out),
+            out,
+        )
     } else if active != 0 {
         // A frozen chip votes but is not fused: the gate is over the
         // voters, the constant `m`, so it is taken here, folded, and passed

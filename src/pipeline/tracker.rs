@@ -4,7 +4,7 @@
 
 use super::Output;
 use crate::algo::allan::stream::quantise;
-use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep};
+use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep, SEG};
 use crate::algo::math::sqrtf;
 use crate::link::msg::Noise;
 use crate::link::port::NoiseSource;
@@ -132,6 +132,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             }
             let q = f.map(|f| quantise(f.rate_dps, LSB_DPS));
             match q {
+                // A window starts on the sequence numbers' 32-sample grid
+                // (up to 31 samples late), so every axis's frames, and its
+                // heavy samples with them, keep their phases against the
+                // calibration's solves (`calib::SOLVE_SLOTS`) after any
+                // restart.
+                Some(Ok(_)) if origin.is_none() && !out.seq.is_multiple_of(SEG as u32) => {}
                 Some(Ok(q)) if d.push(q).is_ok() => {
                     origin.get_or_insert(out.seq);
                 }
