@@ -1040,8 +1040,9 @@ fn adaptive_const<const N: usize>(
         // on (with the general mask it cost 270 more per 3-axis sample in
         // the 12 samples after a chip sticks).
         let all_warm = active & !st.warm == 0;
-        let g = first_gate(c, y, &floored(st, c), m, m.count_ones(), all_warm);
-        adaptive_frozen(c, st, y, m, active, Some(g), out)
+        let v = floored(st, c);
+        let g = first_gate(c, y, &v, m, m.count_ones(), all_warm);
+        adaptive_frozen(c, st, y, m, active, Some((g, v)), out)
     } else {
         adaptive_frozen(c, st, y, m, active, None, out)
     }
@@ -1087,7 +1088,7 @@ fn adaptive_frozen<const N: usize>(
     y: &[f32; N],
     valid: u8,
     active: u8,
-    gate: Option<Gate>,
+    gate: Option<(Gate, [f32; N])>,
     out: &mut Fused<N>,
 ) -> bool {
     if active == 0 {
@@ -1112,7 +1113,7 @@ fn adaptive_fused_set<const N: usize, const M: u8>(
     st: &mut AxisState<N>,
     y: &[f32; N],
     valid: u8,
-    gate: Option<Gate>,
+    gate: Option<(Gate, [f32; N])>,
     out: &mut Fused<N>,
 ) -> bool {
     put(
@@ -1160,23 +1161,24 @@ fn frozen_check<const N: usize>(
 }
 
 /// The gyros of `valid` left after dropping the `candidates` whose run of
-/// repeats is longer than the shortest among `valid`.
+/// repeats is longer than the shortest among `valid`. Select-style: it
+/// runs on every sample while a chip that stuck is caught here but not
+/// yet flagged by the pipeline, and with branches it cost 330
+/// instructions per 3-axis sample then (`cargo xtask bench`, whole loop).
+/// Out of line: inlined, it cost the all-in path 16 more.
 #[cold]
 #[inline(never)]
 fn drop_frozen<const N: usize>(st: &AxisState<N>, valid: u8, candidates: u8) -> u8 {
     let mut shortest = u8::MAX;
     for i in 0..N {
-        if has(valid, i) {
-            shortest = shortest.min(st.frozen[i]);
-        }
+        let f = if has(valid, i) { st.frozen[i] } else { u8::MAX };
+        shortest = shortest.min(f);
     }
-    let mut active = valid;
+    let mut longer = 0u8;
     for i in 0..N {
-        if has(candidates, i) && st.frozen[i] > shortest {
-            active &= !(1 << i);
-        }
+        longer |= u8::from(st.frozen[i] > shortest) << i;
     }
-    active
+    valid & !(candidates & longer)
 }
 
 /// The median gate left fewer than two gyros. With an even count the
@@ -1440,13 +1442,16 @@ fn adaptive_active<const N: usize>(
     active: u8,
     voters: u8,
     (fast_gate, fast_fuse): (bool, bool),
-    gate: Option<Gate>,
+    gate: Option<(Gate, [f32; N])>,
     out: &mut Fused<N>,
 ) -> Option<(f32, [f32; N])> {
     let n = voters.count_ones();
     // Current weights: inverse variance once warmed up, equal before.
     let all_warm = active & !st.warm == 0;
-    let v = floored(st, c);
+    let v = match gate {
+        Some((_, v)) => v,
+        None => floored(st, c),
+    };
     let mut w = [0.0f32; N];
     for i in 0..N {
         let wi = if all_warm { 1.0 / v[i] } else { 1.0 };
@@ -1457,7 +1462,7 @@ fn adaptive_active<const N: usize>(
     // `fast_gate`, the voters are `active` and it is a constant; `gate`,
     // the caller took it.
     let (med, offm, v_med) = match gate {
-        Some(g) => g,
+        Some((g, _)) => g,
         None if fast_gate => first_gate(c, y, &v, active, n, all_warm),
         None => first_gate_any(c, y, &v, voters, n, all_warm),
     };

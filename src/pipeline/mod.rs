@@ -59,9 +59,22 @@ pub struct PipelineConfig {
     /// Longest back-off, samples.
     pub backoff_max: u32,
     /// Every this many samples one gyro (in turn) has its configuration
-    /// read back (0: never).
+    /// read back, at sample [`CHECK_AT`] of the period, and (calibrated)
+    /// its die temperature read, at [`TEMP_AT`] (0: never).
     pub check_every: u32,
 }
+
+/// The sample (mod `check_every`, 64 by default) of each configuration
+/// read-back, and of each temperature read. A read-back costs the
+/// firmware about 900 instructions (its bus time aside); every 50 samples
+/// it fell in turn on each phase of the E-DAVARs' 32-sample frames and the
+/// calibration's solves, and made the loop's worst sample (9 941, on a
+/// frame with an estimate; `cargo xtask bench`). On the shared 64-sample
+/// schedule (`calib::SOLVE_SLOTS`, `pipeline::tracker`) both take samples
+/// where the E-DAVARs cost least and no solve falls: ≡ 27 and ≡ 6 (mod 32).
+pub const CHECK_AT: u32 = 27;
+/// See [`CHECK_AT`].
+pub const TEMP_AT: u32 = 38;
 
 impl Default for PipelineConfig {
     fn default() -> Self {
@@ -72,7 +85,7 @@ impl Default for PipelineConfig {
             sample_us: 1000,
             backoff_min: 25,
             backoff_max: 1000,
-            check_every: 50,
+            check_every: 64,
         }
     }
 }
@@ -356,9 +369,10 @@ impl<const N: usize> Pipeline<N> {
                 self.counters[i].not_read = self.counters[i].not_read.saturating_add(1);
                 self.recover(i, &mut **g, seq);
             } else {
-                let due = self.cfg.check_every != 0
-                    && seq % self.cfg.check_every == 0
-                    && (seq / self.cfg.check_every) as usize % N == i;
+                let every = self.cfg.check_every;
+                let due = every != 0
+                    && seq % every == CHECK_AT % every
+                    && (seq / every) as usize % N == i;
                 // One gyro in turn also has its configuration read back.
                 let r = if due {
                     g.check_config().and_then(|()| g.read())
@@ -376,11 +390,10 @@ impl<const N: usize> Pipeline<N> {
                     out.rate_dps[i] = self.board_rates(i, &r);
                 }
                 // The die temperature, for the bias model: one gyro in
-                // turn, half-way between configuration checks.
-                let every = self.cfg.check_every;
+                // turn, between configuration checks.
                 if self.calibrated
                     && every != 0
-                    && seq % every == every / 2
+                    && seq % every == TEMP_AT % every
                     && (seq / every) as usize % N == i
                 {
                     if let Ok(t) = g.temperature_c() {
