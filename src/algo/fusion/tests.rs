@@ -596,3 +596,88 @@ fn used_is_the_positive_weights() {
         }
     }
 }
+
+/// The adaptive method through [`adaptive_active`] with every mask a
+/// runtime value: the reference for the constant-set copies.
+fn adaptive_reference<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> bool {
+    if valid == 0 {
+        return false;
+    }
+    let active = frozen_check(c, st, y, valid);
+    if active == 0 {
+        out.rejected |= valid;
+        return false;
+    }
+    put(
+        adaptive_active(c, st, y, valid, active, valid, (false, false), None, out),
+        out,
+    )
+}
+
+/// Every constant-set copy of the adaptive method (the jump table's sets,
+/// the sets left while a frozen chip votes, one gyro gated out of the
+/// board's healthy sets) gives the general path's bits: outputs and
+/// states, over random sets of five, spikes, stuck chips, warm-up and
+/// rejoins.
+#[test]
+fn constant_set_copies_give_the_general_paths_bits() {
+    let c = AdaptiveConfig::default();
+    let mut rng = Rng::new(11);
+    let mut rejected = 0u32;
+    let mut frozen = 0u32;
+    for _ in 0..100 {
+        let (mut a, mut b) = (AxisState::<5>::default(), AxisState::<5>::default());
+        let mut valid = 0b11111u8;
+        let mut stuck: Option<(usize, f32, u32)> = None;
+        for _ in 0..600 {
+            if rng.uniform() < 0.01 {
+                // A new set: mostly the board's, sometimes any.
+                valid = if rng.uniform() < 0.5 {
+                    [0b11111, 0b01111][(rng.uniform() * 2.0) as usize % 2]
+                } else {
+                    (rng.uniform() * 32.0) as u8 & 0b11111
+                };
+            }
+            let mut y = [0.0f32; 5];
+            for (i, v) in y.iter_mut().enumerate() {
+                *v = 3.0 + [0.1, 0.1, 0.1, 0.1, 0.5][i] * rng.gaussian();
+                if rng.uniform() < 0.03 {
+                    *v += 20.0 * rng.gaussian();
+                }
+            }
+            if stuck.is_none() && rng.uniform() < 0.01 {
+                let i = (rng.uniform() * 5.0) as usize % 5;
+                stuck = Some((i, y[i], 30));
+            }
+            if let Some((i, v, left)) = stuck {
+                y[i] = v;
+                stuck = (left > 1).then_some((i, v, left - 1));
+            }
+            let blank = Fused {
+                rate_dps: f32::NAN,
+                weights: [0.0; 5],
+                rejected: 0,
+                fallback: false,
+            };
+            let (mut oa, mut ob) = (blank, blank);
+            let ra = adaptive(&c, &mut a, &y, valid, &mut oa);
+            let rb = adaptive_reference(&c, &mut b, &y, valid, &mut ob);
+            assert_eq!(ra, rb);
+            assert_eq!(format!("{oa:?}"), format!("{ob:?}"), "valid {valid:#07b}");
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "valid {valid:#07b}");
+            rejected += u32::from(ob.rejected != 0);
+            frozen += u32::from(b.frozen.iter().any(|&f| f >= 3));
+        }
+    }
+    // The test must reach the paths it is about.
+    assert!(
+        rejected > 1000 && frozen > 1000,
+        "rejected {rejected}, frozen {frozen}"
+    );
+}
