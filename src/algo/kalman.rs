@@ -126,7 +126,10 @@ mod tests {
         include!("../../host-tests/vectors/kalman.in");
     }
 
-    fn cv<T: RealField + Copy>() -> (Kf<T, 4>, Matrix4<T>, Matrix4<T>, Matrix2x4<T>, Matrix2<T>) {
+    /// A constant-velocity filter and its F, Q, H and R.
+    type Cv<T> = (Kf<T, 4>, Matrix4<T>, Matrix4<T>, Matrix2x4<T>, Matrix2<T>);
+
+    fn cv<T: RealField + Copy>() -> Cv<T> {
         let c = |v: f64| nalgebra::convert::<f64, T>(v);
         let dt = 0.1;
         let kf = Kf::new(

@@ -457,7 +457,7 @@ fn avar_in_f32_is_within_two_ulp_of_f64() {
 fn u128_to_f32_is_as_f32() {
     use super::u128_to_f32;
     let mut x = 0x9E37_79B9_7F4A_7C15_F39C_C060_5CED_C835u128;
-    let mut check = |v: u128| assert_eq!(u128_to_f32(v).to_bits(), (v as f32).to_bits(), "{v:#x}");
+    let check = |v: u128| assert_eq!(u128_to_f32(v).to_bits(), (v as f32).to_bits(), "{v:#x}");
     for e in 0..128u32 {
         let p = 1u128 << e;
         for v in [
