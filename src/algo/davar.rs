@@ -79,8 +79,13 @@ const CELLS: usize = 16;
 /// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
 /// and the last segmentation's rows (which run on the samples after its
 /// start: CELLS of them, from START_AT + 1 around to the next hop's
-/// sample 4).
+/// sample 4). The changes are refined to the frame on the two samples
+/// before (from `REFINE_AT`, half of them on each): with many changes found
+/// (a chip gated in and out of a fused axis) refining and placing together
+/// cost 1 100 instructions more than with none, on one sample of the
+/// board's loop, which then went over its 10 000.
 const PLACE_AT: usize = 17;
+const REFINE_AT: usize = PLACE_AT - 2;
 const PUBLISH_AT: usize = PLACE_AT + 1;
 /// Samples the publication's window sums are spread over.
 const PUB_PARTS: usize = 3;
@@ -314,6 +319,9 @@ struct Segmentation {
     /// The window placed at [`PLACE_AT`] (span's first frame, window
     /// frames), published at [`PUBLISH_AT`].
     placed: Option<(u64, usize, usize)>,
+    /// The segment bounds being refined from [`REFINE_AT`] (span's first
+    /// frame, bounds, their count less one, the next change to refine).
+    refined: Option<(u64, [u16; CELLS + 1], usize, usize)>,
     /// Frames per cell and cells.
     group: usize,
     cells: usize,
@@ -405,6 +413,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 first: None,
                 next_first: None,
                 placed: None,
+                refined: None,
                 group: span.div_ceil(CELLS).max(1),
                 cells: span.div_ceil(span.div_ceil(CELLS).max(1)),
                 sum: [0.0; CELLS + 1],
@@ -457,6 +466,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.first = None;
         self.dp.next_first = None;
         self.dp.placed = None;
+        self.dp.refined = None;
         self.dp.row = 0;
         self.dp.hist_len = [0; LAG];
     }
@@ -625,7 +635,28 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         if rel != 0 {
             let segmented = self.cfg.placement == Placement::Segmented;
-            if segmented && rel == PLACE_AT {
+            if segmented && (REFINE_AT..PLACE_AT).contains(&rel) {
+                if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
+                    while self.dp.row <= self.dp.cells {
+                        self.dp_row();
+                    }
+                    let (mut bounds, nb, next) = match self.dp.refined {
+                        Some((f, b, nb, next)) if f == prev => (b, nb, next),
+                        _ => {
+                            let (b, nb) = self.backtrack();
+                            (b, nb, 1)
+                        }
+                    };
+                    // The first half of the changes, then the rest.
+                    let to = if rel == REFINE_AT {
+                        1 + nb.saturating_sub(1) / 2
+                    } else {
+                        nb
+                    };
+                    self.refine(&mut bounds, nb, next..to.max(next));
+                    self.dp.refined = Some((prev, bounds, nb, to.max(next)));
+                }
+            } else if segmented && rel == PLACE_AT {
                 // The last segmentation's window (its rows finished long
                 // ago; `while` only guards the invariant).
                 if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
@@ -1120,27 +1151,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.row = j + 1;
     }
 
-    /// The finished segmentation's segment that holds t, widened to λ1;
-    /// returns the window [lo, hi) in frames of the span at `first`.
-    fn segment_window(&mut self, first: u64) -> (usize, usize) {
+    /// The finished segmentation's segment bounds in frames, backtracked
+    /// (0 = b₀ < b₁ < … < b_nb = k), and nb.
+    fn backtrack(&self) -> ([u16; CELLS + 1], usize) {
         let (g, k) = (self.dp.group.max(1), self.span.min(FRAMES - 1));
         let cells = self.dp.cells.min(CELLS);
-        let ft = k / 2; // frame that starts at (or holds) t
-                        // The span's frame prefix sums (from `dp_start`): the changes are
-                        // refined to the frame and every mean below is taken over frames.
-                        // Indices come from the segmentation and are in range; `get` keeps
-                        // that from being a panic path if it ever were not.
-        let (px, ln_n) = (&self.px, &self.ln_n);
-        let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-        let x = |i: usize| p(i + 1) - p(i);
-        let nu = self.dp.nu;
-        let cost = |i: usize, j: usize| {
-            let nf = j.saturating_sub(i);
-            let sum = p(j) - p(i);
-            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
-            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
-        };
-        // Segment bounds in frames, in order: 0 = b₀ < b₁ < … < b_nb = k.
         let mut bounds = [0u16; CELLS + 1];
         let mut nb = 0;
         let mut j = cells;
@@ -1152,22 +1167,74 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let nb = nb.min(CELLS);
         bounds[nb] = 0;
         bounds[..=nb].reverse();
+        (bounds, nb)
+    }
+
+    /// Refine changes `which` (in order) of `bounds` (nb segments) to the
+    /// frame: the cells group g frames, and each change moves to the best
+    /// split of its two segments within ± (g − 1) frames.
+    fn refine(&self, bounds: &mut [u16; CELLS + 1], nb: usize, which: core::ops::Range<usize>) {
+        let g = self.dp.group.max(1);
+        if g <= 1 {
+            return;
+        }
+        // The span's frame prefix sums (from `dp_start`). Indices come from
+        // the segmentation and are in range; `get` keeps that from being a
+        // panic path if it ever were not.
+        let (px, ln_n) = (&self.px, &self.ln_n);
+        let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+        let nu = self.dp.nu;
+        let cost = |i: usize, j: usize| {
+            let nf = j.saturating_sub(i);
+            let sum = p(j) - p(i);
+            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
+            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
+        };
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
-        // Refine each change to the frame (the cells group g frames): the
-        // best split of its two segments within ± (g − 1) frames.
-        if g > 1 {
-            for i in 1..nb {
-                let (l, c, r) = (bd(&bounds, i - 1), bd(&bounds, i), bd(&bounds, i + 1));
-                let mut best = (cost(l, c) + cost(c, r), c);
-                for q in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
-                    let v = cost(l, q) + cost(q, r);
-                    if v < best.0 {
-                        best = (v, q);
-                    }
+        for i in which.start.max(1)..which.end.min(nb) {
+            let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
+            let mut best = (cost(l, c) + cost(c, r), c);
+            for q in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
+                let v = cost(l, q) + cost(q, r);
+                if v < best.0 {
+                    best = (v, q);
                 }
-                bounds[i] = best.1 as u16;
+            }
+            if let Some(b) = bounds.get_mut(i) {
+                *b = best.1 as u16;
             }
         }
+    }
+
+    /// The finished segmentation's segment that holds t, widened to λ1;
+    /// returns the window [lo, hi) in frames of the span at `first`.
+    fn segment_window(&mut self, first: u64) -> (usize, usize) {
+        // The bounds refined from REFINE_AT (the rest, if any, now).
+        let (mut bounds, nb, next) = match self.dp.refined.take() {
+            Some((f, b, nb, next)) if f == first => (b, nb, next),
+            _ => {
+                let (b, nb) = self.backtrack();
+                (b, nb, 1)
+            }
+        };
+        self.refine(&mut bounds, nb, next..nb);
+        let k = self.span.min(FRAMES - 1);
+        let ft = k / 2; // frame that starts at (or holds) t
+                        // The span's frame prefix sums (from `dp_start`): every mean below
+                        // is taken over frames. Indices come from the segmentation and are
+                        // in range; `get` keeps that from being a panic path if it ever
+                        // were not.
+        let (px, ln_n) = (&self.px, &self.ln_n);
+        let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+        let x = |i: usize| p(i + 1) - p(i);
+        let nu = self.dp.nu;
+        let cost = |i: usize, j: usize| {
+            let nf = j.saturating_sub(i);
+            let sum = p(j) - p(i);
+            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
+            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
+        };
+        let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         // Keep the changes that were already there LAG hops ago (the entry
         // about to be overwritten), or strong ones, and remember this hop's.
         let at = self.dp.hist_at % LAG;
@@ -1203,7 +1270,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         // Score: what the segmentation gained over one segment (> 0 iff a
         // change was placed), against the penalty per change.
-        self.score = (cost(0, k) - self.dp.cost[cells]).max(0.0);
+        self.score = (cost(0, k) - self.dp.cost[self.dp.cells.min(CELLS)]).max(0.0);
         self.threshold = self.dp.beta;
         // A monotone run of segments through t's (levels rising or falling
         // segment after segment) is a gradual change cut into stairs, not
