@@ -636,26 +636,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if rel != 0 {
             let segmented = self.cfg.placement == Placement::Segmented;
             if segmented && (REFINE_AT..PLACE_AT).contains(&rel) {
-                if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
-                    while self.dp.row <= self.dp.cells {
-                        self.dp_row();
-                    }
-                    let (mut bounds, nb, next) = match self.dp.refined {
-                        Some((f, b, nb, next)) if f == prev => (b, nb, next),
-                        _ => {
-                            let (b, nb) = self.backtrack();
-                            (b, nb, 1)
-                        }
-                    };
-                    // The first half of the changes, then the rest.
-                    let to = if rel == REFINE_AT {
-                        1 + nb.saturating_sub(1) / 2
-                    } else {
-                        nb
-                    };
-                    self.refine(&mut bounds, nb, next..to.max(next));
-                    self.dp.refined = Some((prev, bounds, nb, to.max(next)));
-                }
+                self.refine_part(rel == REFINE_AT);
             } else if segmented && rel == PLACE_AT {
                 // The last segmentation's window (its rows finished long
                 // ago; `while` only guards the invariant).
@@ -1151,6 +1132,34 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.row = j + 1;
     }
 
+    /// One of the refinement's two samples (`first`: the first half of the
+    /// changes; else the rest). Out of line: inlined in `push`, it cost
+    /// every sample 33 instructions.
+    #[inline(never)]
+    fn refine_part(&mut self, first: bool) {
+        let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) else {
+            return;
+        };
+        while self.dp.row <= self.dp.cells {
+            self.dp_row();
+        }
+        let (mut bounds, nb, next) = match self.dp.refined {
+            Some((f, b, nb, next)) if f == prev => (b, nb, next),
+            _ => {
+                let (b, nb) = self.backtrack();
+                (b, nb, 1)
+            }
+        };
+        let to = if first {
+            1 + nb.saturating_sub(1) / 2
+        } else {
+            nb
+        }
+        .max(next);
+        self.refine(&mut bounds, nb, next..to);
+        self.dp.refined = Some((prev, bounds, nb, to));
+    }
+
     /// The finished segmentation's segment bounds in frames, backtracked
     /// (0 = b₀ < b₁ < … < b_nb = k), and nb.
     fn backtrack(&self) -> ([u16; CELLS + 1], usize) {
@@ -1173,6 +1182,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Refine changes `which` (in order) of `bounds` (nb segments) to the
     /// frame: the cells group g frames, and each change moves to the best
     /// split of its two segments within ± (g − 1) frames.
+    #[inline(never)]
     fn refine(&self, bounds: &mut [u16; CELLS + 1], nb: usize, which: core::ops::Range<usize>) {
         let g = self.dp.group.max(1);
         if g <= 1 {
