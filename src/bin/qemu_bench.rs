@@ -62,7 +62,40 @@ fn main() -> ! {
         ok &= bench_davar::<1024, 35, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker");
     }
     ok &= bench_selftest(&t, ipt, &mut rng);
-    ok &= bench_loop(&t, ipt);
+    // The board's loop under two fault scenarios (both with the
+    // variance step of the emulated motion at 3 s).
+    use gyro_array::emu::Fault;
+    ok &= bench_loop(
+        &t,
+        ipt,
+        "faults A: gyro 2 stuck from 1.5 s, ADXRS453 bit errors 2.0-2.2 s, gyro 1 powered off 4.5-4.6 s",
+        &[
+            (1500, 2, Fault::Stuck),
+            (2000, 4, Fault::BitErrors { prob: 0.05 }),
+            (2200, 4, Fault::None),
+            (4500, 1, Fault::PoweredOff),
+            (4600, 1, Fault::None),
+        ],
+        true,
+    );
+    ok &= bench_loop(
+        &t,
+        ipt,
+        "faults B: gyro 0 spikes 1.0-2.5 s, gyros 3 and 1 stuck 3.0/3.2-4.5 s, gyro 2 bit errors 5-6 s, ADXRS453 silent 6.5-7 s",
+        &[
+            (1000, 0, Fault::Spikes { prob: 0.05, magnitude_dps: 50.0 }),
+            (2500, 0, Fault::None),
+            (3000, 3, Fault::Stuck),
+            (3200, 1, Fault::Stuck),
+            (4500, 3, Fault::None),
+            (4500, 1, Fault::None),
+            (5000, 2, Fault::BitErrors { prob: 0.05 }),
+            (6000, 2, Fault::None),
+            (6500, 4, Fault::NoResponse),
+            (7000, 4, Fault::None),
+        ],
+        false,
+    );
     exit(ok)
 }
 
@@ -117,16 +150,20 @@ impl embedded_hal_nb::serial::Write<u8> for NullUart {
 /// own sample-period update (`advance`) is outside the timing.
 #[inline(never)]
 #[allow(unsafe_code)]
-fn bench_loop(t: &Ticks, ipt: f32) -> bool {
+fn bench_loop(
+    t: &Ticks,
+    ipt: f32,
+    faults: &str,
+    plan: &[(u32, usize, gyro_array::emu::Fault)],
+    all: bool,
+) -> bool {
     use core::cell::RefCell;
     use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::AdaptiveConfig;
     use gyro_array::drivers::adxrs453::Adxrs453;
     use gyro_array::drivers::icm42688::Icm42688;
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{
-        board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay, Fault, RateProfile,
-    };
+    use gyro_array::emu::{board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay, RateProfile};
     use gyro_array::link::msg::Settings;
     use gyro_array::link::port::Port;
     use gyro_array::pipeline::startup::start_array;
@@ -216,13 +253,12 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
     let (mut drain_sum, mut drain_worst) = (0.0f32, 0.0f32);
     for n in 0..SAMPLES {
         with_bus(&bus, |b| {
-            match n {
-                1500 => b.chips[2].set_fault(Fault::Stuck),
-                2000 => b.chips[4].set_fault(Fault::BitErrors { prob: 0.05 }),
-                2200 => b.chips[4].set_fault(Fault::None),
-                4500 => b.chips[1].set_fault(Fault::PoweredOff),
-                4600 => b.chips[1].set_fault(Fault::None),
-                _ => {}
+            for &(at, chip, fault) in plan {
+                if at == n {
+                    if let Some(c) = b.chips.get_mut(chip) {
+                        c.set_fault(fault);
+                    }
+                }
             }
             b.advance(dt);
         });
@@ -276,6 +312,7 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         }
     }
     let bus_bytes = meter().1 - bytes0;
+    defmt::info!("bench whole loop, {=str}:", faults);
     let f = |ticks: f32| (ticks * ipt) as u32;
     let mean = |ticks: f32| (ticks * ipt / SAMPLES as f32) as u32;
     defmt::info!(
@@ -302,6 +339,11 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         f(fw_worst_parts[1]),
         f(fw_worst_parts[2])
     );
+    let c = port.counters();
+    let ok = c.dropped == 0 && c.sent >= SAMPLES;
+    if !all {
+        return ok;
+    }
     defmt::info!(
         "bench whole loop: status frame, built in the idle time after its sample: worst {=u32} instructions",
         f(status_worst)
@@ -311,14 +353,13 @@ fn bench_loop(t: &Ticks, ipt: f32) -> bool {
         mean(drain_sum),
         f(drain_worst)
     );
-    let c = port.counters();
     defmt::info!(
         "bench whole loop: {=u32} frames sent, {=u32} dropped, {=u32} bytes",
         c.sent,
         c.dropped,
         uart.0
     );
-    c.dropped == 0 && c.sent >= SAMPLES
+    ok
 }
 
 /// Instructions per frame of `step` over `frames` (after one untimed pass
