@@ -109,6 +109,8 @@ pub struct RelCal<const N: usize> {
     phase: u8,
     /// The update count's offset for solving (see [`RelCal::for_axis`]).
     slot: u32,
+    /// The last [`RelCal::fuse`] solved for the estimates.
+    solved: bool,
     /// Parity of the update counts on which a chip that has just warmed
     /// up is solved for.
     warm_parity: u32,
@@ -140,6 +142,7 @@ impl<const N: usize> RelCal<N> {
             warming: 0,
             phase: 0,
             slot: 0,
+            solved: false,
             warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
@@ -160,6 +163,13 @@ impl<const N: usize> RelCal<N> {
         c.slot = SOLVE_SLOTS.get(axis).copied().unwrap_or(0);
         c.warm_parity = u32::from(axis == 2);
         c
+    }
+
+    /// Whether the last [`RelCal::fuse`] solved for the estimates (about
+    /// 400 instructions on the Cortex-M4, N = 5): the pipeline reports such
+    /// samples as busy.
+    pub fn solved(&self) -> bool {
+        self.solved
     }
 
     /// The corrected readings `(y − b) / s` of every chip.
@@ -190,6 +200,7 @@ impl<const N: usize> RelCal<N> {
         // on the samples [`RelCal::for_axis`] chose for them.
         let learn_now = self.phase == 0;
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
+        self.solved = false;
         let r = match fusion.fuse(st, &self.correct(y), offered) {
             Ok(r) => r,
             Err(e) => {
@@ -308,6 +319,7 @@ impl<const N: usize> RelCal<N> {
         let t = self.tick.wrapping_sub(self.slot);
         let warm_turn = self.warming != 0 && t % 2 == self.warm_parity && self.newly_warm();
         if t.is_multiple_of(EVERY) || warm_turn {
+            self.solved = true;
             self.solve(y, mask);
         } else if (t + 1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).

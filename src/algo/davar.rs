@@ -79,13 +79,15 @@ const CELLS: usize = 16;
 /// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
 /// and the last segmentation's rows (which run on the samples after its
 /// start: CELLS of them, from START_AT + 1 around to the next hop's
-/// sample 4). The changes are refined to the frame on the two samples
-/// before (from `REFINE_AT`, half of them on each): with many changes found
-/// (a chip gated in and out of a fused axis) refining and placing together
-/// cost 1 100 instructions more than with none, on one sample of the
-/// board's loop, which then went over its 10 000.
+/// sample 4). The changes are refined to the frame on the
+/// `REFINE_PARTS` samples before (from `REFINE_AT`, a share of them on
+/// each): with many changes found (a chip gated in and out of a fused
+/// axis) refining and placing together cost 1 100 instructions more than
+/// with none, on one sample of the board's loop, which then went over its
+/// 10 000; in two parts, one of them still left 17 to spare.
 const PLACE_AT: usize = 17;
-const REFINE_AT: usize = PLACE_AT - 2;
+const REFINE_PARTS: usize = 4;
+const REFINE_AT: usize = PLACE_AT - REFINE_PARTS;
 const PUBLISH_AT: usize = PLACE_AT + 1;
 /// Samples the publication's window sums are spread over.
 const PUB_PARTS: usize = 3;
@@ -636,7 +638,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if rel != 0 {
             let segmented = self.cfg.placement == Placement::Segmented;
             if segmented && (REFINE_AT..PLACE_AT).contains(&rel) {
-                self.refine_part(rel == REFINE_AT);
+                self.refine_part(rel - REFINE_AT);
             } else if segmented && rel == PLACE_AT {
                 // The last segmentation's window (its rows finished long
                 // ago; `while` only guards the invariant).
@@ -1132,11 +1134,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.row = j + 1;
     }
 
-    /// One of the refinement's two samples (`first`: the first half of the
-    /// changes; else the rest). Out of line: inlined in `push`, it cost
-    /// every sample 33 instructions.
+    /// Part `part` (of [`REFINE_PARTS`]) of the refinement: its share of
+    /// the changes, in order. Out of line: inlined in `push`, it cost every
+    /// sample 33 instructions.
     #[inline(never)]
-    fn refine_part(&mut self, first: bool) {
+    fn refine_part(&mut self, part: usize) {
         let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) else {
             return;
         };
@@ -1150,12 +1152,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 (b, nb, 1)
             }
         };
-        let to = if first {
-            1 + nb.saturating_sub(1) / 2
-        } else {
-            nb
-        }
-        .max(next);
+        let to = (1 + nb.saturating_sub(1) * (part + 1) / REFINE_PARTS)
+            .min(nb)
+            .max(next);
         self.refine(&mut bounds, nb, next..to);
         self.dp.refined = Some((prev, bounds, nb, to));
     }

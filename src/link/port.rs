@@ -189,7 +189,11 @@ impl<const TX: usize> Port<TX> {
                 }
                 // Bit 7: no static calibration record in use.
                 s.degraded |= u8::from(!pipe.calibrated()) << 7;
-                s.noise = self.next_noise(noise);
+                // An estimate describes a sample half a window back: on a
+                // busy sample it waits for the next frame.
+                if !out.busy {
+                    s.noise = self.next_noise(noise);
+                }
                 self.send_ref(FrameRef::Sample(&s));
             }
             Mode::Raw => {

@@ -181,6 +181,13 @@ pub struct Output<const N: usize> {
     pub fused: [Option<Fused<N>>; 3],
     /// Gyros whose health flags changed in this sample.
     pub health_changed: u8,
+    /// This sample ran periodic heavy work (a calibration solve, a
+    /// configuration read-back, a temperature read): work that can wait,
+    /// such as the link's E-DAVAR estimate, waits a sample. A solve for a
+    /// chip that had just warmed up again after bit errors, on a frame with
+    /// an estimate, made the loop's worst sample (10 030 instructions,
+    /// `cargo xtask bench`, fault scenario B).
+    pub busy: bool,
 }
 
 /// The sampling pipeline for `N` gyros.
@@ -360,6 +367,7 @@ impl<const N: usize> Pipeline<N> {
             offered: [0; 3],
             fused: [None; 3],
             health_changed: 0,
+            busy: false,
         };
         self.seq = self.seq.wrapping_add(1);
         let seq = out.seq;
@@ -374,6 +382,7 @@ impl<const N: usize> Pipeline<N> {
                     && seq % every == CHECK_AT % every
                     && (seq / every) as usize % N == i;
                 // One gyro in turn also has its configuration read back.
+                out.busy |= due;
                 let r = if due {
                     g.check_config().and_then(|()| g.read())
                 } else {
@@ -396,6 +405,7 @@ impl<const N: usize> Pipeline<N> {
                     && seq % every == TEMP_AT % every
                     && (seq / every) as usize % N == i
                 {
+                    out.busy = true;
                     if let Ok(t) = g.temperature_c() {
                         self.temps[i] = Some(t);
                     }
@@ -420,6 +430,7 @@ impl<const N: usize> Pipeline<N> {
             out.fused[a] = self.cal[a]
                 .fuse(&self.fusion, &mut self.axes[a], &y, out.offered[a])
                 .ok();
+            out.busy |= self.cal[a].solved();
         }
         out
     }
