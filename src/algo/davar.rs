@@ -1187,18 +1187,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if g <= 1 {
             return;
         }
-        // The span's frame prefix sums (from `dp_start`). Indices come from
-        // the segmentation and are in range; `get` keeps that from being a
-        // panic path if it ever were not.
-        let (px, ln_n) = (&self.px, &self.ln_n);
-        let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-        let nu = self.dp.nu;
-        let cost = |i: usize, j: usize| {
-            let nf = j.saturating_sub(i);
-            let sum = p(j) - p(i);
-            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
-            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
-        };
+        // Over the span's frame prefix sums (from `dp_start`).
+        let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
+        let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
@@ -1237,12 +1228,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
         let x = |i: usize| p(i + 1) - p(i);
         let nu = self.dp.nu;
-        let cost = |i: usize, j: usize| {
-            let nf = j.saturating_sub(i);
-            let sum = p(j) - p(i);
-            let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
-            nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
-        };
+        let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         // Keep the changes that were already there LAG hops ago (the entry
         // about to be overwritten), or strong ones, and remember this hop's.
@@ -1445,6 +1431,18 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             .max(self.cfg.lambda1 as i32)
             .min(self.cfg.lambda2 as i32) as u16;
     }
+}
+
+/// The segmentation's cost of frames i..j of its span: ν·n·(ln Σx − ln n)
+/// over the frame prefix sums `px` (indices from the segmentation are in
+/// range; `get` keeps that from being a panic path if it ever were not).
+#[inline(always)]
+fn seg_cost(px: &[f32], ln_n: &[f32], nu: f32, i: usize, j: usize) -> f32 {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    let nf = j.saturating_sub(i);
+    let sum = p(j) - p(i);
+    let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
+    nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
 }
 
 /// ln x for normal x ≥ 0.5 to 8e-5 (absolute): the exponent, and a degree-4
