@@ -1145,18 +1145,24 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         while self.dp.row <= self.dp.cells {
             self.dp_row();
         }
-        let (mut bounds, nb, next) = match self.dp.refined {
-            Some((f, b, nb, next)) if f == prev => (b, nb, next),
-            _ => {
-                let (b, nb) = self.backtrack();
-                (b, nb, 1)
-            }
-        };
+        let (mut bounds, nb, next) = self.refining(prev);
         let to = (1 + nb.saturating_sub(1) * (part + 1) / REFINE_PARTS)
             .min(nb)
             .max(next);
         self.refine(&mut bounds, nb, next..to);
         self.dp.refined = Some((prev, bounds, nb, to));
+    }
+
+    /// The refinement of the span at `first` so far (bounds, their count
+    /// less one, the next change to refine), or its start.
+    fn refining(&self, first: u64) -> ([u16; CELLS + 1], usize, usize) {
+        match self.dp.refined {
+            Some((f, b, nb, next)) if f == first => (b, nb, next),
+            _ => {
+                let (b, nb) = self.backtrack();
+                (b, nb, 1)
+            }
+        }
     }
 
     /// The finished segmentation's segment bounds in frames, backtracked
@@ -1210,13 +1216,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// returns the window [lo, hi) in frames of the span at `first`.
     fn segment_window(&mut self, first: u64) -> (usize, usize) {
         // The bounds refined from REFINE_AT (the rest, if any, now).
-        let (mut bounds, nb, next) = match self.dp.refined.take() {
-            Some((f, b, nb, next)) if f == first => (b, nb, next),
-            _ => {
-                let (b, nb) = self.backtrack();
-                (b, nb, 1)
-            }
-        };
+        let (mut bounds, nb, next) = self.refining(first);
+        self.dp.refined = None;
         self.refine(&mut bounds, nb, next..nb);
         let k = self.span.min(FRAMES - 1);
         let ft = k / 2; // frame that starts at (or holds) t

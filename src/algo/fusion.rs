@@ -807,21 +807,34 @@ fn median_of<const N: usize>(y: &[f32; N], m: u8) -> f32 {
             i32::MAX
         };
     }
-    if m.count_ones() == 3 {
-        // Three keys: the middle one, 4 min/max.
+    let (lo, hi) = middle_keys(k, m);
+    let f = |j: i32| f32::from_bits(key(j) as u32);
+    if one_middle(m) {
+        f(lo)
+    } else {
+        0.5 * (f(lo) + f(hi))
+    }
+}
+
+/// The two middle keys of the keys `k` of the gyros in `m` (the others
+/// keyed `i32::MAX`), sorted: the same one twice where there is one middle
+/// ([`one_middle`]). Three or four gyros (every set after a chip or two
+/// fails) take a short network on their gathered keys (4 and 6 min/max);
+/// the others the odd–even transposition sort.
+#[inline(always)]
+fn middle_keys<const N: usize>(mut k: [i32; N], m: u8) -> (i32, i32) {
+    let n = m.count_ones();
+    if n == 3 {
         let [a, b, c, _] = four(&k, m);
         let mid = a.min(b).max(a.max(b).min(c));
-        return f32::from_bits(key(mid) as u32);
+        return (mid, mid);
     }
-    if m.count_ones() == 4 {
-        // Four keys: the middle pair is (max of the two minima, min of the
-        // two maxima), 6 min/max.
+    if n == 4 {
+        // The middle pair is (max of the two minima, min of the two maxima).
         let [a, b, c, d] = four(&k, m);
         let (a, b) = (a.min(b), a.max(b));
         let (c, d) = (c.min(d), c.max(d));
-        let (lo, hi) = (a.max(c), b.min(d));
-        let f = |j: i32| f32::from_bits(key(j) as u32);
-        return 0.5 * (f(lo) + f(hi));
+        return (a.max(c), b.min(d));
     }
     for round in 0..N {
         let mut i = round % 2;
@@ -832,14 +845,16 @@ fn median_of<const N: usize>(y: &[f32; N], m: u8) -> f32 {
             i += 2;
         }
     }
-    let n = m.count_ones() as usize;
-    let (lo, hi) = (n.saturating_sub(1) / 2, n / 2);
-    let at = |j: usize| f32::from_bits(key(k.get(j).copied().unwrap_or(0)) as u32);
-    if lo == hi {
-        at(lo)
-    } else {
-        0.5 * (at(lo) + at(hi))
-    }
+    let n = n as usize;
+    let at = |j: usize| k.get(j).copied().unwrap_or(0);
+    (at(n.saturating_sub(1) / 2), at(n / 2))
+}
+
+/// Whether the gyros in `m` have one middle value (an odd count, or none).
+#[inline(always)]
+fn one_middle(m: u8) -> bool {
+    let n = m.count_ones();
+    n % 2 == 1 || n == 0
 }
 
 /// The median for the adaptive gate: with an odd count the middle value;
@@ -867,40 +882,17 @@ fn gate_median<const N: usize>(y: &[f32; N], v: &[f32; N], m: u8) -> f32 {
         // (ya/va + yb/vb) / (1/va + 1/vb), without the divisions.
         (ya * vb + yb * va) / (va + vb)
     };
-    if m.count_ones() == 3 {
-        let [a, b, c, _] = four(&k, m);
-        let mid = a.min(b).max(a.max(b).min(c));
-        return y[(mid & 7) as usize % N];
-    }
-    if m.count_ones() == 4 {
-        let [a, b, c, d] = four(&k, m);
-        let (a, b) = (a.min(b), a.max(b));
-        let (c, d) = (c.min(d), c.max(d));
-        return pick(a.max(c), b.min(d));
-    }
-    for round in 0..N {
-        let mut i = round % 2;
-        while i + 1 < N {
-            let (a, b) = (k[i], k[i + 1]);
-            k[i] = a.min(b);
-            k[i + 1] = a.max(b);
-            i += 2;
-        }
-    }
-    let n = m.count_ones() as usize;
-    let (lo, hi) = (n.saturating_sub(1) / 2, n / 2);
-    let at = |j: usize| k.get(j).copied().unwrap_or(0);
-    if lo == hi {
-        y[(at(lo) & 7) as usize % N]
+    let (lo, hi) = middle_keys(k, m);
+    if one_middle(m) {
+        y[(lo & 7) as usize % N]
     } else {
-        pick(at(lo), at(hi))
+        pick(lo, hi)
     }
 }
 
 /// The keys of the (up to) four gyros in `m`, in order; `i32::MAX` after
-/// them. With
-/// `m` a constant (the adaptive method's constant sets) the gather folds
-/// to four loads.
+/// them. With `m` a constant (the adaptive method's constant sets) the
+/// gather folds to four loads.
 #[inline(always)]
 fn four<const N: usize>(k: &[i32; N], m: u8) -> [i32; 4] {
     if N == 4 && m == full::<N>() {
@@ -1515,56 +1507,25 @@ fn adaptive_active<const N: usize>(
     out.rejected |= valid & !good;
     // With `fast_fuse`, `active` is the caller's constant set: inlined for
     // it when the gate kept every gyro, out of line otherwise (N ≥ 5).
+    let warm = (all_warm, warm_cap);
+    let one_out = (active & !good).is_power_of_two();
     let r = if fast_fuse && good == active {
-        update_and_fuse(
-            c,
-            st,
-            y,
-            active,
-            active,
-            (all_warm, warm_cap),
-            med,
-            &v,
-            &w,
-            out,
-        )
+        update_and_fuse(c, st, y, active, active, warm, med, &v, &w, out)
     } else if N < 5 && fast_fuse {
         // A gyro gated out of a constant set, with fewer than five: inlined
         // too (a call cost 47 more per 3-axis sample with N = 4, where the
         // bench's spiking gyro is gated out of 5 % of the axes).
-        update_and_fuse(
-            c,
-            st,
-            y,
-            active,
-            good,
-            (all_warm, warm_cap),
-            med,
-            &v,
-            &w,
-            out,
-        )
-    } else if fast_fuse && N == 5 && (active & !good).is_power_of_two() && active == full::<N>() {
+        update_and_fuse(c, st, y, active, good, warm, med, &v, &w, out)
+    } else if fast_fuse && N == 5 && one_out && active == 31 {
         // One gyro gated out of the board's healthy sets (all five on z,
         // the four ICM-42688-Ps on x and y), out of line: a chip that
         // glitches on all three axes at once cost 740 more per 3-axis
         // sample through the general path.
-        without_one::<N, 31>(c, st, y, good, (all_warm, warm_cap), med, &v, &w, out)
-    } else if fast_fuse && N == 5 && (active & !good).is_power_of_two() && active == 15 {
-        without_one::<N, 15>(c, st, y, good, (all_warm, warm_cap), med, &v, &w, out)
+        without_one::<N, 31>(c, st, y, good, warm, med, &v, &w, out)
+    } else if fast_fuse && N == 5 && one_out && active == 15 {
+        without_one::<N, 15>(c, st, y, good, warm, med, &v, &w, out)
     } else {
-        update_and_fuse_general(
-            c,
-            st,
-            y,
-            active,
-            good,
-            (all_warm, warm_cap),
-            med,
-            &v,
-            &w,
-            out,
-        )
+        update_and_fuse_general(c, st, y, active, good, warm, med, &v, &w, out)
     };
     // Warming up (the first samples after power-up or a rejoin), the
     // output is the median of the voters: equal weights over what a rough
