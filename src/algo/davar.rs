@@ -64,13 +64,21 @@ use crate::algo::stats::chi2_quantile;
 pub const SEG: usize = 32;
 /// Frequency bins used per STFT frame (1..=15).
 pub const BINS: usize = SEG / 2 - 1;
-/// A change bounds a window only if a segmentation LAG hops earlier put one
-/// at the same place (± one cell): a step stays where it is, while the
-/// change a gradual variance ramp produces moves with the span.
-const LAG: usize = 4;
+/// A change bounds a window only if one of the LAG segmentations before put
+/// one at the same place (± one frame), or it is strong: a step stays where
+/// it is, while a one-off false alarm does not come back. (Requiring the
+/// same place exactly 4 hops earlier, which also filtered the changes a
+/// variance ramp produces, moving with the span, missed weak steps: the
+/// ramps are now told apart by a line, in `segment_window`.)
+const LAG: usize = 2;
 /// A change whose likelihood gain exceeds STRONG × β bounds a window
 /// without waiting for confirmation.
 const STRONG: f32 = 3.0;
+/// A change gaining less than GRADUAL·β may be read as gradual
+/// ([`Davar::segment_window`]).
+const GRADUAL: f32 = 2.0;
+/// Chunks of frames a line is fitted over ([`line_cost`]).
+const LINE_CHUNKS: usize = 16;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 16;
@@ -1231,11 +1239,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let nu = self.dp.nu;
         let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
-        // Keep the changes that were already there LAG hops ago (the entry
-        // about to be overwritten), or strong ones, and remember this hop's.
+        // Keep the changes that one of the last LAG segmentations had too,
+        // or strong ones, and remember this hop's (over the oldest).
         let at = self.dp.hist_at % LAG;
-        let old = self.dp.hist[at];
-        let old_len = (self.dp.hist_len[at] as usize).min(CELLS);
+        let (old, old_len) = (self.dp.hist, self.dp.hist_len);
         let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
         for i in 1..nb {
             let c = bd(&bounds, i);
@@ -1245,9 +1252,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             // segments.
             let (l, r) = (bd(&bounds, i - 1), bd(&bounds, i + 1));
             let gain = cost(l, r) - cost(l, c) - cost(c, r);
-            let seen = old[..old_len]
-                .iter()
-                .any(|&o| abs.wrapping_sub(o).wrapping_add(1) <= 2);
+            let seen = old.iter().zip(old_len).any(|(h, len)| {
+                h[..(len as usize).min(CELLS)]
+                    .iter()
+                    .any(|&o| abs.wrapping_sub(o).wrapping_add(1) <= 2)
+            });
             if seen || gain > STRONG * self.dp.beta {
                 kept[nk.min(CELLS)] = c as u16;
                 nk += 1;
@@ -1274,14 +1283,55 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // order and a one-sided segment is not. Use the widest symmetric
         // window inside the run.
         let dir = |i: usize| (mean(i + 1) - mean(i)).signum();
-        if s > 0 && s + 1 < nb && dir(s - 1) == dir(s) {
-            let d = dir(s);
-            let (mut r0, mut r1) = (s - 1, s + 1);
-            while r0 > 0 && dir(r0 - 1) == d {
-                r0 -= 1;
-            }
-            while r1 + 1 < nb && dir(r1) == d {
-                r1 += 1;
+        // A change next to t's segment is gradual (a ramp cut into a step,
+        // or a false alarm), not a step, when
+        // - it separates two segments of at least λ1 each, gains less than
+        //   GRADUAL·β over merging them, and one line through both fits
+        //   them as well as the step does (less the penalty for the step's
+        //   location); or
+        // - a blurred step fits its two segments better than the sharp one:
+        //   the two levels joined by a linear transition over 2h frames
+        //   centred on the change, h ≥ λ1 (so a one-sided window of λ1
+        //   inside the transition would be biased by its slope).
+        // Such a change does not bound the window: t gets a window
+        // symmetric about it, which a linear change leaves unbiased. (Each
+        // side tests one change, so the sample's cost stays bounded.)
+        let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
+        let gradual = |i: usize| {
+            let (l, c, r) = (b(i - 1), b(i), b(i + 1));
+            let step = cost(l, c) + cost(c, r);
+            let line = || {
+                c - l >= min_frames
+                    && r - c >= min_frames
+                    && cost(l, r) - step < GRADUAL * beta
+                    && line_cost(px, nu, l, r).is_some_and(|line| line < step + beta)
+            };
+            let blurred = || {
+                let mut h = min_frames.max(1);
+                while c > l + h && c + h < r {
+                    if transition_cost(px, ln_n, nu, (l, c, r), h, q).is_some_and(|v| v < step) {
+                        return true;
+                    }
+                    h *= 2;
+                }
+                false
+            };
+            line() || blurred()
+        };
+        let r0 = s - usize::from(s > 0 && gradual(s));
+        let r1 = s + usize::from(s + 1 < nb && gradual(s + 1));
+        let run = s > 0 && s + 1 < nb && dir(s - 1) == dir(s);
+        if run || r0 < s || r1 > s {
+            let (mut r0, mut r1) = (r0, r1);
+            if run {
+                let d = dir(s);
+                (r0, r1) = (r0.min(s - 1), r1.max(s + 1));
+                while r0 > 0 && dir(r0 - 1) == d {
+                    r0 -= 1;
+                }
+                while r1 + 1 < nb && dir(r1) == d {
+                    r1 += 1;
+                }
             }
             let odd = k % 2;
             let (run_lo, run_hi) = (b(r0), b(r1 + 1));
@@ -1444,6 +1494,82 @@ fn seg_cost(px: &[f32], ln_n: &[f32], nu: f32, i: usize, j: usize) -> f32 {
     let sum = p(j) - p(i);
     let ln_nf = ln_n.get(nf).copied().unwrap_or(0.0);
     nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
+}
+
+/// Cost of one line through the frame energies i..j of the span, on the
+/// same scale as [`seg_cost`] (ν·Σ n (ln μ + x̄/μ − 1)), or None where the
+/// line is not positive. The frames are taken in at most [`LINE_CHUNKS`]
+/// chunks (sums from the prefix sums `px`, the line at each chunk's
+/// centre), so the cost is bounded whatever λ2: at λ2 = 1024 a chunk is
+/// one or two frames.
+fn line_cost(px: &[f32], nu: f32, i: usize, j: usize) -> Option<f32> {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    let q = j.saturating_sub(i).div_ceil(LINE_CHUNKS).max(1);
+    // (frames, centre relative to i, energy) of chunk c.
+    let chunk = |c: usize| {
+        let (a, e) = ((i + c * q).min(j), (i + (c + 1) * q).min(j));
+        ((e - a) as f32, 0.5 * (a + e - 2 * i) as f32, p(e) - p(a))
+    };
+    let chunks = j.saturating_sub(i).div_ceil(q).min(LINE_CHUNKS);
+    // Least squares of the frame energies on a line: weighted by frames.
+    let (mut sw, mut sm, mut sy, mut smm, mut smy) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    for c in 0..chunks {
+        let (w, m, x) = chunk(c);
+        sw += w;
+        sm += w * m;
+        sy += x;
+        smm += w * m * m;
+        smy += m * x;
+    }
+    let det = sw * smm - sm * sm;
+    if !(det > 0.0) {
+        return None;
+    }
+    let slope = (sw * smy - sm * sy) / det;
+    let a = (sy - slope * sm) / sw;
+    let mut cost = 0.0f32;
+    for c in 0..chunks {
+        let (w, m, x) = chunk(c);
+        let mu = a + slope * m;
+        if !(mu > 0.5) {
+            return None;
+        }
+        cost += w * (ln_fast(mu) - 1.0) + x / mu;
+    }
+    Some(nu * cost)
+}
+
+/// Cost of a blurred step over the span's frames l..r (same scale as
+/// [`seg_cost`]): the means of [l, c − h) and [c + h, r), joined by a
+/// linear transition over [c − h, c + h) taken in chunks of q frames. None
+/// where it does not fit in l..r or its mean is not positive.
+fn transition_cost(
+    px: &[f32],
+    ln_n: &[f32],
+    nu: f32,
+    (l, c, r): (usize, usize, usize),
+    h: usize,
+    q: usize,
+) -> Option<f32> {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    let (a, e) = (c.checked_sub(h)?, c + h);
+    if a <= l || e >= r || q == 0 {
+        return None;
+    }
+    let m1 = (p(a) - p(l)) / (a - l) as f32;
+    let m2 = (p(r) - p(e)) / (r - e) as f32;
+    let mut cost = seg_cost(px, ln_n, nu, l, a) + seg_cost(px, ln_n, nu, e, r);
+    let (slope, mut f) = ((m2 - m1) / (2 * h) as f32, a);
+    while f < e {
+        let g = (f + q).min(e);
+        let mu = m1 + slope * (0.5 * (f + g) as f32 - a as f32);
+        if !(mu > 0.5) {
+            return None;
+        }
+        cost += nu * ((g - f) as f32 * (ln_fast(mu) - 1.0) + (p(g) - p(f)) / mu);
+        f = g;
+    }
+    Some(cost)
 }
 
 /// ln x for normal x ≥ 0.5 to 8e-5 (absolute): the exponent, and a degree-4

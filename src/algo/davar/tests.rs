@@ -481,3 +481,106 @@ fn u128_to_f32_is_as_f32() {
     check(0);
     check(u128::MAX);
 }
+
+/// Fraction of the hops inside a variance ramp (σ² 1 → 3 over `len`
+/// samples from sample 4000) whose window is one-sided: its centre more
+/// than two frames from t. λ 256/1024, 8 seeds.
+fn one_sided_on_a_ramp(len: usize) -> f64 {
+    let (mut off, mut hops) = (0u32, 0u32);
+    for seed in 1..=8 {
+        let w = white(100 + seed, 8000 + len, |i| {
+            (1.0 + 2.0 * ((i as f32 - 4000.0) / len as f32).clamp(0.0, 1.0)).sqrt()
+        });
+        let mut d = D::new(DavarConfig::segmented(256, 1024)).unwrap();
+        for &x in &w {
+            if d.push(x).unwrap().is_some() {
+                let e = d.estimate().unwrap();
+                if (4000..4000 + len as u64).contains(&e.t) {
+                    hops += 1;
+                    off += u32::from(((e.start + e.end) / 2).abs_diff(e.t) > 64);
+                }
+            }
+        }
+    }
+    off as f64 / hops as f64
+}
+
+/// On a variance ramp a one-sided window is biased by the slope. The
+/// segmentation cuts a ramp into steps; the changes it places there are
+/// read as gradual (a line, or a blurred step, fits them), so the window
+/// stays centred on t.
+#[test]
+fn a_ramp_keeps_windows_centred() {
+    let (slow, fast) = (one_sided_on_a_ramp(2000), one_sided_on_a_ramp(500));
+    eprintln!("one-sided on a ramp over 2000: {slow:.3}, over 500: {fast:.3}");
+    // 0.08 and 0.63 measured; 0.27 and 0.90 when every change bounded the
+    // window.
+    assert!(slow < 0.15, "ramp over 2000: {slow}");
+    assert!(fast < 0.75, "ramp over 500: {fast}");
+}
+
+/// `line_cost` against an f64 reference written from the definition: the
+/// least-squares line through the frame energies and its scaled-χ²
+/// deviance ν·Σ (ln μ + x/μ − 1). Exact up to 16 frames (one frame a
+/// chunk); beyond, the chunked fit is measured against the frame-level one,
+/// in cost units (the penalty β that decides a change is ≈ 13).
+#[test]
+fn line_cost_matches_an_f64_reference() {
+    let mut rng = Rng::new(5);
+    let (mut worst_exact, mut worst_chunked) = (0.0f64, 0.0f64);
+    for case in 0..200 {
+        let n = 3 + case % 60;
+        // Level ratios up to about 2.2 from end to end, as a ramp within
+        // one span; and some lines that cross the floor.
+        let slope = (rng.gaussian() as f64).clamp(-1.5, 1.5) * 0.5 / n as f64;
+        let level = if case % 10 == 0 { 0.4 } else { 1000.0 };
+        let x: Vec<f64> = (0..n)
+            .map(|f| {
+                let mu = level * (1.0 + slope * (f as f64 - n as f64 / 2.0));
+                // Energies of 22 degrees of freedom about the line.
+                let chi: f64 = (0..22).map(|_| (rng.gaussian() as f64).powi(2)).sum();
+                mu * chi / 22.0
+            })
+            .collect();
+        let mut px = vec![0.0f32];
+        for &v in &x {
+            px.push(px.last().unwrap() + v as f32);
+        }
+        let nu = 21.6;
+        // Reference.
+        let nf = n as f64;
+        let fm = (nf - 1.0) / 2.0;
+        let ym = x.iter().sum::<f64>() / nf;
+        let sxy: f64 = x
+            .iter()
+            .enumerate()
+            .map(|(f, &v)| (f as f64 - fm) * v)
+            .sum();
+        let sxx: f64 = (0..n).map(|f| (f as f64 - fm).powi(2)).sum();
+        let b = sxy / sxx;
+        let mus: Vec<f64> = (0..n).map(|f| ym + b * (f as f64 - fm)).collect();
+        let got = line_cost(&px, nu, 0, n);
+        if mus.iter().any(|&m| m <= 0.5) {
+            // (Chunk centres may all be above the floor.)
+            assert!(n > LINE_CHUNKS || got.is_none());
+            continue;
+        }
+        let want: f64 = nu as f64
+            * x.iter()
+                .zip(&mus)
+                .map(|(&v, &m)| m.ln() + v / m - 1.0)
+                .sum::<f64>();
+        let got = got.expect("a positive line") as f64;
+        // In cost units: a change is decided on a penalty β ≈ 13.
+        let err = (got - want).abs();
+        if n <= LINE_CHUNKS {
+            worst_exact = worst_exact.max(err);
+        } else {
+            worst_chunked = worst_chunked.max(err);
+        }
+    }
+    eprintln!("line_cost: worst error {worst_exact:.2e} exact, {worst_chunked:.2e} chunked");
+    assert!(worst_exact < 0.1, "{worst_exact}");
+    // Chunks of up to 4 frames (62 frames): 2.6 measured, a fifth of β.
+    assert!(worst_chunked < 4.0, "{worst_chunked}");
+}
