@@ -1194,7 +1194,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
 
     /// Refine changes `which` (in order) of `bounds` (nb segments) to the
     /// frame: the cells group g frames, and each change moves to the best
-    /// split of its two segments within ± (g − 1) frames.
+    /// split of its two segments within ± (g − 1) frames (every frame for
+    /// g < 4, else every other one and then the two beside the best).
     #[inline(never)]
     fn refine(&self, bounds: &mut [u16; CELLS + 1], nb: usize, which: core::ops::Range<usize>) {
         let g = self.dp.group.max(1);
@@ -1207,12 +1208,31 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
-            let mut best = (cost(l, c) + cost(c, r), c);
-            for q in c.saturating_sub(g - 1).max(l + 1)..(c + g).min(r) {
-                let v = cost(l, q) + cost(q, r);
-                if v < best.0 {
-                    best = (v, q);
+            let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));
+            let split = |q: usize| (cost(l, q) + cost(q, r), q);
+            let keep = |best: (f32, usize), q: usize| {
+                let v = split(q);
+                if v.0 < best.0 {
+                    v
+                } else {
+                    best
                 }
+            };
+            let mut best = split(c);
+            if g < 4 {
+                best = (lo..hi).filter(|&q| q != c).fold(best, keep);
+            } else {
+                // Every other frame from c, then the two beside the best:
+                // g + 1 costs for 2g − 1 (λ2 ≥ 2048 only; the split's cost
+                // is smooth at that scale).
+                best = (lo..hi)
+                    .filter(|&q| q != c && q.abs_diff(c) % 2 == 0)
+                    .fold(best, keep);
+                let b = best.1;
+                best = [b.wrapping_sub(1), b + 1]
+                    .into_iter()
+                    .filter(|q| (lo..hi).contains(q))
+                    .fold(best, keep);
             }
             if let Some(b) = bounds.get_mut(i) {
                 *b = best.1 as u16;
@@ -1299,11 +1319,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
+            // Both tests need two segments of λ1 (the board's λ1 = λ2/2
+            // stops here but for a change in the middle of the span).
+            if c - l < min_frames || r - c < min_frames {
+                return false;
+            }
             let step = cost(l, c) + cost(c, r);
             let line = || {
-                c - l >= min_frames
-                    && r - c >= min_frames
-                    && cost(l, r) - step < GRADUAL * beta
+                cost(l, r) - step < GRADUAL * beta
                     && line_cost(px, nu, l, r).is_some_and(|line| line < step + beta)
             };
             let blurred = || {

@@ -123,12 +123,13 @@ fn classes() -> Vec<Class> {
             });
         }
     }
-    for &len in &[500usize, 2000, 8000] {
+    // The last at the board's λ (λ1 = λ2/2, forced by its 9 τ).
+    for &(len, l1) in &[(500usize, 256u16), (2000, 256), (8000, 256), (1000, 512)] {
         let n = 4000 + len + 4000;
         v.push(Class {
-            name: format!("ramp 1→3 over {len}, λ 256/1024"),
+            name: format!("ramp 1→3 over {len}, λ {l1}/1024"),
             kind: Kind::Ramp,
-            lambda: (256, 1024),
+            lambda: (l1, 1024),
             n,
             gen: Box::new(white_class(n, move |t| {
                 1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
