@@ -1195,7 +1195,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Refine changes `which` (in order) of `bounds` (nb segments) to the
     /// frame: the cells group g frames, and each change moves to the best
     /// split of its two segments within ± (g − 1) frames (every frame for
-    /// g < 4, else every other one and then the two beside the best).
+    /// g < 4; else, near a change the last segmentation placed, that frame
+    /// and the two beside it, and otherwise every other frame and then the
+    /// two beside the best).
     #[inline(never)]
     fn refine(&self, bounds: &mut [u16; CELLS + 1], nb: usize, which: core::ops::Range<usize>) {
         let g = self.dp.group.max(1);
@@ -1206,6 +1208,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
         let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
+        // The changes the last segmentation placed (absolute frames).
+        let (first, at) = (
+            self.dp.first.unwrap_or(0),
+            (self.dp.hist_at + LAG - 1) % LAG,
+        );
+        let last = &self.dp.hist[at][..(self.dp.hist_len[at] as usize).min(CELLS)];
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
             let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));
@@ -1218,22 +1226,33 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     best
                 }
             };
-            let mut best = split(c);
-            if g < 4 {
-                best = (lo..hi).filter(|&q| q != c).fold(best, keep);
+            let near = last.iter().find_map(|&a| {
+                let p = a.wrapping_sub(first as u16) as usize;
+                (g >= 4 && (lo..hi).contains(&p)).then_some(p)
+            });
+            let best = if g < 4 {
+                (lo..hi).filter(|&q| q != c).fold(split(c), keep)
+            } else if let Some(p) = near {
+                // The last segmentation refined a change within reach: a
+                // step's split moves little from one hop to the next, so
+                // look there and beside it (3 costs for 2g − 1).
+                [p.wrapping_sub(1), p + 1]
+                    .into_iter()
+                    .filter(|q| (lo..hi).contains(q))
+                    .fold(split(p), keep)
             } else {
                 // Every other frame from c, then the two beside the best:
                 // g + 1 costs for 2g − 1 (λ2 ≥ 2048 only; the split's cost
                 // is smooth at that scale).
-                best = (lo..hi)
+                let best = (lo..hi)
                     .filter(|&q| q != c && q.abs_diff(c) % 2 == 0)
-                    .fold(best, keep);
+                    .fold(split(c), keep);
                 let b = best.1;
-                best = [b.wrapping_sub(1), b + 1]
+                [b.wrapping_sub(1), b + 1]
                     .into_iter()
                     .filter(|q| (lo..hi).contains(q))
-                    .fold(best, keep);
-            }
+                    .fold(best, keep)
+            };
             if let Some(b) = bounds.get_mut(i) {
                 *b = best.1 as u16;
             }

@@ -688,6 +688,52 @@ fn bench_davar<
     run_davar(t, ipt, step, name, &mut [&mut a0, &mut a1, &mut a2])
 }
 
+/// Ticks of the bench's signal from sample `from` to the end, pushed into
+/// the axes (reset first) when `WITH`, else only generated.
+#[inline(never)]
+fn whole_run<
+    const CAP: usize,
+    const FRAMES: usize,
+    const T: usize,
+    const STFT: usize,
+    const WITH: bool,
+>(
+    t: &Ticks,
+    step: bool,
+    from: usize,
+    axes: &mut [&mut Davar<CAP, FRAMES, T, STFT>],
+) -> u64 {
+    for d in axes.iter_mut() {
+        d.reset();
+    }
+    let mut rng = Rng::new(99);
+    let mut t0 = t.now();
+    for i in 0..WARM + ALLAN_SAMPLES {
+        let x = (davar_sigma(step, i) * rng.gaussian()) as i16;
+        if i == from {
+            t0 = t.now();
+        }
+        if WITH {
+            for d in axes.iter_mut() {
+                let _ = black_box(d.push(black_box(x as i32)));
+            }
+        } else {
+            black_box(x);
+        }
+    }
+    t.now() - t0
+}
+
+/// σ of the E-DAVAR benches' white noise at sample i: doubled from the
+/// middle on when `step`.
+fn davar_sigma(step: bool, i: usize) -> f32 {
+    if step && i >= (WARM + ALLAN_SAMPLES) / 2 {
+        200.0
+    } else {
+        100.0
+    }
+}
+
 /// The measurement of [`bench_davar`] over the given axes.
 #[inline(never)]
 fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>(
@@ -702,19 +748,14 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
     let mut ok = true;
     let (mut total, mut counted) = (0.0f32, 0u32);
     let (mut worst, mut worst_at) = (0.0f32, 0usize);
-    let mut published = false;
+    let (mut published, mut first) = (false, 0);
     // Mean cost by position in the 32-sample hop (after the first estimate).
     let mut by_phase = [0.0f32; 32];
     // White noise generated on the fly (no sample array on the stack),
     // with σ doubled from the middle on when `step`.
     let mut rng = Rng::new(99);
     for i in 0..WARM + ALLAN_SAMPLES {
-        let sigma = if step && i >= (WARM + ALLAN_SAMPLES) / 2 {
-            200.0
-        } else {
-            100.0
-        };
-        let x = (sigma * rng.gaussian()) as i16;
+        let x = (davar_sigma(step, i) * rng.gaussian()) as i16;
         let t0 = t.now();
         for d in axes.iter_mut() {
             let r = d.push(black_box(x as i32));
@@ -727,18 +768,30 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
             worst_at = i;
         }
         if published {
+            if counted == 0 {
+                first = i;
+            }
             total += ticks;
             counted += 1;
             by_phase[(i + 1) % 32] += ticks;
         }
     }
+    // The mean once more, exactly: the same samples timed as one stretch
+    // (a reading at each end, none per sample), less the same stretch
+    // without the E-DAVAR (the signal's generation alone). The per-sample
+    // mean carries the timer's pair cost, which moves by tens of
+    // instructions between builds; this does not.
+    let bare = whole_run::<CAP, FRAMES, T, STFT, false>(t, step, first, axes);
+    let with = whole_run::<CAP, FRAMES, T, STFT, true>(t, step, first, axes);
+    let exact = with.saturating_sub(bare) as f32 * ipt / counted.max(1) as f32;
     let f = |ticks: f32| (ticks * ipt) as u32;
     defmt::info!(
-        "bench e-davar {=str} lambda2 = {=usize} ({=usize} tau, {=usize} axis/axes): mean {=u32} instructions per sample, worst {=u32} at sample {=usize} (hop phase {=usize}), {=usize} B RAM per axis",
+        "bench e-davar {=str} lambda2 = {=usize} ({=usize} tau, {=usize} axis/axes): mean {=u32} instructions per sample (timed per sample: {=u32}), worst {=u32} at sample {=usize} (hop phase {=usize}), {=usize} B RAM per axis",
         name,
         CAP,
         T,
         axes.len(),
+        exact as u32,
         (total * ipt / counted.max(1) as f32) as u32,
         f(worst),
         worst_at,
