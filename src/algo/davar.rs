@@ -1226,13 +1226,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     best
                 }
             };
-            let near = last.iter().find_map(|&a| {
-                let p = a.wrapping_sub(first as u16) as usize;
-                (g >= 4 && (lo..hi).contains(&p)).then_some(p)
-            });
+            let near = || {
+                last.iter().find_map(|&a| {
+                    let p = a.wrapping_sub(first as u16) as usize;
+                    (lo..hi).contains(&p).then_some(p)
+                })
+            };
             let best = if g < 4 {
                 (lo..hi).filter(|&q| q != c).fold(split(c), keep)
-            } else if let Some(p) = near {
+            } else if let Some(p) = near() {
                 // The last segmentation refined a change within reach: a
                 // step's split moves little from one hop to the next, so
                 // look there and beside it (3 costs for 2g − 1).
