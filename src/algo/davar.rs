@@ -1325,30 +1325,31 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // window inside the run.
         let dir = |i: usize| (mean(i + 1) - mean(i)).signum();
         // A change next to t's segment is gradual (a ramp cut into a step,
-        // or a false alarm), not a step, when
-        // - it separates two segments of at least λ1 each, gains less than
-        //   GRADUAL·β over merging them, and one line through both fits
-        //   them as well as the step does (less the penalty for the step's
-        //   location); or
-        // - a blurred step fits its two segments better than the sharp one:
-        //   the two levels joined by a linear transition over 2h frames
-        //   centred on the change, h ≥ λ1 (so a one-sided window of λ1
-        //   inside the transition would be biased by its slope).
+        // or a false alarm), not a step, when its two segments together
+        // span at least 2λ1 and
+        // - one line through both fits them better than the step does, or
+        //   as well less the penalty for the step's location where the
+        //   change gains less than GRADUAL·β; or
+        // - a blurred step fits them better than the sharp one: the two
+        //   levels joined by a linear transition over 2h frames centred on
+        //   the change, h ≥ λ1 (so a one-sided window of λ1 inside the
+        //   transition would be biased by its slope).
         // Such a change does not bound the window: t gets a window
         // symmetric about it, which a linear change leaves unbiased. (Each
         // side tests one change, so the sample's cost stays bounded.)
         let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
-            // Both tests need two segments of λ1 (the board's λ1 = λ2/2
-            // stops here but for a change in the middle of the span).
-            if c - l < min_frames || r - c < min_frames {
+            // (At the board's λ1 = λ2/2 only a change alone in the span
+            // passes.)
+            if r - l < 2 * min_frames {
                 return false;
             }
             let step = cost(l, c) + cost(c, r);
             let line = || {
-                cost(l, r) - step < GRADUAL * beta
-                    && line_cost(px, nu, l, r).is_some_and(|line| line < step + beta)
+                line_cost(px, nu, l, r).is_some_and(|line| {
+                    line < step || (cost(l, r) - step < GRADUAL * beta && line < step + beta)
+                })
             };
             let blurred = || {
                 let mut h = min_frames.max(1);
