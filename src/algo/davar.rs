@@ -77,8 +77,6 @@ const STRONG: f32 = 3.0;
 /// A change gaining less than GRADUAL·β may be read as gradual
 /// ([`Davar::segment_window`]).
 const GRADUAL: f32 = 2.0;
-/// Chunks of frames a line is fitted over ([`line_cost`]).
-const LINE_CHUNKS: usize = 16;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 16;
@@ -1347,9 +1345,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             }
             let step = cost(l, c) + cost(c, r);
             let line = || {
-                line_cost(px, nu, l, r).is_some_and(|line| {
-                    line < step || (cost(l, r) - step < GRADUAL * beta && line < step + beta)
-                })
+                let d = line_over_step(px, nu, (l, c, r));
+                d > 0.0 || (d > -beta && cost(l, r) - step < GRADUAL * beta)
             };
             let blurred = || {
                 let mut h = min_frames.max(1);
@@ -1541,47 +1538,32 @@ fn seg_cost(px: &[f32], ln_n: &[f32], nu: f32, i: usize, j: usize) -> f32 {
     nu * nf as f32 * (ln_fast(if sum > 0.5 { sum } else { 0.5 }) - ln_nf)
 }
 
-/// Cost of one line through the frame energies i..j of the span, on the
-/// same scale as [`seg_cost`] (ν·Σ n (ln μ + x̄/μ − 1)), or None where the
-/// line is not positive. The frames are taken in at most [`LINE_CHUNKS`]
-/// chunks (sums from the prefix sums `px`, the line at each chunk's
-/// centre), so the cost is bounded whatever λ2: at λ2 = 1024 a chunk is
-/// one or two frames.
-fn line_cost(px: &[f32], nu: f32, i: usize, j: usize) -> Option<f32> {
+/// How much better one line explains the frame energies of l..r than the
+/// step at c does, in cost units: (SS_line − SS_step)·ν/(2m²), the sums of
+/// squares the least-squares line and the two segment means explain,
+/// scaled by the variance 2m²/ν of a frame energy at the pooled mean m.
+/// That is the second-order form of the difference of their Gamma
+/// deviances, from the prefix sums alone: r − l additions and no
+/// logarithm, so the board's placement sample can afford it. −∞ where it
+/// does not apply.
+fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
     let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-    let q = j.saturating_sub(i).div_ceil(LINE_CHUNKS).max(1);
-    // (frames, centre relative to i, energy) of chunk c.
-    let chunk = |c: usize| {
-        let (a, e) = ((i + c * q).min(j), (i + (c + 1) * q).min(j));
-        ((e - a) as f32, 0.5 * (a + e - 2 * i) as f32, p(e) - p(a))
-    };
-    let chunks = j.saturating_sub(i).div_ceil(q).min(LINE_CHUNKS);
-    // Least squares of the frame energies on a line: weighted by frames.
-    let (mut sw, mut sm, mut sy, mut smm, mut smy) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    for c in 0..chunks {
-        let (w, m, x) = chunk(c);
-        sw += w;
-        sm += w * m;
-        sy += x;
-        smm += w * m * m;
-        smy += m * x;
+    if c <= l || r <= c || r < l + 3 {
+        return f32::NEG_INFINITY;
     }
-    let det = sw * smm - sm * sm;
-    if !(det > 0.0) {
-        return None;
+    let (n, n1, n2) = ((r - l) as f32, (c - l) as f32, (r - c) as f32);
+    let s = p(r) - p(l);
+    let m = s / n;
+    if !(m > 0.5) {
+        return f32::NEG_INFINITY;
     }
-    let slope = (sw * smy - sm * sy) / det;
-    let a = (sy - slope * sm) / sw;
-    let mut cost = 0.0f32;
-    for c in 0..chunks {
-        let (w, m, x) = chunk(c);
-        let mu = a + slope * m;
-        if !(mu > 0.5) {
-            return None;
-        }
-        cost += w * (ln_fast(mu) - 1.0) + x / mu;
-    }
-    Some(nu * cost)
+    // Σ (f − l)·x_f = n·P(r) − Σ_{j = l+1..=r} P(j) (P the prefix sums;
+    // P(l) cancels), then about the centre l + (n − 1)/2.
+    let sp: f32 = px.get(l + 1..=r).map_or(0.0, |w| w.iter().sum());
+    let sfc = n * p(r) - sp - 0.5 * (n - 1.0) * s;
+    let sxx = n * (n * n - 1.0) / 12.0;
+    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
+    (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
 }
 
 /// Cost of a blurred step over the span's frames l..r (same scale as

@@ -459,7 +459,7 @@ fn main() -> ExitCode {
         let met = ratio <= target;
         all_met &= met;
         print!(
-            "  target: default {what} × best fixed: {ratio:.3} {}",
+            "  target: default {what} × best fixed: {ratio:.4} {}",
             if met { "met" } else { "NOT met" }
         );
         if matches!(class.kind, Kind::Stationary) {
