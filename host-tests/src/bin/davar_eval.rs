@@ -1,7 +1,7 @@
 //! E-DAVAR evaluation over scenario classes (issue 12) and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
-//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--csv PATH]`
+//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--csv PATH] [--other-lambdas]`
 //!
 //! Every class is run over N seeds (20 by default). The error is the RMS of
 //! σ²(τ0) against the true local Allan variance at τ0, over the times every
@@ -106,6 +106,51 @@ fn coloured_class(n: usize, white: f64, ar: Vec<(f64, f64)>) -> impl Fn(u64) -> 
             .collect();
         (w, vec![truth_v; n])
     }
+}
+
+/// Ramps and steps at other λ than the issue's classes (`--other-lambdas`).
+fn other_lambdas() -> Vec<Class> {
+    let mut v = Vec::new();
+    for &(len, l1, l2) in &[
+        (2000usize, 512u16, 1024u16),
+        (4000, 512, 1024),
+        (1000, 256, 1024),
+        (500, 256, 512),
+        (300, 256, 512),
+    ] {
+        let n = 4000 + len + 4000;
+        v.push(Class {
+            name: format!("ramp 1→3 over {len}, λ {l1}/{l2}"),
+            kind: Kind::Ramp,
+            lambda: (l1, l2),
+            n,
+            gen: Box::new(white_class(n, move |t| {
+                1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
+            })),
+            changes: None,
+        });
+    }
+    for &(r, l1, l2) in &[
+        (1.5f64, 512u16, 1024u16),
+        (2.0, 512, 1024),
+        (4.0, 512, 1024),
+        (0.5, 512, 1024),
+        (0.25, 512, 1024),
+        (2.0, 256, 512),
+        (3.0, 256, 1024),
+        (8.0, 256, 1024),
+    ] {
+        let n = 8000;
+        v.push(Class {
+            name: format!("step ×{r}, λ {l1}/{l2}"),
+            kind: Kind::Step,
+            lambda: (l1, l2),
+            n,
+            gen: Box::new(white_class(n, move |t| if t < 4000 { 1.0 } else { r })),
+            changes: Some(vec![4000]),
+        });
+    }
+    v
 }
 
 fn classes() -> Vec<Class> {
@@ -378,6 +423,11 @@ struct Args {
     /// target/davar-trace.csv).
     #[arg(long)]
     csv: Option<String>,
+    /// Run the classes at other λ instead (ramps and steps at the board's
+    /// 512/1024, at 256/512 and 256/1024): a check away from the issue's
+    /// own classes.
+    #[arg(long)]
+    other_lambdas: bool,
 }
 
 fn main() -> ExitCode {
@@ -389,7 +439,11 @@ fn main() -> ExitCode {
     );
     let mut all_met = true;
     let mut trace = String::from("method,t,window_len,avar_tau1,truth\n");
-    for class in classes() {
+    for class in if args.other_lambdas {
+        other_lambdas()
+    } else {
+        classes()
+    } {
         let (l1, l2) = class.lambda;
         let ms = methods(l1, l2);
         let (a, b) = (l2 as usize / 2 + SEG, class.n - l2 as usize / 2 - SEG);
