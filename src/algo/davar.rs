@@ -1325,9 +1325,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // A change next to t's segment is gradual (a ramp cut into a step,
         // or a false alarm), not a step, when its two segments together
         // span at least 2λ1 and
-        // - one line through both fits them better than the step does, or
-        //   as well less the penalty for the step's location where the
-        //   change gains less than GRADUAL·β; or
+        // - one line through both explains their energies better than the
+        //   step does ([`line_over_step`]), or as well less the penalty for
+        //   the step's location where the change gains less than GRADUAL·β;
+        //   or
         // - a blurred step fits them better than the sharp one: the two
         //   levels joined by a linear transition over 2h frames centred on
         //   the change, h ≥ λ1 (so a one-sided window of λ1 inside the
