@@ -315,7 +315,7 @@ fn run_board_array(
     run_board_array_from(profile, seed, samples, [Fault::None; 5], each)
 }
 
-/// Run the board's emulated array as [`run_board_array`] does, with a
+/// Run the board's emulated array as `run_board_array` does, with a
 /// fault per chip present from power-up (the fault campaign's harness).
 pub fn run_board_array_from(
     profile: RateProfile,

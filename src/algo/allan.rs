@@ -258,7 +258,7 @@ fn oavar_phase_inline(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint,
     Ok(AdevPoint::from_sum(m, tau0_s, s, terms as u64, n as u64))
 }
 
-/// Σ (θ[i + 2m] − 2θ[i + m] + θ[i])² over i in `from..to`: the kernel of
+/// Σ (θ[i + 2m] − 2θ[i + m] + θ\[i\])² over i in `from..to`: the kernel of
 /// every overlapping Allan-type sum (the host tool's OADEV and TOTDEV use
 /// it). 0 for an empty range or one that does not fit in `phase`.
 pub fn second_diff_sum(phase: &[f64], m: usize, from: usize, to: usize) -> f64 {

@@ -531,7 +531,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     }
 
     /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
-    /// 32 first differences d: for Gaussian d, ν = 2E[x]²/Var x =
+    /// 32 first differences d: for Gaussian d, ν = 2E\[x\]²/Var x =
     /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
     /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
     /// change, however frequent, does not bias them. White noise: ρ₁ = −½,

@@ -110,7 +110,7 @@ enum Pending {
 pub struct SensorData {
     /// Rate in counts (80 LSB per °/s).
     pub rate: i16,
-    /// ST[1:0]: 01 valid data, 10 self-test data, 00 invalid.
+    /// ST\[1:0\]: 01 valid data, 10 self-test data, 00 invalid.
     pub status: u8,
     /// Fault bits (see [`fault`]).
     pub faults: u8,

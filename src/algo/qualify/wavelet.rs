@@ -5,7 +5,7 @@
 //!
 //! Conventions follow PyWavelets so that results can be compared 1:1:
 //! level j gives ⌊(n + F − 1)/2⌋ coefficients from n, coefficient k is
-//! Σ_j dec[j]·x̃[2k + 1 − j] with x̃ the half-sample symmetric extension,
+//! Σ_j dec\[j\]·x̃\[2k + 1 − j\] with x̃ the half-sample symmetric extension,
 //! and reconstruction is the "valid" upsampling convolution (2n − F + 2
 //! samples), trimmed by one when lengths differ.
 
