@@ -1224,6 +1224,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     best
                 }
             };
+            // The best of `best` and the frames on either side of it.
+            let beside = |best: (f32, usize)| {
+                [best.1.wrapping_sub(1), best.1 + 1]
+                    .into_iter()
+                    .filter(|q| (lo..hi).contains(q))
+                    .fold(best, keep)
+            };
             let near = || {
                 last.iter().find_map(|&a| {
                     let p = a.wrapping_sub(first as u16) as usize;
@@ -1236,22 +1243,16 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // The last segmentation refined a change within reach: a
                 // step's split moves little from one hop to the next, so
                 // look there and beside it (3 costs for 2g − 1).
-                [p.wrapping_sub(1), p + 1]
-                    .into_iter()
-                    .filter(|q| (lo..hi).contains(q))
-                    .fold(split(p), keep)
+                beside(split(p))
             } else {
                 // Every other frame from c, then the two beside the best:
                 // g + 1 costs for 2g − 1 (λ2 ≥ 2048 only; the split's cost
                 // is smooth at that scale).
-                let best = (lo..hi)
-                    .filter(|&q| q != c && q.abs_diff(c) % 2 == 0)
-                    .fold(split(c), keep);
-                let b = best.1;
-                [b.wrapping_sub(1), b + 1]
-                    .into_iter()
-                    .filter(|q| (lo..hi).contains(q))
-                    .fold(best, keep)
+                beside(
+                    (lo..hi)
+                        .filter(|&q| q != c && q.abs_diff(c) % 2 == 0)
+                        .fold(split(c), keep),
+                )
             };
             if let Some(b) = bounds.get_mut(i) {
                 *b = best.1 as u16;

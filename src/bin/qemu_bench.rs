@@ -751,8 +751,8 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
     let (mut published, mut first) = (false, 0);
     // Mean cost by position in the 32-sample hop (after the first estimate).
     let mut by_phase = [0.0f32; 32];
-    // White noise generated on the fly (no sample array on the stack),
-    // with σ doubled from the middle on when `step`.
+    // White noise generated on the fly (no sample array on the stack), of
+    // σ `davar_sigma`.
     let mut rng = Rng::new(99);
     for i in 0..WARM + ALLAN_SAMPLES {
         let x = (davar_sigma(step, i) * rng.gaussian()) as i16;

@@ -108,6 +108,35 @@ fn coloured_class(n: usize, white: f64, ar: Vec<(f64, f64)>) -> impl Fn(u64) -> 
     }
 }
 
+/// White noise whose variance steps from 1 to `r` at sample 4000 of 8000.
+fn step_class(r: f64, l1: u16, l2: u16) -> Class {
+    let n = 8000;
+    Class {
+        name: format!("step ×{r}, λ {l1}/{l2}"),
+        kind: Kind::Step,
+        lambda: (l1, l2),
+        n,
+        gen: Box::new(white_class(n, move |t| if t < 4000 { 1.0 } else { r })),
+        changes: Some(vec![4000]),
+    }
+}
+
+/// White noise whose variance ramps from 1 to 3 over `len` samples from
+/// sample 4000, with 4000 steady samples after.
+fn ramp_class(len: usize, l1: u16, l2: u16) -> Class {
+    let n = 4000 + len + 4000;
+    Class {
+        name: format!("ramp 1→3 over {len}, λ {l1}/{l2}"),
+        kind: Kind::Ramp,
+        lambda: (l1, l2),
+        n,
+        gen: Box::new(white_class(n, move |t| {
+            1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
+        })),
+        changes: None,
+    }
+}
+
 /// Ramps and steps at other λ than the classes (`--other-lambdas`).
 fn other_lambdas() -> Vec<Class> {
     let mut v = Vec::new();
@@ -118,17 +147,7 @@ fn other_lambdas() -> Vec<Class> {
         (500, 256, 512),
         (300, 256, 512),
     ] {
-        let n = 4000 + len + 4000;
-        v.push(Class {
-            name: format!("ramp 1→3 over {len}, λ {l1}/{l2}"),
-            kind: Kind::Ramp,
-            lambda: (l1, l2),
-            n,
-            gen: Box::new(white_class(n, move |t| {
-                1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
-            })),
-            changes: None,
-        });
+        v.push(ramp_class(len, l1, l2));
     }
     for &(r, l1, l2) in &[
         (1.5f64, 512u16, 1024u16),
@@ -140,15 +159,7 @@ fn other_lambdas() -> Vec<Class> {
         (3.0, 256, 1024),
         (8.0, 256, 1024),
     ] {
-        let n = 8000;
-        v.push(Class {
-            name: format!("step ×{r}, λ {l1}/{l2}"),
-            kind: Kind::Step,
-            lambda: (l1, l2),
-            n,
-            gen: Box::new(white_class(n, move |t| if t < 4000 { 1.0 } else { r })),
-            changes: Some(vec![4000]),
-        });
+        v.push(step_class(r, l1, l2));
     }
     v
 }
@@ -157,30 +168,12 @@ fn classes() -> Vec<Class> {
     let mut v = Vec::new();
     for &(l1, l2) in &[(256u16, 1024u16), (400, 800)] {
         for &r in &[1.5f64, 2.0, 4.0] {
-            let n = 8000;
-            v.push(Class {
-                name: format!("step ×{r}, λ {l1}/{l2}"),
-                kind: Kind::Step,
-                lambda: (l1, l2),
-                n,
-                gen: Box::new(white_class(n, move |t| if t < 4000 { 1.0 } else { r })),
-                changes: Some(vec![4000]),
-            });
+            v.push(step_class(r, l1, l2));
         }
     }
     // The last at the board's λ (λ1 = λ2/2, forced by its 9 τ).
     for &(len, l1) in &[(500usize, 256u16), (2000, 256), (8000, 256), (1000, 512)] {
-        let n = 4000 + len + 4000;
-        v.push(Class {
-            name: format!("ramp 1→3 over {len}, λ {l1}/1024"),
-            kind: Kind::Ramp,
-            lambda: (l1, 1024),
-            n,
-            gen: Box::new(white_class(n, move |t| {
-                1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
-            })),
-            changes: None,
-        });
+        v.push(ramp_class(len, l1, 1024));
     }
     for &(l1, l2, every) in &[
         (400u16, 800u16, 300usize),
