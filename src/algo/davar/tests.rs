@@ -418,6 +418,26 @@ fn ln_fast_accuracy() {
     assert!(worst < 8e-5, "{worst}");
 }
 
+#[test]
+fn ln_floored_is_the_float_floor_bit_for_bit() {
+    // Zero, both sides of the floor, every 613th positive pattern, and
+    // negative values (which the prefix sums never give).
+    let mut xs = vec![
+        0.0f32,
+        -0.0,
+        0.499_999_97,
+        0.5,
+        0.500_000_06,
+        -1.0,
+        f32::MIN,
+    ];
+    xs.extend((0..f32::MAX.to_bits()).step_by(613).map(f32::from_bits));
+    for x in xs {
+        let float = ln_fast(if x > 0.5 { x } else { 0.5 });
+        assert_eq!(ln_floored(x).to_bits(), float.to_bits(), "{x}");
+    }
+}
+
 /// The published Allan variance is computed in f32 (one rounding of the
 /// exact sum, one of the term count, one division, an exact power of two):
 /// within 2 ulp of the f64 quotient over sums from 1 to 2^100, every τ and
