@@ -36,8 +36,19 @@ use std::fmt::Write as _;
 use std::process::ExitCode;
 
 type D = Davar<2048, 67, 8>;
-/// Integer resolution of the generated signals (σ = 1 is 1024 LSB).
-const LSB: f64 = 1.0 / 1024.0;
+/// Integer resolution of the generated signals, in units of the classes'
+/// base σ (1/1024 unless `--lsb`).
+static LSB: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+fn lsb() -> f64 {
+    *LSB.get_or_init(|| 1.0 / 1024.0)
+}
+
+/// What rounding to the LSB adds to σ²_A(τ0): a uniform error of variance
+/// LSB²/12 in each sample, independent of the next (the signals move by
+/// many LSB a sample), so ½E[(e₁ − e₀)²] = LSB²/12.
+fn rounding() -> f64 {
+    lsb() * lsb() / 12.0
+}
 
 #[derive(Clone, Copy)]
 enum Kind {
@@ -67,9 +78,11 @@ fn white_class(n: usize, v: impl Fn(usize) -> f64 + 'static) -> impl Fn(u64) -> 
     move |seed| {
         let mut rng = Rng::new(seed);
         let w = (0..n)
-            .map(|t| (v(t).sqrt() * rng.gaussian() as f64 / LSB).round() as i32)
+            .map(|t| (v(t).sqrt() * rng.gaussian() as f64 / lsb()).round() as i32)
             .collect();
-        let truth = (0..n).map(|t| 0.5 * (v(t) + v(t + 1))).collect();
+        let truth = (0..n)
+            .map(|t| 0.5 * (v(t) + v(t + 1)) + rounding())
+            .collect();
         (w, truth)
     }
 }
@@ -101,10 +114,10 @@ fn coloured_class(n: usize, white: f64, ar: Vec<(f64, f64)>) -> impl Fn(u64) -> 
                     *x = phi * *x + q.sqrt() * rng.gaussian() as f64;
                     y += *x;
                 }
-                (y / LSB).round() as i32
+                (y / lsb()).round() as i32
             })
             .collect();
-        (w, vec![truth_v; n])
+        (w, vec![truth_v + rounding(); n])
     }
 }
 
@@ -282,7 +295,7 @@ fn run(cfg: DavarConfig, w: &[i32]) -> Run {
     for &x in w {
         if d.push(x).expect("in range").is_some() {
             let s = d.estimate().expect("published");
-            hops.push((s.t as usize, s.avar[0] as f64 * LSB * LSB, s.len));
+            hops.push((s.t as usize, s.avar[0] as f64 * lsb() * lsb(), s.len));
         }
     }
     Run { hops }
@@ -296,7 +309,7 @@ fn avar_tau0(w: &[i32], s: usize, e: usize) -> f64 {
             d * d
         })
         .sum();
-    0.5 * d2 / (e - s - 1) as f64 * LSB * LSB
+    0.5 * d2 / (e - s - 1) as f64 * lsb() * lsb()
 }
 
 /// The oracle: at each hop time of `like`, the window is the true segment
@@ -421,10 +434,27 @@ struct Args {
     /// own classes.
     #[arg(long)]
     other_lambdas: bool,
+    /// Quantisation step of the generated signals in units of the
+    /// classes' base σ (default 1/1024). `--lsb 1` runs every class at about
+    /// one LSB of noise, as a raw log of a gyro at a wide range reads: the
+    /// rounding is then a good part of each frame's energy, and the truth
+    /// carries its LSB²/12.
+    #[arg(long, value_parser = positive)]
+    lsb: Option<f64>,
+}
+
+fn positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("{s}: not a positive number")),
+    }
 }
 
 fn main() -> ExitCode {
     let args = <Args as clap::Parser>::parse();
+    if let Some(l) = args.lsb {
+        let _ = LSB.set(l);
+    }
     let seeds = args.seeds;
     println!(
         "E-DAVAR classes: RMS error of σ²(τ0) against the true local value, {seeds} seeds each \

@@ -419,6 +419,54 @@ fn ln_fast_accuracy() {
 }
 
 #[test]
+fn i64_to_f32_is_exact_below_2_pow_31_and_close_above() {
+    let mut rng = Rng::new(31);
+    let small = [
+        0i64,
+        1,
+        -1,
+        -40,
+        127,
+        -128,
+        -129,
+        255,
+        i32::MAX as i64,
+        i32::MIN as i64,
+    ];
+    for v in small.into_iter().chain((0..20_000).map(|_| {
+        let bits = rng.next_u32() % 31;
+        (rng.next_u32() as i64 >> (31 - bits)) * if rng.next_u32() % 2 == 0 { 1 } else { -1 }
+    })) {
+        assert_eq!(i64_to_f32(v), v as f32, "{v}");
+    }
+    // Above 2³¹: two roundings, within 1 ulp of the correctly rounded value.
+    for _ in 0..20_000 {
+        let v = ((rng.next_u32() as i64) << 31 | rng.next_u32() as i64) >> (rng.next_u32() % 20);
+        for v in [v, -v] {
+            let (got, want) = (i64_to_f32(v), v as f32);
+            assert!(
+                (got - want).abs() <= want.abs() * f32::EPSILON,
+                "{v}: {got} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
+fn white_noise_of_one_lsb_reads_its_nu() {
+    // Quantised white noise of σ = 1 and 3 LSB: the lag-1 correlation of
+    // the first differences is −½, so ν ≈ 21.6, as for σ = 1000 LSB.
+    for sigma in [1.0f32, 3.0, 1000.0] {
+        let mut rng = Rng::new(8);
+        let mut d = Davar::<1024, 35, 7, 0>::new(DavarConfig::segmented(512, 1024)).unwrap();
+        for _ in 0..100_000 {
+            d.push((sigma * rng.gaussian()).round() as i32).unwrap();
+        }
+        assert!((d.nu() - 21.6).abs() < 1.5, "σ {sigma} LSB: ν {}", d.nu());
+    }
+}
+
+#[test]
 fn ln_floored_is_the_float_floor_bit_for_bit() {
     // Zero, both sides of the floor, every 613th positive pattern, and
     // negative values (which the prefix sums never give).
