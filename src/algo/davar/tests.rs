@@ -435,7 +435,12 @@ fn i64_to_f32_is_exact_below_2_pow_31_and_close_above() {
     ];
     for v in small.into_iter().chain((0..20_000).map(|_| {
         let bits = rng.next_u32() % 31;
-        (rng.next_u32() as i64 >> (31 - bits)) * if rng.next_u32() % 2 == 0 { 1 } else { -1 }
+        (rng.next_u32() as i64 >> (31 - bits))
+            * if rng.next_u32().is_multiple_of(2) {
+                1
+            } else {
+                -1
+            }
     })) {
         assert_eq!(i64_to_f32(v), v as f32, "{v}");
     }
