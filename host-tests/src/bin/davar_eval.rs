@@ -87,6 +87,26 @@ fn white_class(n: usize, v: impl Fn(usize) -> f64 + 'static) -> impl Fn(u64) -> 
     }
 }
 
+/// Stationary white noise of unit variance with heavy tails: Student's t
+/// with `dof` (> 4) degrees of freedom, z/√(χ²/dof) scaled by
+/// √((dof − 2)/dof). Its squares vary more than a Gaussian's (kurtosis
+/// 3 + 6/(dof − 4)), so a threshold that assumes Gaussian frames sees
+/// changes in it.
+fn student_class(n: usize, dof: u32) -> impl Fn(u64) -> Signal {
+    move |seed| {
+        let mut rng = Rng::new(seed);
+        let k = dof as f64;
+        let w = (0..n)
+            .map(|_| {
+                let z = rng.gaussian() as f64;
+                let chi2: f64 = (0..dof).map(|_| (rng.gaussian() as f64).powi(2)).sum();
+                (z / (chi2 / k).sqrt() * ((k - 2.0) / k).sqrt() / lsb()).round() as i32
+            })
+            .collect();
+        (w, vec![1.0 + rounding(); n])
+    }
+}
+
 /// Stationary sum of white noise (variance `white`) and AR(1) components
 /// (coefficient φ, innovation variance q): truth σ²_A(τ0) = ½E[(y₁ − y₀)²]
 /// = white + Σ q/(1 + φ) (each AR(1) has variance q/(1 − φ²) and lag-1
@@ -237,6 +257,14 @@ fn classes() -> Vec<Class> {
         lambda: (256, 1024),
         n,
         gen: Box::new(coloured_class(n, 0.3, vec![(1.0 - 1e-9, 0.7)])),
+        changes: Some(vec![]),
+    });
+    v.push(Class {
+        name: "stationary heavy-tailed white (Student t, 5 dof)".into(),
+        kind: Kind::Stationary,
+        lambda: (256, 1024),
+        n,
+        gen: Box::new(student_class(n, 5)),
         changes: Some(vec![]),
     });
     v.push(Class {
