@@ -47,7 +47,7 @@ pub const LEARN_STRIDE: u32 = 2;
 /// made the loop's worst sample.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
-use crate::algo::fusion::{median, AxisState, FuseError, Fused, Fusion};
+use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
 use crate::algo::math::bound;
 
 /// Settings of [`RelCal`].
@@ -193,6 +193,20 @@ impl<const N: usize> RelCal<N> {
         y: &[f32; N],
         offered: u8,
     ) -> Result<Fused<N>, FuseError> {
+        self.fuse_probed(fusion, st, y, offered).map(|(f, _)| f)
+    }
+
+    /// [`RelCal::fuse`], and the array's noise probe
+    /// ([`crate::algo::fusion::noise_probe`]) over the corrected readings
+    /// fusion saw, with its weights.
+    #[inline]
+    pub fn fuse_probed(
+        &mut self,
+        fusion: &Fusion<N>,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        offered: u8,
+    ) -> Result<(Fused<N>, Option<f32>), FuseError> {
         // The calibration learns on every other sample: what it tracks
         // moves over seconds, and the consensus and moments of every
         // sample cost 330 instructions per axis on the Cortex-M4. Its
@@ -201,7 +215,8 @@ impl<const N: usize> RelCal<N> {
         let learn_now = self.phase == 0;
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
         self.solved = false;
-        let r = match fusion.fuse(st, &self.correct(y), offered) {
+        let seen = self.correct(y);
+        let r = match fusion.fuse(st, &seen, offered) {
             Ok(r) => r,
             Err(e) => {
                 if learn_now {
@@ -210,8 +225,9 @@ impl<const N: usize> RelCal<N> {
                 return Err(e);
             }
         };
+        let used = r.used();
         if learn_now {
-            self.learn(y, r.used(), LEARN_STRIDE);
+            self.learn(y, used, LEARN_STRIDE);
         }
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
@@ -225,7 +241,7 @@ impl<const N: usize> RelCal<N> {
         if self.fresh != 0 {
             self.forget_fresh(st);
         }
-        Ok(r)
+        Ok((r, noise_probe(&seen, &r.weights)))
     }
 
     /// Forget the noise estimates of the chips whose correction has just

@@ -92,8 +92,11 @@ const CELLS: usize = 16;
 /// with none, on one sample of the board's loop, which then went over its
 /// 10 000; in two parts, one of them still left 17 to spare.
 const PLACE_AT: usize = 17;
-/// The sample of the hop that learns the noise's tails: after the τ terms
-/// (T ≤ 11) and before the refinement, where no segmentation row runs.
+/// The sample of the hop that learns the noise's tails (~630
+/// instructions), once the span has filled: after the τ terms (T ≤ 11)
+/// and before the refinement, where no segmentation row runs. (Spread over
+/// four samples it cost 30 a sample more in all, and moving it to samples
+/// 8–11 moved the board's three-axis peak, not lowered it.)
 const TAILS_AT: usize = 12;
 const REFINE_PARTS: usize = 4;
 const REFINE_AT: usize = PLACE_AT - REFINE_PARTS;
@@ -728,6 +731,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // terms of the last frame end on its first sample.
         self.add_terms(0);
         if n < (self.span * SEG + hop_phase) as u64 {
+            // (The tails are learnt once the span has filled: during the
+            // fill their samples would meet the first, from-scratch terms
+            // of the long τ.)
+            self.tail_terms = None;
             return Ok(None);
         }
         let c = n / SEG as u64; // frames 0..c are complete
@@ -848,7 +855,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     (p1, p2) = (d, p1);
                 }
                 (self.lag, self.dprev) = ([s0, s1, s2], [p1, p2]);
-                self.tail_terms = Some((first_k, last));
+                // The tails take the last whole frame's terms, whatever
+                // the hop's phase (so that staggered axes learn the same).
+                let end = (last + 1) / SEG as u64 * SEG as u64;
+                self.tail_terms = end.checked_sub(SEG as u64).map(|f| (f, end - 1));
             }
         }
     }
@@ -918,16 +928,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     }
 
     /// Fold the last frame's fourth moments into the running covariances
-    /// of q = d² (ν from them: [`Davar::nu`]). Its own sample of the hop,
-    /// away from the hop's work. Out of line, like `refine_part`: inlined
-    /// in `push`, it cost every sample ~30 instructions.
+    /// of q = d² (ν from them: [`Davar::nu`]), on a sample of the hop of
+    /// its own. Out of line, like `refine_part`: inlined in `push`, it cost
+    /// every sample ~30 instructions.
     #[inline(never)]
     fn learn_tails(&mut self) {
         let Some((from, to)) = self.tail_terms.take() else {
             return;
         };
-        // One frame's terms (more only on the first fill).
-        let from = from.max(to.saturating_sub(SEG as u64 - 1));
         // (usize indices: a u64 loop cost twice the instructions.)
         let (from, count, mask) = (from as usize, (to - from) as usize + 1, CAP - 1);
         let ([mut u0, mut u1, mut u2, mut u3], [mut q1, mut q2, mut q3]) =

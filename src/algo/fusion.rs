@@ -229,6 +229,47 @@ pub struct Fused<const N: usize> {
     pub fallback: bool,
 }
 
+/// The array's noise probe: Σ cᵢyᵢ over the gyros the fused value used,
+/// with coefficients that sum to 0, so a rate common to every chip (the
+/// platform's motion: sway, a 100 °/s turn) cancels, while the noise left
+/// has the fused rate's variance. cᵢ = k(sᵢ − δ)wᵢ, with signs sᵢ = ±1
+/// alternating over the used gyros in index order, δ = Σsᵢwᵢ (so Σcᵢ = 0
+/// for weights that sum to 1), and k = 1/√Σ(sᵢ − δ)²wᵢ. For independent
+/// noises of variance σᵢ² and inverse-variance weights
+/// wᵢ = σᵢ⁻²/Σσⱼ⁻² (the adaptive fusion's),
+/// Var Σcᵢnᵢ = k²Σ(sᵢ − δ)²wᵢ/Σσⱼ⁻² = 1/Σσⱼ⁻², the fused error's variance
+/// exactly; at longer τ it holds as far as the chips share one noise
+/// shape (c² differs from w² chip by chip: with five equal weights three
+/// chips get 0.67× and two 1.5×, the least spread any Σcᵢ = 0 allows).
+/// What all chips share (a common vibration error) is not seen.
+///
+/// `None` with fewer than two used gyros (no combination is free of the
+/// motion) or a non-finite input among them.
+pub fn noise_probe<const N: usize>(y: &[f32; N], weights: &[f32; N]) -> Option<f32> {
+    // One pass, no coefficients kept: with W = Σwᵢ, D = Σsᵢwᵢ, δ = D/W,
+    // F = Σwᵢyᵢ and S = Σsᵢwᵢyᵢ: Σ(sᵢ − δ)wᵢyᵢ = S − δF, and
+    // Σ(sᵢ − δ)²wᵢ = W − 2δD + δ²W = W(1 − δ²), so k = 1/(W√(1 − δ²)).
+    // (A cached set of coefficients cost less on most samples but ~100
+    // an axis on each change of the used set, which in a fault comes on
+    // all three axes at once: the board loop's worst sample.)
+    let (mut w_sum, mut d, mut f, mut sy, mut s, mut n) =
+        (0.0f32, 0.0f32, 0.0f32, 0.0f32, 1.0f32, 0u32);
+    for (&yi, &w) in y.iter().zip(weights) {
+        if w > 0.0 {
+            let sw = s * w;
+            w_sum += w;
+            d += sw;
+            f += w * yi;
+            sy += sw * yi;
+            s = -s;
+            n += 1;
+        }
+    }
+    let delta = d / w_sum;
+    let p = (sy - delta * f) / (w_sum * sqrtf(1.0 - delta * delta));
+    (n >= 2 && p.is_finite()).then_some(p)
+}
+
 impl<const N: usize> Fused<N> {
     /// The gyros that went into the fused rate (weight above 0).
     #[inline]

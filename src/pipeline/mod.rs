@@ -179,6 +179,11 @@ pub struct Output<const N: usize> {
     pub offered: [u8; 3],
     /// Per axis, the fused sample.
     pub fused: [Option<Fused<N>>; 3],
+    /// Per axis, the array's noise probe (`fusion::noise_probe`) over the
+    /// inputs fusion saw: noise with the fused rate's variance and none of
+    /// the platform's motion, for the noise tracker. `None` where fewer
+    /// than two gyros were used.
+    pub noise_probe_dps: [Option<f32>; 3],
     /// Gyros whose health flags changed in this sample.
     pub health_changed: u8,
     /// This sample ran periodic heavy work (a calibration solve, a
@@ -366,6 +371,7 @@ impl<const N: usize> Pipeline<N> {
             rate_dps: [[f32::NAN; 3]; N],
             offered: [0; 3],
             fused: [None; 3],
+            noise_probe_dps: [None; 3],
             health_changed: 0,
             busy: false,
         };
@@ -427,9 +433,11 @@ impl<const N: usize> Pipeline<N> {
             // Fusion sees the chips with their relative scale and bias
             // taken out (`algo::calib`); the calibration then learns from
             // the raw readings of the chips fusion used.
-            out.fused[a] = self.cal[a]
-                .fuse(&self.fusion, &mut self.axes[a], &y, out.offered[a])
-                .ok();
+            let r = self.cal[a].fuse_probed(&self.fusion, &mut self.axes[a], &y, out.offered[a]);
+            (out.fused[a], out.noise_probe_dps[a]) = match r {
+                Ok((f, p)) => (Some(f), p),
+                Err(_) => (None, None),
+            };
             out.busy |= self.cal[a].solved();
         }
         out

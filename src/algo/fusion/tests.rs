@@ -681,3 +681,39 @@ fn constant_set_copies_give_the_general_paths_bits() {
         "rejected {rejected}, frozen {frozen}"
     );
 }
+
+#[test]
+fn noise_probe_cancels_motion_and_keeps_the_fused_variance() {
+    // Five gyros of unequal noise, inverse-variance weights, a platform
+    // rate of up to ±100 °/s that every chip sees: the probe does not move
+    // with the rate, and its variance is the fused error's, 1/Σσ⁻².
+    let sigma = [0.05f32, 0.08, 0.1, 0.12, 0.2];
+    let inv: f32 = sigma.iter().map(|s| 1.0 / (s * s)).sum();
+    let w = sigma.map(|s| 1.0 / (s * s) / inv);
+    let mut rng = Rng::new(3);
+    let (mut sum2, mut fused2, n) = (0.0f64, 0.0f64, 200_000);
+    for k in 0..n {
+        let rate = 100.0 * libm::sinf(k as f32 * 0.01);
+        let noise = sigma.map(|s| s * rng.gaussian());
+        let y: [f32; 5] = core::array::from_fn(|i| rate + noise[i]);
+        let p = noise_probe(&y, &w).unwrap();
+        let still = noise_probe(&noise, &w).unwrap();
+        assert!((p - still).abs() < 1e-4, "the rate leaks: {p} vs {still}");
+        sum2 += (p as f64).powi(2);
+        fused2 += (w.iter().zip(&noise).map(|(w, e)| w * e).sum::<f32>() as f64).powi(2);
+    }
+    let (var, want) = (sum2 / n as f64, 1.0 / inv as f64);
+    assert!((var / want - 1.0).abs() < 0.02, "{var} vs {want}");
+    assert!((fused2 / n as f64 / want - 1.0).abs() < 0.02);
+    // Weights that do not sum to 1 give the same probe.
+    let y = [0.3f32, -0.1, 0.2, 0.05, -0.4];
+    let (a, b) = (
+        noise_probe(&y, &w).unwrap(),
+        noise_probe(&y, &w.map(|w| 3.0 * w)).unwrap(),
+    );
+    assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+    // Two gyros: half their difference; one gyro, or none: no probe.
+    assert_eq!(noise_probe(&[1.0, 3.0, 0.0], &[0.5, 0.5, 0.0]), Some(-1.0));
+    assert_eq!(noise_probe(&[1.0, 3.0], &[1.0, 0.0]), None);
+    assert_eq!(noise_probe(&[1.0, f32::NAN], &[0.5, 0.5]), None);
+}
