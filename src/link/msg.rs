@@ -95,7 +95,9 @@ pub struct Noise {
     pub seq: u32,
     /// Window length, samples.
     pub len: u16,
-    /// Allan deviation at the three τ of [`Status::noise_tau`], °/s.
+    /// Allan deviation of the fused rate's noise (measured on the array's
+    /// noise probe, free of the platform's motion) at the three τ of
+    /// [`Status::noise_tau`], °/s.
     pub sigma_dps: [f32; 3],
 }
 
