@@ -225,9 +225,8 @@ impl<const N: usize> RelCal<N> {
                 return Err(e);
             }
         };
-        let used = r.used();
         if learn_now {
-            self.learn(y, used, LEARN_STRIDE);
+            self.learn(y, r.used(), LEARN_STRIDE);
         }
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
