@@ -19,9 +19,7 @@
 //! `cargo test -p host-tests --test noise_in_motion -- --nocapture` prints
 //! the table.
 
-use gyro_array::checks::run_board_array_with;
-use gyro_array::emu::{Fault, RateProfile};
-use gyro_array::pipeline::tracker::{self, sigma_dps, NoiseTracker};
+use host_tests::motion::{self, Run};
 
 /// Overlapping Allan variance at τ = m samples of `y`, in f64.
 fn oavar(y: &[f64], m: usize) -> f64 {
@@ -41,43 +39,11 @@ fn oavar(y: &[f64], m: usize) -> f64 {
 
 #[test]
 fn the_tracker_measures_the_fused_error_not_the_vehicle() {
-    let profile = RateProfile {
-        base_dps: [0.0, 0.0, 100.0],
-        sine_dps: [15.0, 0.0, 30.0],
-        sine_hz: 2.0,
-        sine_start_s: 0.0,
-    };
     let samples = 30_000;
-    let mut noise = NoiseTracker::<1024, 35, 9>::new(tracker::config(1024)).unwrap();
-    let (mut err, mut rate): ([Vec<f64>; 3], [Vec<f64>; 3]) = Default::default();
-    let mut est: [[Vec<f64>; 3]; 3] = Default::default();
-    let mut last_seq = [None; 3];
-    run_board_array_with(
-        profile,
-        7,
-        samples,
-        [Fault::None; 5],
-        None,
-        |_, bus, out, _| {
-            noise.push(out);
-            let truth = bus.borrow().chips[0].true_rate_dps();
-            for a in 0..3 {
-                if let Some(f) = out.fused[a] {
-                    err[a].push(f64::from(f.rate_dps - truth[a]));
-                    rate[a].push(f64::from(f.rate_dps));
-                }
-                if let Some(e) = noise.estimate(a) {
-                    if last_seq[a] != Some(e.seq) {
-                        last_seq[a] = Some(e.seq);
-                        for (k, j) in [0, 3, 6].into_iter().enumerate() {
-                            est[a][k].push(f64::from(sigma_dps(&e.step, j)).powi(2));
-                        }
-                    }
-                }
-            }
-        },
-    )
-    .expect("the pipeline builds");
+    let Run { rate, err, sigma } = motion::run(7, samples).expect("the pipeline builds");
+    // σ² of every estimate at τ = 1, 8 and 64 samples (j = 0, 3, 6).
+    let est: [[Vec<f64>; 3]; 3] =
+        sigma.map(|s| [0, 3, 6].map(|j| s[j].iter().map(|v| v * v).collect()));
     let median = |v: &[f64]| {
         let mut v = v.to_vec();
         v.sort_by(f64::total_cmp);

@@ -27,7 +27,7 @@ use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use gyro_array::checks::run_board_array_from;
 use gyro_array::emu::noise::{quantise, AxisNoise};
 use gyro_array::emu::{with_bus, Fault, NoiseParams, RateProfile, Rng};
-use gyro_array::pipeline::tracker::{self, sigma_dps, NoiseTracker};
+use host_tests::motion::{self, Run};
 use plotters::prelude::*;
 
 type Err = Box<dyn std::error::Error>;
@@ -104,6 +104,22 @@ where
     Ok(())
 }
 
+/// The grid and axis labels of an Allan-deviation panel (log τ, log σ).
+fn adev_mesh<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+) -> Result<(), Err>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_mesh()
+        .x_desc("τ (s)")
+        .y_desc("σ(τ) (°/s)")
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()?;
+    Ok(())
+}
+
 fn curve(rate: &[f64]) -> Result<Vec<AdevPoint>, Err> {
     let mut phase = vec![0.0; rate.len() + 1];
     let mut pts = [AdevPoint::default(); 40];
@@ -175,12 +191,7 @@ fn allan(out: &Path, seed: u64) -> Result<(), Err> {
             (5e-4f64..fc.last().map_or(100.0, |p| p.tau_s * 2.0)).log_scale(),
             (lo * 0.5..hi * 2.0).log_scale(),
         )?;
-    chart
-        .configure_mesh()
-        .x_desc("τ (s)")
-        .y_desc("σ(τ) (°/s)")
-        .y_label_formatter(&|v| format!("{v:.0e}"))
-        .draw()?;
+    adev_mesh(&mut chart)?;
     for (i, c) in curves.iter().enumerate() {
         chart
             .draw_series(LineSeries::new(
@@ -608,44 +619,17 @@ fn replay(out: &Path, seed: u64) -> Result<(), Err> {
     Ok(())
 }
 
-/// The noise tracker on a moving board: 60 s of the emulated board (five
-/// chips through their drivers, calibration and fusion) turning at 100 °/s
-/// about z and swaying at 2 Hz (30 °/s on z, 15 °/s on x). Per axis x and
-/// z: the Allan deviation of the fused rate, of the fused error (fused less
+/// The noise tracker on a moving board (`host_tests::motion`), 60 s. Per
+/// axis x and z: the Allan deviation of the fused rate, of the fused error (fused less
 /// the emulator's true rate: the oracle) and the tracker's E-DAVAR
 /// estimates at its nine τ (median, 10–90 % range).
 fn motion(out: &Path, seed: u64) -> Result<(), Err> {
     const N: u32 = 60_000;
-    let profile = RateProfile {
-        base_dps: [0.0, 0.0, 100.0],
-        sine_dps: [15.0, 0.0, 30.0],
-        sine_hz: 2.0,
-        sine_start_s: 0.0,
-    };
-    let mut noise =
-        NoiseTracker::<1024, 35, 9>::new(tracker::config(1024)).map_err(|e| format!("{e:?}"))?;
-    let (mut err, mut rate): ([Vec<f64>; 3], [Vec<f64>; 3]) = Default::default();
-    let mut est: [[Vec<f64>; 9]; 3] = Default::default();
-    let mut last = [None; 3];
-    run_board_array_from(profile, seed + 6, N, [Fault::None; 5], |_, bus, o, _| {
-        noise.push(o);
-        let truth = bus.borrow().chips[0].true_rate_dps();
-        for a in 0..3 {
-            if let Some(f) = o.fused[a] {
-                err[a].push(f64::from(f.rate_dps - truth[a]));
-                rate[a].push(f64::from(f.rate_dps));
-            }
-            if let Some(e) = noise.estimate(a) {
-                if last[a] != Some(e.seq) {
-                    last[a] = Some(e.seq);
-                    for (j, v) in est[a].iter_mut().enumerate() {
-                        v.push(f64::from(sigma_dps(&e.step, j)));
-                    }
-                }
-            }
-        }
-    })
-    .ok_or("the board did not start")?;
+    let Run {
+        rate,
+        err,
+        sigma: est,
+    } = motion::run(seed + 6, N).ok_or("the board did not start")?;
     let pct = |v: &[f64], q: f64| {
         let mut v = v.to_vec();
         v.sort_by(f64::total_cmp);
@@ -699,12 +683,7 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
             .x_label_area_size(40)
             .y_label_area_size(65)
             .build_cartesian_2d((5e-4f64..0.6f64).log_scale(), (bottom..top).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("τ (s)")
-            .y_desc("σ(τ) (°/s)")
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .draw()?;
+        adev_mesh(&mut chart)?;
         chart
             .draw_series(LineSeries::new(
                 fr.iter()
