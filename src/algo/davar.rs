@@ -315,9 +315,8 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     lag: [i64; 3],
     dprev: [i32; 2],
     rho: [f32; 2],
-    /// The first τ0 term (d) of the last whole frame, for
-    /// [`Davar::learn_tails`].
-    tail_frame: Option<u64>,
+    /// The τ0 terms (d) of the last frame, for [`Davar::learn_tails`].
+    tail_terms: Option<(u64, u64)>,
     /// Running (over [`QUAD_FRAMES`]) covariances of q at lags 0, 1, 2 and
     /// σ⁴ (the mean q·q₊₃), each frame's in its own scale (the ratios taken
     /// in `nu` weigh frames by σ⁴), and the frames seen.
@@ -435,7 +434,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             lag: [0; 3],
             dprev: [0; 2],
             rho: [-0.5, 0.0],
-            tail_frame: None,
+            tail_terms: None,
             cov_q: [0.0; 4],
             quad_frames: 0,
             thresholds: [0.0; FRAMES],
@@ -496,7 +495,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.lag = [0; 3];
         self.dprev = [0; 2];
         self.rho = [-0.5, 0.0];
-        self.tail_frame = None;
+        self.tail_terms = None;
         self.cov_q = [0.0; 4];
         self.quad_frames = 0;
         self.last = None;
@@ -735,7 +734,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             // (The tails are learnt once the span has filled: during the
             // fill their samples would meet the first, from-scratch terms
             // of the long τ.)
-            self.tail_frame = None;
+            self.tail_terms = None;
             return Ok(None);
         }
         let c = n / SEG as u64; // frames 0..c are complete
@@ -859,7 +858,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // The tails take the last whole frame's terms, whatever
                 // the hop's phase (so that staggered axes learn the same).
                 let end = (last + 1) / SEG as u64 * SEG as u64;
-                self.tail_frame = end.checked_sub(SEG as u64);
+                self.tail_terms = end.checked_sub(SEG as u64).map(|f| (f, end - 1));
             }
         }
     }
@@ -934,14 +933,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// every sample ~30 instructions.
     #[inline(never)]
     fn learn_tails(&mut self) {
-        let Some(from) = self.tail_frame.take() else {
+        let Some((from, to)) = self.tail_terms.take() else {
             return;
         };
         // (usize indices: a u64 loop cost twice the instructions.)
-        let (from, mask) = (from as usize, CAP - 1);
+        let (from, count, mask) = (from as usize, (to - from) as usize + 1, CAP - 1);
         let ([mut u0, mut u1, mut u2, mut u3], [mut q1, mut q2, mut q3]) =
             ([0.0f32; 4], [0.0f32; 3]);
-        for i in from..from + SEG {
+        for i in from..from + count {
             let d = (self.ring[(i + 1) & mask] - self.ring[i & mask]) as f32;
             let q = d * d;
             u0 += q * q;
@@ -955,18 +954,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // mean is σ⁴ = (E q)², taken inside the frame so that a variance
         // change between frames does not enter; lags 0–2 less σ⁴ are the
         // covariances of q.
-        let n = SEG as f32;
-        let sig4 = u3 / (n - 3.0);
-        let c = [
-            u0 / n - sig4,
-            u1 / (n - 1.0) - sig4,
-            u2 / (n - 2.0) - sig4,
-            sig4,
-        ];
-        for (m, c) in self.cov_q.iter_mut().zip(c) {
-            *m += (c - *m) / QUAD_FRAMES;
+        let n = count as u32 as f32;
+        if n >= 8.0 {
+            let sig4 = u3 / (n - 3.0);
+            let c = [
+                u0 / n - sig4,
+                u1 / (n - 1.0) - sig4,
+                u2 / (n - 2.0) - sig4,
+                sig4,
+            ];
+            for (m, c) in self.cov_q.iter_mut().zip(c) {
+                *m += (c - *m) / QUAD_FRAMES;
+            }
+            self.quad_frames = self.quad_frames.saturating_add(1);
         }
-        self.quad_frames = self.quad_frames.saturating_add(1);
     }
 
     /// Publish the window [lo, hi) (frames) of the span starting at frame
