@@ -2,6 +2,11 @@
 //! gap-free stretch of a recording, and a summary of the E-DAVAR
 //! estimates the board sent (σ at its three τ, window lengths, and how far
 //! behind the frame each estimate's time is).
+//!
+//! The fused rate holds the vehicle's motion, so on a moving vehicle its
+//! Allan deviation is mostly the motion's: the board's E-DAVAR estimates
+//! (fed its noise probe) are the noise; so is `gyro replay`'s probe over a
+//! raw-mode recording.
 
 use std::path::PathBuf;
 
@@ -62,7 +67,7 @@ pub fn run(file: &PathBuf) -> Res<bool> {
         println!("fewer than 16 contiguous fused samples: no Allan deviation");
     } else {
         println!(
-            "Allan deviation (overlapping, octave τ) of the fused rate over {} contiguous samples, τ0 = {} ms:",
+            "Allan deviation (overlapping, octave τ) of the fused rate over {} contiguous samples, τ0 = {} ms (the motion included; the E-DAVAR estimates below are the noise alone):",
             best.len(),
             tau0 * 1e3
         );

@@ -622,13 +622,48 @@ fn replay_log(
         let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
         println!("  fused: error RMS {rms:.4}, max {max:.4}");
     }
+    // The fused gyro's noise, free of the motion: the probe's Allan
+    // deviation (and, with a reference, the fused error's beside it).
+    let (len, probe) = replay::longest_run_adev(&r.probe, s.tau0);
+    if probe.is_empty() {
+        println!("  noise probe: fewer than 16 contiguous samples with two chips fused");
+    } else {
+        let oracle = truth_col.as_ref().map(|t| {
+            let e: Vec<f64> = r.fused.iter().zip(t).map(|(f, t)| f - t).collect();
+            replay::longest_run_adev(&e, s.tau0).1
+        });
+        println!(
+            "  noise probe (the fused noise without the motion), Allan deviation over {len} contiguous samples:"
+        );
+        println!(
+            "  {:>12} {:>14}{}",
+            "tau_s",
+            "probe",
+            if oracle.is_some() {
+                "   fused error (from the reference)"
+            } else {
+                ""
+            }
+        );
+        for (j, (tau, sd)) in probe.iter().enumerate() {
+            let o = oracle
+                .as_ref()
+                .and_then(|o| o.get(j))
+                .map_or(String::new(), |(_, o)| format!(" {o:>14.6e}"));
+            println!("  {tau:>12.4} {sd:>14.6e}{o}");
+        }
+    }
     if let Some(p) = csv_out {
         let mut w = csv::Writer::from_path(p)?;
-        let mut head = vec!["t_s".to_string(), "fused".into()];
+        let mut head = vec!["t_s".to_string(), "fused".into(), "noise_probe".into()];
         head.extend(s.names.iter().map(|n| format!("w_{n}")));
         w.write_record(&head)?;
         for i in 0..n {
-            let mut rec = vec![short(i as f64 * s.tau0).to_string(), r.fused[i].to_string()];
+            let mut rec = vec![
+                short(i as f64 * s.tau0).to_string(),
+                r.fused[i].to_string(),
+                r.probe[i].to_string(),
+            ];
             rec.extend((0..s.names.len()).map(|c| r.weights[i][c].to_string()));
             w.write_record(&rec)?;
         }

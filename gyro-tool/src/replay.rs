@@ -6,6 +6,11 @@
 //! median gate, frozen-chip check, inverse-variance weights learnt online)
 //! weighs them. A NaN or empty cell is a chip that did not answer.
 //!
+//! Each sample also gives the array's noise probe (`fusion::noise_probe`):
+//! noise with the fused rate's variance and none of the motion, whose
+//! Allan deviation is the fused gyro's noise even on a moving vehicle,
+//! where the fused rate's own is mostly the motion.
+//!
 //! Not replayed: the drivers' checks (parity, stuck raw counts, restarts),
 //! which need the chips' register reads; a log of rates does not carry them.
 //!
@@ -15,6 +20,7 @@
 
 use std::path::Path;
 
+use gyro_array::algo::allan::{oavar_octave, AdevPoint};
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use plotters::prelude::*;
@@ -31,6 +37,8 @@ pub struct Replay {
     pub fused: Vec<f64>,
     /// Per sample, each chip's weight (0 when not used).
     pub weights: Vec<[f32; MAX_CHIPS]>,
+    /// The noise probe per sample (NaN where fewer than two chips fused).
+    pub probe: Vec<f64>,
     /// Per chip, samples it answered and samples fusion used it.
     pub offered: Vec<usize>,
     pub used: Vec<usize>,
@@ -50,6 +58,7 @@ pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
     let mut out = Replay {
         fused: Vec::with_capacity(n),
         weights: Vec::with_capacity(n),
+        probe: Vec::with_capacity(n),
         offered: vec![0; k],
         used: vec![0; k],
     };
@@ -64,9 +73,10 @@ pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
                 out.offered[c] += 1;
             }
         }
-        match cal.fuse(&fusion, &mut st, &y, offered) {
-            Ok(f) => {
+        match cal.fuse_probed(&fusion, &mut st, &y, offered) {
+            Ok((f, p)) => {
                 out.fused.push(f64::from(f.rate_dps));
+                out.probe.push(p.map_or(f64::NAN, f64::from));
                 for (c, u) in out.used.iter_mut().enumerate() {
                     *u += usize::from(f.used() & (1 << c) != 0);
                 }
@@ -74,11 +84,38 @@ pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
             }
             Err(_) => {
                 out.fused.push(f64::NAN);
+                out.probe.push(f64::NAN);
                 out.weights.push([0.0; MAX_CHIPS]);
             }
         }
     }
     Ok(out)
+}
+
+/// Overlapping Allan deviation at octave τ of the longest run of finite
+/// values in `x` (sampled every `tau0` s); the run's length and the
+/// points, (τ, σ).
+pub fn longest_run_adev(x: &[f64], tau0: f64) -> (usize, Vec<(f64, f64)>) {
+    let (mut best, mut start) = (0..0, 0);
+    for (i, v) in x.iter().chain([f64::NAN].iter()).enumerate() {
+        if !v.is_finite() {
+            if i - start > best.len() {
+                best = start..i;
+            }
+            start = i + 1;
+        }
+    }
+    let run = &x[best];
+    if run.len() < 16 {
+        return (run.len(), Vec::new());
+    }
+    let mut phase = vec![0.0; run.len() + 1];
+    let mut out = vec![AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
+    let n = oavar_octave(run, tau0, &mut phase, &mut out).unwrap_or(0);
+    (
+        run.len(),
+        out[..n].iter().map(|p| (p.tau_s, p.adev())).collect(),
+    )
 }
 
 /// Draw the replay of `chips` (named `names`, sampled every `tau0` s).
@@ -273,6 +310,45 @@ mod tests {
         assert!(
             fused < 0.8 * mean,
             "fused {fused} vs mean of the live chips {mean}"
+        );
+    }
+
+    /// On a board turning at up to ±100 °/s, the fused rate's Allan
+    /// deviation is the motion's; the probe's is the fused error's
+    /// (computed from the truth), within 10 % at τ = 1–64 samples (1.5 %
+    /// measured; the fused rate's reads 14–3 000× the fused error's).
+    #[test]
+    fn the_probe_gives_the_fused_noise_under_motion() {
+        let mut rng = gyro_array::emu::Rng::new(5);
+        let n = 40_000;
+        let truth: Vec<f64> = (0..n)
+            .map(|i| 100.0 * (i as f64 * 0.002).sin() + 20.0 * (i as f64 * 0.05).sin())
+            .collect();
+        let sd = [0.05, 0.07, 0.1, 0.2];
+        let chips: Vec<Vec<f64>> = (0..4)
+            .map(|c| {
+                truth
+                    .iter()
+                    .map(|t| t + sd[c] * f64::from(rng.gaussian()))
+                    .collect()
+            })
+            .collect();
+        let r = replay(&chips).unwrap();
+        let err: Vec<f64> = r.fused.iter().zip(&truth).map(|(f, t)| f - t).collect();
+        let (len, probe) = longest_run_adev(&r.probe[1000..], 1e-3);
+        let (_, oracle) = longest_run_adev(&err[1000..], 1e-3);
+        let (_, fused) = longest_run_adev(&r.fused[1000..], 1e-3);
+        assert_eq!(len, n - 1000, "a probe on every sample");
+        for j in 0..7 {
+            let ratio = probe[j].1 / oracle[j].1;
+            assert!(
+                (0.9..1.1).contains(&ratio),
+                "τ = 2^{j}: probe / oracle {ratio}"
+            );
+        }
+        assert!(
+            fused[6].1 > 20.0 * oracle[6].1,
+            "the fused rate holds the motion"
         );
     }
 }

@@ -240,7 +240,7 @@ impl<const N: usize> RelCal<N> {
         if self.fresh != 0 {
             self.forget_fresh(st);
         }
-        Ok((r, noise_probe(&seen, &r.weights)))
+        Ok((r, noise_probe(&seen, &r)))
     }
 
     /// Forget the noise estimates of the chips whose correction has just

@@ -233,8 +233,8 @@ pub struct Fused<const N: usize> {
 /// with coefficients that sum to 0, so a rate common to every chip (the
 /// platform's motion: sway, a 100 °/s turn) cancels, while the noise left
 /// has the fused rate's variance. cᵢ = k(sᵢ − δ)wᵢ, with signs sᵢ = ±1
-/// alternating over the used gyros in index order, δ = Σsᵢwᵢ (so Σcᵢ = 0
-/// for weights that sum to 1), and k = 1/√Σ(sᵢ − δ)²wᵢ. For independent
+/// alternating over the used gyros in index order, δ = Σsᵢwᵢ (so Σcᵢ = 0,
+/// the weights summing to 1), and k = 1/√Σ(sᵢ − δ)²wᵢ. For independent
 /// noises of variance σᵢ² and inverse-variance weights
 /// wᵢ = σᵢ⁻²/Σσⱼ⁻² (the adaptive fusion's),
 /// Var Σcᵢnᵢ = k²Σ(sᵢ − δ)²wᵢ/Σσⱼ⁻² = 1/Σσⱼ⁻², the fused error's variance
@@ -243,30 +243,30 @@ pub struct Fused<const N: usize> {
 /// chips get 0.67× and two 1.5×, the least spread any Σcᵢ = 0 allows).
 /// What all chips share (a common vibration error) is not seen.
 ///
-/// `None` with fewer than two used gyros (no combination is free of the
-/// motion) or a non-finite input among them.
-pub fn noise_probe<const N: usize>(y: &[f32; N], weights: &[f32; N]) -> Option<f32> {
-    // One pass, no coefficients kept: with W = Σwᵢ, D = Σsᵢwᵢ, δ = D/W,
-    // F = Σwᵢyᵢ and S = Σsᵢwᵢyᵢ: Σ(sᵢ − δ)wᵢyᵢ = S − δF, and
-    // Σ(sᵢ − δ)²wᵢ = W − 2δD + δ²W = W(1 − δ²), so k = 1/(W√(1 − δ²)).
-    // (A cached set of coefficients cost less on most samples but ~100
-    // an axis on each change of the used set, which in a fault comes on
-    // all three axes at once: the board loop's worst sample.)
-    let (mut w_sum, mut d, mut f, mut sy, mut s, mut n) =
-        (0.0f32, 0.0f32, 0.0f32, 0.0f32, 1.0f32, 0u32);
-    for (&yi, &w) in y.iter().zip(weights) {
+/// `fused` must be what fusion made of `y`: its weights sum to 1 and its
+/// rate is Σwᵢyᵢ (every method's, `fused_rate_is_its_weighted_sum`), so the
+/// probe reuses both. `None` with fewer than two used gyros (no
+/// combination is free of the motion) or a non-finite input among them.
+pub fn noise_probe<const N: usize>(y: &[f32; N], fused: &Fused<N>) -> Option<f32> {
+    // One pass, no coefficients kept: with D = Σsᵢwᵢ = δ and
+    // S = Σsᵢwᵢyᵢ, Σcᵢyᵢ = k(S − δ·Σwᵢyᵢ) = k(S − δ·rate), and
+    // Σ(sᵢ − δ)²wᵢ = 1 − 2δD + δ² = 1 − δ², so k = 1/√(1 − δ²). (Summing
+    // Σwᵢ and Σwᵢyᵢ here as well cost 30 instructions a 3-axis sample on
+    // the Cortex-M4. A cached set of coefficients cost less on most
+    // samples but ~100 an axis on each change of the used set, which in a
+    // fault comes on all three axes at once: the board loop's worst
+    // sample.)
+    let (mut d, mut sy, mut s, mut n) = (0.0f32, 0.0f32, 1.0f32, 0u32);
+    for (&yi, &w) in y.iter().zip(&fused.weights) {
         if w > 0.0 {
             let sw = s * w;
-            w_sum += w;
             d += sw;
-            f += w * yi;
             sy += sw * yi;
             s = -s;
             n += 1;
         }
     }
-    let delta = d / w_sum;
-    let p = (sy - delta * f) / (w_sum * sqrtf(1.0 - delta * delta));
+    let p = (sy - d * fused.rate_dps) / sqrtf(1.0 - d * d);
     (n >= 2 && p.is_finite()).then_some(p)
 }
 

@@ -16,7 +16,7 @@ use defmt_semihosting as _;
 use gyro_array::algo::allan::stream::StreamAdev;
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
-use gyro_array::algo::fusion::{AxisState, Fusion, Method};
+use gyro_array::algo::fusion::{noise_probe, AxisState, Fusion, Method};
 use gyro_array::board::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
 use gyro_array::checks::methods;
 use gyro_array::emu::Rng;
@@ -38,7 +38,13 @@ fn main() -> ! {
     defmt::info!("calibration: {=f32} instructions per SysTick tick", ipt);
 
     let mut rng = Rng::new(7);
-    let mut ok = bench_fusion(&t, ipt, &mut rng);
+    // The trace build runs the board's loop only: `cargo xtask bench`
+    // counts its instructions exactly from QEMU's execution trace.
+    let mut ok = TRACE || bench_fusion(&t, ipt, &mut rng);
+    if TRACE {
+        ok &= bench_loops(&t, ipt);
+        exit(ok)
+    }
     ok &= bench_allan(&t, ipt, &mut rng);
     for (input, step) in [("stationary", false), ("one variance step", true)] {
         defmt::info!("e-davar input: {=str}", input);
@@ -62,11 +68,16 @@ fn main() -> ! {
         ok &= bench_davar::<1024, 35, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker");
     }
     ok &= bench_selftest(&t, ipt, &mut rng);
-    // The board's loop under two fault scenarios (both with the
-    // variance step of the emulated motion at 3 s).
+    ok &= bench_loops(&t, ipt);
+    exit(ok)
+}
+
+/// The board's loop under two fault scenarios (both with the variance
+/// step of the emulated motion at 3 s).
+fn bench_loops(t: &Ticks, ipt: f32) -> bool {
     use gyro_array::emu::Fault;
-    ok &= bench_loop(
-        &t,
+    let mut ok = bench_loop(
+        t,
         ipt,
         "faults A: gyro 2 stuck from 1.5 s, ADXRS453 bit errors 2.0-2.2 s, gyro 1 powered off 4.5-4.6 s",
         &[
@@ -79,7 +90,7 @@ fn main() -> ! {
         true,
     );
     ok &= bench_loop(
-        &t,
+        t,
         ipt,
         "faults B: gyro 0 spikes 1.0-2.5 s, gyros 3 and 1 stuck 3.0/3.2-4.5 s, gyro 2 bit errors 5-6 s, ADXRS453 silent 6.5-7 s",
         &[
@@ -96,7 +107,7 @@ fn main() -> ! {
         ],
         false,
     );
-    exit(ok)
+    ok
 }
 
 /// Ticks of an empty `t.now()` pair.
@@ -251,7 +262,9 @@ fn bench_loop(
     let mut worst_parts = [0.0f32; 3];
     let mut status_worst = 0.0f32;
     let (mut drain_sum, mut drain_worst) = (0.0f32, 0.0f32);
+    mark::scenario();
     for n in 0..SAMPLES {
+        mark::sample();
         with_bus(&bus, |b| {
             for &(at, chip, fault) in plan {
                 if at == n {
@@ -264,20 +277,25 @@ fn bench_loop(
         });
         let (m0, _) = meter();
         let t0 = t.now();
+        mark::fuse();
         let out = {
             let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
             pipe.step(&mut gyros)
         };
+        mark::off();
         let t1 = t.now();
         let (m1, _) = meter();
         // The bus operations' ticks, and one clock read's overhead for
         // each (the outer interval holds two reads per operation, the
         // operation's own interval one).
         let in_bus = (m1.ticks - m0.ticks) as f32 + (m1.ops - m0.ops) as f32 * clock_cost;
+        mark::davar();
         noise.push(&out);
         let t2 = t.now();
+        mark::link();
         port.publish(&out, u64::from(n) * 1000, &pipe, &noise.at_taus([0, 4, 8]));
         let status_due = port.status_due(out.seq);
+        mark::off();
         let t3 = t.now();
         // The UART is fed in the idle time, as on the board (timed on its
         // own).
@@ -329,7 +347,7 @@ fn bench_loop(
         f(worst_parts[2])
     );
     defmt::info!(
-        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (read+fuse {=u32}, e-davar {=u32}, link {=u32}); target <= 10000",
+        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (read+fuse {=u32}, e-davar {=u32}, link {=u32}); SysTick reads each bus operation to a tick (40 instructions), so the worst reads high: `cargo xtask bench` counts it exactly from the execution trace",
         mean(bus_sum),
         bus_bytes / SAMPLES,
         mean(fw_sum),
@@ -478,7 +496,8 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
     }
 
     // The default path of the pipeline: relative calibration, adaptive
-    // fusion, calibration update (as `Pipeline::step` runs them).
+    // fusion, calibration update (as `Pipeline::step` runs them; the noise
+    // probe it adds is timed on its own below).
     let Ok(fusion) = Fusion::<4>::new(Method::Adaptive(Default::default())) else {
         exit(false)
     };
@@ -538,6 +557,30 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
         st_i as u32
     );
     ok &= all > 0.0;
+    // The noise probe the pipeline takes from each fused axis for its
+    // tracker, on the fused outputs of the frames (timed alone: a second
+    // caller of `fuse_probed` here changed its inlining into `fuse` and
+    // the path above by +270).
+    let fused: [[Option<gyro_array::algo::fusion::Fused<4>>; 3]; FRAMES] = {
+        let mut st = [AxisState::<4>::default(); 3];
+        core::array::from_fn(|k| {
+            core::array::from_fn(|a| fusion.fuse(&mut st[a], &frames[k][a], 0b1111).ok())
+        })
+    };
+    let mut k = 0usize;
+    let probe = per_frame(t, ipt, overhead, &frames, false, |f| {
+        for (a, axis) in f.iter().enumerate() {
+            if let Some(r) = &fused[k % FRAMES][a] {
+                black_box(noise_probe(black_box(axis), black_box(r)));
+            }
+        }
+        k += 1;
+    });
+    defmt::info!(
+        "bench fusion noise probe (the pipeline's tracker input, on top of the default path): {=u32} instructions per 3-axis sample (N = 4)",
+        probe as u32
+    );
+    ok &= probe > 0.0;
 
     // Seed 001 on the array: a local rate+bias Kalman filter per chip,
     // fused by entropy or covariance weights, the fused rate fed back.
@@ -808,4 +851,45 @@ fn run_davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: 
     }
     let est = axes[0].estimate();
     ok && est.is_some_and(|e| e.avar[0] > 0.0)
+}
+
+/// Built with the `bench-trace` feature: only the board's loop runs, with
+/// its phase markers.
+const TRACE: bool = cfg!(feature = "bench-trace");
+
+/// Phase markers of the whole-loop bench for `cargo xtask bench`'s exact
+/// count: each is a function of its own (a distinct volatile store, so
+/// none is merged with another) whose entry the execution trace shows.
+/// The count runs from `fuse` to `off` of each sample, in the phase last
+/// marked; `scenario` starts a scenario, `sample` a sample. Called only in
+/// the trace build, so the timed builds run without them.
+mod mark {
+    use core::ptr::{addr_of_mut, write_volatile};
+
+    static mut MARK: u32 = 0;
+
+    macro_rules! marker {
+        ($name:ident, $sym:ident, $k:expr) => {
+            #[inline(never)]
+            #[no_mangle]
+            #[allow(unsafe_code)]
+            extern "C" fn $sym() {
+                // SAFETY: a plain store to a static only this module
+                // touches, on the one thread.
+                unsafe { write_volatile(addr_of_mut!(MARK), $k) }
+            }
+            #[inline(always)]
+            pub fn $name() {
+                if super::TRACE {
+                    $sym();
+                }
+            }
+        };
+    }
+    marker!(scenario, bench_mark_scenario, 0x5ce7);
+    marker!(sample, bench_mark_sample, 0x5a3b);
+    marker!(fuse, bench_mark_fuse, 0xf05e);
+    marker!(davar, bench_mark_davar, 0xda7a);
+    marker!(link, bench_mark_link, 0x1137);
+    marker!(off, bench_mark_off, 0x0ff0);
 }

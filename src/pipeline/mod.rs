@@ -76,6 +76,20 @@ pub const CHECK_AT: u32 = 27;
 /// See [`CHECK_AT`].
 pub const TEMP_AT: u32 = 38;
 
+/// A gyro's restart runs its steps (a reset; the configuration and its
+/// read-back, some 30 SPI transactions for an ICM-42688-P) only on samples
+/// ≡ [`RESTART_AT`] (mod [`RESTART_EVERY`]), where the E-DAVARs' frames
+/// cost least and no solve, read-back or temperature read falls. Run when
+/// due, the configuration step made the loop's costliest sample: fault
+/// scenario B's worst went 9 913 → 9 730 instructions with the slots
+/// (`cargo xtask bench-loop`, exact). Each step waits up to 3 samples
+/// more: back in fusion after an ICM-42688-P reset 64 → 73 samples, an
+/// ADXRS453 reset 119 → 125, a late power-up 166 → 189
+/// (`checks::recovery_comes_back`).
+pub const RESTART_EVERY: u32 = 4;
+/// See [`RESTART_EVERY`].
+pub const RESTART_AT: u32 = 1;
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
@@ -455,6 +469,9 @@ impl<const N: usize> Pipeline<N> {
         let (Some(h), Some(c)) = (self.health.get_mut(i), self.counters.get_mut(i)) else {
             return;
         };
+        if seq % RESTART_EVERY != RESTART_AT {
+            return;
+        }
         let due = |at: u32| (seq.wrapping_sub(at) as i32) >= 0;
         let step = match h.recovery {
             Recovery::Running => return,

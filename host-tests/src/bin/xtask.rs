@@ -5,7 +5,9 @@
 //!   exit code), then the board firmware build. This is the project's one
 //!   test command.
 //! - `run`: the demo firmware in QEMU, logs decoded by defmt-print.
-//! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`).
+//! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`); the
+//!   board's loop also counted exactly from QEMU's execution trace.
+//! - `bench-loop`: that exact count alone (about two minutes).
 //! - `size`: flash and static RAM of the firmware binaries.
 //! - `panics`: panic call sites in each release ELF, by the code they come
 //!   from (llvm-objdump and llvm-addr2line).
@@ -16,6 +18,9 @@
 //! defmt-print and flip-link (cargo, pinned).
 use std::path::{Path, PathBuf};
 use std::process::{exit, Command, Stdio};
+
+#[path = "xtask/trace.rs"]
+mod trace;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 const DEFMT_PRINT: &str = "1.2.0";
@@ -560,6 +565,14 @@ fn main() {
             ensure_tools();
             let ok = qemu(&build_qemu("qemu-bench"), true);
             must(ok, "bench");
+            // The board's loop again, counted exactly from the trace.
+            let ok = trace::loop_counts(&build_firmware("bench-trace", "qemu-bench"));
+            must(ok, "bench, exact count of the board's loop");
+        }
+        "bench-loop" => {
+            ensure_tools();
+            let ok = trace::loop_counts(&build_firmware("bench-trace", "qemu-bench"));
+            must(ok, "bench, exact count of the board's loop");
         }
         "size" => {
             ensure_tools();
@@ -591,7 +604,7 @@ fn main() {
             println!("panic call sites from this crate, all ELFs: {ours_total}");
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|run|board-qemu|bench|size|panics|fuzz [SECONDS]>");
+            eprintln!("usage: cargo xtask <test|run|board-qemu|bench|bench-loop|size|panics|fuzz [SECONDS]>");
             exit(2);
         }
     }

@@ -1,0 +1,269 @@
+//! Exact instruction counts of the board's loop, from QEMU's execution
+//! trace (`-d in_asm,exec,nochain`), for `cargo xtask bench`.
+//!
+//! The timed bench reads SysTick, whose tick is 40 instructions under
+//! `-icount shift=0`, and takes out the emulated bus's operations timed one
+//! by one: some forty a sample, each off by up to a tick. The sum's error
+//! is about ±100 instructions a sample, so the worst of 8 000 samples reads
+//! some 300 high. Here every executed instruction is counted: the trace
+//! logs each translated block's instructions (`IN:`) and each execution of
+//! a block (`Trace`); the bench's trace build (feature `bench-trace`)
+//! calls a marker function at each phase of a sample; and an instruction
+//! is the emulator's, not the firmware's, when any of its inline frames
+//! (DWARF) is in `gyro_array::emu` (but for the chip-select pins, which
+//! stand in for the board's GPIO writes) or the bench's clock. On the board
+//! the CPU waits for the SPI bus instead; that time is not counted here.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use object::{Object, ObjectSymbol};
+
+/// Per sample: firmware instructions in read + calibrate + fuse, E-DAVAR,
+/// link; and the emulated bus's inside read + fuse.
+#[derive(Clone, Copy, Default)]
+struct Sample {
+    fw: [u64; 3],
+    bus: u64,
+}
+
+/// What a marker does.
+#[derive(Clone, Copy, PartialEq)]
+enum Mark {
+    Scenario,
+    Sample,
+    Phase(usize),
+    Off,
+}
+
+/// Run the trace build `elf` under QEMU; print its decoded log and each
+/// scenario's exact figures. False if QEMU, defmt-print or the parse failed.
+pub fn loop_counts(elf: &Path) -> bool {
+    let marks = match markers(elf) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("xtask: {}: {e}", elf.display());
+            return false;
+        }
+    };
+    let loader = match addr2line::Loader::new(elf) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("xtask: {}: no DWARF: {e}", elf.display());
+            return false;
+        }
+    };
+    let mut q = Command::new("timeout");
+    q.args(["1800", "qemu-system-arm"]);
+    q.args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"]);
+    q.args([
+        "-monitor",
+        "none",
+        "-semihosting-config",
+        "enable=on,target=native",
+    ]);
+    q.args(["-icount", "shift=0,sleep=off"]);
+    q.args(["-d", "in_asm,exec,nochain", "-D", "/dev/stderr"]);
+    q.arg("-kernel").arg(elf);
+    q.stdout(Stdio::piped()).stderr(Stdio::piped());
+    eprintln!(
+        "xtask: {q:?} (trace parsed here) | defmt-print -e {}",
+        elf.display()
+    );
+    let Ok(mut child) = q.spawn() else {
+        eprintln!("xtask: cannot start qemu");
+        return false;
+    };
+    let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+        return false;
+    };
+    let elf_arg = elf.to_path_buf();
+    let printer = std::thread::spawn(move || {
+        Command::new("defmt-print")
+            .arg("-e")
+            .arg(elf_arg)
+            .stdin(stdout)
+            .output()
+    });
+    let scenarios = parse(BufReader::with_capacity(1 << 20, stderr), &marks, &loader);
+    let q_ok = child.wait().is_ok_and(|s| s.success());
+    let Ok(Ok(decoded)) = printer.join() else {
+        eprintln!("xtask: defmt-print failed");
+        return false;
+    };
+    let text = String::from_utf8_lossy(&decoded.stdout);
+    print!("{text}");
+    // The scenarios' names, in the order the bench ran them.
+    let names: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.split_once("bench whole loop, faults "))
+        .filter_map(|(_, r)| r.split_once(':').map(|(name, _)| name))
+        .collect();
+    for (k, s) in scenarios.iter().enumerate() {
+        report(names.get(k).copied().unwrap_or("?"), s);
+    }
+    q_ok && decoded.status.success() && !scenarios.is_empty()
+}
+
+/// The marker functions' addresses (Thumb bit cleared).
+fn markers(elf: &Path) -> Result<HashMap<u64, Mark>, String> {
+    let data = std::fs::read(elf).map_err(|e| e.to_string())?;
+    let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    let mut m = HashMap::new();
+    for sym in file.symbols() {
+        let kind = match sym.name() {
+            Ok("bench_mark_scenario") => Mark::Scenario,
+            Ok("bench_mark_sample") => Mark::Sample,
+            Ok("bench_mark_fuse") => Mark::Phase(0),
+            Ok("bench_mark_davar") => Mark::Phase(1),
+            Ok("bench_mark_link") => Mark::Phase(2),
+            Ok("bench_mark_off") => Mark::Off,
+            _ => continue,
+        };
+        m.insert(sym.address() & !1, kind);
+    }
+    if m.len() == 6 {
+        Ok(m)
+    } else {
+        Err(format!(
+            "{} of the 6 bench_mark_* symbols (built without bench-trace?)",
+            m.len()
+        ))
+    }
+}
+
+/// Whether the instruction at `addr` is the emulator's (or the bench
+/// clock's): any inline frame in `gyro_array::emu` (not `EmuCs`) or
+/// `board::qemu::ticks`.
+fn is_emu(loader: &addr2line::Loader, addr: u64) -> bool {
+    let Ok(mut frames) = loader.find_frames(addr) else {
+        return false;
+    };
+    while let Ok(Some(f)) = frames.next() {
+        if let Some(name) = f.function.as_ref().and_then(|n| n.demangle().ok()) {
+            // The emulated chip-select pins stay the firmware's: a few
+            // instructions each, as a GPIO write is on the board.
+            if (name.contains("gyro_array::emu::") && !name.contains("EmuCs"))
+                || name.contains("gyro_array::board::qemu::ticks")
+            {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Count the trace: per scenario, per sample.
+fn parse(
+    r: impl BufRead,
+    marks: &HashMap<u64, Mark>,
+    loader: &addr2line::Loader,
+) -> Vec<Vec<Sample>> {
+    // Per block start: (firmware, emulator) instructions, from its last
+    // translation.
+    let mut blocks: HashMap<u64, (u64, u64)> = HashMap::new();
+    let mut emu_at: HashMap<u64, bool> = HashMap::new();
+    let mut building: Option<(u64, u64, u64)> = None;
+    let mut scenarios: Vec<Vec<Sample>> = Vec::new();
+    let mut phase: Option<usize> = None;
+    for line in r.split(b'\n') {
+        let Ok(line) = line else { break };
+        if line.starts_with(b"IN:") {
+            building = Some((u64::MAX, 0, 0));
+            continue;
+        }
+        if let Some((start, fw, emu)) = building.as_mut() {
+            // "0x000180ec:  b580  push {r7, lr}"
+            if let Some(addr) = line
+                .strip_prefix(b"0x")
+                .and_then(|l| l.get(..8))
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u64::from_str_radix(h, 16).ok())
+            {
+                if *start == u64::MAX {
+                    *start = addr;
+                }
+                let e = *emu_at.entry(addr).or_insert_with(|| is_emu(loader, addr));
+                if e {
+                    *emu += 1;
+                } else {
+                    *fw += 1;
+                }
+                continue;
+            }
+            let (start, fw, emu) = (*start, *fw, *emu);
+            if start != u64::MAX {
+                blocks.insert(start, (fw, emu));
+            }
+            building = None;
+        }
+        // "Trace 0: 0x7f.. [00800408/000180ec/00000110/ff020200] name"
+        let Some(pc) = line
+            .strip_prefix(b"Trace ")
+            .and_then(|l| l.iter().position(|&b| b == b'[').map(|i| &l[i + 1..]))
+            .and_then(|l| l.get(9..17))
+            .and_then(|h| std::str::from_utf8(h).ok())
+            .and_then(|h| u64::from_str_radix(h, 16).ok())
+        else {
+            continue;
+        };
+        match marks.get(&pc) {
+            Some(Mark::Scenario) => {
+                scenarios.push(Vec::new());
+                phase = None;
+            }
+            Some(Mark::Sample) => {
+                if let Some(s) = scenarios.last_mut() {
+                    s.push(Sample::default());
+                }
+                phase = None;
+            }
+            Some(Mark::Phase(p)) => phase = Some(*p),
+            Some(Mark::Off) => phase = None,
+            None => {
+                let (Some(p), Some(s)) = (phase, scenarios.last_mut().and_then(|s| s.last_mut()))
+                else {
+                    continue;
+                };
+                let (fw, emu) = blocks.get(&pc).copied().unwrap_or((0, 0));
+                s.fw[p] += fw;
+                if p == 0 {
+                    s.bus += emu;
+                }
+            }
+        }
+    }
+    scenarios
+}
+
+/// Print one scenario's mean and worst sample.
+fn report(name: &str, samples: &[Sample]) {
+    let n = samples.len().max(1) as f64;
+    let total = |s: &Sample| s.fw.iter().sum::<u64>();
+    let mean = |f: &dyn Fn(&Sample) -> u64| samples.iter().map(f).sum::<u64>() as f64 / n;
+    let Some((at, worst)) = samples.iter().enumerate().max_by_key(|(_, s)| total(s)) else {
+        return;
+    };
+    // The next worst, at least a sample away: how much the worst stands out.
+    let second = samples
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| i.abs_diff(at) > 1)
+        .map(|(_, s)| total(s))
+        .max()
+        .unwrap_or(0);
+    println!(
+        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (read+fuse {:.0}, e-davar {:.0}, link {:.0}; the emulated bus {:.0} more), worst {} at sample {at} (read+fuse {}, e-davar {}, link {}), next worst {second}; target <= 10000",
+        mean(&total),
+        mean(&|s| s.fw[0]),
+        mean(&|s| s.fw[1]),
+        mean(&|s| s.fw[2]),
+        mean(&|s| s.bus),
+        total(worst),
+        worst.fw[0],
+        worst.fw[1],
+        worst.fw[2],
+    );
+}
