@@ -362,6 +362,35 @@ pub fn run_array(
     self_test: Option<u16>,
     mounts: Option<[Mount; 5]>,
     cal: Option<&CalRecord>,
+    each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
+) -> Option<u8> {
+    run_array_from_seq(
+        0,
+        profile,
+        seed,
+        samples,
+        at_power_up,
+        self_test,
+        mounts,
+        cal,
+        each,
+    )
+}
+
+/// [`run_array`] with the pipeline's first sample numbered `first_seq`
+/// (the numbers before it consumed as overruns): a board that has run
+/// for weeks, its u32 sequence number about to wrap (after 49.7 days at
+/// 1 kHz).
+#[allow(clippy::too_many_arguments)]
+pub fn run_array_from_seq(
+    first_seq: u32,
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    at_power_up: [Fault; 5],
+    self_test: Option<u16>,
+    mounts: Option<[Mount; 5]>,
+    cal: Option<&CalRecord>,
     mut each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
 ) -> Option<u8> {
     let cs: [CsLine; 5] = Default::default();
@@ -400,6 +429,9 @@ pub fn run_array(
         self_test,
         &mut pipe,
     );
+    if first_seq != 0 {
+        pipe.note_overrun(first_seq);
+    }
     for n in 0..samples {
         with_bus(&bus, |b| b.advance(1e-3));
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
