@@ -336,7 +336,7 @@ impl<const N: usize> RelCal<N> {
         if t.is_multiple_of(EVERY) || warm_turn {
             self.solved = true;
             self.solve(y, mask);
-        } else if (t + 1).is_multiple_of(EVERY) {
+        } else if t.wrapping_add(1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).
             self.last_raw = *y;
         }
