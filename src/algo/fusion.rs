@@ -244,9 +244,12 @@ pub struct Fused<const N: usize> {
 /// What all chips share (a common vibration error) is not seen.
 ///
 /// `fused` must be what fusion made of `y`: its weights sum to 1 and its
-/// rate is Σwᵢyᵢ (every method's, `fused_rate_is_its_weighted_sum`), so the
-/// probe reuses both. `None` with fewer than two used gyros (no
-/// combination is free of the motion) or a non-finite input among them.
+/// rate is Σwᵢyᵢ, which the probe reuses. (In the adaptive method's
+/// warm-up the rate is the voters' median instead; it too moves one for
+/// one with a rate common to every chip, so the motion still cancels:
+/// test `every_methods_probe_cancels_motion`.) `None` with fewer than two
+/// used gyros (no combination is free of the motion) or a non-finite
+/// input among them.
 pub fn noise_probe<const N: usize>(y: &[f32; N], fused: &Fused<N>) -> Option<f32> {
     // One pass, no coefficients kept: with D = Σsᵢwᵢ = δ and
     // S = Σsᵢwᵢyᵢ, Σcᵢyᵢ = k(S − δ·Σwᵢyᵢ) = k(S − δ·rate), and
