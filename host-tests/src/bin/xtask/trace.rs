@@ -5,7 +5,7 @@
 //! `-icount shift=0`, and takes out the emulated bus's operations timed one
 //! by one: some forty a sample, each off by up to a tick. The sum's error
 //! is about ±100 instructions a sample, so the worst of 8 000 samples reads
-//! some 300 high. Here every executed instruction is counted: the trace
+//! some 200 high (both are printed). Here every executed instruction is counted: the trace
 //! logs each translated block's instructions (`IN:`) and each execution of
 //! a block (`Trace`); the bench's trace build (feature `bench-trace`)
 //! calls a marker function at each phase of a sample; and an instruction
@@ -39,7 +39,8 @@ enum Mark {
 }
 
 /// Run the trace build `elf` under QEMU; print each scenario's exact
-/// figures (and its decoded log if it failed). False if QEMU, defmt-print or the parse failed.
+/// figures (and its decoded log if it failed). False if QEMU, defmt-print
+/// or the parse failed.
 pub fn loop_counts(elf: &Path) -> bool {
     let marks = match markers(elf) {
         Ok(m) => m,
