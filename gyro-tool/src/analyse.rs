@@ -10,10 +10,11 @@
 
 use std::path::PathBuf;
 
-use gyro_array::algo::allan::{oavar_octave, AdevPoint};
+use gyro_array::algo::allan::AdevPoint;
 use gyro_array::link::msg::Frame;
 
 use super::{read_recording, Res};
+use crate::dev::octave_oavar;
 
 pub fn run(file: &PathBuf) -> Res<bool> {
     let (frames, dec) = read_recording(file)?;
@@ -71,15 +72,10 @@ pub fn run(file: &PathBuf) -> Res<bool> {
             best.len(),
             tau0 * 1e3
         );
-        let mut phase = vec![0.0; best.len() + 1];
         let mut pts: [Vec<AdevPoint>; 3] = Default::default();
         for (a, p) in pts.iter_mut().enumerate() {
             let rate: Vec<f64> = best.iter().map(|r| r[a]).collect();
-            let mut out = vec![AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
-            let n =
-                oavar_octave(&rate, tau0, &mut phase, &mut out).map_err(|e| format!("{e:?}"))?;
-            out.truncate(n);
-            *p = out;
+            *p = octave_oavar(&rate, tau0).map_err(|e| format!("{e:?}"))?;
         }
         println!(
             "{:>12} {:>14} {:>14} {:>14}",

@@ -13,6 +13,17 @@ use std::fmt;
 
 use gyro_array::algo::allan;
 
+/// Overlapping Allan variance of `rate` at every octave τ that fits, by
+/// the firmware's exact sweep (`allan::oavar_octave`): the quick curve
+/// `gyro analyse` and `gyro replay` print.
+pub fn octave_oavar(rate: &[f64], tau0: f64) -> Result<Vec<allan::AdevPoint>, allan::AllanError> {
+    let mut phase = vec![0.0; rate.len() + 1];
+    let mut out = vec![allan::AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
+    let n = allan::oavar_octave(rate, tau0, &mut phase, &mut out)?;
+    out.truncate(n);
+    Ok(out)
+}
+
 /// Why a deviation could not be computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DevError {

@@ -20,7 +20,6 @@
 
 use std::path::Path;
 
-use gyro_array::algo::allan::{oavar_octave, AdevPoint};
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use plotters::prelude::*;
@@ -109,13 +108,8 @@ pub fn longest_run_adev(x: &[f64], tau0: f64) -> (usize, Vec<(f64, f64)>) {
     if run.len() < 16 {
         return (run.len(), Vec::new());
     }
-    let mut phase = vec![0.0; run.len() + 1];
-    let mut out = vec![AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
-    let n = oavar_octave(run, tau0, &mut phase, &mut out).unwrap_or(0);
-    (
-        run.len(),
-        out[..n].iter().map(|p| (p.tau_s, p.adev())).collect(),
-    )
+    let pts = crate::dev::octave_oavar(run, tau0).unwrap_or_default();
+    (run.len(), pts.iter().map(|p| (p.tau_s, p.adev())).collect())
 }
 
 /// Draw the replay of `chips` (named `names`, sampled every `tau0` s).
@@ -265,24 +259,30 @@ pub fn draw(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gyro_array::emu::Rng;
+
+    /// One chip per `sd`: `truth` plus white noise of that σ (drawn chip
+    /// after chip).
+    fn noisy_chips(truth: &[f64], sd: &[f64], rng: &mut Rng) -> Vec<Vec<f64>> {
+        sd.iter()
+            .map(|s| {
+                truth
+                    .iter()
+                    .map(|t| t + s * f64::from(rng.gaussian()))
+                    .collect()
+            })
+            .collect()
+    }
 
     /// Four chips, one noisier and one that sticks half-way: the noisy one
     /// gets the least weight and the stuck one leaves the fusion; the fused
     /// rate is better than the plain mean.
     #[test]
     fn the_replay_weighs_and_excludes_as_the_firmware() {
-        let mut rng = gyro_array::emu::Rng::new(3);
+        let mut rng = Rng::new(3);
         let n = 4000;
         let truth: Vec<f64> = (0..n).map(|i| 20.0 * (i as f64 * 0.003).sin()).collect();
-        let sd = [0.05, 0.05, 0.05, 0.25];
-        let mut chips: Vec<Vec<f64>> = (0..4)
-            .map(|c| {
-                truth
-                    .iter()
-                    .map(|t| t + sd[c] * f64::from(rng.gaussian()))
-                    .collect()
-            })
-            .collect();
+        let mut chips = noisy_chips(&truth, &[0.05, 0.05, 0.05, 0.25], &mut rng);
         let held = chips[1][2000];
         for v in chips[1][2000..].iter_mut() {
             *v = held;
@@ -319,20 +319,12 @@ mod tests {
     /// measured; the fused rate's reads 14–3 000× the fused error's).
     #[test]
     fn the_probe_gives_the_fused_noise_under_motion() {
-        let mut rng = gyro_array::emu::Rng::new(5);
+        let mut rng = Rng::new(5);
         let n = 40_000;
         let truth: Vec<f64> = (0..n)
             .map(|i| 100.0 * (i as f64 * 0.002).sin() + 20.0 * (i as f64 * 0.05).sin())
             .collect();
-        let sd = [0.05, 0.07, 0.1, 0.2];
-        let chips: Vec<Vec<f64>> = (0..4)
-            .map(|c| {
-                truth
-                    .iter()
-                    .map(|t| t + sd[c] * f64::from(rng.gaussian()))
-                    .collect()
-            })
-            .collect();
+        let chips = noisy_chips(&truth, &[0.05, 0.07, 0.1, 0.2], &mut rng);
         let r = replay(&chips).unwrap();
         let err: Vec<f64> = r.fused.iter().zip(&truth).map(|(f, t)| f - t).collect();
         let (len, probe) = longest_run_adev(&r.probe[1000..], 1e-3);

@@ -131,8 +131,29 @@ fn qemu(elf: &Path, icount: bool) -> bool {
 fn qemu_with(elf: &Path, icount: bool, extra: &[&str]) -> (bool, String) {
     // A firmware that hangs (a fault loop, a stack overflow) must fail
     // the run, not stall CI: coreutils' `timeout` kills QEMU after 300 s.
+    let mut q = qemu_command(elf, icount, 300, extra);
+    eprintln!("xtask: {q:?} | defmt-print -e {}", elf.display());
+    let mut child = q.spawn().unwrap_or_else(|e| {
+        eprintln!("xtask: cannot start qemu: {e}");
+        exit(1)
+    });
+    let stdout = child.stdout.take().unwrap();
+    let decoded = defmt_print(elf, stdout).unwrap_or_else(|e| {
+        eprintln!("xtask: cannot start defmt-print: {e}");
+        exit(1)
+    });
+    let q_ok = child.wait().map(|s| s.success()).unwrap_or(false);
+    let text = String::from_utf8_lossy(&decoded.stdout).into_owned();
+    print!("{text}");
+    (q_ok && decoded.status.success(), text)
+}
+
+/// QEMU's Cortex-M4 board (mps2-an386) running `elf` with semihosting,
+/// killed by coreutils' `timeout` after `secs`, with `extra` arguments; its
+/// stdout (the defmt stream) piped.
+fn qemu_command(elf: &Path, icount: bool, secs: u32, extra: &[&str]) -> Command {
     let mut q = Command::new("timeout");
-    q.args(["300", "qemu-system-arm"]);
+    q.arg(secs.to_string()).arg("qemu-system-arm");
     q.args([
         "-cpu",
         "cortex-m4",
@@ -150,26 +171,20 @@ fn qemu_with(elf: &Path, icount: bool, extra: &[&str]) -> (bool, String) {
     }
     q.args(extra);
     q.arg("-kernel").arg(elf).stdout(Stdio::piped());
-    eprintln!("xtask: {q:?} | defmt-print -e {}", elf.display());
-    let mut child = q.spawn().unwrap_or_else(|e| {
-        eprintln!("xtask: cannot start qemu: {e}");
-        exit(1)
-    });
-    let stdout = child.stdout.take().unwrap();
-    let decoded = Command::new("defmt-print")
+    q
+}
+
+/// The defmt log of `elf` in `stream` (QEMU's stdout), decoded.
+fn defmt_print(
+    elf: &Path,
+    stream: std::process::ChildStdout,
+) -> std::io::Result<std::process::Output> {
+    Command::new("defmt-print")
         .arg("-e")
         .arg(elf)
-        .stdin(stdout)
+        .stdin(stream)
         .stderr(Stdio::inherit())
         .output()
-        .unwrap_or_else(|e| {
-            eprintln!("xtask: cannot start defmt-print: {e}");
-            exit(1)
-        });
-    let q_ok = child.wait().map(|s| s.success()).unwrap_or(false);
-    let text = String::from_utf8_lossy(&decoded.stdout).into_owned();
-    print!("{text}");
-    (q_ok && decoded.status.success(), text)
 }
 
 /// The host tool (`gyro-tool`), built; its path.

@@ -17,7 +17,7 @@
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 
 use object::{Object, ObjectSymbol};
 
@@ -56,19 +56,13 @@ pub fn loop_counts(elf: &Path) -> bool {
             return false;
         }
     };
-    let mut q = Command::new("timeout");
-    q.args(["1800", "qemu-system-arm"]);
-    q.args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic"]);
-    q.args([
-        "-monitor",
-        "none",
-        "-semihosting-config",
-        "enable=on,target=native",
-    ]);
-    q.args(["-icount", "shift=0,sleep=off"]);
-    q.args(["-d", "in_asm,exec,nochain", "-D", "/dev/stderr"]);
-    q.arg("-kernel").arg(elf);
-    q.stdout(Stdio::piped()).stderr(Stdio::piped());
+    let mut q = crate::qemu_command(
+        elf,
+        true,
+        1800,
+        &["-d", "in_asm,exec,nochain", "-D", "/dev/stderr"],
+    );
+    q.stderr(Stdio::piped());
     eprintln!(
         "xtask: {q:?} (trace parsed here) | defmt-print -e {}",
         elf.display()
@@ -81,13 +75,7 @@ pub fn loop_counts(elf: &Path) -> bool {
         return false;
     };
     let elf_arg = elf.to_path_buf();
-    let printer = std::thread::spawn(move || {
-        Command::new("defmt-print")
-            .arg("-e")
-            .arg(elf_arg)
-            .stdin(stdout)
-            .output()
-    });
+    let printer = std::thread::spawn(move || crate::defmt_print(&elf_arg, stdout));
     let scenarios = parse(BufReader::with_capacity(1 << 20, stderr), &marks, &loader);
     let q_ok = child.wait().is_ok_and(|s| s.success());
     let Ok(Ok(decoded)) = printer.join() else {
