@@ -421,6 +421,58 @@ fn two_chips_agreeing_by_chance_do_not_outvote_the_quiet_majority() {
     assert_ne!(r.rejected & 0b0100, 0, "{r:?}");
 }
 
+/// The consensus gate as written before it shared each pair's square:
+/// gate every active gyro about each active gyro's value in turn; most
+/// gyros wins, then most total inverse variance.
+fn consensus_by_reference<const N: usize>(
+    y: &[f32; N],
+    v: &[f32; N],
+    active: u8,
+    first: u8,
+    k2: f32,
+    v_med: f32,
+) -> (u8, bool) {
+    let weight = |set: u8| {
+        (0..N)
+            .filter(|&i| has(set, i))
+            .map(|i| 1.0 / v[i])
+            .sum::<f32>()
+    };
+    let (mut best, mut best_n, mut best_w) = (first, first.count_ones(), weight(first));
+    for j in (0..N).filter(|&j| has(active, j)) {
+        let set = (0..N)
+            .filter(|&i| has(active, i) && (y[i] - y[j]).powi(2) <= k2 * (v[i] + v_med))
+            .fold(0u8, |s, i| s | 1 << i);
+        let (n, w) = (set.count_ones(), weight(set));
+        if n >= 2 && (n > best_n || (n == best_n && w > best_w)) {
+            (best, best_n, best_w) = (set, n, w);
+        }
+    }
+    (best, 2 * best_n <= active.count_ones())
+}
+
+proptest::proptest! {
+    /// The shipped consensus gate (each pair's square once, weights only
+    /// for a tie) picks the same set as gating about each gyro in turn,
+    /// on values clustered so that every kind of split occurs.
+    #[test]
+    fn consensus_gate_picks_what_gating_about_each_gyro_picks(
+        y in proptest::array::uniform5(proptest::prop_oneof![-2.0f32..2.0, 9.0f32..10.0, 0.0f32..0.3]),
+        v in proptest::array::uniform5(0.001f32..1.0),
+        active in 0u8..32,
+        first in 0u8..32,
+        v_med in 0.0f32..0.5,
+    ) {
+        let first = first & active;
+        let k2 = 9.0;
+        let w = core::array::from_fn(|i| if has(active, i) { 1.0 / v[i] } else { 0.0 });
+        proptest::prop_assert_eq!(
+            consensus_gate(&y, &v, &w, active, first, k2, v_med),
+            consensus_by_reference(&y, &v, active, first, k2, v_med)
+        );
+    }
+}
+
 /// κ makes the capped squared residual an unbiased variance estimate for
 /// Gaussian noise: E[κ·min(z², c²)] = 1, by Monte Carlo (10⁶ draws).
 #[test]

@@ -29,6 +29,25 @@ struct Sample {
     bus: u64,
 }
 
+/// A scenario's samples, and firmware instructions by function (innermost
+/// inline frame) in its worst sample and over all its samples: where the
+/// worst sample's extra cost goes.
+#[derive(Default)]
+struct Scenario {
+    samples: Vec<Sample>,
+    worst_by_fn: Vec<(u32, u64)>,
+    all_by_fn: Vec<u64>,
+}
+
+/// One translated block: firmware and emulator instructions, and the
+/// firmware's by function id.
+#[derive(Clone, Default)]
+struct Block {
+    fw: u64,
+    emu: u64,
+    by_fn: Vec<(u32, u64)>,
+}
+
 /// What a marker does.
 #[derive(Clone, Copy, PartialEq)]
 enum Mark {
@@ -76,7 +95,7 @@ pub fn loop_counts(elf: &Path) -> bool {
     };
     let elf_arg = elf.to_path_buf();
     let printer = std::thread::spawn(move || crate::defmt_print(&elf_arg, stdout));
-    let scenarios = parse(BufReader::with_capacity(1 << 20, stderr), &marks, &loader);
+    let (scenarios, fn_names) = parse(BufReader::with_capacity(1 << 20, stderr), &marks, &loader);
     let q_ok = child.wait().is_ok_and(|s| s.success());
     let Ok(Ok(decoded)) = printer.join() else {
         eprintln!("xtask: defmt-print failed");
@@ -96,7 +115,7 @@ pub fn loop_counts(elf: &Path) -> bool {
         .filter_map(|(_, r)| r.split_once(':').map(|(name, _)| name))
         .collect();
     for (k, s) in scenarios.iter().enumerate() {
-        report(names.get(k).copied().unwrap_or("?"), s);
+        report(names.get(k).copied().unwrap_or("?"), s, &fn_names);
     }
     ok && !scenarios.is_empty()
 }
@@ -130,11 +149,13 @@ fn markers(elf: &Path) -> Result<HashMap<u64, Mark>, String> {
 
 /// Whether the instruction at `addr` is the emulator's (or the bench
 /// clock's): any inline frame in `gyro_array::emu` (not `EmuCs`) or
-/// `board::qemu::ticks`.
-fn is_emu(loader: &addr2line::Loader, addr: u64) -> bool {
+/// `board::qemu::ticks`; and its innermost frame's function.
+fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String) {
     let Ok(mut frames) = loader.find_frames(addr) else {
-        return false;
+        return (false, "?".into());
     };
+    let mut innermost = None;
+    let mut emu = false;
     while let Ok(Some(f)) = frames.next() {
         if let Some(name) = f.function.as_ref().and_then(|n| n.demangle().ok()) {
             // The emulated chip-select pins stay the firmware's: a few
@@ -142,32 +163,51 @@ fn is_emu(loader: &addr2line::Loader, addr: u64) -> bool {
             if (name.contains("gyro_array::emu::") && !name.contains("EmuCs"))
                 || name.contains("gyro_array::board::qemu::ticks")
             {
-                return true;
+                emu = true;
+            }
+            if innermost.is_none() {
+                innermost = Some(short_name(&name));
             }
         }
     }
-    false
+    (emu, innermost.unwrap_or_else(|| "?".into()))
 }
 
-/// Count the trace: per scenario, per sample.
+/// A demangled path without its hash and crate-internal generics, for
+/// the worst sample's breakdown.
+fn short_name(name: &str) -> String {
+    let name = name.strip_prefix('<').unwrap_or(name);
+    let name = match name.rsplit_once("::h") {
+        Some((head, hash)) if hash.len() == 16 => head,
+        _ => name,
+    };
+    name.replace("gyro_array::", "")
+}
+
+/// Count the trace: per scenario, per sample. Also returns the function
+/// names that `Scenario::worst_by_fn` indexes.
 fn parse(
     r: impl BufRead,
     marks: &HashMap<u64, Mark>,
     loader: &addr2line::Loader,
-) -> Vec<Vec<Sample>> {
-    // Per block start: (firmware, emulator) instructions.
-    let mut blocks: HashMap<u64, (u64, u64)> = HashMap::new();
-    let mut emu_at: HashMap<u64, bool> = HashMap::new();
-    let mut building: Option<(u64, u64, u64)> = None;
-    let mut scenarios: Vec<Vec<Sample>> = Vec::new();
+) -> (Vec<Scenario>, Vec<String>) {
+    let mut blocks: HashMap<u64, Block> = HashMap::new();
+    // Per instruction address: (emulator's?, function id).
+    let mut at: HashMap<u64, (bool, u32)> = HashMap::new();
+    let mut names: Vec<String> = Vec::new();
+    let mut ids: HashMap<String, u32> = HashMap::new();
+    let mut building: Option<(u64, Block)> = None;
+    let mut scenarios: Vec<Scenario> = Vec::new();
     let mut phase: Option<usize> = None;
+    // The current sample's firmware instructions by function id.
+    let mut by_fn: Vec<u64> = Vec::new();
     for line in r.split(b'\n') {
         let Ok(line) = line else { break };
         if line.starts_with(b"IN:") {
-            building = Some((u64::MAX, 0, 0));
+            building = Some((u64::MAX, Block::default()));
             continue;
         }
-        if let Some((start, fw, emu)) = building.as_mut() {
+        if let Some((start, block)) = building.as_mut() {
             // "0x000180ec:  b580  push {r7, lr}"
             if let Some(addr) = line
                 .strip_prefix(b"0x")
@@ -178,27 +218,38 @@ fn parse(
                 if *start == u64::MAX {
                     *start = addr;
                 }
-                let e = *emu_at.entry(addr).or_insert_with(|| is_emu(loader, addr));
+                let (e, id) = *at.entry(addr).or_insert_with(|| {
+                    let (e, name) = classify(loader, addr);
+                    let next = ids.len() as u32;
+                    let id = *ids.entry(name.clone()).or_insert_with(|| {
+                        names.push(name);
+                        next
+                    });
+                    (e, id)
+                });
                 if e {
-                    *emu += 1;
+                    block.emu += 1;
                 } else {
-                    *fw += 1;
+                    block.fw += 1;
+                    match block.by_fn.iter_mut().find(|(f, _)| *f == id) {
+                        Some((_, n)) => *n += 1,
+                        None => block.by_fn.push((id, 1)),
+                    }
                 }
                 continue;
             }
-            let (start, fw, emu) = (*start, *fw, *emu);
+            let (start, block) = building.take().unwrap_or_default();
             // The longest translation of a start address stands: under
             // -icount a block cut short at a device access is translated
             // again, run once and logged, while the cached full block runs
             // on unlogged (this bench's only device reads are the clock's,
             // which is not counted).
             if start != u64::MAX {
-                let b = blocks.entry(start).or_insert((0, 0));
-                if fw + emu > b.0 + b.1 {
-                    *b = (fw, emu);
+                let b = blocks.entry(start).or_default();
+                if block.fw + block.emu > b.fw + b.emu {
+                    *b = block;
                 }
             }
-            building = None;
         }
         // "Trace 0: 0x7f.. [00800408/000180ec/00000110/ff020200] name"
         let Some(pc) = line
@@ -212,35 +263,75 @@ fn parse(
         };
         match marks.get(&pc) {
             Some(Mark::Scenario) => {
-                scenarios.push(Vec::new());
+                close_sample(scenarios.last_mut(), &mut by_fn);
+                scenarios.push(Scenario::default());
                 phase = None;
             }
             Some(Mark::Sample) => {
+                close_sample(scenarios.last_mut(), &mut by_fn);
                 if let Some(s) = scenarios.last_mut() {
-                    s.push(Sample::default());
+                    s.samples.push(Sample::default());
                 }
                 phase = None;
             }
             Some(Mark::Phase(p)) => phase = Some(*p),
             Some(Mark::Off) => phase = None,
             None => {
-                let (Some(p), Some(s)) = (phase, scenarios.last_mut().and_then(|s| s.last_mut()))
-                else {
+                let (Some(p), Some(s)) = (
+                    phase,
+                    scenarios.last_mut().and_then(|s| s.samples.last_mut()),
+                ) else {
                     continue;
                 };
-                let (fw, emu) = blocks.get(&pc).copied().unwrap_or((0, 0));
-                s.fw[p] += fw;
+                let Some(b) = blocks.get(&pc) else { continue };
+                s.fw[p] += b.fw;
                 if p == 0 {
-                    s.bus += emu;
+                    s.bus += b.emu;
+                }
+                for &(id, n) in &b.by_fn {
+                    let id = id as usize;
+                    if by_fn.len() <= id {
+                        by_fn.resize(id + 1, 0);
+                    }
+                    by_fn[id] += n;
                 }
             }
         }
     }
-    scenarios
+    close_sample(scenarios.last_mut(), &mut by_fn);
+    (scenarios, names)
 }
 
-/// Print one scenario's mean and worst sample.
-fn report(name: &str, samples: &[Sample]) {
+/// End the scenario's last sample: keep its breakdown by function if it
+/// is the worst so far; clear `by_fn` for the next.
+fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
+    if let Some(sc) = scenario {
+        if sc.all_by_fn.len() < by_fn.len() {
+            sc.all_by_fn.resize(by_fn.len(), 0);
+        }
+        for (a, n) in sc.all_by_fn.iter_mut().zip(by_fn.iter()) {
+            *a += n;
+        }
+        let total = |s: &Sample| s.fw.iter().sum::<u64>();
+        if let Some(last) = sc.samples.last() {
+            let worst = sc.samples.iter().map(total).max().unwrap_or(0);
+            if total(last) == worst {
+                sc.worst_by_fn = by_fn
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &n)| n > 0)
+                    .map(|(id, &n)| (id as u32, n))
+                    .collect();
+            }
+        }
+    }
+    by_fn.iter_mut().for_each(|n| *n = 0);
+}
+
+/// Print one scenario's mean and worst sample, and the worst sample's
+/// costliest functions.
+fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
+    let samples = &scenario.samples;
     let n = samples.len().max(1) as f64;
     let total = |s: &Sample| s.fw.iter().sum::<u64>();
     let mean = |f: &dyn Fn(&Sample) -> u64| samples.iter().map(f).sum::<u64>() as f64 / n;
@@ -266,5 +357,24 @@ fn report(name: &str, samples: &[Sample]) {
         worst.fw[0],
         worst.fw[1],
         worst.fw[2],
+    );
+    // Where the worst sample spends more than the mean sample does.
+    let mut extra: Vec<(u32, f64)> = scenario
+        .worst_by_fn
+        .iter()
+        .map(|&(id, w)| {
+            let all = scenario.all_by_fn.get(id as usize).copied().unwrap_or(0);
+            (id, w as f64 - all as f64 / n)
+        })
+        .collect();
+    extra.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let line: Vec<String> = extra
+        .iter()
+        .take(10)
+        .map(|&(id, x)| format!("+{x:.0} {}", fn_names.get(id as usize).map_or("?", |s| s)))
+        .collect();
+    println!(
+        "  its extra over the mean sample, by function (innermost inline frame): {}",
+        line.join(", ")
     );
 }
