@@ -289,6 +289,17 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     next: [u64; T],
     a: [i32; T],
     b: [i32; T],
+    /// Per τ, the sums of its first term (b over samples 0..m, a over
+    /// m..2m), kept as the samples arrive from a running sum read at
+    /// each power of two, so that the first term is not summed from
+    /// scratch: 2m samples on one sample of the loop (some 7 000
+    /// instructions for τ = 1024 after a restart; `cargo xtask
+    /// bench-loop`'s scenario E made its worst sample with τ = 256).
+    first_a: [i32; T],
+    first_b: [i32; T],
+    /// Σ of the samples so far (wrapping: a difference of two of them is
+    /// exact), while the first terms are being gathered.
+    prefix: i32,
     /// Per block (terms starting in it) and τ: Σd² as low word + carry,
     /// and the prefix a window ending in this block needs.
     lo: [[u64; FRAMES]; T],
@@ -418,6 +429,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             next: [0; T],
             a: [0; T],
             b: [0; T],
+            first_a: [0; T],
+            first_b: [0; T],
+            prefix: 0,
             lo: [[0; FRAMES]; T],
             x0: [0.0; FRAMES],
             px: [0.0; FRAMES],
@@ -489,6 +503,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.next = [0; T];
         self.a = [0; T];
         self.b = [0; T];
+        self.prefix = 0;
         self.len = self.cfg.l_init;
         self.score = 0.0;
         self.threshold = self.threshold_for(self.span);
@@ -667,6 +682,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let n = self.n;
         self.ring[n as usize & (CAP - 1)] = w;
         self.n = n + 1;
+        if n >> T == 0 {
+            self.gather_first_terms(w);
+        }
         let n = self.n;
         if n.is_multiple_of(SEG as u64) {
             self.cur_slot = Self::next(self.cur_slot);
@@ -770,6 +788,32 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// term, where doing it sample by sample cost ~60 (state reloads).
     /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
     /// to add and `a`, `b` hold the sums of the term before it.
+    /// The last sample pushed, if any since the start or a reset.
+    pub fn last_sample(&self) -> Option<i32> {
+        let n = self.n.checked_sub(1)?;
+        self.ring.get(n as usize & (CAP - 1)).copied()
+    }
+
+    /// After sample `w` (the `n`th, from 1): at n = 2ʲ the first term's b
+    /// of τ = 2ʲ is the running sum, and a of τ = 2ʲ⁻¹ the sum since
+    /// n = 2ʲ⁻¹. Runs for the first 2^T samples after a start.
+    #[inline]
+    fn gather_first_terms(&mut self, w: i32) {
+        self.prefix = self.prefix.wrapping_add(w);
+        let n = self.n;
+        if n.is_power_of_two() {
+            let i = n.trailing_zeros() as usize;
+            if let Some(b) = self.first_b.get_mut(i) {
+                *b = self.prefix;
+            }
+            if let Some(j) = i.checked_sub(1) {
+                if let (Some(a), Some(&b)) = (self.first_a.get_mut(j), self.first_b.get(j)) {
+                    *a = self.prefix.wrapping_sub(b);
+                }
+            }
+        }
+    }
+
     fn add_terms(&mut self, j: usize) {
         let n = self.n;
         if j >= T {
@@ -803,9 +847,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 };
                 let mut from = k;
                 if k == 0 {
-                    // First term: its sums from scratch (once per τ).
-                    b = (0..mu).map(|i| self.ring[i & (CAP - 1)]).sum();
-                    a = (mu..m2).map(|i| self.ring[i & (CAP - 1)]).sum();
+                    // First term: its sums, gathered as the samples came.
+                    (a, b) = (self.first_a[j], self.first_b[j]);
                     (lo, hi) = add_sq(lo, hi, a - b);
                     if pre_off == 0 {
                         self.pre[j][slot] = lo;

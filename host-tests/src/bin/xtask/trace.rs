@@ -108,14 +108,23 @@ pub fn loop_counts(elf: &Path) -> bool {
     if !ok {
         print!("{text}");
     }
-    // The scenarios' names, in the order the bench ran them.
-    let names: Vec<&str> = text
+    // The scenarios' names, in the order the bench ran them, and what
+    // the bench says of their fallbacks and tracker restarts.
+    let names: Vec<(&str, &str)> = text
         .lines()
         .filter_map(|l| l.split_once("bench whole loop, faults "))
-        .filter_map(|(_, r)| r.split_once(':').map(|(name, _)| name))
+        .filter(|(_, r)| r.contains("window restarts"))
+        .filter_map(|(_, r)| {
+            let (name, rest) = r.split_once(':')?;
+            Some((name, rest.rsplit_once(" (").map_or("", |(_, c)| c)))
+        })
         .collect();
     for (k, s) in scenarios.iter().enumerate() {
-        report(names.get(k).copied().unwrap_or("?"), s, &fn_names);
+        let (name, counts) = names.get(k).copied().unwrap_or(("?", ""));
+        report(name, s, &fn_names);
+        if !counts.is_empty() {
+            println!("  ({counts}");
+        }
     }
     ok && !scenarios.is_empty()
 }
