@@ -354,9 +354,10 @@ fn main() -> ! {
         _ => pass = false,
     }
     defmt::info!(
-        "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts",
+        "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts, {} missing samples bridged",
         sigma_x_1ms,
-        noise.restarts()
+        noise.restarts(),
+        noise.bridged()
     );
     pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
     defmt::info!(
