@@ -174,10 +174,10 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
     // A fifth, untuned: two chips spiking at once (the consensus gate on
     // every axis), the ADXRS453 silent, a chip power-cycled, another
     // stuck, under a 100 deg/s turn with a 12 Hz vibration. Its fallbacks
-    // restarted the noise tracker's windows (22 times; now bridged), and
-    // it broke the 10 000 at 10 113 where a restarted window summed its
-    // first term of a long τ from scratch (now gathered as the samples
-    // come).
+    // restarted the noise tracker's windows 22 times (now 4: the others
+    // are bridged), and it broke the 10 000 at 10 113 where a restarted
+    // window summed its first term of a long τ from scratch (now gathered
+    // as the samples come).
     ok &= bench_loop_on(
         t,
         ipt,

@@ -52,16 +52,22 @@ fn build_axis<const CAP: usize, const FRAMES: usize, const T: usize>(
 }
 
 /// A missing noise-probe sample is bridged (the last one held) at most once
-/// per this many samples of the axis's window.
+/// per this many samples of the axis's window, in the long run.
 pub const BRIDGE_EVERY: u16 = 128;
+/// Bridges saved up over a quiet stretch, for a burst (fallbacks come in
+/// clusters while two chips misbehave at once).
+pub const BRIDGE_BURST: u16 = 4;
+/// How far before `bridge_at` a bridge is allowed: BRIDGE_BURST − 1 periods.
+const BRIDGE_SAVED: u32 = (BRIDGE_BURST as u32 - 1) * BRIDGE_EVERY as u32;
 
 /// E-DAVAR on the three fused axes.
 ///
 /// Allan variances need contiguous samples. An axis whose noise probe is
 /// missing on a sample (fusion fell back: no majority to vouch for any
-/// chip) holds its last value for it, at most one sample in
-/// [`BRIDGE_EVERY`] (none in its window's first [`BRIDGE_EVERY`]), counted
-/// in [`NoiseTracker::bridged`]: a held
+/// chip) holds its last value for it: one sample in [`BRIDGE_EVERY`] in the
+/// long run, up to [`BRIDGE_BURST`] saved up (so at most 12 in a window of
+/// 1024; none in the window's first [`BRIDGE_EVERY`]), counted in
+/// [`NoiseTracker::bridged`]: a held
 /// sample takes one first difference out and doubles the next, which
 /// lowers σ²(τ0) by at most about 1/[`BRIDGE_EVERY`] of itself for white
 /// noise (measured in `a_bridged_gap_keeps_the_estimate`). Restarting on
@@ -79,9 +85,10 @@ pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
     origin: [Option<u32>; 3],
     last_seq: Option<u32>,
     restarts: u32,
-    /// Per axis, the sequence number of its last bridge (or of its
-    /// window's start).
-    last_bridge: [u32; 3],
+    /// Per axis, when its bridging credit is all spent (a generic cell
+    /// rate algorithm's theoretical arrival time): a bridge is allowed
+    /// from BRIDGE_BURST − 1 periods before it, and moves it a period on.
+    bridge_at: [u32; 3],
     bridged: u32,
 }
 
@@ -106,7 +113,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             origin: [None; 3],
             last_seq: None,
             restarts: 0,
-            last_bridge: [0; 3],
+            bridge_at: [0; 3],
             bridged: 0,
         })
     }
@@ -135,7 +142,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             core::ptr::addr_of_mut!((*p).origin).write([None; 3]);
             core::ptr::addr_of_mut!((*p).last_seq).write(None);
             core::ptr::addr_of_mut!((*p).restarts).write(0);
-            core::ptr::addr_of_mut!((*p).last_bridge).write([0; 3]);
+            core::ptr::addr_of_mut!((*p).bridge_at).write([0; 3]);
             core::ptr::addr_of_mut!((*p).bridged).write(0);
             Ok(slot.assume_init_mut())
         }
@@ -146,8 +153,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         let contiguous = self.last_seq.is_some_and(|s| out.seq == s.wrapping_add(1));
         self.last_seq = Some(out.seq);
         for (a, (d, p)) in self.axes.iter_mut().zip(out.noise_probe_dps).enumerate() {
-            let (Some(origin), Some(last_bridge)) =
-                (self.origin.get_mut(a), self.last_bridge.get_mut(a))
+            let (Some(origin), Some(bridge_at)) =
+                (self.origin.get_mut(a), self.bridge_at.get_mut(a))
             else {
                 continue;
             };
@@ -158,12 +165,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             }
             let q = match p {
                 Some(p) => Some(quantise(p, LSB_DPS)),
-                // Bridged: the window's last sample again, at most one
-                // sample in BRIDGE_EVERY.
+                // Bridged: the window's last sample again, within the
+                // credit (wrapping comparisons: the sequence numbers wrap).
                 None if origin.is_some()
-                    && out.seq.wrapping_sub(*last_bridge) >= u32::from(BRIDGE_EVERY) =>
+                    && out.seq.wrapping_sub(bridge_at.wrapping_sub(BRIDGE_SAVED)) as i32 >= 0 =>
                 {
-                    *last_bridge = out.seq;
+                    let spent = (out.seq.wrapping_sub(*bridge_at) as i32) < 0;
+                    *bridge_at = if spent { *bridge_at } else { out.seq };
+                    *bridge_at = bridge_at.wrapping_add(u32::from(BRIDGE_EVERY));
                     self.bridged += 1;
                     d.last_sample().map(Ok)
                 }
@@ -179,7 +188,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
                 Some(Ok(q)) if d.push(q).is_ok() => {
                     if origin.is_none() {
                         *origin = Some(out.seq);
-                        *last_bridge = out.seq;
+                        // Credit starts empty: the first bridge a period on.
+                        *bridge_at = out.seq.wrapping_add(BRIDGE_SAVED + u32::from(BRIDGE_EVERY));
                     }
                 }
                 _ => {
@@ -319,5 +329,34 @@ mod tests {
             t.restarts()
         );
         assert!(t.estimate(1).is_some(), "y kept its window");
+    }
+
+    /// After a quiet stretch an axis bridges a burst of BRIDGE_BURST
+    /// missing samples, and restarts on the next; across the sequence
+    /// numbers' wrap.
+    #[test]
+    fn a_burst_is_bridged_then_the_window_restarts() {
+        let mut t = NoiseTracker::<1024, 35, 9>::new(config(1024)).unwrap();
+        let mut rng = Rng::new(6);
+        let first = 0xFFFF_FC00u32; // on the 32-sample grid, 1024 before the wrap
+        for k in 0..3000u32 {
+            let p = 0.01 * rng.gaussian();
+            let gap = (2000..2006).contains(&k);
+            let out = Output::<1> {
+                seq: first.wrapping_add(k),
+                rate_dps: [[0.0; 3]],
+                offered: [0; 3],
+                fused: [None; 3],
+                noise_probe_dps: [(!gap).then_some(p), Some(p), Some(p)],
+                health_changed: 0,
+                busy: false,
+            };
+            t.push(&out);
+            if k == 2003 {
+                assert_eq!((t.bridged(), t.restarts()), (4, 0));
+            }
+        }
+        assert_eq!(t.bridged(), u32::from(BRIDGE_BURST));
+        assert_eq!(t.restarts(), 1);
     }
 }
