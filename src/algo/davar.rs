@@ -782,12 +782,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         Ok(done)
     }
 
-    /// τ0 energy of frame f (Σ of its 32 squared first differences).
-    /// Add every Allan term completed since the last hop to its block, per
-    /// τ in one tight loop (sliding sums in registers): ~10 instructions a
-    /// term, where doing it sample by sample cost ~60 (state reloads).
-    /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
-    /// to add and `a`, `b` hold the sums of the term before it.
     /// The last sample pushed, if any since the start or a reset.
     pub fn last_sample(&self) -> Option<i32> {
         let n = self.n.checked_sub(1)?;
@@ -814,6 +808,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
     }
 
+    /// Add every Allan term completed since the last hop to its block, per
+    /// τ in one tight loop (sliding sums in registers): ~10 instructions a
+    /// term, where doing it sample by sample cost ~60 (state reloads).
+    /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
+    /// to add and `a`, `b` hold the sums of the term before it.
     fn add_terms(&mut self, j: usize) {
         let n = self.n;
         if j >= T {
