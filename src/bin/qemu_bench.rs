@@ -209,6 +209,45 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
+    // A sixth, untuned, tried at the end of the session that added E: it
+    // breaks the 10 000 (10 035, a dozen samples after two chips stick at
+    // once under a slow, wide sway: fusion's regate and general path
+    // while the stuck chips are not yet flagged; see README).
+    ok &= bench_loop_on(
+        t,
+        ipt,
+        "faults F: another board (seed 53) swaying 90/60/100 deg/s at 0.2 Hz; ADXRS453 powered off 0.50-0.52 s and 1.50-1.53 s, gyro 0 saturated 2.0-2.1 s, gyros 2 and 3 stuck together 3.0-3.8 s with gyro 1 bit errors 3.1-3.9 s, ADXRS453 spiking 200 deg/s with gyro 0 frame bit errors 5.0-6.5 s, gyros 1 and 2 powered off 7.00-7.04/7.06 s",
+        RateProfile {
+            base_dps: [0.0, 20.0, -10.0],
+            sine_dps: [90.0, 60.0, 100.0],
+            sine_hz: 0.2,
+            sine_start_s: 0.0,
+        },
+        53,
+        &[
+            (500, 4, Fault::PoweredOff),
+            (520, 4, Fault::None),
+            (1500, 4, Fault::PoweredOff),
+            (1530, 4, Fault::None),
+            (2000, 0, Fault::Saturated),
+            (2100, 0, Fault::None),
+            (3000, 2, Fault::Stuck),
+            (3000, 3, Fault::Stuck),
+            (3100, 1, Fault::BitErrors { prob: 0.1 }),
+            (3800, 2, Fault::None),
+            (3800, 3, Fault::None),
+            (3900, 1, Fault::None),
+            (5000, 4, Fault::Spikes { prob: 0.05, magnitude_dps: 200.0 }),
+            (5000, 0, Fault::FrameBitError { prob: 0.1 }),
+            (6500, 4, Fault::None),
+            (6500, 0, Fault::None),
+            (7000, 1, Fault::PoweredOff),
+            (7000, 2, Fault::PoweredOff),
+            (7040, 1, Fault::None),
+            (7060, 2, Fault::None),
+        ],
+        false,
+    );
     ok
 }
 
