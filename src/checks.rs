@@ -338,32 +338,6 @@ pub fn run_board_array_with(
     self_test: Option<u16>,
     each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
 ) -> Option<u8> {
-    run_array(
-        profile,
-        seed,
-        samples,
-        at_power_up,
-        self_test,
-        None,
-        None,
-        each,
-    )
-}
-
-/// [`run_board_array_with`] with the chips mounted as `mounts` say
-/// (`None`: aligned) and the pipeline given the static calibration `cal`
-/// (`None`: uncalibrated).
-#[allow(clippy::too_many_arguments)]
-pub fn run_array(
-    profile: RateProfile,
-    seed: u64,
-    samples: u32,
-    at_power_up: [Fault; 5],
-    self_test: Option<u16>,
-    mounts: Option<[Mount; 5]>,
-    cal: Option<&CalRecord>,
-    each: impl FnMut(u32, &RefCell<EmuBus<'_, 5>>, &Output<5>, &Pipeline<5>),
-) -> Option<u8> {
     run_array_from_seq(
         0,
         profile,
@@ -371,16 +345,18 @@ pub fn run_array(
         samples,
         at_power_up,
         self_test,
-        mounts,
-        cal,
+        None,
+        None,
         each,
     )
 }
 
-/// [`run_array`] with the pipeline's first sample numbered `first_seq`
-/// (the numbers before it consumed as overruns): a board that has run
-/// for weeks, its u32 sequence number about to wrap (after 49.7 days at
-/// 1 kHz).
+/// [`run_board_array_with`] with the pipeline's first sample numbered
+/// `first_seq` (the numbers before it consumed as overruns: 0 for a fresh
+/// board; near `u32::MAX` for one that has run for weeks, its sequence
+/// number about to wrap after 49.7 days at 1 kHz), the chips mounted as
+/// `mounts` say (`None`: aligned) and the pipeline given the static
+/// calibration `cal` (`None`: uncalibrated).
 #[allow(clippy::too_many_arguments)]
 pub fn run_array_from_seq(
     first_seq: u32,

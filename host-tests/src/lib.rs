@@ -17,7 +17,7 @@ pub mod calibration {
     //!   still runs against the temperature the drivers read.
 
     use gyro_array::algo::mounting::{inverse3, CalRecord, ChipCal};
-    use gyro_array::checks::run_array;
+    use gyro_array::checks::run_array_from_seq;
     use gyro_array::emu::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
 
     /// Rate of the rate-table runs, °/s.
@@ -41,7 +41,8 @@ pub mod calibration {
         let mut sum = [[0.0f64; 3]; 5];
         let mut n = [[0u32; 3]; 5];
         let (mut tsum, mut tn) = ([0.0f64; 5], [0u32; 5]);
-        run_array(
+        run_array_from_seq(
+            0,
             profile,
             seed,
             SETTLE + hold,

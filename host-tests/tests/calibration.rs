@@ -4,7 +4,7 @@
 //! once calibrated, through a temperature ramp.
 
 use gyro_array::algo::mounting::{CalError, CalRecord, MAX_LEN};
-use gyro_array::checks::run_array;
+use gyro_array::checks::run_array_from_seq;
 use gyro_array::emu::{mounted_board, Fault, RateProfile, TempProfile};
 use host_tests::calibration::{calibrate, errors};
 
@@ -25,7 +25,8 @@ fn fused_rms(rec: Option<&CalRecord>, mounted: bool, n: u32) -> [f64; 3] {
     let mounts = mounted.then(|| mounted_board(temp));
     let mut acc = [0.0f64; 3];
     let mut cnt = 0u32;
-    run_array(
+    run_array_from_seq(
+        0,
         profile,
         3,
         n,
