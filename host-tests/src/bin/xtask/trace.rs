@@ -35,6 +35,7 @@ struct Sample {
 #[derive(Default)]
 struct Scenario {
     samples: Vec<Sample>,
+    worst_total: u64,
     worst_by_fn: Vec<(u32, u64)>,
     all_by_fn: Vec<u64>,
 }
@@ -321,10 +322,11 @@ fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
         for (a, n) in sc.all_by_fn.iter_mut().zip(by_fn.iter()) {
             *a += n;
         }
-        let total = |s: &Sample| s.fw.iter().sum::<u64>();
         if let Some(last) = sc.samples.last() {
-            let worst = sc.samples.iter().map(total).max().unwrap_or(0);
-            if total(last) == worst {
+            let total = last.fw.iter().sum::<u64>();
+            // `>=`: the last of equal worst samples, as `report` picks.
+            if total >= sc.worst_total {
+                sc.worst_total = total;
                 sc.worst_by_fn = by_fn
                     .iter()
                     .enumerate()
