@@ -74,6 +74,32 @@ fn main() -> ! {
 /// The board's loop under four fault scenarios: A and B on a still board
 /// with the variance step of the emulated motion at 3 s, C and D on other
 /// boards in motion.
+/// Scenario C's faults (sample, gyro, fault), which D repeats.
+const C_FAULTS: [(u32, usize, gyro_array::emu::Fault); 12] = {
+    use gyro_array::emu::Fault;
+    [
+        (1200, 3, Fault::Saturated),
+        (1500, 3, Fault::None),
+        (
+            2500,
+            4,
+            Fault::Spikes {
+                prob: 0.1,
+                magnitude_dps: 100.0,
+            },
+        ),
+        (3500, 4, Fault::None),
+        (4200, 1, Fault::FrameBitError { prob: 0.2 }),
+        (4700, 1, Fault::None),
+        (5000, 0, Fault::Stuck),
+        (5100, 2, Fault::Stuck),
+        (6000, 0, Fault::None),
+        (6000, 2, Fault::None),
+        (6800, 3, Fault::PoweredOff),
+        (6900, 3, Fault::None),
+    ]
+};
+
 fn bench_loops(t: &Ticks, ipt: f32) -> bool {
     use gyro_array::emu::{Fault, RateProfile};
     let mut ok = bench_loop(
@@ -120,22 +146,25 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
             sine_start_s: 2.0,
         },
         17,
-        &[
-            (1200, 3, Fault::Saturated),
-            (1500, 3, Fault::None),
-            (2500, 4, Fault::Spikes { prob: 0.1, magnitude_dps: 100.0 }),
-            (3500, 4, Fault::None),
-            (4200, 1, Fault::FrameBitError { prob: 0.2 }),
-            (4700, 1, Fault::None),
-            (5000, 0, Fault::Stuck),
-            (5100, 2, Fault::Stuck),
-            (6000, 0, Fault::None),
-            (6000, 2, Fault::None),
-            (6800, 3, Fault::PoweredOff),
-            (6900, 3, Fault::None),
-        ],
+        &C_FAULTS,
         false,
     );
+    // D: C's faults and two more.
+    let mut d_plan = [(0, 0, Fault::None); C_FAULTS.len() + 4];
+    d_plan[..4].copy_from_slice(&[
+        (700, 2, Fault::PoweredOff),
+        (760, 2, Fault::None),
+        (
+            3000,
+            1,
+            Fault::Spikes {
+                prob: 0.2,
+                magnitude_dps: 30.0,
+            },
+        ),
+        (3900, 1, Fault::None),
+    ]);
+    d_plan[4..].copy_from_slice(&C_FAULTS);
     // A fourth, also untuned, tried at the end of the session that added
     // C: it broke the 10 000 at 10 221 (gyro 1 spiking on a fifth of the
     // samples under a 100 deg/s turn: fusion's consensus gate, since made
@@ -151,24 +180,7 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
             sine_start_s: 0.5,
         },
         29,
-        &[
-            (700, 2, Fault::PoweredOff),
-            (760, 2, Fault::None),
-            (1200, 3, Fault::Saturated),
-            (1500, 3, Fault::None),
-            (3000, 1, Fault::Spikes { prob: 0.2, magnitude_dps: 30.0 }),
-            (3900, 1, Fault::None),
-            (2500, 4, Fault::Spikes { prob: 0.1, magnitude_dps: 100.0 }),
-            (3500, 4, Fault::None),
-            (4200, 1, Fault::FrameBitError { prob: 0.2 }),
-            (4700, 1, Fault::None),
-            (5000, 0, Fault::Stuck),
-            (5100, 2, Fault::Stuck),
-            (6000, 0, Fault::None),
-            (6000, 2, Fault::None),
-            (6800, 3, Fault::PoweredOff),
-            (6900, 3, Fault::None),
-        ],
+        &d_plan,
         false,
     );
     // A fifth, untuned: two chips spiking at once (the consensus gate on
