@@ -1416,7 +1416,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                         // were not.
         let (px, ln_n) = (&self.px, &self.ln_n);
         let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-        let x = |i: usize| p(i + 1) - p(i);
         let nu = self.dp.nu;
         let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
@@ -1424,21 +1423,30 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // or strong ones, and remember this hop's (over the oldest).
         let at = self.dp.hist_at % LAG;
         let (old, old_len) = (self.dp.hist, self.dp.hist_len);
+        // A history's changes, in frames from `first` (they are within a
+        // few spans of it, far inside i16), ascending as the changes are:
+        // each history is walked once alongside this hop's changes, not
+        // once per change (up to 16 × 2 × 15 comparisons on one sample).
+        let rel = |o: u16| i32::from(o.wrapping_sub(first as u16) as i16);
+        let mut walked = [0usize; LAG];
         let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
         for i in 1..nb {
             let c = bd(&bounds, i);
-            let abs = (first + c as u64) as u16;
-            self.dp.hist[at][(i - 1).min(CELLS - 1)] = abs;
+            self.dp.hist[at][(i - 1).min(CELLS - 1)] = (first + c as u64) as u16;
+            // Seen: a history has a change within a frame of c.
+            let mut seen = false;
+            for ((h, &len), j) in old.iter().zip(&old_len).zip(&mut walked) {
+                let h = h.get(..usize::from(len).min(CELLS)).unwrap_or(&[]);
+                while h.get(*j).is_some_and(|&o| rel(o) < c as i32 - 1) {
+                    *j += 1;
+                }
+                seen |= h.get(*j).is_some_and(|&o| rel(o) <= c as i32 + 1);
+            }
             // Likelihood gain of this change against merging its two
             // segments.
             let (l, r) = (bd(&bounds, i - 1), bd(&bounds, i + 1));
-            let gain = cost(l, r) - cost(l, c) - cost(c, r);
-            let seen = old.iter().zip(old_len).any(|(h, len)| {
-                h[..(len as usize).min(CELLS)]
-                    .iter()
-                    .any(|&o| abs.wrapping_sub(o).wrapping_add(1) <= 2)
-            });
-            if seen || gain > STRONG * self.dp.beta {
+            let gain = || cost(l, r) - cost(l, c) - cost(c, r);
+            if seen || gain() > STRONG * self.dp.beta {
                 kept[nk.min(CELLS)] = c as u16;
                 nk += 1;
             }
@@ -1530,15 +1538,33 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let (mut lo, mut hi) = (b(s), b(s + 1).max(b(s) + 1));
         // Widen to λ1, one frame at a time, toward the neighbour whose
-        // energy is closer (in ratio) to the segment's mean.
+        // energy is closer (in ratio) to the segment's mean. Each side's
+        // gap is computed once per frame it reaches, the frames' energies
+        // walked outward over the prefix sums as slices: recomputing both
+        // sides' gaps on every step, through checked reads, made an axis's
+        // placement ~1 000 instructions dearer when t's segment was a few
+        // frames long (`cargo xtask bench-loop`, scenario F, after two
+        // chips power-cycled).
         let seg_mean = mean(s);
+        let gap = |w: &[f32]| match *w {
+            [a, b] => ratio_gap(b - a, seg_mean),
+            _ => f32::INFINITY,
+        };
+        // Frames lo − 1, lo − 2, …, 0 and hi, hi + 1, …, k − 1.
+        let mut lefts = px.get(..=lo).unwrap_or(&[]).windows(2).rev().map(gap);
+        let mut rights = px.get(hi..=k).unwrap_or(&[]).windows(2).map(gap);
+        let (mut left, mut right) = (lefts.next(), rights.next());
         while hi - lo < self.min_frames.min(k) {
-            let left = (lo > 0).then(|| ratio_gap(x(lo - 1), seg_mean));
-            let right = (hi < k).then(|| ratio_gap(x(hi), seg_mean));
-            match (left, right) {
-                (Some(l), Some(r)) if l <= r => lo -= 1,
-                (Some(_), None) => lo -= 1,
-                _ => hi += 1,
+            let to_left = match (left, right) {
+                (Some(l), Some(r)) => l <= r,
+                (l, _) => l.is_some(),
+            };
+            if to_left {
+                lo -= 1;
+                left = lefts.next();
+            } else {
+                hi += 1;
+                right = rights.next();
             }
         }
         (lo, hi)
@@ -1844,7 +1870,16 @@ fn add_sq(lo: u64, hi: u8, d: i32) -> (u64, u8) {
 
 /// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
 fn ratio_gap(a: f32, b: f32) -> f32 {
-    let (a, b) = (a.max(f32::MIN_POSITIVE), b.max(f32::MIN_POSITIVE));
+    // (Selects, not `f32::max`: that is a call to libm's `fmaxf` on the
+    // Cortex-M4. The same for every input, NaN included.)
+    let floor = |v: f32| {
+        if v > f32::MIN_POSITIVE {
+            v
+        } else {
+            f32::MIN_POSITIVE
+        }
+    };
+    let (a, b) = (floor(a), floor(b));
     if a > b {
         a / b
     } else {
