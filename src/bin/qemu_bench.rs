@@ -222,9 +222,11 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         false,
     );
     // A sixth, untuned, tried at the end of the session that added E: it
-    // breaks the 10 000 (10 035, a dozen samples after two chips stick at
+    // broke the 10 000 (10 035, a dozen samples after two chips stuck at
     // once under a slow, wide sway: fusion's regate and general path
-    // while the stuck chips are not yet flagged; see README).
+    // while the stuck chips were not yet flagged; and 10 083 where the
+    // placement of an E-DAVAR compared every change with its history
+    // after two chips power-cycled).
     ok &= bench_loop_on(
         t,
         ipt,
@@ -257,6 +259,39 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
             (7000, 2, Fault::PoweredOff),
             (7040, 1, Fault::None),
             (7060, 2, Fault::None),
+        ],
+        false,
+    );
+    // A seventh, untuned, added after F was fixed: a steady 100 deg/s turn
+    // on z with a 3 Hz sway on x and y; two ICM-42688-Ps stuck together
+    // while a third spikes, the ADXRS453 garbling frames while a chip
+    // power-cycles, the ADXRS453 saturated, a chip silent.
+    ok &= bench_loop_on(
+        t,
+        ipt,
+        "faults G: another board (seed 67) turning at 100 deg/s on z with a 3 Hz, 30 deg/s sway on x and y; gyro 3 spiking 100 deg/s on 10 % of samples 1.0-2.0 s, gyros 0 and 1 stuck together 1.5-2.5 s, ADXRS453 frame bit errors 4.0-5.0 s with gyro 2 powered off 4.00-4.06 s, ADXRS453 saturated 6.0-6.3 s, gyro 1 silent 7.0-7.5 s",
+        RateProfile {
+            base_dps: [0.0, 0.0, 100.0],
+            sine_dps: [30.0, 30.0, 0.0],
+            sine_hz: 3.0,
+            sine_start_s: 0.0,
+        },
+        67,
+        &[
+            (1000, 3, Fault::Spikes { prob: 0.1, magnitude_dps: 100.0 }),
+            (1500, 0, Fault::Stuck),
+            (1500, 1, Fault::Stuck),
+            (2000, 3, Fault::None),
+            (2500, 0, Fault::None),
+            (2500, 1, Fault::None),
+            (4000, 4, Fault::FrameBitError { prob: 0.1 }),
+            (4000, 2, Fault::PoweredOff),
+            (4060, 2, Fault::None),
+            (5000, 4, Fault::None),
+            (6000, 4, Fault::Saturated),
+            (6300, 4, Fault::None),
+            (7000, 1, Fault::NoResponse),
+            (7500, 1, Fault::None),
         ],
         false,
     );
