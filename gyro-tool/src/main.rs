@@ -1151,6 +1151,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                         "axis",
                         "describes_seq",
                         "window",
+                        "bridged",
                         "sigma0_dps",
                         "sigma1_dps",
                         "sigma2_dps",
@@ -1162,6 +1163,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     n.axis.to_string(),
                     n.seq.to_string(),
                     n.len.to_string(),
+                    n.bridged.to_string(),
                 ];
                 r.extend(n.sigma_dps.iter().map(|v| v.to_string()));
                 w.write_record(&r)?;

@@ -1177,6 +1177,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.last.map(|p| (p.t, (p.end - p.start) as u16))
     }
 
+    /// The last estimate's window [start, end), in sample indices.
+    pub fn estimate_span(&self) -> Option<(u64, u64)> {
+        self.last.map(|p| (p.start, p.end))
+    }
+
     /// One τ (2ʲ samples) of [`Davar::estimate`]: `None` before the first
     /// estimate or for j ≥ T.
     pub fn estimate_avar(&self, j: usize) -> Option<f32> {

@@ -371,11 +371,12 @@ fn main() -> ! {
                 if let Some(d) = noise.estimate(a) {
                     let e = d.step;
                     defmt::info!(
-                        "seq {} axis {}: E-DAVAR for seq {} L={} score {=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
+                        "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
                         out.seq,
                         a,
                         d.seq,
                         e.len,
+                        d.bridged,
                         e.score,
                         tracker::sigma_dps(&e, 0),
                         tracker::sigma_dps(&e, 4),

@@ -257,11 +257,12 @@ fn main() -> ! {
                 let Some(d) = noise.estimate(a) else { continue };
                 let e = d.step;
                 defmt::info!(
-                    "seq {} axis {}: E-DAVAR for seq {} L={} score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
+                    "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
                     out.seq,
                     a,
                     d.seq,
                     e.len,
+                    d.bridged,
                     e.score,
                     e.threshold,
                     tracker::sigma_dps(&e, 0),

@@ -95,6 +95,10 @@ pub struct Noise {
     pub seq: u32,
     /// Window length, samples.
     pub len: u16,
+    /// Samples of the window that were missing and bridged by holding the
+    /// one before (fusion had no noise probe: no majority vouched for any
+    /// chip). Each reads σ²(τ0) about 1/len low.
+    pub bridged: u8,
     /// Allan deviation of the fused rate's noise (measured on the array's
     /// noise probe, free of the platform's motion) at the three τ of
     /// [`Status::noise_tau`], °/s.

@@ -59,6 +59,12 @@ pub const BRIDGE_EVERY: u16 = 128;
 pub const BRIDGE_BURST: u16 = 4;
 /// How far before `bridge_at` a bridge is allowed: BRIDGE_BURST − 1 periods.
 const BRIDGE_SAVED: u32 = (BRIDGE_BURST as u32 - 1) * BRIDGE_EVERY as u32;
+/// Bridged samples remembered per axis (their sequence numbers), to count
+/// those inside an estimate's window. The credit allows at most
+/// BRIDGE_BURST + ⌈n / BRIDGE_EVERY⌉ in n samples, so 40 cover every
+/// window of up to 4 608 samples (checked at construction: the tracker's
+/// capacity is at most that).
+const HELD_MEMORY: usize = 40;
 
 /// E-DAVAR on the three fused axes.
 ///
@@ -67,7 +73,8 @@ const BRIDGE_SAVED: u32 = (BRIDGE_BURST as u32 - 1) * BRIDGE_EVERY as u32;
 /// chip) holds its last value for it: one sample in [`BRIDGE_EVERY`] in the
 /// long run, up to [`BRIDGE_BURST`] saved up (so at most 12 in a window of
 /// 1024; none in the window's first [`BRIDGE_EVERY`]), counted in
-/// [`NoiseTracker::bridged`]. A held sample takes one first difference out
+/// [`NoiseTracker::bridged`], and per estimate, those inside its window, in
+/// [`Described::bridged`] and the link's noise record. A held sample takes one first difference out
 /// and doubles the next: for white noise σ²(τ0) of a window of n samples
 /// reads about 1/n low per held sample in it, so at most 1.2 % at
 /// λ2 = 1024, and 0.8 % with one sample in 130 missing
@@ -92,6 +99,10 @@ pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
     /// from BRIDGE_BURST − 1 periods before it, and moves it a period on.
     bridge_at: [u32; 3],
     bridged: u32,
+    /// Per axis, the sequence numbers of its window's bridged samples (a
+    /// ring), and how many since its window started.
+    held: [[u32; HELD_MEMORY]; 3],
+    held_count: [u32; 3],
 }
 
 /// One estimate with the sequence number of the sample it describes.
@@ -99,13 +110,22 @@ pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
 pub struct Described<const T: usize> {
     /// Sequence number of the sample at the estimate's time t.
     pub seq: u32,
+    /// Samples of the window that were bridged ([`NoiseTracker`]).
+    pub bridged: u8,
     /// The surface row (window, score, Allan variances).
     pub step: DavarStep<T>,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FRAMES, T> {
+    /// Every window's bridged samples fit in [`HELD_MEMORY`].
+    const HELD_FIT: () = assert!(
+        CAP <= (HELD_MEMORY - BRIDGE_BURST as usize) * BRIDGE_EVERY as usize,
+        "a window could hold more bridged samples than the tracker remembers"
+    );
+
     /// One E-DAVAR per axis with `cfg`.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
+        let () = Self::HELD_FIT;
         Ok(Self {
             axes: [
                 Davar::new(cfg)?.with_hop_phase(HOP_PHASES[0]),
@@ -117,6 +137,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             restarts: 0,
             bridge_at: [0; 3],
             bridged: 0,
+            held: [[0; HELD_MEMORY]; 3],
+            held_count: [0; 3],
         })
     }
 
@@ -130,6 +152,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         slot: &mut core::mem::MaybeUninit<Self>,
         cfg: DavarConfig,
     ) -> Result<&mut Self, DavarError> {
+        let () = Self::HELD_FIT;
         let p = slot.as_mut_ptr();
         // SAFETY: `p` is valid for writes of `Self` (from the MaybeUninit);
         // `axes` is an array of 3. Fields are written through raw pointers,
@@ -146,6 +169,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             core::ptr::addr_of_mut!((*p).restarts).write(0);
             core::ptr::addr_of_mut!((*p).bridge_at).write([0; 3]);
             core::ptr::addr_of_mut!((*p).bridged).write(0);
+            core::ptr::addr_of_mut!((*p).held).write([[0; HELD_MEMORY]; 3]);
+            core::ptr::addr_of_mut!((*p).held_count).write([0; 3]);
             Ok(slot.assume_init_mut())
         }
     }
@@ -176,6 +201,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
                     *bridge_at = if spent { *bridge_at } else { out.seq };
                     *bridge_at = bridge_at.wrapping_add(u32::from(BRIDGE_EVERY));
                     self.bridged += 1;
+                    if let (Some(ring), Some(n)) =
+                        (self.held.get_mut(a), self.held_count.get_mut(a))
+                    {
+                        if let Some(slot) = ring.get_mut(*n as usize % HELD_MEMORY) {
+                            *slot = out.seq;
+                        }
+                        *n = n.saturating_add(1);
+                    }
                     d.last_sample().map(Ok)
                 }
                 None => None,
@@ -190,6 +223,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
                 Some(Ok(q)) if d.push(q).is_ok() => {
                     if origin.is_none() {
                         *origin = Some(out.seq);
+                        if let Some(n) = self.held_count.get_mut(a) {
+                            *n = 0;
+                        }
                         // Credit starts empty: the first bridge a period on.
                         *bridge_at = out.seq.wrapping_add(BRIDGE_SAVED + u32::from(BRIDGE_EVERY));
                     }
@@ -212,8 +248,25 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         let origin = (*self.origin.get(axis)?)?;
         Some(Described {
             seq: origin.wrapping_add(step.t as u32),
+            bridged: self.bridged_in(axis, origin, (step.start, step.end)),
             step,
         })
+    }
+
+    /// How many of `axis`'s bridged samples lie in its window [start,
+    /// end) (sample indices from `origin`).
+    fn bridged_in(&self, axis: usize, origin: u32, (start, end): (u64, u64)) -> u8 {
+        let (Some(ring), Some(&n)) = (self.held.get(axis), self.held_count.get(axis)) else {
+            return 0;
+        };
+        let first = origin.wrapping_add(start as u32);
+        let len = end.saturating_sub(start) as u32;
+        let kept = ring.get(..(n as usize).min(HELD_MEMORY)).unwrap_or(&[]);
+        let inside = kept
+            .iter()
+            .filter(|&&s| s.wrapping_sub(first) < len)
+            .count();
+        inside.min(usize::from(u8::MAX)) as u8
     }
 
     /// The link's view of the tracker: σ at τ = 2^`taus[k]` samples.
@@ -258,6 +311,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
             axis: axis as u8,
             seq: origin.wrapping_add(t as u32),
             len,
+            bridged: self.tracker.bridged_in(axis, origin, d.estimate_span()?),
             sigma_dps: self
                 .taus
                 .map(|j| d.estimate_avar(j).map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)),
@@ -331,6 +385,59 @@ mod tests {
             t.restarts()
         );
         assert!(t.estimate(1).is_some(), "y kept its window");
+    }
+
+    /// Every estimate, and the link's noise record, counts the bridged
+    /// samples inside its own window: checked against the samples seen
+    /// bridged as they were pushed (one missing in 130 on y, none on x),
+    /// across the sequence numbers' wrap.
+    #[test]
+    fn estimates_count_the_bridged_samples_in_their_window() {
+        let mut t = NoiseTracker::<1024, 35, 9>::new(config(1024)).unwrap();
+        let mut rng = Rng::new(7);
+        let first = 0xFFFF_E000u32; // on the 32-sample grid, 8192 before the wrap
+        let mut held = Vec::new();
+        let (mut checked, mut with_held, mut last) = (0, 0, None);
+        for k in 0..20_000u32 {
+            let seq = first.wrapping_add(k);
+            let p = 0.01 * rng.gaussian();
+            let out = Output::<1> {
+                seq,
+                rate_dps: [[0.0; 3]],
+                offered: [0; 3],
+                fused: [None; 3],
+                noise_probe_dps: [Some(p), (k % 130 != 77).then_some(p), Some(p)],
+                health_changed: 0,
+                busy: false,
+            };
+            let before = t.bridged();
+            t.push(&out);
+            if t.bridged() > before {
+                held.push(seq);
+            }
+            let Some(y) = t.estimate(1) else { continue };
+            if last == Some(y.seq) {
+                continue;
+            }
+            last = Some(y.seq);
+            let start = y.seq.wrapping_sub((y.step.t - y.step.start) as u32);
+            let len = (y.step.end - y.step.start) as u32;
+            let want = held
+                .iter()
+                .filter(|&&s| s.wrapping_sub(start) < len)
+                .count();
+            assert_eq!(usize::from(y.bridged), want, "estimate for seq {}", y.seq);
+            let link = t.at_taus([0, 4, 8]).noise(1).unwrap();
+            assert_eq!((link.seq, link.bridged), (y.seq, y.bridged));
+            assert_eq!(t.estimate(0).map(|x| x.bridged), Some(0));
+            checked += 1;
+            with_held += usize::from(y.bridged > 0);
+        }
+        assert!(held.len() > 100, "{} bridged", held.len());
+        assert!(
+            checked > 300 && with_held * 10 > checked * 9,
+            "{with_held} of {checked}"
+        );
     }
 
     /// After a quiet stretch an axis bridges a burst of BRIDGE_BURST
