@@ -198,12 +198,8 @@ impl<const N: usize> RelCal<N> {
 
     /// [`RelCal::fuse`], and the array's noise probe
     /// ([`crate::algo::fusion::noise_probe`]) over the corrected readings
-    /// fusion saw, with its weights. Out of line: inlined into the
-    /// board's loop (one function of ~55 KB), its register allocation
-    /// moved with any change elsewhere in fusion, by ±100 instructions a
-    /// sample (`cargo xtask bench-loop`); out of line the loop's mean was
-    /// also 10–30 lower.
-    #[inline(never)]
+    /// fusion saw, with its weights.
+    #[inline]
     pub fn fuse_probed(
         &mut self,
         fusion: &Fusion<N>,
