@@ -675,18 +675,19 @@ fn adaptive_reference<const N: usize>(
 /// Every constant-set copy of the adaptive method (the jump table's sets,
 /// the sets left while a frozen chip votes, one gyro gated out of the
 /// board's healthy sets) gives the general path's bits: outputs and
-/// states, over random sets of five, spikes, stuck chips, warm-up and
-/// rejoins.
+/// states, over random sets of five, spikes, one or two chips stuck at
+/// once, warm-up and rejoins.
 #[test]
 fn constant_set_copies_give_the_general_paths_bits() {
     let c = AdaptiveConfig::default();
     let mut rng = Rng::new(11);
     let mut rejected = 0u32;
     let mut frozen = 0u32;
+    let mut pairs = 0u32;
     for _ in 0..100 {
         let (mut a, mut b) = (AxisState::<5>::default(), AxisState::<5>::default());
         let mut valid = 0b11111u8;
-        let mut stuck: Option<(usize, f32, u32)> = None;
+        let mut stuck: Option<(u8, [f32; 5], u32)> = None;
         for _ in 0..600 {
             if rng.uniform() < 0.01 {
                 // A new set: mostly the board's, sometimes any.
@@ -704,12 +705,19 @@ fn constant_set_copies_give_the_general_paths_bits() {
                 }
             }
             if stuck.is_none() && rng.uniform() < 0.01 {
+                // One chip, or (half the time) two together: then the
+                // gyros fused while they are frozen can be a pair.
                 let i = (rng.uniform() * 5.0) as usize % 5;
-                stuck = Some((i, y[i], 30));
+                let j = (i + 1 + (rng.uniform() * 4.0) as usize % 4) % 5;
+                let m = (1u8 << i) | if rng.uniform() < 0.5 { 1u8 << j } else { 0 };
+                stuck = Some((m, y, 30));
             }
-            if let Some((i, v, left)) = stuck {
-                y[i] = v;
-                stuck = (left > 1).then_some((i, v, left - 1));
+            if let Some((m, v, left)) = stuck {
+                for i in 0..5 {
+                    y[i] = if m & (1 << i) != 0 { v[i] } else { y[i] };
+                }
+                stuck = (left > 1).then_some((m, v, left - 1));
+                pairs += u32::from((valid & !m).count_ones() == 2 && valid & m != 0);
             }
             let blank = Fused {
                 rate_dps: f32::NAN,
@@ -729,8 +737,8 @@ fn constant_set_copies_give_the_general_paths_bits() {
     }
     // The test must reach the paths it is about.
     assert!(
-        rejected > 1000 && frozen > 1000,
-        "rejected {rejected}, frozen {frozen}"
+        rejected > 1000 && frozen > 1000 && pairs > 300,
+        "rejected {rejected}, frozen {frozen}, pairs left beside stuck chips {pairs}"
     );
 }
 
