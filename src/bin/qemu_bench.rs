@@ -295,6 +295,48 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
+    // An eighth, untuned, added with G: a 1 Hz sway of 100 deg/s on every
+    // axis (0.6 deg/s from one sample to the next at its fastest); the
+    // ADXRS453 stuck, two chips spiking at once, a chip power-cycled, two
+    // with bit errors, one saturated, three of the four ICM-42688-Ps
+    // stuck together (no majority on x and y), a chip silent.
+    ok &= bench_loop_on(
+        t,
+        ipt,
+        "faults H: another board (seed 79) swaying 100 deg/s at 1 Hz on every axis; ADXRS453 stuck 1.0-1.5 s, gyros 1 and 3 spiking 50 deg/s on 5 % of samples 2.0-3.0 s, gyro 0 powered off 3.50-3.55 s, gyros 0 and 2 bit errors 4.0-5.0 s, gyro 1 saturated 5.5-5.8 s, gyros 0, 1 and 2 stuck together 6.5-6.7 s, gyro 3 silent 7.2-7.4 s",
+        RateProfile {
+            base_dps: [0.0, 0.0, 0.0],
+            sine_dps: [100.0, 100.0, 100.0],
+            sine_hz: 1.0,
+            sine_start_s: 0.0,
+        },
+        79,
+        &[
+            (1000, 4, Fault::Stuck),
+            (1500, 4, Fault::None),
+            (2000, 1, Fault::Spikes { prob: 0.05, magnitude_dps: 50.0 }),
+            (2000, 3, Fault::Spikes { prob: 0.05, magnitude_dps: 50.0 }),
+            (3000, 1, Fault::None),
+            (3000, 3, Fault::None),
+            (3500, 0, Fault::PoweredOff),
+            (3550, 0, Fault::None),
+            (4000, 2, Fault::BitErrors { prob: 0.05 }),
+            (4000, 0, Fault::BitErrors { prob: 0.05 }),
+            (5000, 2, Fault::None),
+            (5000, 0, Fault::None),
+            (5500, 1, Fault::Saturated),
+            (5800, 1, Fault::None),
+            (6500, 0, Fault::Stuck),
+            (6500, 1, Fault::Stuck),
+            (6500, 2, Fault::Stuck),
+            (6700, 0, Fault::None),
+            (6700, 1, Fault::None),
+            (6700, 2, Fault::None),
+            (7200, 3, Fault::NoResponse),
+            (7400, 3, Fault::None),
+        ],
+        false,
+    );
     ok
 }
 
