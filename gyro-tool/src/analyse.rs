@@ -1,7 +1,8 @@
 //! `gyro analyse`: the Allan deviation of each fused axis over the longest
 //! gap-free stretch of a recording, and a summary of the E-DAVAR
-//! estimates the board sent (σ at its three τ, window lengths, and how far
-//! behind the frame each estimate's time is).
+//! estimates the board sent (σ at its three τ, window lengths, how far
+//! behind the frame each estimate's time is, and how many came from
+//! windows with bridged samples).
 //!
 //! The fused rate holds the vehicle's motion, so on a moving vehicle its
 //! Allan deviation is mostly the motion's: the board's E-DAVAR estimates
@@ -11,7 +12,7 @@
 use std::path::PathBuf;
 
 use gyro_array::algo::allan::AdevPoint;
-use gyro_array::link::msg::Frame;
+use gyro_array::link::msg::{Frame, Noise};
 
 use super::{read_recording, Res};
 use crate::dev::octave_oavar;
@@ -23,7 +24,8 @@ pub fn run(file: &PathBuf) -> Res<bool> {
     // The longest run of consecutive samples with all three axes valid.
     let (mut best, mut cur): (Vec<[f64; 3]>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());
     let mut last_seq: Option<u32> = None;
-    let mut noise: [Vec<(u32, u16, [f32; 3])>; 3] = Default::default();
+    // Per axis: each estimate with how far behind its frame it describes.
+    let mut noise: [Vec<(u32, Noise)>; 3] = Default::default();
     for d in frames.iter().flatten() {
         match &d.body {
             Frame::Status(s) => {
@@ -46,7 +48,7 @@ pub fn run(file: &PathBuf) -> Res<bool> {
                 last_seq = Some(s.seq);
                 if let Some(n) = s.noise {
                     if let Some(v) = noise.get_mut(usize::from(n.axis)) {
-                        v.push((s.seq.wrapping_sub(n.seq), n.len, n.sigma_dps));
+                        v.push((s.seq.wrapping_sub(n.seq), n));
                     }
                 }
             }
@@ -109,13 +111,15 @@ pub fn run(file: &PathBuf) -> Res<bool> {
             x.sort_by(f64::total_cmp);
             x[x.len() / 2]
         };
-        let s0: Vec<f64> = v.iter().map(|e| f64::from(e.2[0])).collect();
+        let s0: Vec<f64> = v.iter().map(|e| f64::from(e.1.sigma_dps[0])).collect();
         let lo = s0.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = s0.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let lens: Vec<f64> = v.iter().map(|e| f64::from(e.1)).collect();
+        let lens: Vec<f64> = v.iter().map(|e| f64::from(e.1.len)).collect();
         let lag: Vec<f64> = v.iter().map(|e| f64::from(e.0)).collect();
+        let held = v.iter().filter(|e| e.1.bridged > 0).count();
+        let most = v.iter().map(|e| e.1.bridged).max().unwrap_or(0);
         println!(
-            "  axis {a}: {} estimates; σ(τ0) min {lo:.4e} median {:.4e} max {hi:.4e} dps; window median {} samples; each describes the sample {} before its frame (median)",
+            "  axis {a}: {} estimates; σ(τ0) min {lo:.4e} median {:.4e} max {hi:.4e} dps; window median {} samples; each describes the sample {} before its frame (median); {held} over windows with bridged samples (at most {most} in one)",
             v.len(),
             med(s0.clone()),
             med(lens),
