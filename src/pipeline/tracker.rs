@@ -60,11 +60,18 @@ pub const BRIDGE_BURST: u16 = 4;
 /// How far before `bridge_at` a bridge is allowed: BRIDGE_BURST − 1 periods.
 const BRIDGE_SAVED: u32 = (BRIDGE_BURST as u32 - 1) * BRIDGE_EVERY as u32;
 /// Bridged samples remembered per axis (their sequence numbers), to count
-/// those inside an estimate's window. The credit allows at most
-/// BRIDGE_BURST + ⌈n / BRIDGE_EVERY⌉ in n samples, so 40 cover every
-/// window of up to 4 608 samples (checked at construction: the tracker's
-/// capacity is at most that).
+/// those inside an estimate's window. The ring holds the newest, so it
+/// must hold every bridge from the start of a window read now: a window is
+/// at most CAP samples and closes at most [`HELD_LAG`] samples before its
+/// estimate is last read. The credit allows at most BRIDGE_BURST +
+/// ⌈n / BRIDGE_EVERY⌉ bridges in n samples, so 40 cover a capacity of up
+/// to 4 480 samples (checked at construction).
 const HELD_MEMORY: usize = 40;
+/// Samples from a window's end to the last read of its estimate, at most:
+/// the span ends on the last whole frame before the hop (≤ 2 frames back
+/// by the time the hop's work is done), and the estimate is replaced a
+/// frame later; one frame more for a link frame that waits (`busy`).
+const HELD_LAG: usize = 4 * SEG;
 
 /// E-DAVAR on the three fused axes.
 ///
@@ -119,7 +126,7 @@ pub struct Described<const T: usize> {
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FRAMES, T> {
     /// Every window's bridged samples fit in [`HELD_MEMORY`].
     const HELD_FIT: () = assert!(
-        CAP <= (HELD_MEMORY - BRIDGE_BURST as usize) * BRIDGE_EVERY as usize,
+        BRIDGE_BURST as usize + (CAP + HELD_LAG).div_ceil(BRIDGE_EVERY as usize) <= HELD_MEMORY,
         "a window could hold more bridged samples than the tracker remembers"
     );
 
