@@ -57,7 +57,7 @@
 
 use crate::algo::allan::stream::SAMPLE_MAX;
 use crate::algo::allan::AllanError;
-use crate::algo::math::lnf;
+use crate::algo::math::{at_least, lnf};
 use crate::algo::stats::chi2_quantile;
 
 /// Frame (block, STFT hop) length, samples.
@@ -1875,16 +1875,10 @@ fn add_sq(lo: u64, hi: u8, d: i32) -> (u64, u8) {
 
 /// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
 fn ratio_gap(a: f32, b: f32) -> f32 {
-    // (Selects, not `f32::max`: that is a call to libm's `fmaxf` on the
-    // Cortex-M4. The same for every input, NaN included.)
-    let floor = |v: f32| {
-        if v > f32::MIN_POSITIVE {
-            v
-        } else {
-            f32::MIN_POSITIVE
-        }
-    };
-    let (a, b) = (floor(a), floor(b));
+    let (a, b) = (
+        at_least(a, f32::MIN_POSITIVE),
+        at_least(b, f32::MIN_POSITIVE),
+    );
     if a > b {
         a / b
     } else {

@@ -14,7 +14,7 @@
 //! per-axis running state is [`AxisState`]. Capacity is the const `N ≤ 8`;
 //! gyro sets are bit masks (bit i = gyro i).
 
-use crate::algo::math::{expf, lnf, sqrtf};
+use crate::algo::math::{at_least, expf, lnf, sqrtf};
 use crate::algo::stats::grubbs_critical;
 
 /// Largest array supported (masks are `u8`).
@@ -396,7 +396,7 @@ impl<const N: usize> AxisState<N> {
         let mut s = [f32::NAN; N];
         for i in 0..N {
             if self.n_upd[i] > 0 {
-                s[i] = sqrtf(floor(self.var[i], cfg.var_floor));
+                s[i] = sqrtf(at_least(self.var[i], cfg.var_floor));
             }
         }
         s
@@ -817,17 +817,6 @@ fn memory_weights<const N: usize>(
     big_r
 }
 
-/// `max(v, lo)` without libm's `fmaxf` call (`f32::max` is a function
-/// call on this target); NaN gives `lo`.
-#[inline(always)]
-fn floor(v: f32, lo: f32) -> f32 {
-    if v > lo {
-        v
-    } else {
-        lo
-    }
-}
-
 /// Median of the masked values: an odd–even transposition sort (N rounds,
 /// fully unrolled for the const N) of order-preserving integer keys, with
 /// gyros outside `m` keyed last. On the Cortex-M4 integer compare-exchanges
@@ -1091,7 +1080,7 @@ fn adaptive_const<const N: usize>(
 fn floored<const N: usize>(st: &AxisState<N>, c: &AdaptiveConfig) -> [f32; N] {
     let mut v = [0.0f32; N];
     for i in 0..N {
-        v[i] = floor(st.var[i], c.var_floor);
+        v[i] = at_least(st.var[i], c.var_floor);
     }
     v
 }

@@ -6,12 +6,23 @@
 //! `micromath` is not used where accuracy matters: its `sqrt(9.0)` returns
 //! 3.125. The accuracy of [`lnf`] is measured against f64 in the tests.
 
+/// `v.max(lo)` without libm's `fmaxf` (`f32::max` is a function call on
+/// the Cortex-M4); NaN gives `lo`, as `max` does.
+#[inline(always)]
+pub fn at_least(v: f32, lo: f32) -> f32 {
+    if v > lo {
+        v
+    } else {
+        lo
+    }
+}
+
 /// `v.max(lo).min(hi)` without libm's `fmaxf` and `fminf` (`f32::max` and
 /// `f32::min` are function calls on the Cortex-M4: 230 instructions a turn
 /// in the online calibration's solve); NaN gives `lo`, as `max` does.
 #[inline(always)]
 pub fn bound(v: f32, lo: f32, hi: f32) -> f32 {
-    let v = if v > lo { v } else { lo };
+    let v = at_least(v, lo);
     if v < hi {
         v
     } else {
