@@ -131,10 +131,8 @@ pub fn loop_counts(elf: &Path) -> bool {
     let worst = scenarios
         .iter()
         .enumerate()
-        .filter_map(|(k, s)| {
-            let w = s.samples.iter().map(|x| x.fw.iter().sum::<u64>()).max()?;
-            Some((w, names.get(k).map_or("?", |n| n.0)))
-        })
+        .filter(|(_, s)| !s.samples.is_empty())
+        .map(|(k, s)| (s.worst_total, names.get(k).map_or("?", |n| n.0)))
         .max_by_key(|&(w, _)| w);
     if let Some((w, name)) = worst {
         println!(
