@@ -97,82 +97,19 @@ const HELD_LAG: usize = 4 * SEG;
 /// describes.
 pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
     axes: [Davar<CAP, FRAMES, T, 0>; 3],
-    /// Per axis, its window's bookkeeping.
-    windows: [Window; 3],
+    /// Per axis, the sequence number of sample 0 of its E-DAVAR.
+    origin: [Option<u32>; 3],
     last_seq: Option<u32>,
     restarts: u32,
+    /// Per axis, when its bridging credit is all spent (a generic cell
+    /// rate algorithm's theoretical arrival time): a bridge is allowed
+    /// from BRIDGE_BURST − 1 periods before it, and moves it a period on.
+    bridge_at: [u32; 3],
     bridged: u32,
-}
-
-/// One axis's window, beside its E-DAVAR: where it starts and what was
-/// bridged in it.
-#[derive(Clone, Copy)]
-struct Window {
-    /// The sequence number of sample 0 of the E-DAVAR (None: no window).
-    origin: Option<u32>,
-    /// When the bridging credit is all spent (a generic cell rate
-    /// algorithm's theoretical arrival time): a bridge is allowed from
-    /// BRIDGE_BURST − 1 periods before it, and moves it a period on.
-    bridge_at: u32,
-    /// The sequence numbers of the window's bridged samples (a ring), and
-    /// how many since the window started.
-    held: [u32; HELD_MEMORY],
-    held_count: u32,
-}
-
-impl Window {
-    const NONE: Self = Self {
-        origin: None,
-        bridge_at: 0,
-        held: [0; HELD_MEMORY],
-        held_count: 0,
-    };
-
-    /// The window starts at `seq`: nothing bridged yet, and the credit
-    /// starts empty (the first bridge a period on).
-    fn start(&mut self, seq: u32) {
-        self.origin = Some(seq);
-        self.held_count = 0;
-        self.bridge_at = seq.wrapping_add(BRIDGE_SAVED + u32::from(BRIDGE_EVERY));
-    }
-
-    /// Whether a missing sample at `seq` may be bridged; if so, spend the
-    /// credit and remember it (wrapping comparisons: the sequence numbers
-    /// wrap).
-    fn bridge(&mut self, seq: u32) -> bool {
-        if self.origin.is_none()
-            || (seq.wrapping_sub(self.bridge_at.wrapping_sub(BRIDGE_SAVED)) as i32) < 0
-        {
-            return false;
-        }
-        let spent = (seq.wrapping_sub(self.bridge_at) as i32) < 0;
-        let from = if spent { self.bridge_at } else { seq };
-        self.bridge_at = from.wrapping_add(u32::from(BRIDGE_EVERY));
-        if let Some(slot) = self.held.get_mut(self.held_count as usize % HELD_MEMORY) {
-            *slot = seq;
-        }
-        self.held_count = self.held_count.saturating_add(1);
-        true
-    }
-
-    /// How many bridged samples lie in the window [start, end) (sample
-    /// indices from the origin); 0 without a window.
-    fn bridged_in(&self, (start, end): (u64, u64)) -> u8 {
-        let Some(origin) = self.origin else {
-            return 0;
-        };
-        let first = origin.wrapping_add(start as u32);
-        let len = end.saturating_sub(start) as u32;
-        let kept = self
-            .held
-            .get(..(self.held_count as usize).min(HELD_MEMORY))
-            .unwrap_or(&[]);
-        let inside = kept
-            .iter()
-            .filter(|&&s| s.wrapping_sub(first) < len)
-            .count();
-        inside.min(usize::from(u8::MAX)) as u8
-    }
+    /// Per axis, the sequence numbers of its window's bridged samples (a
+    /// ring), and how many since its window started.
+    held: [[u32; HELD_MEMORY]; 3],
+    held_count: [u32; 3],
 }
 
 /// One estimate with the sequence number of the sample it describes.
@@ -202,10 +139,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
                 Davar::new(cfg)?.with_hop_phase(HOP_PHASES[1]),
                 Davar::new(cfg)?.with_hop_phase(HOP_PHASES[2]),
             ],
-            windows: [Window::NONE; 3],
+            origin: [None; 3],
             last_seq: None,
             restarts: 0,
+            bridge_at: [0; 3],
             bridged: 0,
+            held: [[0; HELD_MEMORY]; 3],
+            held_count: [0; 3],
         })
     }
 
@@ -231,10 +171,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
         }
         // SAFETY: as above; after these writes every field is initialised.
         unsafe {
-            core::ptr::addr_of_mut!((*p).windows).write([Window::NONE; 3]);
+            core::ptr::addr_of_mut!((*p).origin).write([None; 3]);
             core::ptr::addr_of_mut!((*p).last_seq).write(None);
             core::ptr::addr_of_mut!((*p).restarts).write(0);
+            core::ptr::addr_of_mut!((*p).bridge_at).write([0; 3]);
             core::ptr::addr_of_mut!((*p).bridged).write(0);
+            core::ptr::addr_of_mut!((*p).held).write([[0; HELD_MEMORY]; 3]);
+            core::ptr::addr_of_mut!((*p).held_count).write([0; 3]);
             Ok(slot.assume_init_mut())
         }
     }
@@ -243,23 +186,36 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     pub fn push<const N: usize>(&mut self, out: &Output<N>) {
         let contiguous = self.last_seq.is_some_and(|s| out.seq == s.wrapping_add(1));
         self.last_seq = Some(out.seq);
-        for ((d, p), w) in self
-            .axes
-            .iter_mut()
-            .zip(out.noise_probe_dps)
-            .zip(self.windows.iter_mut())
-        {
-            if w.origin.is_some() && !contiguous {
+        for (a, (d, p)) in self.axes.iter_mut().zip(out.noise_probe_dps).enumerate() {
+            let (Some(origin), Some(bridge_at)) =
+                (self.origin.get_mut(a), self.bridge_at.get_mut(a))
+            else {
+                continue;
+            };
+            if origin.is_some() && !contiguous {
                 d.reset();
-                w.origin = None;
+                *origin = None;
                 self.restarts += 1;
             }
             let q = match p {
                 Some(p) => Some(quantise(p, LSB_DPS)),
                 // Bridged: the window's last sample again, within the
-                // credit.
-                None if w.bridge(out.seq) => {
+                // credit (wrapping comparisons: the sequence numbers wrap).
+                None if origin.is_some()
+                    && out.seq.wrapping_sub(bridge_at.wrapping_sub(BRIDGE_SAVED)) as i32 >= 0 =>
+                {
+                    let spent = (out.seq.wrapping_sub(*bridge_at) as i32) < 0;
+                    *bridge_at = if spent { *bridge_at } else { out.seq };
+                    *bridge_at = bridge_at.wrapping_add(u32::from(BRIDGE_EVERY));
                     self.bridged += 1;
+                    if let (Some(ring), Some(n)) =
+                        (self.held.get_mut(a), self.held_count.get_mut(a))
+                    {
+                        if let Some(slot) = ring.get_mut(*n as usize % HELD_MEMORY) {
+                            *slot = out.seq;
+                        }
+                        *n = n.saturating_add(1);
+                    }
                     d.last_sample().map(Ok)
                 }
                 None => None,
@@ -270,16 +226,21 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
                 // heavy samples with them, keep their phases against the
                 // calibration's solves (`calib::SOLVE_SLOTS`) after any
                 // restart.
-                Some(Ok(_)) if w.origin.is_none() && !out.seq.is_multiple_of(SEG as u32) => {}
+                Some(Ok(_)) if origin.is_none() && !out.seq.is_multiple_of(SEG as u32) => {}
                 Some(Ok(q)) if d.push(q).is_ok() => {
-                    if w.origin.is_none() {
-                        w.start(out.seq);
+                    if origin.is_none() {
+                        *origin = Some(out.seq);
+                        if let Some(n) = self.held_count.get_mut(a) {
+                            *n = 0;
+                        }
+                        // Credit starts empty: the first bridge a period on.
+                        *bridge_at = out.seq.wrapping_add(BRIDGE_SAVED + u32::from(BRIDGE_EVERY));
                     }
                 }
                 _ => {
-                    if w.origin.is_some() {
+                    if origin.is_some() {
                         d.reset();
-                        w.origin = None;
+                        *origin = None;
                         self.restarts += 1;
                     }
                 }
@@ -291,12 +252,28 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     /// number it describes: `None` until the axis's window has filled.
     pub fn estimate(&self, axis: usize) -> Option<Described<T>> {
         let step = self.axes.get(axis)?.estimate()?;
-        let w = self.windows.get(axis)?;
+        let origin = (*self.origin.get(axis)?)?;
         Some(Described {
-            seq: w.origin?.wrapping_add(step.t as u32),
-            bridged: w.bridged_in((step.start, step.end)),
+            seq: origin.wrapping_add(step.t as u32),
+            bridged: self.bridged_in(axis, origin, (step.start, step.end)),
             step,
         })
+    }
+
+    /// How many of `axis`'s bridged samples lie in its window [start,
+    /// end) (sample indices from `origin`).
+    fn bridged_in(&self, axis: usize, origin: u32, (start, end): (u64, u64)) -> u8 {
+        let (Some(ring), Some(&n)) = (self.held.get(axis), self.held_count.get(axis)) else {
+            return 0;
+        };
+        let first = origin.wrapping_add(start as u32);
+        let len = end.saturating_sub(start) as u32;
+        let kept = ring.get(..(n as usize).min(HELD_MEMORY)).unwrap_or(&[]);
+        let inside = kept
+            .iter()
+            .filter(|&&s| s.wrapping_sub(first) < len)
+            .count();
+        inside.min(usize::from(u8::MAX)) as u8
     }
 
     /// The link's view of the tracker: σ at τ = 2^`taus[k]` samples.
@@ -329,24 +306,19 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
 {
     fn described(&self, axis: usize) -> Option<u32> {
         let (t, _) = self.tracker.axes.get(axis)?.estimate_window()?;
-        Some(
-            self.tracker
-                .windows
-                .get(axis)?
-                .origin?
-                .wrapping_add(t as u32),
-        )
+        let origin = (*self.tracker.origin.get(axis)?)?;
+        Some(origin.wrapping_add(t as u32))
     }
 
     fn noise(&self, axis: usize) -> Option<Noise> {
         let d = self.tracker.axes.get(axis)?;
         let (t, len) = d.estimate_window()?;
-        let w = self.tracker.windows.get(axis)?;
+        let origin = (*self.tracker.origin.get(axis)?)?;
         Some(Noise {
             axis: axis as u8,
-            seq: w.origin?.wrapping_add(t as u32),
+            seq: origin.wrapping_add(t as u32),
             len,
-            bridged: w.bridged_in(d.estimate_span()?),
+            bridged: self.tracker.bridged_in(axis, origin, d.estimate_span()?),
             sigma_dps: self
                 .taus
                 .map(|j| d.estimate_avar(j).map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)),
