@@ -227,7 +227,7 @@ impl DavarConfig {
 pub enum DavarError {
     /// λ1 > λ2, l_init outside [λ1, λ2], or λ2 shorter than two frames.
     Lambda,
-    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 3, `STFT` < FRAMES
+    /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 3 (or ≥ 2¹⁵), `STFT` < FRAMES
     /// for an adaptive centred window,
     /// λ1 below 2^T (the largest τ's term span), CAP < 2^T + 33, T outside
     /// 1..=11, or CAP not a power of two.
@@ -305,6 +305,16 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     lo: [[u64; FRAMES]; T],
     /// τ0 block sums as f32, once complete (the segmentation's input).
     x0: [f32; FRAMES],
+    /// Per block, the stamp (first frame, as u16) of the last
+    /// segmentation that put a change at it (`marks`), or within a frame of
+    /// it (`marks_near`); a stale stamp from the time the block completed
+    /// otherwise ([`stale`]). Whether one of the last [`LAG`]
+    /// segmentations had a change within a frame of c is then one read:
+    /// a list per segmentation, walked beside each change, cost ~700
+    /// instructions on one sample with fifteen changes (`cargo xtask
+    /// bench-loop`, scenario I, after two stuck chips came back).
+    marks: [u16; FRAMES],
+    marks_near: [u16; FRAMES],
     /// Prefix sums of x0 over the span being segmented.
     px: [f32; FRAMES],
     hi: [[u8; FRAMES]; T],
@@ -377,10 +387,13 @@ struct Segmentation {
     row: usize,
     nu: f32,
     beta: f32,
-    /// Changes (absolute frames) of the last [`LAG`] segmentations.
-    hist: [[u16; CELLS]; LAG],
-    hist_len: [u8; LAG],
-    hist_at: usize,
+    /// Stamps of the last [`LAG`] segmentations (their first frames, as
+    /// u16; the first `recent_len` of them valid, the next written at
+    /// `recent_at`): their changes are the blocks whose `marks` carry one
+    /// of them.
+    recent: [u16; LAG],
+    recent_len: u8,
+    recent_at: usize,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
@@ -396,7 +409,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // segmentation are computed meanwhile), and the blocks that left
         // since the last window are subtracted from its sums: two more
         // blocks than the span.
-        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 3 {
+        // (FRAMES < 2¹⁵ keeps the blocks' change stamps apart: [`stale`].)
+        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 3 || FRAMES >= 1 << 15 {
             return Err(DavarError::Capacity);
         }
         let span = l2 / SEG;
@@ -434,6 +448,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             prefix: 0,
             lo: [[0; FRAMES]; T],
             x0: [0.0; FRAMES],
+            marks: [stale(0); FRAMES],
+            marks_near: [stale(0); FRAMES],
             px: [0.0; FRAMES],
             hi: [[0; FRAMES]; T],
             pre: [[0; FRAMES]; T],
@@ -471,9 +487,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 row: 0,
                 nu: NU_WHITE,
                 beta: 0.0,
-                hist: [[0; CELLS]; LAG],
-                hist_len: [0; LAG],
-                hist_at: 0,
+                recent: [0; LAG],
+                recent_len: 0,
+                recent_at: 0,
             },
         };
         for (i, v) in d.ln_n.iter_mut().enumerate().skip(1) {
@@ -521,7 +537,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.placed = None;
         self.dp.refined = None;
         self.dp.row = 0;
-        self.dp.hist_len = [0; LAG];
+        // (The valid stamps are the first `recent_len`: start at 0.)
+        (self.dp.recent_len, self.dp.recent_at) = (0, 0);
+        // (Every block a later segmentation reads completes after this and
+        // is made stale then; cleared here all the same.)
+        self.marks = [stale(0); FRAMES];
+        self.marks_near = [stale(0); FRAMES];
     }
 
     /// The tabulated threshold for `k` frames (every k a window of this
@@ -879,6 +900,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 self.hi[j][slot] = hi;
                 if j == 0 && end % SEG as u64 == SEG as u64 - 1 {
                     self.x0[slot] = u64_to_f32(lo);
+                    self.marks[slot] = stale(block);
+                    self.marks_near[slot] = stale(block);
                 }
                 k = end + 1;
             }
@@ -1352,12 +1375,18 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
         let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
-        // The changes the last segmentation placed (absolute frames).
-        let (first, at) = (
-            self.dp.first.unwrap_or(0),
-            (self.dp.hist_at + LAG - 1) % LAG,
-        );
-        let last = &self.dp.hist[at][..(self.dp.hist_len[at] as usize).min(CELLS)];
+        // The changes the last segmentation placed: the span's blocks
+        // that carry its stamp.
+        let first = self.dp.first.unwrap_or(0);
+        let last =
+            (self.dp.recent_len > 0).then(|| self.dp.recent[(self.dp.recent_at + LAG - 1) % LAG]);
+        let s0 = self.slot_of(first).min(FRAMES - 1);
+        let marks = &self.marks;
+        let placed_last = |q: usize| {
+            let s = s0 + q;
+            let s = if s >= FRAMES { s - FRAMES } else { s };
+            last.is_some_and(|l| marks.get(s) == Some(&l))
+        };
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
             let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));
@@ -1377,12 +1406,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     .filter(|q| (lo..hi).contains(q))
                     .fold(best, keep)
             };
-            let near = || {
-                last.iter().find_map(|&a| {
-                    let p = a.wrapping_sub(first as u16) as usize;
-                    (lo..hi).contains(&p).then_some(p)
-                })
-            };
+            let near = || (lo..hi).find(|&q| placed_last(q));
             let best = if g < 4 {
                 (lo..hi).filter(|&q| q != c).fold(split(c), keep)
             } else if let Some(p) = near() {
@@ -1425,39 +1449,66 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         // Keep the changes that one of the last LAG segmentations had too,
-        // or strong ones, and remember this hop's (over the oldest).
-        let at = self.dp.hist_at % LAG;
-        let (old, old_len) = (self.dp.hist, self.dp.hist_len);
-        // A history's changes, in frames from `first` (they are within a
-        // few spans of it, far inside i16), ascending as the changes are:
-        // each history is walked once alongside this hop's changes, not
-        // once per change (up to 16 × 2 × 15 comparisons on one sample).
-        let rel = |o: u16| i32::from(o.wrapping_sub(first as u16) as i16);
-        let mut walked = [0usize; LAG];
-        let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
-        for i in 1..nb {
-            let c = bd(&bounds, i);
-            self.dp.hist[at][(i - 1).min(CELLS - 1)] = (first + c as u64) as u16;
-            // Seen: a history has a change within a frame of c.
-            let mut seen = false;
-            for ((h, &len), j) in old.iter().zip(&old_len).zip(&mut walked) {
-                let h = h.get(..usize::from(len).min(CELLS)).unwrap_or(&[]);
-                while h.get(*j).is_some_and(|&o| rel(o) < c as i32 - 1) {
-                    *j += 1;
-                }
-                seen |= h.get(*j).is_some_and(|&o| rel(o) <= c as i32 + 1);
+        // or strong ones, and then stamp this hop's (its stamp over the
+        // oldest's).
+        let s0 = self.slot_of(first).min(FRAMES - 1);
+        // The block c frames into the span (c ≤ k < FRAMES: one wrap at
+        // most).
+        let slot = |c: usize| {
+            let s = s0 + c;
+            if s >= FRAMES {
+                s - FRAMES
+            } else {
+                s
             }
-            // Likelihood gain of this change against merging its two
-            // segments.
-            let (l, r) = (bd(&bounds, i - 1), bd(&bounds, i + 1));
-            let gain = || cost(l, r) - cost(l, c) - cost(c, r);
-            if seen || gain() > STRONG * self.dp.beta {
-                kept[nk.min(CELLS)] = c as u16;
+        };
+        // The recent stamps; where fewer than LAG segmentations ran since
+        // the start, this one's own stamp, which no block carries yet.
+        let stamp = first as u16;
+        let n_recent = usize::from(self.dp.recent_len);
+        let recent: [u16; LAG] = core::array::from_fn(|j| {
+            if j < n_recent {
+                self.dp.recent[j]
+            } else {
+                stamp
+            }
+        });
+        let near = &self.marks_near;
+        let strong = STRONG * self.dp.beta;
+        // This hop's changes with their neighbours (l, c, r), as slices:
+        // reading the bounds one by one through checked reads cost ~250
+        // instructions with fifteen changes.
+        let changes = bounds.get(..=nb).unwrap_or(&[]);
+        let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
+        for w in changes.windows(3) {
+            let &[l, c, r] = w else { continue };
+            let (l, c, r) = (usize::from(l), usize::from(c), usize::from(r));
+            // Seen: a recent segmentation had a change within a frame of c
+            // (the latest that had one did, then). Else its likelihood gain
+            // against merging its two segments must be strong.
+            let seen = near.get(slot(c)).is_some_and(|m| recent.contains(m));
+            if seen || cost(l, r) - cost(l, c) - cost(c, r) > strong {
+                if let Some(kc) = kept.get_mut(nk) {
+                    *kc = c as u16;
+                }
                 nk += 1;
             }
         }
-        self.dp.hist_len[at] = nb.saturating_sub(1) as u8;
-        self.dp.hist_at = (at + 1) % LAG;
+        for &c in changes.get(1..nb).unwrap_or(&[]) {
+            let c = usize::from(c);
+            if let Some(m) = self.marks.get_mut(slot(c)) {
+                *m = stamp;
+            }
+            for q in [c - 1, c, c + 1] {
+                if let Some(m) = self.marks_near.get_mut(slot(q)) {
+                    *m = stamp;
+                }
+            }
+        }
+        let at = self.dp.recent_at % LAG;
+        self.dp.recent[at] = stamp;
+        self.dp.recent_len = (self.dp.recent_len + 1).min(LAG as u8);
+        self.dp.recent_at = (at + 1) % LAG;
         let nb = nk.min(CELLS);
         kept[nb] = k as u16;
         let b = |i: usize| bd(&kept, i);
@@ -1874,6 +1925,15 @@ fn add_sq(lo: u64, hi: u8, d: i32) -> (u64, u8) {
 }
 
 /// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
+/// The mark of a block that no segmentation has put a change at since it
+/// completed: a stamp half the u16 range from its own frame number. A
+/// segmentation's stamp is its first frame, within FRAMES of any block it
+/// reads (< 2¹⁵ by construction), so no recent stamp can equal it until
+/// the block's slot is reused and made stale again.
+const fn stale(block: u64) -> u16 {
+    (block as u16).wrapping_add(0x8000)
+}
+
 fn ratio_gap(a: f32, b: f32) -> f32 {
     let (a, b) = (
         at_least(a, f32::MIN_POSITIVE),

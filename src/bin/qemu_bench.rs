@@ -337,6 +337,52 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
+    // A ninth, untuned, added in the session after G and H: a steady
+    // 100 deg/s turn on x under a 2.5 Hz sway up to 80 deg/s; a chip
+    // spiking past the rate limit, the ADXRS453 garbling half its frames,
+    // two chips power-cycled together and then stuck together beside a
+    // third with bit errors, the ADXRS453 silent for 2 s, chips saturated,
+    // stuck and spiking at once. It first read 10 107: the E-DAVAR
+    // placement sample after the two stuck chips came back (fifteen
+    // changes in a span, each looked up in two lists of the last
+    // segmentations' changes), since made a read of a per-block stamp.
+    ok &= bench_loop_on(
+        t,
+        ipt,
+        "faults I: another board (seed 97) turning at -100 deg/s on x with a 2.5 Hz sway of 15/50/80 deg/s; gyro 2 spiking 300 deg/s on 30 % of samples 0.8-1.6 s, ADXRS453 frame bit errors on half its frames 1.2-2.6 s, gyros 1 and 3 powered off 3.000-3.020/3.025 s, gyro 0 bit errors 4.2-5.3 s with gyros 1 and 3 stuck together 4.3-5.2 s, ADXRS453 silent 5.8-7.8 s, gyro 0 saturated 6.20-6.25 s, gyro 2 stuck with gyro 3 spiking 60 deg/s on 10 % 6.9-7.3 s",
+        RateProfile {
+            base_dps: [-100.0, 40.0, 0.0],
+            sine_dps: [15.0, 50.0, 80.0],
+            sine_hz: 2.5,
+            sine_start_s: 0.2,
+        },
+        97,
+        &[
+            (800, 2, Fault::Spikes { prob: 0.3, magnitude_dps: 300.0 }),
+            (1200, 4, Fault::FrameBitError { prob: 0.5 }),
+            (1600, 2, Fault::None),
+            (2600, 4, Fault::None),
+            (3000, 1, Fault::PoweredOff),
+            (3000, 3, Fault::PoweredOff),
+            (3020, 1, Fault::None),
+            (3025, 3, Fault::None),
+            (4200, 0, Fault::BitErrors { prob: 0.1 }),
+            (4300, 1, Fault::Stuck),
+            (4300, 3, Fault::Stuck),
+            (5200, 1, Fault::None),
+            (5200, 3, Fault::None),
+            (5300, 0, Fault::None),
+            (5800, 4, Fault::NoResponse),
+            (6200, 0, Fault::Saturated),
+            (6250, 0, Fault::None),
+            (6900, 2, Fault::Stuck),
+            (6900, 3, Fault::Spikes { prob: 0.1, magnitude_dps: 60.0 }),
+            (7300, 2, Fault::None),
+            (7300, 3, Fault::None),
+            (7800, 4, Fault::None),
+        ],
+        false,
+    );
     ok
 }
 

@@ -267,6 +267,31 @@ fn reset_forgets_everything() {
 }
 
 #[test]
+fn reset_forgets_the_last_segmentations_changes() {
+    // Reset after an even and an odd number of segmentations (their
+    // stamps are kept in a ring that must start over too), with a weak
+    // step (σ ×1.4) 600 samples after it: whether it bounds the window
+    // depends on the segmentation before having it as well. (Found at
+    // λ2 = 2048: a ring not restarted made the first estimates after a
+    // reset differ from a fresh E-DAVAR's.)
+    type D2 = Davar<2048, 67, 8, 0>;
+    let cfg = DavarConfig::segmented(1024, 2048);
+    for cut in [4000, 4032] {
+        let w = white(7, 9000, |i| if i < cut + 600 { 1.0 } else { 1.4 });
+        let mut a = D2::new(cfg).unwrap();
+        for &x in &w[..cut] {
+            a.push(x).unwrap();
+        }
+        a.reset();
+        let mut b = D2::new(cfg).unwrap();
+        for &x in &w[cut..] {
+            assert_eq!(a.push(x).unwrap(), b.push(x).unwrap());
+            assert_eq!(a.estimate(), b.estimate(), "reset after {cut} samples");
+        }
+    }
+}
+
+#[test]
 fn bad_settings_are_typed() {
     let ok = DavarConfig {
         lambda1: 400,
