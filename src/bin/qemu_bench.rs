@@ -383,6 +383,52 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
+    // A tenth, untuned, added with I: a 100 deg/s turn on y under a
+    // 40 Hz vibration; all four ICM-42688-Ps with bit errors at once, the
+    // ADXRS453 reporting a chip fault, a chip powered off for 2 s, another
+    // reading the wrong identity, small dense spikes, a chip saturated
+    // while the ADXRS453 sticks, two chips silent together. Its first run
+    // (in a scratch copy of the bench) read 9 994, where a calibration
+    // solve for a chip just warmed up met an E-DAVAR segmentation row.
+    ok &= bench_loop_on(
+        t,
+        ipt,
+        "faults J: another board (seed 113) turning at 100 deg/s on y under a 40 Hz, 5 deg/s vibration; gyros 0-3 bit errors 0.6-1.6 s, ADXRS453 chip fault 2.0-2.6 s, gyro 2 powered off 3.0-5.0 s, gyro 0 wrong identity 3.5-3.9 s, gyro 1 spiking 5 deg/s on half its samples 4.2-4.8 s, gyro 3 saturated with the ADXRS453 stuck 5.6-6.1 s, gyros 0 and 1 silent 6.800-6.850/6.870 s",
+        RateProfile {
+            base_dps: [5.0, 100.0, -20.0],
+            sine_dps: [5.0, 5.0, 5.0],
+            sine_hz: 40.0,
+            sine_start_s: 0.0,
+        },
+        113,
+        &[
+            (600, 0, Fault::BitErrors { prob: 0.02 }),
+            (600, 1, Fault::BitErrors { prob: 0.02 }),
+            (600, 2, Fault::BitErrors { prob: 0.02 }),
+            (600, 3, Fault::BitErrors { prob: 0.02 }),
+            (1600, 0, Fault::None),
+            (1600, 1, Fault::None),
+            (1600, 2, Fault::None),
+            (1600, 3, Fault::None),
+            (2000, 4, Fault::ChipFault),
+            (2600, 4, Fault::None),
+            (3000, 2, Fault::PoweredOff),
+            (3500, 0, Fault::WrongId),
+            (3900, 0, Fault::None),
+            (4200, 1, Fault::Spikes { prob: 0.5, magnitude_dps: 5.0 }),
+            (4800, 1, Fault::None),
+            (5000, 2, Fault::None),
+            (5600, 3, Fault::Saturated),
+            (5600, 4, Fault::Stuck),
+            (6100, 3, Fault::None),
+            (6100, 4, Fault::None),
+            (6800, 0, Fault::NoResponse),
+            (6800, 1, Fault::NoResponse),
+            (6850, 0, Fault::None),
+            (6870, 1, Fault::None),
+        ],
+        false,
+    );
     ok
 }
 
