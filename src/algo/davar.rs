@@ -652,6 +652,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.back_slot((self.n / SEG as u64 - f) as usize)
     }
 
+    /// The slot `c` blocks after slot `s0` (c < FRAMES: one wrap at most).
+    #[inline(always)]
+    fn ahead(s0: usize, c: usize) -> usize {
+        let s = s0 + c;
+        if s >= FRAMES {
+            s - FRAMES
+        } else {
+            s
+        }
+    }
+
     /// The next slot after `s`.
     #[inline(always)]
     fn next(s: usize) -> usize {
@@ -1382,11 +1393,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             (self.dp.recent_len > 0).then(|| self.dp.recent[(self.dp.recent_at + LAG - 1) % LAG]);
         let s0 = self.slot_of(first).min(FRAMES - 1);
         let marks = &self.marks;
-        let placed_last = |q: usize| {
-            let s = s0 + q;
-            let s = if s >= FRAMES { s - FRAMES } else { s };
-            last.is_some_and(|l| marks.get(s) == Some(&l))
-        };
+        let placed_last =
+            |q: usize| last.is_some_and(|l| marks.get(Self::ahead(s0, q)) == Some(&l));
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
             let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));
@@ -1452,16 +1460,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // or strong ones, and then stamp this hop's (its stamp over the
         // oldest's).
         let s0 = self.slot_of(first).min(FRAMES - 1);
-        // The block c frames into the span (c ≤ k < FRAMES: one wrap at
-        // most).
-        let slot = |c: usize| {
-            let s = s0 + c;
-            if s >= FRAMES {
-                s - FRAMES
-            } else {
-                s
-            }
-        };
+        // The block c frames into the span (c ≤ k < FRAMES).
+        let slot = |c: usize| Self::ahead(s0, c);
         // The recent stamps; where fewer than LAG segmentations ran since
         // the start, this one's own stamp, which no block carries yet.
         let stamp = first as u16;
@@ -1924,7 +1924,6 @@ fn add_sq(lo: u64, hi: u8, d: i32) -> (u64, u8) {
     (v, hi + c as u8)
 }
 
-/// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
 /// The mark of a block that no segmentation has put a change at since it
 /// completed: a stamp half the u16 range from its own frame number. A
 /// segmentation's stamp is its first frame, within FRAMES of any block it
@@ -1934,6 +1933,7 @@ const fn stale(block: u64) -> u16 {
     (block as u16).wrapping_add(0x8000)
 }
 
+/// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
 fn ratio_gap(a: f32, b: f32) -> f32 {
     let (a, b) = (
         at_least(a, f32::MIN_POSITIVE),
