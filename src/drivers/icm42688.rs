@@ -13,18 +13,104 @@ use super::{Gyro, ReadFault, Reading, Restart};
 #[allow(missing_docs)]
 pub mod reg {
     pub const DEVICE_CONFIG: u8 = 0x11;
+    pub const FIFO_CONFIG: u8 = 0x16;
     pub const TEMP_DATA1: u8 = 0x1D;
     pub const GYRO_DATA_X1: u8 = 0x25;
     pub const INT_STATUS: u8 = 0x2D;
+    pub const FIFO_COUNTH: u8 = 0x2E;
+    pub const FIFO_COUNTL: u8 = 0x2F;
+    pub const FIFO_DATA: u8 = 0x30;
+    pub const SIGNAL_PATH_RESET: u8 = 0x4B;
+    pub const INTF_CONFIG0: u8 = 0x4C;
+    pub const INTF_CONFIG1: u8 = 0x4D;
     pub const PWR_MGMT0: u8 = 0x4E;
     pub const GYRO_CONFIG0: u8 = 0x4F;
+    pub const GYRO_CONFIG1: u8 = 0x51;
+    pub const GYRO_ACCEL_CONFIG0: u8 = 0x52;
+    pub const TMST_CONFIG: u8 = 0x54;
+    pub const FIFO_CONFIG1: u8 = 0x5F;
+    pub const FIFO_CONFIG2: u8 = 0x60;
+    pub const FIFO_CONFIG3: u8 = 0x61;
     pub const SELF_TEST_CONFIG: u8 = 0x70;
     pub const WHO_AM_I: u8 = 0x75;
     pub const REG_BANK_SEL: u8 = 0x76;
+    /// Bank 1: GYRO_AAF_DIS (bit 1), GYRO_NF_DIS (bit 0).
+    pub const GYRO_CONFIG_STATIC2: u8 = 0x0B;
+    /// Bank 1: GYRO_AAF_DELT (bits 5:0).
+    pub const GYRO_CONFIG_STATIC3: u8 = 0x0C;
+    /// Bank 1: GYRO_AAF_DELTSQR[7:0].
+    pub const GYRO_CONFIG_STATIC4: u8 = 0x0D;
+    /// Bank 1: GYRO_AAF_BITSHIFT (7:4), GYRO_AAF_DELTSQR[11:8] (3:0).
+    pub const GYRO_CONFIG_STATIC5: u8 = 0x0E;
     /// Bank 1: factory self-test codes for the gyro axes.
     pub const XG_ST_DATA: u8 = 0x5F;
     pub const YG_ST_DATA: u8 = 0x60;
     pub const ZG_ST_DATA: u8 = 0x61;
+    /// Bank 1: PIN9_FUNCTION (bits 2:1; 0b10 = CLKIN).
+    pub const INTF_CONFIG5: u8 = 0x7B;
+}
+
+/// Register bit fields (datasheet section 14), bank 0 unless noted.
+#[allow(missing_docs)]
+pub mod bits {
+    /// INT_STATUS.
+    pub const DATA_RDY: u8 = 1 << 3;
+    pub const FIFO_THS: u8 = 1 << 2;
+    pub const FIFO_FULL: u8 = 1 << 1;
+    /// FIFO_CONFIG.FIFO_MODE (bits 7:6).
+    pub const FIFO_MODE_MASK: u8 = 0b11 << 6;
+    pub const FIFO_MODE_STREAM: u8 = 0b01 << 6;
+    pub const FIFO_MODE_STOP_ON_FULL: u8 = 0b10 << 6;
+    /// FIFO_CONFIG1.
+    pub const FIFO_RESUME_PARTIAL_RD: u8 = 1 << 6;
+    pub const FIFO_WM_GT_TH: u8 = 1 << 5;
+    pub const FIFO_HIRES_EN: u8 = 1 << 4;
+    pub const FIFO_TMST_FSYNC_EN: u8 = 1 << 3;
+    pub const FIFO_TEMP_EN: u8 = 1 << 2;
+    pub const FIFO_GYRO_EN: u8 = 1 << 1;
+    pub const FIFO_ACCEL_EN: u8 = 1 << 0;
+    /// SIGNAL_PATH_RESET.
+    pub const FIFO_FLUSH: u8 = 1 << 1;
+    /// INTF_CONFIG0.
+    pub const FIFO_COUNT_REC: u8 = 1 << 6;
+    pub const FIFO_COUNT_ENDIAN: u8 = 1 << 5;
+    pub const SENSOR_DATA_ENDIAN: u8 = 1 << 4;
+    /// INTF_CONFIG1: AFSR (bits 7:6, undocumented; 0b01 turns it off, as
+    /// PX4, ArduPilot and Betaflight write), RTC_MODE, CLKSEL (bits 1:0).
+    pub const AFSR_MASK: u8 = 0b11 << 6;
+    pub const AFSR_OFF: u8 = 0b01 << 6;
+    pub const RTC_MODE: u8 = 1 << 2;
+    pub const CLKSEL_MASK: u8 = 0b11;
+    pub const CLKSEL_PLL: u8 = 0b01;
+    /// TMST_CONFIG.
+    pub const TMST_TO_REGS_EN: u8 = 1 << 4;
+    pub const TMST_RES: u8 = 1 << 3;
+    pub const TMST_DELTA_EN: u8 = 1 << 2;
+    pub const TMST_EN: u8 = 1 << 0;
+    /// Bank 1 GYRO_CONFIG_STATIC2.
+    pub const GYRO_AAF_DIS: u8 = 1 << 1;
+    /// Bank 1 INTF_CONFIG5.PIN9_FUNCTION (bits 2:1).
+    pub const PIN9_MASK: u8 = 0b11 << 1;
+    pub const PIN9_CLKIN: u8 = 0b10 << 1;
+    /// FIFO header (datasheet 6.2).
+    pub const HEADER_MSG: u8 = 1 << 7;
+    pub const HEADER_ACCEL: u8 = 1 << 6;
+    pub const HEADER_GYRO: u8 = 1 << 5;
+    pub const HEADER_20: u8 = 1 << 4;
+    pub const HEADER_TIMESTAMP_ODR: u8 = 0b10 << 2;
+    pub const HEADER_ODR_ACCEL: u8 = 1 << 1;
+    pub const HEADER_ODR_GYRO: u8 = 1 << 0;
+}
+
+/// Reset values the driver and the emulated chip agree on (datasheet
+/// section 14).
+#[allow(missing_docs)]
+pub mod reset {
+    pub const INTF_CONFIG0: u8 = 0x30;
+    pub const INTF_CONFIG1: u8 = 0x91;
+    pub const GYRO_CONFIG1: u8 = 0x16;
+    pub const GYRO_ACCEL_CONFIG0: u8 = 0x11;
+    pub const TMST_CONFIG: u8 = 0x23;
 }
 
 /// WHO_AM_I value of the ICM-42688-P.
@@ -109,6 +195,23 @@ pub enum Odr {
 }
 
 impl Odr {
+    /// Decode GYRO_ODR (bits 3:0); `None` for the rates this driver does
+    /// not use (32 and 16 kHz, and below 25 Hz).
+    pub fn from_bits(b: u8) -> Option<Self> {
+        Some(match b & 0x0F {
+            0x3 => Self::Hz8000,
+            0x4 => Self::Hz4000,
+            0x5 => Self::Hz2000,
+            0x6 => Self::Hz1000,
+            0x7 => Self::Hz200,
+            0x8 => Self::Hz100,
+            0x9 => Self::Hz50,
+            0xA => Self::Hz25,
+            0xF => Self::Hz500,
+            _ => return None,
+        })
+    }
+
     /// Rate in Hz.
     pub fn hz(self) -> f32 {
         match self {
@@ -145,8 +248,19 @@ pub enum Error<E> {
     /// The self-test response was below half the factory value on these axes
     /// (bit 0 = x).
     SelfTestFailed(u8),
-    /// The self-test needs at least one sample per phase.
+    /// The self-test needs at least one sample per phase, or an AAF
+    /// setting the driver does not know.
     InvalidArgument,
+    /// FIFO_FULL was set: samples were lost. The FIFO has been flushed.
+    FifoOverflow,
+    /// A FIFO packet's header is not a gyro packet's (`0x68` in its top six
+    /// bits): the stream is out of step. The FIFO has been flushed.
+    FifoBadHeader(u8),
+    /// The count promised a packet the FIFO did not hold (its header read
+    /// "empty"). The FIFO has been flushed.
+    FifoShort,
+    /// FIFO sampling is not configured.
+    NotFifo,
 }
 
 impl<E> Error<E> {
@@ -160,8 +274,146 @@ impl<E> Error<E> {
             }
             Error::SelfTestFailed(a) => Error::SelfTestFailed(a),
             Error::InvalidArgument => Error::InvalidArgument,
+            Error::FifoOverflow => Error::FifoOverflow,
+            Error::FifoBadHeader(h) => Error::FifoBadHeader(h),
+            Error::FifoShort => Error::FifoShort,
+            Error::NotFifo => Error::NotFifo,
         }
     }
+}
+
+/// The gyro's signal path (datasheet section 5): the anti-alias filter
+/// (AAF) at the 32 kHz internal rate, then the UI filter that decimates to
+/// the ODR.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Filter {
+    /// GYRO_AAF_DELT: 0 turns the AAF off; otherwise an entry of
+    /// datasheet table 17 that [`aaf_coefficients`] knows.
+    pub aaf_delt: u8,
+    /// GYRO_UI_FILT_ORD as an order, 1..=3.
+    pub ui_order: u8,
+    /// GYRO_UI_FILT_BW: 0..=7 for ODR/2, /4, /5, /8, /10, /16, /20, /40;
+    /// 14 or 15 for the low-latency settings.
+    pub ui_bw: u8,
+}
+
+impl Filter {
+    /// The chip's reset values: AAF at 585 Hz (assumed; see
+    /// `emu::icm42688`), UI filter of 2nd order at ODR/4.
+    pub const RESET: Self = Self {
+        aaf_delt: 13,
+        ui_order: 2,
+        ui_bw: 1,
+    };
+    /// PX4's: AAF at 585 Hz, the UI filter left at reset (run at 8 kHz
+    /// there, averaged down in software).
+    pub const PX4: Self = Self::RESET;
+    /// ArduPilot's at a 1 kHz ODR: AAF at 258 Hz, the UI filter at reset.
+    pub const ARDUPILOT: Self = Self {
+        aaf_delt: 6,
+        ui_order: 2,
+        ui_bw: 1,
+    };
+    /// This board's (see [`Config::default`]).
+    pub const BOARD: Self = Self::ARDUPILOT;
+
+    /// GYRO_CONFIG1's GYRO_UI_FILT_ORD bits (3:2).
+    fn order_bits(self) -> u8 {
+        (self.ui_order.clamp(1, 3) - 1) << 2
+    }
+}
+
+/// GYRO_AAF_DELTSQR and GYRO_AAF_BITSHIFT for GYRO_AAF_DELT `delt`
+/// (datasheet table 17: DELTSQR is close to DELT² but not always equal),
+/// for DELT 1..=56 and 63; `None` for the others, which the driver does
+/// not set.
+pub fn aaf_coefficients(delt: u8) -> Option<(u16, u8)> {
+    const T: [(u16, u8); 56] = [
+        (1, 15),
+        (4, 13),
+        (9, 12),
+        (16, 11),
+        (25, 10),
+        (36, 10),
+        (49, 9),
+        (64, 9),
+        (81, 9),
+        (100, 8),
+        (122, 8),
+        (144, 8),
+        (170, 8),
+        (196, 7),
+        (224, 7),
+        (256, 7),
+        (288, 7),
+        (324, 7),
+        (360, 6),
+        (400, 6),
+        (440, 6),
+        (488, 6),
+        (528, 6),
+        (576, 6),
+        (624, 6),
+        (680, 6),
+        (736, 5),
+        (784, 5),
+        (848, 5),
+        (896, 5),
+        (960, 5),
+        (1024, 5),
+        (1088, 5),
+        (1152, 5),
+        (1232, 5),
+        (1296, 5),
+        (1376, 4),
+        (1440, 4),
+        (1536, 4),
+        (1600, 4),
+        (1696, 4),
+        (1760, 4),
+        (1856, 4),
+        (1952, 4),
+        (2016, 4),
+        (2112, 4),
+        (2208, 4),
+        (2304, 4),
+        (2400, 4),
+        (2496, 4),
+        (2592, 4),
+        (2720, 4),
+        (2816, 3),
+        (2944, 3),
+        (3008, 3),
+        (3136, 3),
+    ];
+    match delt {
+        1..=56 => Some(T[delt as usize - 1]),
+        63 => Some((3968, 3)),
+        _ => None,
+    }
+}
+
+/// Where the chip takes its clock from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ClockInput {
+    /// Its own PLL (±1 %; datasheet table 2).
+    Internal,
+    /// The board's 31–50 kHz clock on pin 9 (INTF_CONFIG5.PIN9_FUNCTION =
+    /// CLKIN, INTF_CONFIG1.RTC_MODE): the ODR follows it.
+    ClkIn,
+}
+
+/// How samples reach the host.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Sampling {
+    /// The data registers, polled.
+    Registers,
+    /// The FIFO: 16-byte packets with a 16-bit timestamp (datasheet 6.2,
+    /// packet 3), stop-on-full, the count in records.
+    Fifo,
 }
 
 /// Gyro configuration applied by [`Icm42688::init`].
@@ -172,16 +424,135 @@ pub struct Config {
     pub full_scale: FullScale,
     /// Output data rate.
     pub odr: Odr,
+    /// Signal-path filters.
+    pub filter: Filter,
+    /// Clock source.
+    pub clock: ClockInput,
+    /// Registers or FIFO.
+    pub sampling: Sampling,
 }
 
 impl Default for Config {
+    /// ±250 °/s (the board turns at up to 100 °/s), 1 kHz, ArduPilot's
+    /// filters at 1 kHz, AFSR off (always: it freezes the output for
+    /// 1–2 ms when the rate crosses 100 °/s), the internal clock, the data
+    /// registers.
     fn default() -> Self {
         Self {
             full_scale: FullScale::Dps250,
             odr: Odr::Hz1000,
+            filter: Filter::BOARD,
+            clock: ClockInput::Internal,
+            sampling: Sampling::Registers,
         }
     }
 }
+
+impl Config {
+    /// GYRO_CONFIG0.
+    fn gyro_config0(&self) -> u8 {
+        ((self.full_scale as u8) << 5) | self.odr as u8
+    }
+    /// INTF_CONFIG1: the reset value with AFSR off and RTC_MODE as chosen.
+    fn intf_config1(&self) -> u8 {
+        let rtc = if self.clock == ClockInput::ClkIn {
+            bits::RTC_MODE
+        } else {
+            0
+        };
+        (reset::INTF_CONFIG1 & !(bits::AFSR_MASK | bits::RTC_MODE)) | bits::AFSR_OFF | rtc
+    }
+    /// GYRO_CONFIG1: the reset value with the UI filter's order.
+    fn gyro_config1(&self) -> u8 {
+        (reset::GYRO_CONFIG1 & !(0b11 << 2)) | self.filter.order_bits()
+    }
+    /// GYRO_ACCEL_CONFIG0: the accelerometer's half at reset, the UI
+    /// filter's bandwidth.
+    fn gyro_accel_config0(&self) -> u8 {
+        (reset::GYRO_ACCEL_CONFIG0 & 0xF0) | (self.filter.ui_bw & 0x0F)
+    }
+    /// INTF_CONFIG0: big-endian data and count (reset), the count in
+    /// records with the FIFO.
+    fn intf_config0(&self) -> u8 {
+        match self.sampling {
+            Sampling::Fifo => reset::INTF_CONFIG0 | bits::FIFO_COUNT_REC,
+            Sampling::Registers => reset::INTF_CONFIG0,
+        }
+    }
+    /// FIFO_CONFIG1: accel, gyro and temperature slots (packet 3 carries the
+    /// timestamp; the accelerometer stays off and reads −32768).
+    fn fifo_config1(&self) -> u8 {
+        match self.sampling {
+            Sampling::Fifo => bits::FIFO_TEMP_EN | bits::FIFO_GYRO_EN | bits::FIFO_ACCEL_EN,
+            Sampling::Registers => 0,
+        }
+    }
+    /// FIFO_CONFIG: stop-on-full (what is kept stays in order; an overflow
+    /// is flagged and flushed), or bypass.
+    fn fifo_config(&self) -> u8 {
+        match self.sampling {
+            Sampling::Fifo => bits::FIFO_MODE_STOP_ON_FULL,
+            Sampling::Registers => 0,
+        }
+    }
+    /// Bank-1 GYRO_CONFIG_STATIC2..5 (0x0B..0x0E) and INTF_CONFIG5, or
+    /// `None` for an AAF setting the driver does not know.
+    fn bank1(&self) -> Option<([u8; 4], u8)> {
+        // With the AAF off its coefficients stay at the reset entry.
+        let (d, dis) = match self.filter.aaf_delt {
+            0 => (13, bits::GYRO_AAF_DIS),
+            d => (d, 0),
+        };
+        let (sq, shift) = aaf_coefficients(d)?;
+        let static2 = (STATIC2_RESET & !bits::GYRO_AAF_DIS) | dis;
+        let st = [
+            static2,
+            d & 0x3F,
+            sq as u8,
+            (shift << 4) | ((sq >> 8) as u8 & 0x0F),
+        ];
+        let pin9 = if self.clock == ClockInput::ClkIn {
+            bits::PIN9_CLKIN
+        } else {
+            0
+        };
+        Some((st, pin9))
+    }
+}
+
+/// GYRO_CONFIG_STATIC2 at reset (AAF and notch on); see `emu::icm42688`.
+const STATIC2_RESET: u8 = 0xA0;
+
+/// One sample out of the FIFO.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FifoSample {
+    /// Raw counts per axis.
+    pub raw: [i16; 3],
+    /// The chip's timestamp of the sample, µs of its own clock (TMST_RES
+    /// = 0), extended past the packet's 16 bits.
+    pub stamp_us: u32,
+}
+
+/// What one FIFO read found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FifoRead {
+    /// INT_STATUS as read with the count.
+    pub status: u8,
+    /// Samples written to the caller's buffer.
+    pub samples: usize,
+    /// Samples left in the FIFO (more than the buffer held).
+    pub left: usize,
+}
+
+/// FIFO packet size, bytes (packet 3).
+pub const FIFO_PACKET: usize = 16;
+/// The header of a packet 3 with accel and gyro slots and an ODR
+/// timestamp; the low two bits flag an ODR change and are not checked.
+const HEADER_EXPECTED: u8 = bits::HEADER_ACCEL | bits::HEADER_GYRO | bits::HEADER_TIMESTAMP_ODR;
+/// The header bits checked against [`HEADER_EXPECTED`].
+const HEADER_MASK: u8 = 0xFC;
 
 /// The configuration a self-test saved, restored by
 /// [`Icm42688::self_test_end`].
@@ -223,6 +594,10 @@ pub struct Icm42688<SPI> {
     full_scale: FullScale,
     /// The configuration last set (a restart sets it again).
     config: Config,
+    /// Which register group the next [`Gyro::check_config`] reads.
+    check_group: u8,
+    /// The last FIFO timestamp (16 bits) and its extension.
+    stamp: Option<u32>,
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -233,8 +608,10 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             full_scale: FullScale::Dps2000,
             config: Config {
                 full_scale: FullScale::Dps2000,
-                odr: Odr::Hz1000,
+                ..Config::default()
             },
+            check_group: 0,
+            stamp: None,
         }
     }
 
@@ -248,8 +625,14 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.full_scale
     }
 
-    /// Soft-reset, check WHO_AM_I, set range and rate (with read-back) and
-    /// start the gyro in low-noise mode.
+    /// The configuration last set.
+    pub fn config(&self) -> Config {
+        self.config
+    }
+
+    /// Soft-reset, check WHO_AM_I, set the signal path, clock, range, rate
+    /// and FIFO (each with read-back) and start the gyro in low-noise
+    /// mode; with the FIFO, flush what the gyro's start-up produced.
     pub fn init(&mut self, delay: &mut impl DelayNs, cfg: Config) -> Result<(), Error<SPI::Error>> {
         self.write(reg::DEVICE_CONFIG, SOFT_RESET)?;
         delay.delay_ms(1); // datasheet: wait 1 ms after a soft reset
@@ -258,13 +641,140 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         if id != WHO_AM_I_VALUE {
             return Err(Error::WrongId(id));
         }
+        self.configure_path(cfg)?;
         self.configure(cfg)?;
+        self.configure_fifo(cfg)?;
         self.write_checked(reg::PWR_MGMT0, GYRO_MODE_LN)?;
         // Clear RESET_DONE (set by the reset above): from here on, a set
         // bit in a sample's INT_STATUS means the chip reset behind our back.
         self.read(reg::INT_STATUS)?;
         delay.delay_ms(45); // gyro start-up time, datasheet table 1
+        if cfg.sampling == Sampling::Fifo {
+            self.flush_fifo()?;
+        }
         Ok(())
+    }
+
+    /// The signal path and the clock: bank 1 (AAF coefficients, pin 9),
+    /// then INTF_CONFIG1 (AFSR off, RTC_MODE), GYRO_CONFIG1 (UI filter
+    /// order) and GYRO_ACCEL_CONFIG0 (its bandwidth), each read back.
+    /// Pin 9 becomes CLKIN before RTC_MODE asks for it (TDK's driver does
+    /// the same).
+    pub fn configure_path(&mut self, cfg: Config) -> Result<(), Error<SPI::Error>> {
+        let (st, pin9) = cfg.bank1().ok_or(Error::InvalidArgument)?;
+        self.write(reg::REG_BANK_SEL, 1)?;
+        let r = self.write_bank1(st, pin9);
+        self.write(reg::REG_BANK_SEL, 0)?;
+        r?;
+        self.write_checked(reg::INTF_CONFIG1, cfg.intf_config1())?;
+        self.write_checked(reg::GYRO_CONFIG1, cfg.gyro_config1())?;
+        self.write_checked(reg::GYRO_ACCEL_CONFIG0, cfg.gyro_accel_config0())?;
+        Ok(())
+    }
+
+    fn write_bank1(&mut self, st: [u8; 4], pin9: u8) -> Result<(), Error<SPI::Error>> {
+        for (i, v) in st.iter().enumerate() {
+            self.write_checked(reg::GYRO_CONFIG_STATIC2 + i as u8, *v)?;
+        }
+        self.write_checked(reg::INTF_CONFIG5, pin9)
+    }
+
+    /// INTF_CONFIG0, FIFO_CONFIG1 and FIFO_CONFIG for the sampling chosen,
+    /// each read back.
+    pub fn configure_fifo(&mut self, cfg: Config) -> Result<(), Error<SPI::Error>> {
+        self.write_checked(reg::INTF_CONFIG0, cfg.intf_config0())?;
+        self.write_checked(reg::FIFO_CONFIG1, cfg.fifo_config1())?;
+        self.write_checked(reg::FIFO_CONFIG, cfg.fifo_config())?;
+        self.config.sampling = cfg.sampling;
+        self.stamp = None;
+        Ok(())
+    }
+
+    /// Empty the FIFO (SIGNAL_PATH_RESET.FIFO_FLUSH).
+    pub fn flush_fifo(&mut self) -> Result<(), Error<SPI::Error>> {
+        self.stamp = None;
+        self.write(reg::SIGNAL_PATH_RESET, bits::FIFO_FLUSH)
+    }
+
+    /// Read what the FIFO holds, oldest first, into `out`.
+    ///
+    /// One transaction in the usual case: a burst from INT_STATUS through
+    /// FIFO_COUNTH/L into FIFO_DATA (the address stays on FIFO_DATA), with
+    /// room for one packet; a second one for the rest when the count says
+    /// more came (a fast chip clock, a late read). Each header is checked;
+    /// FIFO_FULL, a bad header or a short FIFO flush it and return a typed
+    /// error, so the next read starts on a packet boundary and the caller
+    /// counts the gap. Timestamps are extended from 16 bits by their
+    /// difference from the last (reads must come within 65 ms).
+    pub fn read_fifo(&mut self, out: &mut [FifoSample]) -> Result<FifoRead, Error<SPI::Error>> {
+        if self.config.sampling != Sampling::Fifo {
+            return Err(Error::NotFifo);
+        }
+        let mut b = [0u8; 3 + FIFO_PACKET];
+        self.spi
+            .transaction(&mut [
+                Operation::Write(&[reg::INT_STATUS | READ]),
+                Operation::Read(&mut b),
+            ])
+            .map_err(Error::Spi)?;
+        let status = b[0];
+        if status & bits::FIFO_FULL != 0 {
+            self.flush_fifo()?;
+            return Err(Error::FifoOverflow);
+        }
+        let count = u16::from_be_bytes([b[1], b[2]]) as usize;
+        let mut read = FifoRead {
+            status,
+            samples: 0,
+            left: 0,
+        };
+        if count == 0 {
+            return Ok(read);
+        }
+        let mut packet = [0u8; FIFO_PACKET];
+        packet.copy_from_slice(&b[3..]);
+        let want = count.min(out.len());
+        read.left = count - want;
+        for i in 0..want {
+            if i > 0 {
+                self.spi
+                    .transaction(&mut [
+                        Operation::Write(&[reg::FIFO_DATA | READ]),
+                        Operation::Read(&mut packet),
+                    ])
+                    .map_err(Error::Spi)?;
+            }
+            match self.parse_packet(&packet) {
+                Ok(s) => out[i] = s,
+                Err(e) => {
+                    self.flush_fifo()?;
+                    return Err(e);
+                }
+            }
+            read.samples = i + 1;
+        }
+        Ok(read)
+    }
+
+    fn parse_packet(&mut self, p: &[u8; FIFO_PACKET]) -> Result<FifoSample, Error<SPI::Error>> {
+        let h = p[0];
+        if h & bits::HEADER_MSG != 0 {
+            return Err(Error::FifoShort);
+        }
+        if h & HEADER_MASK != HEADER_EXPECTED {
+            return Err(Error::FifoBadHeader(h));
+        }
+        let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
+        let stamp16 = u16::from_be_bytes([p[14], p[15]]);
+        let stamp_us = match self.stamp {
+            Some(last) => last.wrapping_add(stamp16.wrapping_sub(last as u16) as u32),
+            None => stamp16 as u32,
+        };
+        self.stamp = Some(stamp_us);
+        Ok(FifoSample {
+            raw: [w(7), w(9), w(11)],
+            stamp_us,
+        })
     }
 
     /// Die temperature, °C: TEMP_DATA1/0 (0x1D, 0x1E), big-endian
@@ -301,9 +811,11 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         ))
     }
 
-    /// Set range and output data rate, and check the read-back.
+    /// Set range and output data rate, and check the read-back. The rest
+    /// of `cfg` is remembered as set by [`Self::configure_path`] and
+    /// [`Self::configure_fifo`].
     pub fn configure(&mut self, cfg: Config) -> Result<(), Error<SPI::Error>> {
-        let v = ((cfg.full_scale as u8) << 5) | cfg.odr as u8;
+        let v = cfg.gyro_config0();
         self.write_checked(reg::GYRO_CONFIG0, v)?;
         self.full_scale = FullScale::from_bits(v >> 5);
         self.config = cfg;
@@ -373,6 +885,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.configure(Config {
             full_scale: FullScale::Dps250,
             odr: Odr::Hz1000,
+            ..self.config
         })?;
         Ok(saved)
     }
@@ -441,6 +954,13 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         ])
     }
 
+    /// Read `b.len()` consecutive registers from `addr` in one burst.
+    pub fn read_burst(&mut self, addr: u8, b: &mut [u8]) -> Result<(), Error<SPI::Error>> {
+        self.spi
+            .transaction(&mut [Operation::Write(&[addr | READ]), Operation::Read(b)])
+            .map_err(Error::Spi)
+    }
+
     /// Read one register (bank as currently selected).
     pub fn read(&mut self, addr: u8) -> Result<u8, Error<SPI::Error>> {
         let mut b = [0u8; 1];
@@ -503,30 +1023,67 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         self.read_temperature_c().map_err(|_| ReadFault::Bus)
     }
 
-    /// REG_BANK_SEL, GYRO_CONFIG0 and PWR_MGMT0 as `init` left them.
+    /// The configuration `init` set, one of two groups per call (as PX4
+    /// re-checks one register at a time, so each call costs the same few
+    /// transactions): bank 0, REG_BANK_SEL, the burst INTF_CONFIG0 ..
+    /// GYRO_ACCEL_CONFIG0 (0x4C..=0x52; ACCEL_CONFIG0 skipped), FIFO_CONFIG
+    /// and FIFO_CONFIG1; then bank 1, GYRO_CONFIG_STATIC2..5 in one burst
+    /// and INTF_CONFIG5.
     fn check_config(&mut self) -> Result<(), ReadFault> {
         let cfg = self.config;
-        let want = [
-            (reg::REG_BANK_SEL, 0),
-            (
-                reg::GYRO_CONFIG0,
-                ((cfg.full_scale as u8) << 5) | cfg.odr as u8,
-            ),
-            (reg::PWR_MGMT0, GYRO_MODE_LN),
-        ];
-        for (r, v) in want {
-            if self.read(r).map_err(|_| ReadFault::Bus)? != v {
+        let bus = |_| ReadFault::Bus;
+        let group = self.check_group;
+        self.check_group ^= 1;
+        if group == 0 {
+            if self.read(reg::REG_BANK_SEL).map_err(bus)? != 0 {
                 return Err(ReadFault::Config);
             }
+            let mut b = [0u8; 7];
+            self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
+            let want = [
+                cfg.intf_config0(),
+                cfg.intf_config1(),
+                GYRO_MODE_LN,
+                cfg.gyro_config0(),
+                b[4], // ACCEL_CONFIG0: not set by this driver
+                cfg.gyro_config1(),
+                cfg.gyro_accel_config0(),
+            ];
+            let fifo = [
+                (reg::FIFO_CONFIG, cfg.fifo_config()),
+                (reg::FIFO_CONFIG1, cfg.fifo_config1()),
+            ];
+            if b != want {
+                return Err(ReadFault::Config);
+            }
+            for (r, v) in fifo {
+                if self.read(r).map_err(bus)? != v {
+                    return Err(ReadFault::Config);
+                }
+            }
+            return Ok(());
         }
-        Ok(())
+        let (st, pin9) = cfg.bank1().ok_or(ReadFault::Config)?;
+        self.write(reg::REG_BANK_SEL, 1).map_err(bus)?;
+        let mut b = [0u8; 4];
+        let r = self.read_burst(reg::GYRO_CONFIG_STATIC2, &mut b);
+        let p = self.read(reg::INTF_CONFIG5);
+        self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+        if r.map_err(bus).is_ok() && b == st && p.map_err(bus)? & bits::PIN9_MASK == pin9 {
+            Ok(())
+        } else {
+            Err(ReadFault::Config)
+        }
     }
 
-    /// `init` in steps: soft reset; 1 ms later identify, configure (with
-    /// read-back), start the gyro and clear RESET_DONE; done after the
-    /// 45 ms gyro start-up. The configuration is the last one set.
+    /// `init` in steps: soft reset; 1 ms later identify and set the signal
+    /// path and clock; then range, rate, FIFO and start the gyro; after the
+    /// 45 ms gyro start-up flush the FIFO (with FIFO sampling) and done.
+    /// Each step is a handful of transactions, so a restart never makes a
+    /// heavy sample. The configuration is the last one set.
     fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
         let bus = |_| ReadFault::Bus;
+        let cfg = self.config;
         match step {
             0 => {
                 self.write(reg::DEVICE_CONFIG, SOFT_RESET).map_err(bus)?;
@@ -540,15 +1097,28 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                 if self.read(reg::WHO_AM_I).map_err(bus)? != WHO_AM_I_VALUE {
                     return Err(ReadFault::BadResponse);
                 }
-                let cfg = self.config;
+                self.configure_path(cfg)
+                    .map_err(|_| ReadFault::BadResponse)?;
+                Ok(Restart::Again {
+                    step: 2,
+                    wait_us: 0,
+                })
+            }
+            2 => {
                 self.configure(cfg).map_err(|_| ReadFault::BadResponse)?;
+                self.configure_fifo(cfg)
+                    .map_err(|_| ReadFault::BadResponse)?;
                 self.write_checked(reg::PWR_MGMT0, GYRO_MODE_LN)
                     .map_err(|_| ReadFault::BadResponse)?;
                 self.read(reg::INT_STATUS).map_err(bus)?;
                 Ok(Restart::Again {
-                    step: 2,
+                    step: 3,
                     wait_us: 45_000,
                 })
+            }
+            3 if cfg.sampling == Sampling::Fifo => {
+                self.flush_fifo().map_err(bus)?;
+                Ok(Restart::Done)
             }
             _ => Ok(Restart::Done),
         }
@@ -583,6 +1153,29 @@ mod tests {
             T::transaction_end(),
         ]
     }
+    /// A write and its read-back.
+    fn wrc(s: &mut Vec<T<u8>>, addr: u8, v: u8) {
+        s.extend(wr(addr, v));
+        s.extend(rd(addr, &[v]));
+    }
+
+    /// The signal path and clock: bank 1 (GYRO_CONFIG_STATIC2..5 at
+    /// 0x0B..0x0E, INTF_CONFIG5 at 0x7B), then INTF_CONFIG1 (0x4D),
+    /// GYRO_CONFIG1 (0x51), GYRO_ACCEL_CONFIG0 (0x52).
+    fn path(s: &mut Vec<T<u8>>, aaf: [u8; 4], pin9: u8, intf1: u8, cfg1: u8, gac0: u8) {
+        s.extend(wr(0x76, 0x01));
+        for (i, v) in aaf.iter().enumerate() {
+            wrc(s, 0x0B + i as u8, *v);
+        }
+        wrc(s, 0x7B, pin9);
+        s.extend(wr(0x76, 0x00));
+        wrc(s, 0x4D, intf1);
+        wrc(s, 0x51, cfg1);
+        wrc(s, 0x52, gac0);
+    }
+
+    /// 258 Hz AAF: DELT 6, DELTSQR 36, BITSHIFT 10 (datasheet table 17).
+    const AAF_258: [u8; 4] = [0xA0, 6, 36, 0xA0];
 
     #[test]
     fn init_resets_checks_id_and_configures() {
@@ -590,15 +1183,71 @@ mod tests {
         s.extend(wr(0x11, 0x01)); // DEVICE_CONFIG soft reset
         s.extend(wr(0x76, 0x00)); // bank 0
         s.extend(rd(0x75, &[0x47])); // WHO_AM_I
-        s.extend(wr(0x4F, 0x66)); // ±250 °/s (011) | 1 kHz (0110)
-        s.extend(rd(0x4F, &[0x66]));
-        s.extend(wr(0x4E, 0x0C)); // gyro low-noise
-        s.extend(rd(0x4E, &[0x0C]));
+                                     // AFSR off: INTF_CONFIG1 0x91 -> 0x51; UI filter 2nd order at
+                                     // ODR/4 (the reset values 0x16 and 0x11).
+        path(&mut s, AAF_258, 0x00, 0x51, 0x16, 0x11);
+        wrc(&mut s, 0x4F, 0x66); // ±250 °/s (011) | 1 kHz (0110)
+        wrc(&mut s, 0x4C, 0x30); // INTF_CONFIG0 at reset: no FIFO
+        wrc(&mut s, 0x5F, 0x00); // FIFO_CONFIG1: nothing in the FIFO
+        wrc(&mut s, 0x16, 0x00); // FIFO_CONFIG: bypass
+        wrc(&mut s, 0x4E, 0x0C); // gyro low-noise
         s.extend(rd(0x2D, &[0x10])); // INT_STATUS: clears RESET_DONE
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         g.init(&mut NoDelay, Config::default()).unwrap();
         assert_eq!(g.full_scale(), FullScale::Dps250);
+        spi.done();
+    }
+
+    #[test]
+    fn init_with_fifo_and_clkin() {
+        let mut s = Vec::new();
+        s.extend(wr(0x11, 0x01));
+        s.extend(wr(0x76, 0x00));
+        s.extend(rd(0x75, &[0x47]));
+        // PX4's 585 Hz AAF (DELT 13, DELTSQR 170, BITSHIFT 8), pin 9 as
+        // CLKIN (0b10 << 1), RTC_MODE (bit 2) with AFSR off; a 3rd-order UI
+        // filter (0b10 << 2) at ODR/5.
+        path(&mut s, [0xA0, 13, 170, 0x80], 0x04, 0x55, 0x1A, 0x12);
+        wrc(&mut s, 0x4F, 0x66);
+        wrc(&mut s, 0x4C, 0x70); // count in records
+        wrc(&mut s, 0x5F, 0x07); // temperature, gyro, accel slots
+        wrc(&mut s, 0x16, 0x80); // stop-on-full
+        wrc(&mut s, 0x4E, 0x0C);
+        s.extend(rd(0x2D, &[0x10]));
+        s.extend(wr(0x4B, 0x02)); // SIGNAL_PATH_RESET.FIFO_FLUSH
+        let mut spi = Mock::new(&s);
+        let mut g = Icm42688::new(spi.clone());
+        let cfg = Config {
+            filter: Filter {
+                aaf_delt: 13,
+                ui_order: 3,
+                ui_bw: 2,
+            },
+            clock: ClockInput::ClkIn,
+            sampling: Sampling::Fifo,
+            ..Config::default()
+        };
+        g.init(&mut NoDelay, cfg).unwrap();
+        spi.done();
+    }
+
+    #[test]
+    fn an_aaf_setting_outside_the_table_is_refused() {
+        let mut s = Vec::new();
+        s.extend(wr(0x11, 0x01));
+        s.extend(wr(0x76, 0x00));
+        s.extend(rd(0x75, &[0x47]));
+        let mut spi = Mock::new(&s);
+        let mut g = Icm42688::new(spi.clone());
+        let cfg = Config {
+            filter: Filter {
+                aaf_delt: 60,
+                ..Filter::BOARD
+            },
+            ..Config::default()
+        };
+        assert_eq!(g.init(&mut NoDelay, cfg), Err(Error::InvalidArgument));
         spi.done();
     }
 
@@ -626,7 +1275,7 @@ mod tests {
         let mut g = Icm42688::new(spi.clone());
         let cfg = Config {
             full_scale: FullScale::Dps2000,
-            odr: Odr::Hz1000,
+            ..Config::default()
         };
         assert_eq!(
             g.configure(cfg),
@@ -663,19 +1312,17 @@ mod tests {
         // INT_STATUS with RESET_DONE: the chip reset since it was set up.
         s.extend(rd(0x25, &[0x80, 0x00, 0x80, 0x00, 0x80, 0x00, 0, 0, 0x10]));
         s.extend(wr(0x11, 0x01)); // step 0: soft reset
-        s.extend(wr(0x76, 0x00)); // step 1: bank 0, id, config, gyro on
+        s.extend(wr(0x76, 0x00)); // step 1: bank 0, id, signal path
         s.extend(rd(0x75, &[0x47]));
-        s.extend(wr(0x4F, 0x06)); // the configuration set before
-        s.extend(rd(0x4F, &[0x06]));
-        s.extend(wr(0x4E, 0x0C));
-        s.extend(rd(0x4E, &[0x0C]));
+        path(&mut s, AAF_258, 0x00, 0x51, 0x16, 0x11);
+        wrc(&mut s, 0x4F, 0x06); // step 2: the configuration set before
+        wrc(&mut s, 0x4C, 0x30);
+        wrc(&mut s, 0x5F, 0x00);
+        wrc(&mut s, 0x16, 0x00);
+        wrc(&mut s, 0x4E, 0x0C);
         s.extend(rd(0x2D, &[0x10]));
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
-        g.config = Config {
-            full_scale: FullScale::Dps2000,
-            odr: Odr::Hz1000,
-        };
         assert_eq!(Gyro::read(&mut g), Err(ReadFault::Reset));
         assert_eq!(
             g.restart(0),
@@ -688,25 +1335,156 @@ mod tests {
             g.restart(1),
             Ok(Restart::Again {
                 step: 2,
+                wait_us: 0
+            })
+        );
+        assert_eq!(
+            g.restart(2),
+            Ok(Restart::Again {
+                step: 3,
                 wait_us: 45_000
             })
         );
-        assert_eq!(g.restart(2), Ok(Restart::Done));
+        assert_eq!(g.restart(3), Ok(Restart::Done));
         spi.done();
     }
 
     #[test]
-    fn config_check_reads_back_three_registers() {
+    fn config_check_reads_back_both_groups_in_turn() {
         let mut s = Vec::new();
+        // Group 0: REG_BANK_SEL, 0x4C..=0x52 in one burst, FIFO_CONFIG,
+        // FIFO_CONFIG1 (±2000 °/s, 1 kHz as `new` assumes).
         s.extend(rd(0x76, &[0x00]));
-        s.extend(rd(0x4F, &[0x06])); // ±2000 °/s, 1 kHz: as set
-        s.extend(rd(0x4E, &[0x0C]));
+        s.extend(rd(0x4C, &[0x30, 0x51, 0x0C, 0x06, 0x06, 0x16, 0x11]));
+        s.extend(rd(0x16, &[0x00]));
+        s.extend(rd(0x5F, &[0x00]));
+        // Group 1: bank 1, GYRO_CONFIG_STATIC2..5 in one burst, INTF_CONFIG5.
+        s.extend(wr(0x76, 0x01));
+        s.extend(rd(0x0B, &AAF_258));
+        s.extend(rd(0x7B, &[0x00]));
+        s.extend(wr(0x76, 0x00));
+        // Group 0 again: AFSR back on (a reset value): not what was set.
         s.extend(rd(0x76, &[0x00]));
-        s.extend(rd(0x4F, &[0x66])); // ±250 °/s: not what was set
+        s.extend(rd(0x4C, &[0x30, 0x91, 0x0C, 0x06, 0x06, 0x16, 0x11]));
+        // Group 1 again: the AAF at another setting.
+        s.extend(wr(0x76, 0x01));
+        s.extend(rd(0x0B, &[0xA0, 13, 170, 0x80]));
+        s.extend(rd(0x7B, &[0x00]));
+        s.extend(wr(0x76, 0x00));
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         assert_eq!(g.check_config(), Ok(()));
+        assert_eq!(g.check_config(), Ok(()));
         assert_eq!(g.check_config(), Err(ReadFault::Config));
+        assert_eq!(g.check_config(), Err(ReadFault::Config));
+        spi.done();
+    }
+
+    /// A packet 3: header 0x68, accel −32768 ×3, gyro, temperature, stamp.
+    fn packet(g: [i16; 3], stamp: u16) -> [u8; 16] {
+        let mut p = [0u8; 16];
+        p[0] = 0x68;
+        for i in 0..3 {
+            p[1 + 2 * i] = 0x80;
+            p[7 + 2 * i..9 + 2 * i].copy_from_slice(&g[i].to_be_bytes());
+        }
+        p[14..16].copy_from_slice(&stamp.to_be_bytes());
+        p
+    }
+
+    fn fifo_driver(s: &[T<u8>]) -> (Mock<u8>, Icm42688<Mock<u8>>) {
+        let spi = Mock::new(s);
+        let mut g = Icm42688::new(spi.clone());
+        g.config.sampling = Sampling::Fifo;
+        (spi, g)
+    }
+
+    /// The burst INT_STATUS, FIFO_COUNTH/L, one packet.
+    fn head(status: u8, count: u16, p: &[u8; 16]) -> [T<u8>; 4] {
+        let mut v = vec![status];
+        v.extend(count.to_be_bytes());
+        v.extend(p);
+        rd(0x2D, &v)
+    }
+
+    #[test]
+    fn fifo_reads_one_packet_in_one_transaction_and_more_in_a_second() {
+        let mut s = Vec::new();
+        s.extend(head(0x08, 1, &packet([1, -2, 3], 0xFFF0)));
+        // Two more came: the second is read from FIFO_DATA (0x30); the stamp
+        // wraps (0xFFF0 + 1000 µs).
+        s.extend(head(
+            0x08,
+            2,
+            &packet([4, 5, 6], 0xFFF0u16.wrapping_add(1000)),
+        ));
+        s.extend(rd(0x30, &packet([7, 8, 9], 0xFFF0u16.wrapping_add(2000))));
+        // Empty: the packet bytes read 0x80 and are not looked at.
+        s.extend(head(0x00, 0, &[0x80; 16]));
+        let (mut spi, mut g) = fifo_driver(&s);
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 4];
+        let r = g.read_fifo(&mut out).unwrap();
+        assert_eq!((r.samples, r.left, r.status), (1, 0, 0x08));
+        assert_eq!(out[0].raw, [1, -2, 3]);
+        assert_eq!(out[0].stamp_us, 0xFFF0);
+        let r = g.read_fifo(&mut out).unwrap();
+        assert_eq!((r.samples, r.left), (2, 0));
+        assert_eq!(out[0].raw, [4, 5, 6]);
+        assert_eq!(out[0].stamp_us, 0xFFF0 + 1000);
+        assert_eq!(out[1].stamp_us, 0xFFF0 + 2000);
+        assert_eq!(g.read_fifo(&mut out).unwrap().samples, 0);
+        spi.done();
+    }
+
+    #[test]
+    fn fifo_leaves_what_the_buffer_cannot_hold() {
+        let mut s = Vec::new();
+        s.extend(head(0x08, 3, &packet([1, 1, 1], 0)));
+        s.extend(rd(0x30, &packet([2, 2, 2], 1000)));
+        let (mut spi, mut g) = fifo_driver(&s);
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 2];
+        let r = g.read_fifo(&mut out).unwrap();
+        assert_eq!((r.samples, r.left), (2, 1));
+        spi.done();
+    }
+
+    #[test]
+    fn fifo_overflow_bad_header_and_short_fifo_flush_and_say_so() {
+        let mut s = Vec::new();
+        s.extend(head(0x0A, 128, &packet([0; 3], 0))); // FIFO_FULL
+        s.extend(wr(0x4B, 0x02));
+        let mut bad = packet([0; 3], 0);
+        bad[0] = 0x28; // gyro only: not the format configured
+        s.extend(head(0x08, 1, &bad));
+        s.extend(wr(0x4B, 0x02));
+        s.extend(head(0x08, 1, &[0x80; 16])); // counted, but empty
+        s.extend(wr(0x4B, 0x02));
+        let (mut spi, mut g) = fifo_driver(&s);
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 2];
+        assert_eq!(g.read_fifo(&mut out), Err(Error::FifoOverflow));
+        assert_eq!(g.read_fifo(&mut out), Err(Error::FifoBadHeader(0x28)));
+        assert_eq!(g.read_fifo(&mut out), Err(Error::FifoShort));
+        spi.done();
+    }
+
+    #[test]
+    fn fifo_read_without_fifo_sampling_is_refused() {
+        let (mut spi, mut g) = fifo_driver(&[]);
+        g.config.sampling = Sampling::Registers;
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 1];
+        assert_eq!(g.read_fifo(&mut out), Err(Error::NotFifo));
         spi.done();
     }
 
@@ -715,5 +1493,17 @@ mod tests {
         assert_eq!(factory_response_lsb(1), 327.5);
         assert!((factory_response_lsb(101) - 327.5 * 1.01f32.powi(100)).abs() < 0.05);
         assert_eq!(factory_response_lsb(0), 0.0);
+    }
+
+    #[test]
+    fn aaf_coefficient_table() {
+        // The pairs PX4 (585 Hz) and ArduPilot (258, 536, 997 Hz) write.
+        assert_eq!(aaf_coefficients(6), Some((36, 10)));
+        assert_eq!(aaf_coefficients(12), Some((144, 8)));
+        assert_eq!(aaf_coefficients(13), Some((170, 8)));
+        assert_eq!(aaf_coefficients(21), Some((440, 6)));
+        assert_eq!(aaf_coefficients(63), Some((3968, 3)));
+        assert_eq!(aaf_coefficients(60), None);
+        assert_eq!(aaf_coefficients(0), None);
     }
 }

@@ -12,6 +12,7 @@ pub mod icm42688;
 pub mod mount;
 pub mod noise;
 pub mod rng;
+pub mod timing;
 
 use core::cell::Cell;
 use core::convert::Infallible;
@@ -20,7 +21,7 @@ use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
 pub use adxrs453::Adxrs453Model;
-pub use icm42688::Icm42688Model;
+pub use icm42688::{ChipTiming, Icm42688Model};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;
@@ -91,10 +92,12 @@ impl Chip {
             Chip::Adx(c) => c.exchange(mosi),
         }
     }
-    /// Advance the chip's sensor by one sample period at time `t_s`.
-    pub fn advance(&mut self, t_s: f32, dt_s: f32) {
+    /// Advance the chip's sensor by one bus step to time `t_s` (f32; and
+    /// `t64_s`, the same time in f64, for the chips that keep their own
+    /// time), with the board driving CLKIN at `clkin_hz`.
+    pub fn advance(&mut self, t_s: f32, dt_s: f32, t64_s: f64, clkin_hz: Option<f64>) {
         match self {
-            Chip::Icm(c) => c.advance(t_s, dt_s),
+            Chip::Icm(c) => c.advance(t_s, dt_s, t64_s, clkin_hz),
             Chip::Adx(c) => c.advance(t_s, dt_s),
         }
     }
@@ -161,6 +164,14 @@ impl Chip {
     pub fn corrupt_config(&mut self) {
         if let Chip::Icm(c) = self {
             c.corrupt_config();
+        }
+    }
+
+    /// The ICM-42688-P model, if this is one.
+    pub fn icm(&mut self) -> Option<&mut Icm42688Model> {
+        match self {
+            Chip::Icm(c) => Some(c),
+            Chip::Adx(_) => None,
         }
     }
 
@@ -238,6 +249,10 @@ pub struct EmuBus<'a, const N: usize> {
     cs: &'a [CsLine; N],
     seen: [u32; N],
     t_s: f32,
+    t64_s: f64,
+    /// The board's CLKIN output to every ICM-42688-P, Hz (`None`: not
+    /// driven, or stopped).
+    pub clkin_hz: Option<f64>,
     /// Bytes exchanged so far (a bus-load figure for benchmarks).
     pub bytes: u32,
     /// A benchmark's clock: when set, the time spent inside the bus
@@ -267,6 +282,8 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             cs,
             seen: [0; N],
             t_s: 0.0,
+            t64_s: 0.0,
+            clkin_hz: None,
             bytes: 0,
             clock: None,
             meter: Meter::default(),
@@ -289,14 +306,21 @@ impl<'a, const N: usize> EmuBus<'a, N> {
     /// Advance every chip by one sample period.
     pub fn advance(&mut self, dt_s: f32) {
         self.t_s += dt_s;
+        self.t64_s += dt_s as f64;
         for c in self.chips.iter_mut() {
-            c.advance(self.t_s, dt_s);
+            c.advance(self.t_s, dt_s, self.t64_s, self.clkin_hz);
         }
     }
 
     /// Emulated time in seconds.
     pub fn time_s(&self) -> f32 {
         self.t_s
+    }
+
+    /// Emulated time in seconds, f64 (the chips on their own clocks run on
+    /// it).
+    pub fn time64_s(&self) -> f64 {
+        self.t64_s
     }
 
     fn exchange(&mut self, mosi: u8) -> Result<u8, BusError> {

@@ -164,6 +164,21 @@ impl RateProfile {
     }
 }
 
+impl RateProfile {
+    /// The true rate at time `t_s`, in f64: the chips on their own clocks
+    /// sample it at 32 kHz for minutes, where an f32 time is 61 µs coarse
+    /// after 10 minutes.
+    pub fn at_f64(&self, t_s: f64) -> [f64; 3] {
+        let t = t_s - self.sine_start_s as f64;
+        let s = if t > 0.0 {
+            libm::sin(2.0 * core::f64::consts::PI * self.sine_hz as f64 * t)
+        } else {
+            0.0
+        };
+        core::array::from_fn(|i| self.base_dps[i] as f64 + self.sine_dps[i] as f64 * s)
+    }
+}
+
 /// Round to counts and clamp to the 16-bit output register.
 pub fn quantise(dps: f32, lsb_per_dps: f32) -> i16 {
     let c = libm::roundf(dps * lsb_per_dps);

@@ -1,0 +1,348 @@
+//! The ICM-42688-P driver against the emulated chip on its own clock: FIFO
+//! reads that lose and repeat nothing whatever the chip's clock, overflow
+//! reported, CLKIN locking the rate, AFSR's freeze, and the signal path's
+//! aliasing and delay against the filters' closed forms.
+
+use std::cell::RefCell;
+
+use embedded_hal_bus::spi::RefCellDevice;
+use gyro_array::drivers::icm42688::{
+    ClockInput, Config, Error, FifoSample, Filter, Icm42688, Sampling,
+};
+use gyro_array::emu::timing::{ClockParams, Vibration};
+use gyro_array::emu::{
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    RateProfile,
+};
+
+type Bus<'a> = RefCell<EmuBus<'a, 1>>;
+
+fn chip(profile: RateProfile, noise: NoiseParams, timing: ChipTiming) -> Chip {
+    let mut c = Icm42688Model::new(noise, profile, 7, 80);
+    c.set_timing(Some(timing));
+    Chip::Icm(c)
+}
+
+fn fifo_config(filter: Filter, clock: ClockInput) -> Config {
+    Config {
+        filter,
+        clock,
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    }
+}
+
+/// What a run of FIFO reads found.
+#[derive(Default, Debug)]
+struct Reads {
+    samples: Vec<FifoSample>,
+    /// Bus time of the read each sample came out in.
+    read_at_s: Vec<f64>,
+    empty: u32,
+    overflows: u32,
+    other_errors: u32,
+}
+
+/// Run `ms` bus steps of 1 ms, reading the FIFO after each unless
+/// `skip(n)`; `each(n, bus)` runs before the step.
+fn run(
+    c: Chip,
+    cfg: Config,
+    clkin_hz: Option<f64>,
+    ms: u32,
+    mut each: impl FnMut(u32, &Bus),
+    skip: impl Fn(u32) -> bool,
+) -> (Reads, f64, u64) {
+    let cs: [CsLine; 1] = Default::default();
+    let bus: Bus = RefCell::new(EmuBus::new([c], &cs));
+    with_bus(&bus, |b| b.clkin_hz = clkin_hz);
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let mut g = Icm42688::new(dev);
+    g.init(&mut delay, cfg).expect("init");
+    let mut r = Reads::default();
+    let mut buf = [FifoSample {
+        raw: [0; 3],
+        stamp_us: 0,
+    }; 8];
+    for n in 0..ms {
+        each(n, &bus);
+        with_bus(&bus, |b| b.advance(1e-3));
+        if skip(n) {
+            continue;
+        }
+        let now = with_bus(&bus, |b| b.time64_s()).unwrap();
+        match g.read_fifo(&mut buf) {
+            Ok(f) => {
+                if f.samples == 0 {
+                    r.empty += 1;
+                }
+                r.samples.extend_from_slice(&buf[..f.samples]);
+                r.read_at_s.extend(std::iter::repeat_n(now, f.samples));
+            }
+            Err(Error::FifoOverflow) => r.overflows += 1,
+            Err(_) => r.other_errors += 1,
+        }
+    }
+    let (origin, made) = with_bus(&bus, |b| {
+        let c = b.chips[0].icm().unwrap();
+        (c.clock_origin_s().unwrap(), c.samples_made())
+    })
+    .unwrap();
+    (r, origin, made)
+}
+
+fn stamps_step_by(r: &Reads, us: u32) -> bool {
+    r.samples
+        .windows(2)
+        .all(|w| w[1].stamp_us.wrapping_sub(w[0].stamp_us) == us)
+}
+
+#[test]
+fn fifo_loses_and_repeats_nothing_on_a_fast_or_slow_clock() {
+    for offset in [0.01, -0.01, 0.08, -0.08] {
+        let t = ChipTiming {
+            pll: ClockParams {
+                offset,
+                drift_per_s: 2e-4,
+                wander: 1e-3,
+                wander_period_s: 3.0,
+            },
+            ..ChipTiming::pll(0.0)
+        };
+        let c = chip(RateProfile::constant(5.0), NoiseParams::ICM42688, t);
+        let (r, _, made) = run(
+            c,
+            fifo_config(Filter::BOARD, ClockInput::Internal),
+            None,
+            10_000,
+            |_, _| {},
+            |_| false,
+        );
+        // Every sample made after the start-up flush came out once, in
+        // order (its stamps 1 000 µs of chip time apart).
+        let flushed = made - r.samples.len() as u64;
+        assert!(flushed <= 50, "offset {offset}: {flushed} not read");
+        assert!(stamps_step_by(&r, 1000), "offset {offset}");
+        assert_eq!((r.overflows, r.other_errors), (0, 0));
+        let rate = r.samples.len() as f64 / 10.0;
+        let e = t.pll.error_at(5.0);
+        assert!((rate / (1000.0 * (1.0 + e)) - 1.0).abs() < 0.01, "{rate}");
+        if offset < 0.0 {
+            assert!(r.empty > 0, "a slow chip has nothing new on some reads");
+        }
+    }
+}
+
+#[test]
+fn a_stalled_bus_overflows_and_the_driver_says_so() {
+    let c = chip(
+        RateProfile::constant(0.0),
+        NoiseParams::ICM42688,
+        ChipTiming::pll(0.002),
+    );
+    // No reads for 200 ms: 2 048 bytes hold 128 packets.
+    let (r, _, _) = run(
+        c,
+        fifo_config(Filter::BOARD, ClockInput::Internal),
+        None,
+        1000,
+        |_, _| {},
+        |n| (300..500).contains(&n),
+    );
+    assert_eq!(r.overflows, 1);
+    assert_eq!(r.other_errors, 0);
+    // After the flush the stream is whole again: stamps 1 ms apart within
+    // each side of the gap.
+    let gap = r
+        .samples
+        .windows(2)
+        .filter(|w| w[1].stamp_us.wrapping_sub(w[0].stamp_us) != 1000)
+        .count();
+    assert_eq!(gap, 1);
+}
+
+#[test]
+fn clkin_sets_the_rate_and_its_loss_stops_the_chip() {
+    let t = ChipTiming::pll(0.03); // the PLL's error no longer matters
+    for (hz, per_s) in [(32_000.0, 1000.0), (32_768.0, 1024.0)] {
+        let c = chip(RateProfile::constant(1.0), NoiseParams::ICM42688, t);
+        let (r, _, _) = run(
+            c,
+            fifo_config(Filter::BOARD, ClockInput::ClkIn),
+            Some(hz),
+            4000,
+            |_, bus| {
+                // CLKIN stops at 3 s.
+                with_bus(bus, |b| {
+                    if b.time64_s() >= 3.0 {
+                        b.clkin_hz = None;
+                    }
+                });
+            },
+            |_| false,
+        );
+        let before: Vec<_> = r
+            .read_at_s
+            .iter()
+            .filter(|t| **t > 1.0 && **t <= 3.0)
+            .collect();
+        assert!(
+            (before.len() as f64 - 2.0 * per_s).abs() <= 1.0,
+            "{hz}: {}",
+            before.len()
+        );
+        let after = r.read_at_s.iter().filter(|t| **t > 3.002).count();
+        assert_eq!(after, 0, "{hz}: samples without CLKIN");
+        assert!(r.empty >= 990);
+    }
+}
+
+/// The longest run of bit-identical samples on any axis while the rate is
+/// between 60 and 140 °/s.
+fn longest_freeze(r: &Reads) -> usize {
+    let mut longest = 0;
+    for axis in 0..3 {
+        let mut run = 0;
+        for w in r.samples.windows(2) {
+            let v = w[1].raw[axis] as f32 / 131.0;
+            if w[1].raw[axis] == w[0].raw[axis] && (60.0..140.0).contains(&v.abs()) {
+                run += 1;
+                longest = longest.max(run);
+            } else {
+                run = 0;
+            }
+        }
+    }
+    longest
+}
+
+#[test]
+fn afsr_freezes_the_output_unless_turned_off() {
+    // A 150 °/s, 2 Hz sway crosses 100 °/s four times a second; with no
+    // noise, only AFSR can repeat a sample there (the rate moves by 1.6
+    // °/s, 200 counts, a millisecond).
+    let profile = RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [150.0, -150.0, 120.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    };
+    let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
+    let (off, _, _) = run(
+        c,
+        fifo_config(Filter::BOARD, ClockInput::Internal),
+        None,
+        3000,
+        |_, _| {},
+        |_| false,
+    );
+    assert_eq!(longest_freeze(&off), 0);
+    // AFSR back on (INTF_CONFIG1 at its reset value 0x91) behind the
+    // driver's back.
+    let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
+    let (on, _, _) = run(
+        c,
+        fifo_config(Filter::BOARD, ClockInput::Internal),
+        None,
+        3000,
+        |n, bus| {
+            if n == 0 {
+                with_bus(bus, |b| b.chips[0].icm().map(|c| c.poke(0, 0x4D, 0x91)));
+            }
+        },
+        |_| false,
+    );
+    let f = longest_freeze(&on);
+    assert!((1..=2).contains(&f), "AFSR froze {f} samples");
+}
+
+/// Amplitude of `x` (sampled at `fs_hz`) at `f_hz`, by a single DFT bin.
+fn amplitude(x: &[f64], fs_hz: f64, f_hz: f64) -> f64 {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (i, v) in x.iter().enumerate() {
+        let p = 2.0 * std::f64::consts::PI * f_hz * i as f64 / fs_hz;
+        re += v * p.cos();
+        im += v * p.sin();
+    }
+    2.0 * (re * re + im * im).sqrt() / x.len() as f64
+}
+
+/// |H| of a Butterworth low-pass of `order` at `fc` (the analogue
+/// response: the bilinear design matches it to within 1 % below 4 kHz at
+/// 32 kHz).
+fn butter(order: i32, fc: f64, f: f64) -> f64 {
+    1.0 / (1.0 + (f / fc).powi(2 * order)).sqrt()
+}
+
+#[test]
+fn an_out_of_band_tone_aliases_as_the_filters_allow() {
+    // 20 °/s at 950 Hz on x, sampled at 1 kHz: it folds to 50 Hz,
+    // attenuated by the AAF (258 Hz, 2nd order) and the UI filter
+    // (250 Hz, 2nd order) at 950 Hz.
+    let t = ChipTiming {
+        vibration: Vibration::tone(20.0, 950.0),
+        ..ChipTiming::pll(0.0)
+    };
+    let c = chip(RateProfile::constant(0.0), NoiseParams::IDEAL, t);
+    let (r, _, _) = run(
+        c,
+        fifo_config(Filter::ARDUPILOT, ClockInput::Internal),
+        None,
+        2100,
+        |_, _| {},
+        |_| false,
+    );
+    let x: Vec<f64> = r.samples[50..2050]
+        .iter()
+        .map(|s| s.raw[0] as f64 / 131.0)
+        .collect();
+    let got = amplitude(&x, 1000.0, 50.0);
+    let want = 20.0 * butter(2, 258.0, 950.0) * butter(2, 250.0, 950.0);
+    assert!((got / want - 1.0).abs() < 0.05, "{got} vs {want}");
+}
+
+#[test]
+fn the_path_delays_a_slow_signal_by_its_group_delay() {
+    // A 5 Hz, 60 °/s sine through PX4's filters on an exact clock: the lag
+    // that best aligns the samples with the truth at their stamped instants
+    // is the path's group delay at DC (within 15 µs: 5 Hz is far below
+    // the poles).
+    let profile = RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [60.0, 0.0, 0.0],
+        sine_hz: 5.0,
+        sine_start_s: 0.0,
+    };
+    let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
+    let (r, origin, _) = run(
+        c,
+        fifo_config(Filter::PX4, ClockInput::Internal),
+        None,
+        1000,
+        |_, _| {},
+        |_| false,
+    );
+    let want = {
+        let s = gyro_array::emu::timing::PathSettings {
+            aaf_hz: Some(585.0),
+            ui: Some((2, 250.0)),
+            odr_hz: 1000.0,
+        };
+        s.group_delay_s()
+    };
+    let err = |lag: f64| {
+        let mut e = 0.0;
+        for s in &r.samples[100..] {
+            let t = origin + s.stamp_us as f64 * 1e-6 - lag;
+            let truth = 60.0 * (2.0 * std::f64::consts::PI * 5.0 * t).sin();
+            e += (s.raw[0] as f64 / 131.0 - truth).powi(2);
+        }
+        e
+    };
+    let best = (0..4000)
+        .map(|k| k as f64 * 1e-6)
+        .min_by(|a, b| err(*a).total_cmp(&err(*b)))
+        .unwrap();
+    assert!((best - want).abs() < 15e-6, "lag {best} vs {want}");
+}
