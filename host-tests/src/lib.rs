@@ -3,6 +3,8 @@
 // numeric code indexes several arrays by the same chip index.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
+pub mod single_chip;
+
 pub mod calibration {
     //! The static calibration procedure on the emulated array (issue 9):
     //! a rate table (±100 °/s about each board axis at 25 °C) and a

@@ -3,25 +3,10 @@
 //! reported, CLKIN locking the rate, AFSR's freeze, and the signal path's
 //! aliasing and delay against the filters' closed forms.
 
-use std::cell::RefCell;
-
-use embedded_hal_bus::spi::RefCellDevice;
-use gyro_array::drivers::icm42688::{
-    ClockInput, Config, Error, FifoSample, Filter, Icm42688, Sampling,
-};
-use gyro_array::emu::timing::{ClockParams, Vibration};
-use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
-    RateProfile,
-};
-
-type Bus<'a> = RefCell<EmuBus<'a, 1>>;
-
-fn chip(profile: RateProfile, noise: NoiseParams, timing: ChipTiming) -> Chip {
-    let mut c = Icm42688Model::new(noise, profile, 7, 80);
-    c.set_timing(Some(timing));
-    Chip::Icm(c)
-}
+use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Sampling};
+use gyro_array::emu::timing::{ClockParams, PathSettings, Vibration};
+use gyro_array::emu::{with_bus, ChipTiming, NoiseParams, RateProfile};
+use host_tests::single_chip::{chip, run, Reads};
 
 fn fifo_config(filter: Filter, clock: ClockInput) -> Config {
     Config {
@@ -30,66 +15,6 @@ fn fifo_config(filter: Filter, clock: ClockInput) -> Config {
         sampling: Sampling::Fifo,
         ..Config::default()
     }
-}
-
-/// What a run of FIFO reads found.
-#[derive(Default, Debug)]
-struct Reads {
-    samples: Vec<FifoSample>,
-    /// Bus time of the read each sample came out in.
-    read_at_s: Vec<f64>,
-    empty: u32,
-    overflows: u32,
-    other_errors: u32,
-}
-
-/// Run `ms` bus steps of 1 ms, reading the FIFO after each unless
-/// `skip(n)`; `each(n, bus)` runs before the step.
-fn run(
-    c: Chip,
-    cfg: Config,
-    clkin_hz: Option<f64>,
-    ms: u32,
-    mut each: impl FnMut(u32, &Bus),
-    skip: impl Fn(u32) -> bool,
-) -> (Reads, f64, u64) {
-    let cs: [CsLine; 1] = Default::default();
-    let bus: Bus = RefCell::new(EmuBus::new([c], &cs));
-    with_bus(&bus, |b| b.clkin_hz = clkin_hz);
-    let mut delay = EmuDelay::new(&bus, 1e-3);
-    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
-    let mut g = Icm42688::new(dev);
-    g.init(&mut delay, cfg).expect("init");
-    let mut r = Reads::default();
-    let mut buf = [FifoSample {
-        raw: [0; 3],
-        stamp_us: 0,
-    }; 8];
-    for n in 0..ms {
-        each(n, &bus);
-        with_bus(&bus, |b| b.advance(1e-3));
-        if skip(n) {
-            continue;
-        }
-        let now = with_bus(&bus, |b| b.time64_s()).unwrap();
-        match g.read_fifo(&mut buf) {
-            Ok(f) => {
-                if f.samples == 0 {
-                    r.empty += 1;
-                }
-                r.samples.extend_from_slice(&buf[..f.samples]);
-                r.read_at_s.extend(std::iter::repeat_n(now, f.samples));
-            }
-            Err(Error::FifoOverflow) => r.overflows += 1,
-            Err(_) => r.other_errors += 1,
-        }
-    }
-    let (origin, made) = with_bus(&bus, |b| {
-        let c = b.chips[0].icm().unwrap();
-        (c.clock_origin_s().unwrap(), c.samples_made())
-    })
-    .unwrap();
-    (r, origin, made)
 }
 
 fn stamps_step_by(r: &Reads, us: u32) -> bool {
@@ -111,7 +36,7 @@ fn fifo_loses_and_repeats_nothing_on_a_fast_or_slow_clock() {
             ..ChipTiming::pll(0.0)
         };
         let c = chip(RateProfile::constant(5.0), NoiseParams::ICM42688, t);
-        let (r, _, made) = run(
+        let r = run(
             c,
             fifo_config(Filter::BOARD, ClockInput::Internal),
             None,
@@ -121,7 +46,7 @@ fn fifo_loses_and_repeats_nothing_on_a_fast_or_slow_clock() {
         );
         // Every sample made after the start-up flush came out once, in
         // order (its stamps 1 000 µs of chip time apart).
-        let flushed = made - r.samples.len() as u64;
+        let flushed = r.made - r.samples.len() as u64;
         assert!(flushed <= 50, "offset {offset}: {flushed} not read");
         assert!(stamps_step_by(&r, 1000), "offset {offset}");
         assert_eq!((r.overflows, r.other_errors), (0, 0));
@@ -142,7 +67,7 @@ fn a_stalled_bus_overflows_and_the_driver_says_so() {
         ChipTiming::pll(0.002),
     );
     // No reads for 200 ms: 2 048 bytes hold 128 packets.
-    let (r, _, _) = run(
+    let r = run(
         c,
         fifo_config(Filter::BOARD, ClockInput::Internal),
         None,
@@ -167,7 +92,7 @@ fn clkin_sets_the_rate_and_its_loss_stops_the_chip() {
     let t = ChipTiming::pll(0.03); // the PLL's error no longer matters
     for (hz, per_s) in [(32_000.0, 1000.0), (32_768.0, 1024.0)] {
         let c = chip(RateProfile::constant(1.0), NoiseParams::ICM42688, t);
-        let (r, _, _) = run(
+        let r = run(
             c,
             fifo_config(Filter::BOARD, ClockInput::ClkIn),
             Some(hz),
@@ -229,7 +154,7 @@ fn afsr_freezes_the_output_unless_turned_off() {
         sine_start_s: 0.0,
     };
     let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
-    let (off, _, _) = run(
+    let off = run(
         c,
         fifo_config(Filter::BOARD, ClockInput::Internal),
         None,
@@ -241,7 +166,7 @@ fn afsr_freezes_the_output_unless_turned_off() {
     // AFSR back on (INTF_CONFIG1 at its reset value 0x91) behind the
     // driver's back.
     let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
-    let (on, _, _) = run(
+    let on = run(
         c,
         fifo_config(Filter::BOARD, ClockInput::Internal),
         None,
@@ -285,7 +210,7 @@ fn an_out_of_band_tone_aliases_as_the_filters_allow() {
         ..ChipTiming::pll(0.0)
     };
     let c = chip(RateProfile::constant(0.0), NoiseParams::IDEAL, t);
-    let (r, _, _) = run(
+    let r = run(
         c,
         fifo_config(Filter::ARDUPILOT, ClockInput::Internal),
         None,
@@ -315,7 +240,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
         sine_start_s: 0.0,
     };
     let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
-    let (r, origin, _) = run(
+    let r = run(
         c,
         fifo_config(Filter::PX4, ClockInput::Internal),
         None,
@@ -324,7 +249,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
         |_| false,
     );
     let want = {
-        let s = gyro_array::emu::timing::PathSettings {
+        let s = PathSettings {
             aaf_hz: Some(585.0),
             ui: Some((2, 250.0)),
             odr_hz: 1000.0,
@@ -334,7 +259,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
     let err = |lag: f64| {
         let mut e = 0.0;
         for s in &r.samples[100..] {
-            let t = origin + s.stamp_us as f64 * 1e-6 - lag;
+            let t = r.origin_s + s.stamp_us as f64 * 1e-6 - lag;
             let truth = 60.0 * (2.0 * std::f64::consts::PI * 5.0 * t).sin();
             e += (s.raw[0] as f64 / 131.0 - truth).powi(2);
         }

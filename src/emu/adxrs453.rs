@@ -3,6 +3,7 @@
 
 use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
+use super::timing::{Biquad, ClockParams, Vibration};
 use super::{corrupt, Fault, Rng};
 use crate::drivers::adxrs453::{c_to_tem, cmd, fault, reg, LSB_PER_DPS};
 
@@ -17,6 +18,45 @@ fn seal(mut r: u32) -> u32 {
         r |= 1;
     }
     r
+}
+
+/// The ADXRS453's internal rate update, Hz. Assumed: the datasheet gives
+/// the output's bandwidth, not the rate at which the rate register is
+/// refreshed; 4 kHz is well above the 77.5 Hz bandwidth and makes the
+/// update's own half-period delay (0.125 ms) small beside the filter's.
+pub const ADX_UPDATE_HZ: f64 = 4000.0;
+/// The ADXRS453's rate bandwidth, Hz (datasheet table 1, "Bandwidth").
+pub const ADX_BANDWIDTH_HZ: f64 = 77.5;
+
+/// How an emulated ADXRS453 keeps time: its internal oscillator (no clock
+/// input) and the vibration at its die.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdxTiming {
+    /// The internal clock's frequency error.
+    pub clock: ClockParams,
+    /// Out-of-band vibration (board axes; the part's own axis counts).
+    pub vibration: Vibration,
+}
+
+/// The state of an ADXRS453 on its own clock. Modelling assumptions: the
+/// rate passes a 2nd-order Butterworth low-pass at the datasheet's 77.5 Hz
+/// (the order is not stated; its group delay at DC, √2/ω = 2.9 ms, is the
+/// "few milliseconds" the part is known for), run at [`ADX_UPDATE_HZ`];
+/// the white noise enters before it, so its density is the datasheet's at
+/// low frequency and falls above the bandwidth, as the part's does.
+#[derive(Clone, Copy, Debug)]
+struct AdxTimed {
+    timing: AdxTiming,
+    next_tick_s: Option<f64>,
+    now_s: f64,
+    lp: Biquad,
+    primed: bool,
+}
+
+impl AdxTimed {
+    /// The filter's group delay at DC, s.
+    const DELAY_S: f64 =
+        core::f64::consts::SQRT_2 / (2.0 * core::f64::consts::PI * ADX_BANDWIDTH_HZ);
 }
 
 /// An emulated ADXRS453 mounted on board axis `axis`.
@@ -44,6 +84,7 @@ pub struct Adxrs453Model {
     /// Reset since the last start-up check: responses flag POR, data are
     /// not valid.
     por: bool,
+    timed: Option<AdxTimed>,
 }
 
 impl Adxrs453Model {
@@ -71,6 +112,33 @@ impl Adxrs453Model {
             mount: Mount::ALIGNED,
             temp_c: 25.0,
             por: false,
+            timed: None,
+        }
+    }
+
+    /// Keep time as the part does (`Some`): its own clock, its filter.
+    /// `None` is the ideal lockstep sampler.
+    pub fn set_timing(&mut self, timing: Option<AdxTiming>) {
+        self.timed = timing.map(|timing| AdxTimed {
+            timing,
+            next_tick_s: None,
+            now_s: 0.0,
+            lp: Biquad::lowpass(
+                ADX_BANDWIDTH_HZ,
+                core::f64::consts::FRAC_1_SQRT_2,
+                ADX_UPDATE_HZ,
+            ),
+            primed: false,
+        });
+    }
+
+    /// The delay of the part's filter at DC, s (0 for the lockstep
+    /// sampler).
+    pub fn path_delay_s(&self) -> f64 {
+        if self.timed.is_some() {
+            AdxTimed::DELAY_S
+        } else {
+            0.0
         }
     }
 
@@ -148,16 +216,25 @@ impl Adxrs453Model {
         }
     }
 
-    pub(super) fn advance(&mut self, t_s: f32, dt_s: f32) {
+    pub(super) fn advance(&mut self, t_s: f32, dt_s: f32, t64_s: f64) {
+        if self.timed.is_some() {
+            self.advance_timed(t64_s);
+            return;
+        }
         self.true_rate_dps = self.profile.at(t_s);
         let axis = self.axis.min(2);
         let chip = self.mount.chip_rate(self.true_rate_dps);
         let (thermal, temp_c) = self.mount.thermal(t_s);
         self.temp_c = temp_c;
-        let mut dps = self
+        let dps = self
             .noise
             .step(&self.params, &mut self.rng, chip[axis], dt_s)
             + thermal[axis];
+        self.latch(dps);
+    }
+
+    /// Spikes and faults, then the rate register.
+    fn latch(&mut self, mut dps: f32) {
         if let Fault::Spikes {
             prob,
             magnitude_dps,
@@ -176,5 +253,42 @@ impl Adxrs453Model {
             Fault::Saturated => self.rate = i16::MAX,
             _ => self.rate = quantise(dps, LSB_PER_DPS),
         }
+    }
+
+    fn advance_timed(&mut self, t_end_s: f64) {
+        let Some(mut t) = self.timed.take() else {
+            return;
+        };
+        self.true_rate_dps = self.profile.at(t_end_s as f32);
+        let axis = self.axis.min(2);
+        let dt = (1.0 / ADX_UPDATE_HZ) as f32;
+        loop {
+            let rate = ADX_UPDATE_HZ * (1.0 + t.timing.clock.error_at(t.now_s));
+            let next = t.next_tick_s.unwrap_or(t.now_s + 1.0 / rate);
+            if next > t_end_s {
+                t.next_tick_s = Some(next);
+                break;
+            }
+            t.now_s = next;
+            t.next_tick_s = Some(next + 1.0 / rate);
+            if self.fault == Fault::PoweredOff {
+                continue;
+            }
+            let b = self.profile.at_f64(next);
+            let v = t.timing.vibration.at(next);
+            let board: [f32; 3] = core::array::from_fn(|i| (b[i] + v[i]) as f32);
+            let chip = self.mount.chip_rate(board);
+            let (thermal, temp_c) = self.mount.thermal(next as f32);
+            self.temp_c = temp_c;
+            let x = self.noise.step(&self.params, &mut self.rng, chip[axis], dt) + thermal[axis];
+            if !t.primed {
+                t.primed = true;
+                t.lp.settle(x as f64);
+            }
+            let y = t.lp.step(x as f64) as f32;
+            self.latch(y);
+        }
+        t.now_s = t_end_s;
+        self.timed = Some(t);
     }
 }

@@ -20,7 +20,7 @@ use core::convert::Infallible;
 use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
-pub use adxrs453::Adxrs453Model;
+pub use adxrs453::{AdxTiming, Adxrs453Model};
 pub use icm42688::{ChipTiming, Icm42688Model};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
@@ -98,7 +98,7 @@ impl Chip {
     pub fn advance(&mut self, t_s: f32, dt_s: f32, t64_s: f64, clkin_hz: Option<f64>) {
         match self {
             Chip::Icm(c) => c.advance(t_s, dt_s, t64_s, clkin_hz),
-            Chip::Adx(c) => c.advance(t_s, dt_s),
+            Chip::Adx(c) => c.advance(t_s, dt_s, t64_s),
         }
     }
     /// Inject (or clear, with [`Fault::None`]) a fault. Leaving
