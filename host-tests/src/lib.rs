@@ -4,6 +4,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 pub mod single_chip;
+pub mod timed_array;
 
 pub mod calibration {
     //! The static calibration procedure on the emulated array (issue 9):

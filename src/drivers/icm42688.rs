@@ -13,6 +13,7 @@ use super::{Gyro, ReadFault, Reading, Restart};
 #[allow(missing_docs)]
 pub mod reg {
     pub const DEVICE_CONFIG: u8 = 0x11;
+    pub const INT_CONFIG: u8 = 0x14;
     pub const FIFO_CONFIG: u8 = 0x16;
     pub const TEMP_DATA1: u8 = 0x1D;
     pub const GYRO_DATA_X1: u8 = 0x25;
@@ -31,6 +32,8 @@ pub mod reg {
     pub const FIFO_CONFIG1: u8 = 0x5F;
     pub const FIFO_CONFIG2: u8 = 0x60;
     pub const FIFO_CONFIG3: u8 = 0x61;
+    pub const INT_CONFIG1: u8 = 0x64;
+    pub const INT_SOURCE0: u8 = 0x65;
     pub const SELF_TEST_CONFIG: u8 = 0x70;
     pub const WHO_AM_I: u8 = 0x75;
     pub const REG_BANK_SEL: u8 = 0x76;
@@ -87,6 +90,14 @@ pub mod bits {
     pub const TMST_RES: u8 = 1 << 3;
     pub const TMST_DELTA_EN: u8 = 1 << 2;
     pub const TMST_EN: u8 = 1 << 0;
+    /// INT_CONFIG: INT1 push-pull (bit 1), active high (bit 0), pulsed
+    /// (bit 2 clear).
+    pub const INT1_PUSH_PULL_HIGH: u8 = 0b011;
+    /// INT_CONFIG1.INT_ASYNC_RESET (bit 4): must be cleared for the INT
+    /// pins to work (datasheet 14.x; PX4 clears it).
+    pub const INT_ASYNC_RESET: u8 = 1 << 4;
+    /// INT_SOURCE0.UI_DRDY_INT1_EN: data ready on INT1.
+    pub const UI_DRDY_INT1_EN: u8 = 1 << 3;
     /// Bank 1 GYRO_CONFIG_STATIC2.
     pub const GYRO_AAF_DIS: u8 = 1 << 1;
     /// Bank 1 INTF_CONFIG5.PIN9_FUNCTION (bits 2:1).
@@ -111,6 +122,8 @@ pub mod reset {
     pub const GYRO_CONFIG1: u8 = 0x16;
     pub const GYRO_ACCEL_CONFIG0: u8 = 0x11;
     pub const TMST_CONFIG: u8 = 0x23;
+    pub const INT_CONFIG1: u8 = 0x10;
+    pub const INT_SOURCE0: u8 = 0x10;
 }
 
 /// WHO_AM_I value of the ICM-42688-P.
@@ -261,6 +274,9 @@ pub enum Error<E> {
     FifoShort,
     /// FIFO sampling is not configured.
     NotFifo,
+    /// INT_STATUS.RESET_DONE: the chip reset since it was configured; it
+    /// must be restarted.
+    ChipReset,
 }
 
 impl<E> Error<E> {
@@ -278,6 +294,7 @@ impl<E> Error<E> {
             Error::FifoBadHeader(h) => Error::FifoBadHeader(h),
             Error::FifoShort => Error::FifoShort,
             Error::NotFifo => Error::NotFifo,
+            Error::ChipReset => Error::ChipReset,
         }
     }
 }
@@ -405,6 +422,81 @@ pub fn aaf_coefficients(delt: u8) -> Option<(u16, u8)> {
     }
 }
 
+/// Datasheet table 17: GYRO_AAF_DELT against the AAF's 3 dB bandwidth, Hz,
+/// at the entries the public drivers quote (1–14, 21, 38, 52, 63).
+const AAF_TABLE: [(u8, f32); 18] = [
+    (1, 42.0),
+    (2, 84.0),
+    (3, 126.0),
+    (4, 170.0),
+    (5, 213.0),
+    (6, 258.0),
+    (7, 303.0),
+    (8, 348.0),
+    (9, 394.0),
+    (10, 441.0),
+    (11, 488.0),
+    (12, 536.0),
+    (13, 585.0),
+    (14, 634.0),
+    (21, 997.0),
+    (38, 2029.0),
+    (52, 3057.0),
+    (63, 3979.0),
+];
+
+/// The AAF's 3 dB bandwidth, Hz, for GYRO_AAF_DELT `delt` (1..=63):
+/// table 17, linear between the entries the public drivers quote (the
+/// table is within 2 % of linear between them). 0 reads as 1.
+pub fn aaf_hz(delt: u8) -> f32 {
+    let d = delt.clamp(1, 63);
+    let mut prev = AAF_TABLE[0];
+    for &(k, hz) in AAF_TABLE.iter() {
+        if k == d {
+            return hz;
+        }
+        if k > d {
+            let f = (d - prev.0) as f32 / (k - prev.0) as f32;
+            return prev.1 + f * (hz - prev.1);
+        }
+        prev = (k, hz);
+    }
+    prev.1
+}
+
+/// The UI filter's bandwidth divisor for GYRO_UI_FILT_BW (datasheet
+/// GYRO_ACCEL_CONFIG0: BW = max(400 Hz, ODR)/k); `None` for the
+/// low-latency settings 14 and 15 (and reserved codes), which bypass it.
+pub fn ui_divisor(code: u8) -> Option<f32> {
+    const K: [f32; 8] = [2.0, 4.0, 5.0, 8.0, 10.0, 16.0, 20.0, 40.0];
+    K.get(code as usize).copied()
+}
+
+impl Filter {
+    /// The signal path's group delay at DC for output rate `odr`, µs: the
+    /// AAF as a 2nd-order Butterworth at its table-17 bandwidth (√2/ω) and
+    /// the UI filter as a Butterworth of its order at its bandwidth (1/ω,
+    /// √2/ω, 2/ω). The datasheet gives bandwidths, not delays; the chip
+    /// model's filters are built the same way and their delay is measured
+    /// against this (`host-tests/tests/chip_timing.rs`).
+    pub fn group_delay_us(&self, odr: Odr) -> f32 {
+        let w = |hz: f32| 2.0 * core::f32::consts::PI * hz;
+        let mut d = 0.0;
+        if self.aaf_delt != 0 {
+            d += core::f32::consts::SQRT_2 / w(aaf_hz(self.aaf_delt));
+        }
+        if let Some(k) = ui_divisor(self.ui_bw) {
+            let bw = odr.hz().max(400.0) / k;
+            d += match self.ui_order {
+                0 | 1 => 1.0,
+                2 => core::f32::consts::SQRT_2,
+                _ => 2.0,
+            } / w(bw);
+        }
+        d * 1e6
+    }
+}
+
 /// Where the chip takes its clock from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -496,6 +588,19 @@ impl Config {
         match self.sampling {
             Sampling::Fifo => bits::FIFO_TEMP_EN | bits::FIFO_GYRO_EN | bits::FIFO_ACCEL_EN,
             Sampling::Registers => 0,
+        }
+    }
+    /// INT_CONFIG, INT_CONFIG1 and INT_SOURCE0: with the FIFO, a pulse on
+    /// INT1 at every sample (the board captures its time: the instant each
+    /// sample was made, on the board's clock); otherwise their reset values.
+    fn int1(&self) -> [u8; 3] {
+        match self.sampling {
+            Sampling::Fifo => [
+                bits::INT1_PUSH_PULL_HIGH,
+                reset::INT_CONFIG1 & !bits::INT_ASYNC_RESET,
+                bits::UI_DRDY_INT1_EN,
+            ],
+            Sampling::Registers => [0, reset::INT_CONFIG1, reset::INT_SOURCE0],
         }
     }
     /// FIFO_CONFIG: stop-on-full (what is kept stays in order; an overflow
@@ -609,6 +714,8 @@ pub struct Icm42688<SPI> {
     check_group: u8,
     /// The last FIFO timestamp (16 bits) and its extension.
     stamp: Option<u32>,
+    /// RESET_DONE was seen by a read that could not report it.
+    reset_seen: bool,
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -623,6 +730,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             },
             check_group: 0,
             stamp: None,
+            reset_seen: false,
         }
     }
 
@@ -690,21 +798,33 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write_checked(reg::INTF_CONFIG5, pin9)
     }
 
-    /// INTF_CONFIG0, FIFO_CONFIG1 and FIFO_CONFIG for the sampling chosen,
-    /// each read back.
+    /// INTF_CONFIG0, FIFO_CONFIG1, FIFO_CONFIG and (with the FIFO) INT1 as
+    /// a data-ready pulse, for the sampling chosen, each read back.
     pub fn configure_fifo(&mut self, cfg: Config) -> Result<(), Error<SPI::Error>> {
         self.write_checked(reg::INTF_CONFIG0, cfg.intf_config0())?;
         self.write_checked(reg::FIFO_CONFIG1, cfg.fifo_config1())?;
         self.write_checked(reg::FIFO_CONFIG, cfg.fifo_config())?;
+        if cfg.sampling == Sampling::Fifo {
+            let [c, c1, s0] = cfg.int1();
+            self.write_checked(reg::INT_CONFIG, c)?;
+            self.write_checked(reg::INT_CONFIG1, c1)?;
+            self.write_checked(reg::INT_SOURCE0, s0)?;
+        }
         self.config.sampling = cfg.sampling;
         self.stamp = None;
         Ok(())
     }
 
-    /// Empty the FIFO (SIGNAL_PATH_RESET.FIFO_FLUSH).
+    /// Empty the FIFO (SIGNAL_PATH_RESET.FIFO_FLUSH) and clear the
+    /// FIFO_FULL it may have latched before (INT_STATUS clears on read); a
+    /// RESET_DONE seen there is kept for the next [`Self::read_fifo`].
     pub fn flush_fifo(&mut self) -> Result<(), Error<SPI::Error>> {
         self.stamp = None;
-        self.write(reg::SIGNAL_PATH_RESET, bits::FIFO_FLUSH)
+        self.write(reg::SIGNAL_PATH_RESET, bits::FIFO_FLUSH)?;
+        if self.read(reg::INT_STATUS)? & RESET_DONE != 0 {
+            self.reset_seen = true;
+        }
+        Ok(())
     }
 
     /// Read what the FIFO holds, oldest first, into `out`.
@@ -729,6 +849,10 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             ])
             .map_err(Error::Spi)?;
         let status = b[0];
+        if status & RESET_DONE != 0 || self.reset_seen {
+            self.reset_seen = false;
+            return Err(Error::ChipReset);
+        }
         if status & bits::FIFO_FULL != 0 {
             self.flush_fifo()?;
             return Err(Error::FifoOverflow);
@@ -1034,56 +1158,54 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         self.read_temperature_c().map_err(|_| ReadFault::Bus)
     }
 
-    /// The configuration `init` set, one of two groups per call (as PX4
+    /// The configuration `init` set, one of three groups per call (as PX4
     /// re-checks one register at a time, so each call costs the same few
-    /// transactions): bank 0, REG_BANK_SEL, the burst INTF_CONFIG0 ..
-    /// GYRO_ACCEL_CONFIG0 (0x4C..=0x52; ACCEL_CONFIG0 skipped), FIFO_CONFIG
-    /// and FIFO_CONFIG1; then bank 1, GYRO_CONFIG_STATIC2..5 in one burst
-    /// and INTF_CONFIG5.
+    /// transactions): REG_BANK_SEL and the burst INTF_CONFIG0 ..
+    /// GYRO_ACCEL_CONFIG0 (0x4C..=0x52; ACCEL_CONFIG0 skipped); FIFO_CONFIG,
+    /// FIFO_CONFIG1, INT_CONFIG and the burst INT_CONFIG1, INT_SOURCE0;
+    /// bank 1, GYRO_CONFIG_STATIC2..5 in one burst and INTF_CONFIG5.
     fn check_config(&mut self) -> Result<(), ReadFault> {
         let cfg = self.config;
         let bus = |_| ReadFault::Bus;
         let group = self.check_group;
-        self.check_group ^= 1;
-        if group == 0 {
-            if self.read(reg::REG_BANK_SEL).map_err(bus)? != 0 {
-                return Err(ReadFault::Config);
+        self.check_group = (self.check_group + 1) % 3;
+        let same = |ok: bool| if ok { Ok(()) } else { Err(ReadFault::Config) };
+        match group {
+            0 => {
+                same(self.read(reg::REG_BANK_SEL).map_err(bus)? == 0)?;
+                let mut b = [0u8; 7];
+                self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
+                same(
+                    b == [
+                        cfg.intf_config0(),
+                        cfg.intf_config1(),
+                        GYRO_MODE_LN,
+                        cfg.gyro_config0(),
+                        b[4], // ACCEL_CONFIG0: not set by this driver
+                        cfg.gyro_config1(),
+                        cfg.gyro_accel_config0(),
+                    ],
+                )
             }
-            let mut b = [0u8; 7];
-            self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
-            let want = [
-                cfg.intf_config0(),
-                cfg.intf_config1(),
-                GYRO_MODE_LN,
-                cfg.gyro_config0(),
-                b[4], // ACCEL_CONFIG0: not set by this driver
-                cfg.gyro_config1(),
-                cfg.gyro_accel_config0(),
-            ];
-            let fifo = [
-                (reg::FIFO_CONFIG, cfg.fifo_config()),
-                (reg::FIFO_CONFIG1, cfg.fifo_config1()),
-            ];
-            if b != want {
-                return Err(ReadFault::Config);
+            1 => {
+                let [c, c1, s0] = cfg.int1();
+                same(self.read(reg::FIFO_CONFIG).map_err(bus)? == cfg.fifo_config())?;
+                same(self.read(reg::FIFO_CONFIG1).map_err(bus)? == cfg.fifo_config1())?;
+                same(self.read(reg::INT_CONFIG).map_err(bus)? == c)?;
+                let mut b = [0u8; 2];
+                self.read_burst(reg::INT_CONFIG1, &mut b).map_err(bus)?;
+                same(b == [c1, s0])
             }
-            for (r, v) in fifo {
-                if self.read(r).map_err(bus)? != v {
-                    return Err(ReadFault::Config);
-                }
+            _ => {
+                let (st, pin9) = cfg.bank1().ok_or(ReadFault::Config)?;
+                self.write(reg::REG_BANK_SEL, 1).map_err(bus)?;
+                let mut b = [0u8; 4];
+                let r = self.read_burst(reg::GYRO_CONFIG_STATIC2, &mut b);
+                let p = self.read(reg::INTF_CONFIG5);
+                self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                r.map_err(bus)?;
+                same(b == st && p.map_err(bus)? & bits::PIN9_MASK == pin9)
             }
-            return Ok(());
-        }
-        let (st, pin9) = cfg.bank1().ok_or(ReadFault::Config)?;
-        self.write(reg::REG_BANK_SEL, 1).map_err(bus)?;
-        let mut b = [0u8; 4];
-        let r = self.read_burst(reg::GYRO_CONFIG_STATIC2, &mut b);
-        let p = self.read(reg::INTF_CONFIG5);
-        self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
-        if r.map_err(bus).is_ok() && b == st && p.map_err(bus)? & bits::PIN9_MASK == pin9 {
-            Ok(())
-        } else {
-            Err(ReadFault::Config)
         }
     }
 
@@ -1224,9 +1346,13 @@ mod tests {
         wrc(&mut s, 0x4C, 0x70); // count in records
         wrc(&mut s, 0x5F, 0x07); // temperature, gyro, accel slots
         wrc(&mut s, 0x16, 0x80); // stop-on-full
+        wrc(&mut s, 0x14, 0x03); // INT1 push-pull, active high, pulsed
+        wrc(&mut s, 0x64, 0x00); // INT_ASYNC_RESET cleared
+        wrc(&mut s, 0x65, 0x08); // data ready on INT1
         wrc(&mut s, 0x4E, 0x0C);
         s.extend(rd(0x2D, &[0x10]));
         s.extend(wr(0x4B, 0x02)); // SIGNAL_PATH_RESET.FIFO_FLUSH
+        s.extend(rd(0x2D, &[0x02])); // and the FIFO_FULL latched before
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         let cfg = Config {
@@ -1361,15 +1487,19 @@ mod tests {
     }
 
     #[test]
-    fn config_check_reads_back_both_groups_in_turn() {
+    fn config_check_reads_back_three_groups_in_turn() {
         let mut s = Vec::new();
-        // Group 0: REG_BANK_SEL, 0x4C..=0x52 in one burst, FIFO_CONFIG,
-        // FIFO_CONFIG1 (±2000 °/s, 1 kHz as `new` assumes).
+        // Group 0: REG_BANK_SEL, 0x4C..=0x52 in one burst (±2000 °/s,
+        // 1 kHz as `new` assumes).
         s.extend(rd(0x76, &[0x00]));
         s.extend(rd(0x4C, &[0x30, 0x51, 0x0C, 0x06, 0x06, 0x16, 0x11]));
+        // Group 1: FIFO_CONFIG, FIFO_CONFIG1, INT_CONFIG, then INT_CONFIG1
+        // and INT_SOURCE0 in one burst (reset values without the FIFO).
         s.extend(rd(0x16, &[0x00]));
         s.extend(rd(0x5F, &[0x00]));
-        // Group 1: bank 1, GYRO_CONFIG_STATIC2..5 in one burst, INTF_CONFIG5.
+        s.extend(rd(0x14, &[0x00]));
+        s.extend(rd(0x64, &[0x10, 0x10]));
+        // Group 2: bank 1, GYRO_CONFIG_STATIC2..5 in one burst, INTF_CONFIG5.
         s.extend(wr(0x76, 0x01));
         s.extend(rd(0x0B, &AAF_258));
         s.extend(rd(0x7B, &[0x00]));
@@ -1377,17 +1507,21 @@ mod tests {
         // Group 0 again: AFSR back on (a reset value): not what was set.
         s.extend(rd(0x76, &[0x00]));
         s.extend(rd(0x4C, &[0x30, 0x91, 0x0C, 0x06, 0x06, 0x16, 0x11]));
-        // Group 1 again: the AAF at another setting.
+        // Group 1 again: the FIFO on behind the driver's back.
+        s.extend(rd(0x16, &[0x40]));
+        // Group 2 again: the AAF at another setting.
         s.extend(wr(0x76, 0x01));
         s.extend(rd(0x0B, &[0xA0, 13, 170, 0x80]));
         s.extend(rd(0x7B, &[0x00]));
         s.extend(wr(0x76, 0x00));
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
-        assert_eq!(g.check_config(), Ok(()));
-        assert_eq!(g.check_config(), Ok(()));
-        assert_eq!(g.check_config(), Err(ReadFault::Config));
-        assert_eq!(g.check_config(), Err(ReadFault::Config));
+        for _ in 0..3 {
+            assert_eq!(g.check_config(), Ok(()));
+        }
+        for _ in 0..3 {
+            assert_eq!(g.check_config(), Err(ReadFault::Config));
+        }
         spi.done();
     }
 
@@ -1466,16 +1600,21 @@ mod tests {
     }
 
     #[test]
-    fn fifo_overflow_bad_header_and_short_fifo_flush_and_say_so() {
+    fn fifo_overflow_bad_header_short_fifo_and_reset_are_typed_errors() {
         let mut s = Vec::new();
         s.extend(head(0x0A, 128, &packet([0; 3], 0))); // FIFO_FULL
         s.extend(wr(0x4B, 0x02));
+        s.extend(rd(0x2D, &[0x00]));
         let mut bad = packet([0; 3], 0);
         bad[0] = 0x28; // gyro only: not the format configured
         s.extend(head(0x08, 1, &bad));
         s.extend(wr(0x4B, 0x02));
+        s.extend(rd(0x2D, &[0x00]));
         s.extend(head(0x08, 1, &[0x80; 16])); // counted, but empty
         s.extend(wr(0x4B, 0x02));
+        s.extend(rd(0x2D, &[0x10])); // and a reset seen while flushing
+        s.extend(head(0x08, 1, &packet([0; 3], 0))); // reported by the next read
+        s.extend(head(0x18, 1, &packet([0; 3], 0))); // RESET_DONE itself
         let (mut spi, mut g) = fifo_driver(&s);
         let mut out = [FifoSample {
             raw: [0; 3],
@@ -1484,6 +1623,8 @@ mod tests {
         assert_eq!(g.read_fifo(&mut out), Err(Error::FifoOverflow));
         assert_eq!(g.read_fifo(&mut out), Err(Error::FifoBadHeader(0x28)));
         assert_eq!(g.read_fifo(&mut out), Err(Error::FifoShort));
+        assert_eq!(g.read_fifo(&mut out), Err(Error::ChipReset));
+        assert_eq!(g.read_fifo(&mut out), Err(Error::ChipReset));
         spi.done();
     }
 

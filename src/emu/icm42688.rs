@@ -65,6 +65,8 @@ struct Timed {
     dec: u32,
     /// Output samples made since the last reset.
     made: u64,
+    /// Bus time of the last data-ready pulse on INT1, s.
+    int1_s: Option<f64>,
     paths: [SignalPath; 3],
     fifo: Fifo,
     /// Per axis, output samples still frozen by an AFSR switch.
@@ -94,6 +96,7 @@ impl Timed {
             ticks: 0,
             dec: 0,
             made: 0,
+            int1_s: None,
             paths: [path; 3],
             fifo: Fifo::default(),
             afsr_hold: [0; 3],
@@ -209,6 +212,8 @@ impl Icm42688Model {
         self.bank0[reg::GYRO_CONFIG1 as usize] = reset::GYRO_CONFIG1;
         self.bank0[reg::GYRO_ACCEL_CONFIG0 as usize] = reset::GYRO_ACCEL_CONFIG0;
         self.bank0[reg::TMST_CONFIG as usize] = reset::TMST_CONFIG;
+        self.bank0[reg::INT_CONFIG1 as usize] = reset::INT_CONFIG1;
+        self.bank0[reg::INT_SOURCE0 as usize] = reset::INT_SOURCE0;
         // Bank-1 reset values assumed (the datasheet's tables are not in
         // the public drivers): AAF and notch on, AAF at DELT 13 (585 Hz,
         // DELTSQR 170, BITSHIFT 8), pin 9 as INT2.
@@ -444,6 +449,20 @@ impl Icm42688Model {
         out
     }
 
+    /// INT1 pulses on data ready: routed (INT_SOURCE0.UI_DRDY_INT1_EN),
+    /// driven (INT_CONFIG push-pull) and enabled (INT_ASYNC_RESET clear).
+    fn int1_drdy(&self) -> bool {
+        self.bank0[reg::INT_SOURCE0 as usize] & bits::UI_DRDY_INT1_EN != 0
+            && self.bank0[reg::INT_CONFIG as usize] & 0b010 != 0
+            && self.bank0[reg::INT_CONFIG1 as usize] & bits::INT_ASYNC_RESET == 0
+    }
+
+    /// Bus time of the last data-ready pulse on INT1, s: what the board's
+    /// timer captures (`None` before the first, or with INT1 not set up).
+    pub fn int1_at_s(&self) -> Option<f64> {
+        self.timed.as_ref().and_then(|t| t.int1_s)
+    }
+
     fn gyro_on(&self) -> bool {
         (self.bank0[reg::PWR_MGMT0 as usize] >> 2) & 0b11 >= 0b10
     }
@@ -565,6 +584,9 @@ impl Icm42688Model {
                 self.set_output(out);
             }
             self.bank0[reg::INT_STATUS as usize] |= bits::DATA_RDY;
+            if self.int1_drdy() {
+                t.int1_s = Some(next);
+            }
             self.push_packet(&mut t, out);
         }
         t.now_s = t_end_s;

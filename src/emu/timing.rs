@@ -48,6 +48,8 @@
 //!   samples with a clock that is fast by the same ratio. With RTC_MODE and
 //!   TMST_RES = 1 a count is one CLKIN period.
 
+pub use crate::drivers::icm42688::{aaf_hz, ui_divisor};
+
 /// Nominal internal sample rate of the ICM-42688-P gyro (datasheet 5.1).
 pub const ICM_INTERNAL_HZ: f64 = 32_000.0;
 /// FIFO capacity, bytes (datasheet 6.1: 2 KiB).
@@ -157,56 +159,6 @@ impl Vibration {
         }
         r
     }
-}
-
-/// Datasheet table 17: GYRO_AAF_DELT against the AAF's 3 dB bandwidth, Hz,
-/// at the entries the public drivers quote (1–14, 21, 38, 52, 63).
-const AAF_TABLE: [(u8, f32); 18] = [
-    (1, 42.0),
-    (2, 84.0),
-    (3, 126.0),
-    (4, 170.0),
-    (5, 213.0),
-    (6, 258.0),
-    (7, 303.0),
-    (8, 348.0),
-    (9, 394.0),
-    (10, 441.0),
-    (11, 488.0),
-    (12, 536.0),
-    (13, 585.0),
-    (14, 634.0),
-    (21, 997.0),
-    (38, 2029.0),
-    (52, 3057.0),
-    (63, 3979.0),
-];
-
-/// The AAF's 3 dB bandwidth, Hz, for GYRO_AAF_DELT `delt` (1..=63):
-/// table 17, linear between the entries the public drivers quote (the
-/// table is within 2 % of linear between them). 0 reads as 1.
-pub fn aaf_hz(delt: u8) -> f32 {
-    let d = delt.clamp(1, 63);
-    let mut prev = AAF_TABLE[0];
-    for &(k, hz) in AAF_TABLE.iter() {
-        if k == d {
-            return hz;
-        }
-        if k > d {
-            let f = (d - prev.0) as f32 / (k - prev.0) as f32;
-            return prev.1 + f * (hz - prev.1);
-        }
-        prev = (k, hz);
-    }
-    prev.1
-}
-
-/// The UI filter's bandwidth divisor for GYRO_UI_FILT_BW (datasheet
-/// GYRO_ACCEL_CONFIG0: BW = max(400 Hz, ODR)/k); `None` for the
-/// low-latency settings 14 and 15 (and reserved codes), which bypass it.
-pub fn ui_divisor(code: u8) -> Option<f32> {
-    const K: [f32; 8] = [2.0, 4.0, 5.0, 8.0, 10.0, 16.0, 20.0, 40.0];
-    K.get(code as usize).copied()
 }
 
 /// One second-order section, transposed direct form II, f64 (at 32 kHz a

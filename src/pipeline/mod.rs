@@ -17,6 +17,8 @@
 //! `stuck_after` good samples (its configuration was just verified), any
 //! other flagged one after `recover_after`.
 
+pub mod align;
+pub mod clock;
 pub mod selftest;
 pub mod startup;
 pub mod tracker;

@@ -18,6 +18,7 @@ use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling};
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile};
 use host_tests::single_chip::{chip, run, Reads};
+use host_tests::timed_array::{self, Clocks};
 
 /// One way to run the chip.
 struct Setting {
@@ -129,7 +130,129 @@ fn delay(s: &Setting) -> f64 {
     best + (s.per_ms() - 1) as f64 / (2.0 * s.odr.hz() as f64)
 }
 
+/// The array's output delay for chips at `odr` through `filter`: the path's
+/// group delay, the moving mean's half-span, and one sample period for the
+/// newest mean to exist, all for a chip 1 % slow (a PLL's limit), rounded
+/// up to 10 µs. A chip fallen back to its RC oscillator, up to 8 % slow, is
+/// late for part of its samples and left out of those.
+fn array_delay_us(odr: Odr, filter: Filter) -> u32 {
+    let n = (odr.hz() / 1000.0).round().max(1.0);
+    let period = 1e6 / odr.hz();
+    let d = 1.01 * (filter.group_delay_us(odr) + (n - 1.0) / 2.0 * period + period);
+    ((d / 10.0).ceil() * 10.0) as u32
+}
+
+/// Fused error against the truth at the stated instant, over motion
+/// classes and clocks, against the same array as today's lockstep
+/// sampler; and the lag that best aligns the fused rate with the truth.
+fn fusion_table(seconds: u32) -> usize {
+    let odr = Odr::Hz2000;
+    let filter = Filter::BOARD_2K;
+    let delay_us = array_delay_us(odr, filter);
+    println!();
+    println!(
+        "fusion at the stated instant (board: 2 kHz FIFO, {} µs path delay, output {} µs behind the read), {seconds} s per class",
+        filter.group_delay_us(odr).round(),
+        delay_us
+    );
+    println!(
+        "{:<36} {:<8} {:>22} {:>22} {:>6} {:>6}",
+        "motion", "clocks", "ratio x / y / z", "lag error µs x/y/z", "short", "rep"
+    );
+    let mut lines = Vec::new();
+    let sway = |amp: f32, hz: f32| RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [amp, -0.6 * amp, 0.8 * amp],
+        sine_hz: hz,
+        sine_start_s: 0.0,
+    };
+    let classes = [
+        ("still", RateProfile::constant(0.0), false),
+        ("turns to 100 °/s (0.1 Hz)", sway(100.0, 0.1), false),
+        ("sway 60 °/s at 0.2 Hz", sway(60.0, 0.2), false),
+        ("sway 95 °/s at 2 Hz", sway(95.0, 2.0), false),
+        ("sway 40 °/s at 5 Hz", sway(40.0, 5.0), false),
+        ("sway 20 °/s at 12 Hz", sway(20.0, 12.0), false),
+        ("crossing 100 °/s: 130 °/s at 1 Hz", sway(130.0, 1.0), false),
+        ("sway 95 °/s at 2 Hz, ±1 % scale", sway(95.0, 2.0), true),
+    ];
+    let mut over = 0;
+    let mut worst_ratio: f64 = 0.0;
+    let mut worst_lag: f64 = 0.0;
+    for (name, profile, scale_errors) in classes {
+        for (cname, clocks, restart) in [
+            ("CLKIN", Clocks::ClkIn, None),
+            ("free", Clocks::Free, None),
+            ("restart", Clocks::Free, Some(seconds * 500)),
+        ] {
+            let o = timed_array::run(timed_array::Run {
+                profile,
+                clocks,
+                odr,
+                filter,
+                delay_us,
+                ms: seconds * 1000,
+                seed: 5,
+                restart_at_ms: restart,
+                scale_errors,
+            });
+            let ratio: Vec<f64> = (0..3)
+                .map(|a| o.rms_dps[a] / o.lockstep_rms_dps[a])
+                .collect();
+            for (a, r) in ratio.iter().enumerate() {
+                worst_ratio = worst_ratio.max(*r);
+                if *r > 1.10 {
+                    over += 1;
+                }
+                // The lag is measurable only where the motion moves.
+                if profile.sine_hz > 0.0 {
+                    worst_lag = worst_lag.max(o.lag_error_us[a].abs());
+                }
+            }
+            println!(
+                "{:<36} {:<8} {:>22} {:>22} {:>6} {:>6}",
+                name,
+                cname,
+                format!("{:.3} / {:.3} / {:.3}", ratio[0], ratio[1], ratio[2]),
+                if profile.sine_hz > 0.0 {
+                    format!(
+                        "{:+.0} / {:+.0} / {:+.0}",
+                        o.lag_error_us[0], o.lag_error_us[1], o.lag_error_us[2]
+                    )
+                } else {
+                    "-".to_string()
+                },
+                o.short,
+                o.repeats_or_skips + o.fifo_errors
+            );
+            if scale_errors {
+                lines.push(format!(
+                    "{name}, {cname}: x RMS {:.4} °/s against the lockstep array's {:.4} (the online relative calibration takes the scale errors out of both)",
+                    o.rms_dps[0], o.lockstep_rms_dps[0]
+                ));
+            }
+        }
+    }
+    for l in lines {
+        println!("{l}");
+    }
+    println!(
+        "worst ratio to the lockstep array {worst_ratio:.3} (target 1.10), worst lag error {worst_lag:.0} µs (target 50); class-axes over 1.10: {over}"
+    );
+    println!("short: output samples with fewer than four chips aligned (after warm-up, outside a restart); rep: samples repeated, skipped or lost");
+    over
+}
+
 fn main() {
+    let seconds = std::env::args()
+        .skip_while(|a| a != "--seconds")
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(10);
+    if std::env::args().any(|a| a == "--fusion") {
+        fusion_table(seconds);
+        return;
+    }
     let settings = [
         Setting {
             name: "ArduPilot: 1 kHz, AAF 258 Hz, UI 2nd ODR/4",
@@ -210,4 +333,5 @@ fn main() {
         table[0].0 * 1e3,
         table[1].0 * 1e3
     );
+    fusion_table(seconds);
 }

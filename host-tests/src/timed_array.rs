@@ -1,0 +1,431 @@
+//! Four ICM-42688-P on their own clocks, read through the real driver's
+//! FIFO path, their samples put on the board's clock by the INT1 captures
+//! ([`gyro_array::pipeline::clock`]) and brought to common output
+//! instants ([`gyro_array::pipeline::align`]), fused per axis by the
+//! pipeline's default path (online relative calibration, then the adaptive
+//! method); beside them the same four chips as today's
+//! ideal lockstep sampler, polled. The harness of `timing-eval`'s fusion
+//! table and of the alignment tests.
+//!
+//! Not yet the board's loop: `Pipeline::step` still polls the data
+//! registers. This measures what its alignment will deliver.
+
+use std::cell::RefCell;
+
+use embedded_hal_bus::spi::RefCellDevice;
+use gyro_array::algo::calib::{CalConfig, RelCal};
+use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
+use gyro_array::drivers::icm42688::{
+    ClockInput, Config, FifoSample, Filter, Icm42688, Odr, Sampling,
+};
+use gyro_array::drivers::Gyro;
+use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::{
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    RateProfile,
+};
+use gyro_array::pipeline::align::{Aligned, Aligner};
+use gyro_array::pipeline::clock::{ChipClock, Instant16};
+
+/// Chips in the array.
+pub const N: usize = 4;
+/// Samples before the errors count (trackers acquired, fusion warm).
+const WARM_MS: u32 = 600;
+
+/// How the array's chips keep time.
+#[derive(Clone, Copy, Debug)]
+pub enum Clocks {
+    /// Every chip on the board's CLKIN at 32 kHz.
+    ClkIn,
+    /// Free-running: PLLs ±1 % with drift and wander, chip 3 fallen back
+    /// to its RC oscillator (−7 %).
+    Free,
+}
+
+/// One run's settings.
+#[derive(Clone, Copy, Debug)]
+pub struct Run {
+    /// The motion.
+    pub profile: RateProfile,
+    /// How the chips keep time.
+    pub clocks: Clocks,
+    /// Output data rate and filters of the timed chips.
+    pub odr: Odr,
+    /// Their filters.
+    pub filter: Filter,
+    /// The array's output delay: the fused rate describes `now − delay`.
+    pub delay_us: u32,
+    /// Length, ms.
+    pub ms: u32,
+    /// Noise seed.
+    pub seed: u64,
+    /// Restart chip 1 at this ms (a new phase), if any.
+    pub restart_at_ms: Option<u32>,
+    /// Give the chips scale errors of ±1 % (otherwise none).
+    pub scale_errors: bool,
+}
+
+/// What one run measured, per axis.
+#[derive(Clone, Debug, Default)]
+pub struct Outcome {
+    /// RMS of (fused − truth at the stated instant), °/s, per axis.
+    pub rms_dps: [f64; 3],
+    /// The same for the lockstep array (truth at the read).
+    pub lockstep_rms_dps: [f64; 3],
+    /// The lag that best aligns the fused rate with the truth, minus the
+    /// stated one, µs (positive: the rate is older than stated).
+    pub lag_error_us: [f64; 3],
+    /// Output samples with fewer than four chips aligned.
+    pub short: u32,
+    /// Samples read that were not one sample period after the last, per
+    /// chip (a repeat or a skip; the FIFO makes none).
+    pub repeats_or_skips: u32,
+    /// FIFO errors of any kind.
+    pub fifo_errors: u32,
+    /// Chip clock errors the trackers found, ppm (chip 0..3).
+    pub clock_ppm: [f32; N],
+}
+
+fn timings(c: Clocks) -> [ChipTiming; N] {
+    let free = [
+        ClockParams {
+            offset: 0.008,
+            drift_per_s: 2e-5,
+            wander: 5e-4,
+            wander_period_s: 7.0,
+        },
+        ClockParams {
+            offset: -0.01,
+            drift_per_s: -1e-5,
+            wander: 3e-4,
+            wander_period_s: 11.0,
+        },
+        ClockParams {
+            offset: 0.003,
+            drift_per_s: 0.0,
+            wander: 1e-3,
+            wander_period_s: 5.0,
+        },
+        ClockParams::fixed(0.0),
+    ];
+    core::array::from_fn(|i| ChipTiming {
+        pll: match c {
+            Clocks::Free => free[i],
+            Clocks::ClkIn => ClockParams::fixed(0.02),
+        },
+        rc: ClockParams::fixed(-0.07),
+        ..ChipTiming::pll(0.0)
+    })
+}
+
+fn noise(i: usize, scale: bool) -> NoiseParams {
+    NoiseParams {
+        bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+        scale_error: if scale {
+            [0.01, -0.01, 0.004, -0.006][i]
+        } else {
+            0.0
+        },
+        ..NoiseParams::ICM42688
+    }
+}
+
+fn truth(p: &RateProfile, t_s: f64) -> [f64; 3] {
+    p.at_f64(t_s)
+}
+
+/// Run the timed array and the lockstep one on the same motion.
+pub fn run(r: Run) -> Outcome {
+    let mut out = Outcome::default();
+    let timed = timed(&r, &mut out);
+    let lock = lockstep(&r);
+    for a in 0..3 {
+        out.rms_dps[a] = rms(&timed
+            .iter()
+            .map(|s| s.1[a] - truth(&r.profile, s.0)[a])
+            .collect::<Vec<_>>());
+        out.lockstep_rms_dps[a] = rms(&lock
+            .iter()
+            .map(|s| s.1[a] - truth(&r.profile, s.0)[a])
+            .collect::<Vec<_>>());
+        // The lag: the error regressed on the truth's derivative, the
+        // truth itself (a scale error) and 1 (a bias), by least squares;
+        // e ≈ −lag·ẇ + k·w + b.
+        let h = 1e-4;
+        let rows: Vec<[f64; 4]> = timed
+            .iter()
+            .map(|s| {
+                let w = truth(&r.profile, s.0)[a];
+                let dw =
+                    (truth(&r.profile, s.0 + h)[a] - truth(&r.profile, s.0 - h)[a]) / (2.0 * h);
+                [dw, w, 1.0, s.1[a] - w]
+            })
+            .collect();
+        let best = lag_fit(&rows);
+        out.lag_error_us[a] = best * 1e6;
+    }
+    out
+}
+
+/// −β₀ of the least-squares fit of column 3 on columns 0..3, or 0 where
+/// the derivative does not vary (no motion).
+fn lag_fit(rows: &[[f64; 4]]) -> f64 {
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    for r in rows {
+        let x = nalgebra::Vector3::new(r[0], r[1], r[2]);
+        ata += x * x.transpose();
+        atb += x * r[3];
+    }
+    if ata[(0, 0)] < 1e-6 * rows.len() as f64 {
+        return 0.0;
+    }
+    ata.lu().solve(&atb).map_or(0.0, |b| -b[0])
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// The pipeline's default path per axis: online relative calibration,
+/// then the adaptive fusion.
+struct Fuser {
+    fusion: Fusion<N>,
+    st: [AxisState<N>; 3],
+    cal: [RelCal<N>; 3],
+}
+
+impl Fuser {
+    fn new() -> Self {
+        let Ok(fusion) = Fusion::new(Method::Adaptive(AdaptiveConfig::default())) else {
+            panic!("fusion settings")
+        };
+        Self {
+            fusion,
+            st: [AxisState::default(); 3],
+            cal: core::array::from_fn(|a| RelCal::for_axis(CalConfig::default(), a)),
+        }
+    }
+
+    fn fuse(&mut self, y: &[[f32; N]; 3], offered: u8) -> Option<[f64; 3]> {
+        let mut f = [0.0f64; 3];
+        for a in 0..3 {
+            let (v, _) = self.cal[a]
+                .fuse_probed(&self.fusion, &mut self.st[a], &y[a], offered)
+                .ok()?;
+            f[a] = v.rate_dps as f64;
+        }
+        f.iter().all(|v| v.is_finite()).then_some(f)
+    }
+}
+
+/// (stated instant s, fused rate) per output sample.
+fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
+    let t = timings(r.clocks);
+    let chips: [Chip; N] = core::array::from_fn(|i| {
+        let mut c = Icm42688Model::new(
+            noise(i, r.scale_errors),
+            r.profile,
+            r.seed * 31 + i as u64,
+            70,
+        );
+        c.set_timing(Some(t[i]));
+        if let (Clocks::Free, 3) = (r.clocks, i) {
+            c.fail_pll(true);
+        }
+        Chip::Icm(c)
+    });
+    let cs: [CsLine; N] = Default::default();
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
+    if let Clocks::ClkIn = r.clocks {
+        with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
+    }
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let cfg = Config {
+        odr: r.odr,
+        filter: r.filter,
+        clock: match r.clocks {
+            Clocks::ClkIn => ClockInput::ClkIn,
+            Clocks::Free => ClockInput::Internal,
+        },
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    };
+    let path_us = r.filter.group_delay_us(r.odr);
+    let per_ms = (r.odr.hz() / 1000.0).round().max(1.0) as u8;
+    let period_us = 1e6 / r.odr.hz() as f64;
+    let mut g: Vec<_> = (0..N)
+        .map(|i| {
+            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let mut g = Icm42688::new(d);
+            g.init(&mut delay, cfg).expect("init");
+            g
+        })
+        .collect();
+    // The chips set up first have run while the others were: start every
+    // FIFO empty together, as the board's start-up does.
+    for gi in g.iter_mut() {
+        gi.flush_fifo().expect("flush");
+    }
+    let mut clocks = [ChipClock::new(); N];
+    let mut align = [Aligner::<8>::new(per_ms); N];
+    let mut fuser = Fuser::new();
+    let mut last_stamp: [Option<u32>; N] = [None; N];
+    let mut buf = [FifoSample {
+        raw: [0; 3],
+        stamp_us: 0,
+    }; 16];
+    let mut fused = Vec::new();
+    // Chip 1's restart: the next step and the ms it is due.
+    let mut restart: Option<(u8, u32)> = None;
+    for n in 0..r.ms {
+        if Some(n) == r.restart_at_ms {
+            // A reset behind the driver's back: the chip starts again at a
+            // new phase; the driver's restart, in steps as the pipeline
+            // runs it, configures it again while the others sample.
+            with_bus(&bus, |b| b.chips[1].power_cycle());
+            restart = Some((0, n));
+            clocks[1].reset();
+            align[1].clear();
+            last_stamp[1] = None;
+        }
+        with_bus(&bus, |b| b.advance(1e-3));
+        let now_s = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0);
+        if let Some((step, due)) = restart {
+            if n >= due {
+                restart = match g[1].restart(step) {
+                    Ok(gyro_array::drivers::Restart::Again { step, wait_us }) => {
+                        Some((step, n + 1 + wait_us / 1000))
+                    }
+                    _ => None,
+                };
+            }
+        }
+        for i in 0..N {
+            if i == 1 && restart.is_some() {
+                continue;
+            }
+            let cap = with_bus(&bus, |b| b.int1_capture_us(i)).flatten();
+            let lsb = g[i].full_scale().lsb_per_dps();
+            match g[i].read_fifo(&mut buf) {
+                Ok(f) if f.samples > 0 => {
+                    let s = &buf[..f.samples];
+                    if let Some(c) = cap {
+                        clocks[i].observe(s[f.samples - 1].stamp_us, c);
+                    }
+                    for x in s {
+                        if let Some(l) = last_stamp[i] {
+                            let d = x.stamp_us.wrapping_sub(l) as f64;
+                            if (d - period_us).abs() > 2.0 {
+                                out.repeats_or_skips += 1;
+                            }
+                        }
+                        last_stamp[i] = Some(x.stamp_us);
+                        if let Some(t) = clocks[i].board_instant(x.stamp_us) {
+                            // The path's delay is in the chip's time: on
+                            // the board's clock it scales with the chip's
+                            // clock (8 % more for an RC oscillator 8 %
+                            // slow).
+                            let d = path_us * clocks[i].ratio() * 16.0;
+                            let t = t.wrapping_sub(d as u32);
+                            align[i].push(t, x.raw.map(|v| v as f32 / lsb));
+                        }
+                    }
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    if std::env::var_os("TIMING_DEBUG").is_some() {
+                        eprintln!("n {n} chip {i}: {e:?}");
+                    }
+                    out.fifo_errors += 1;
+                    align[i].clear();
+                }
+            }
+        }
+        if n < 100 {
+            continue; // trackers acquiring
+        }
+        let stated_s = now_s - r.delay_us as f64 * 1e-6;
+        let t_q: Instant16 = ((stated_s * 1e6 * 16.0) as u64) as u32;
+        let mut y = [[0.0f32; N]; 3];
+        let mut offered = 0u8;
+        for i in 0..N {
+            if let Aligned::Rate(v) = align[i].at(t_q) {
+                offered |= 1 << i;
+                for a in 0..3 {
+                    y[a][i] = v[a];
+                }
+            }
+        }
+        if offered != 0b1111 && n >= WARM_MS && restart.is_none() {
+            out.short += 1;
+        }
+        if std::env::var_os("TIMING_DEBUG").is_some() && n >= WARM_MS && n % 250 == 0 {
+            let tr = truth(&r.profile, stated_s);
+            let e: Vec<String> = (0..N)
+                .map(|i| format!("{:+.4}", y[0][i] as f64 - tr[0]))
+                .collect();
+            eprintln!(
+                "n {n} x errors per chip {e:?} ppm {:?}",
+                clocks.map(|c| c.error_ppm())
+            );
+        }
+        if offered.count_ones() < 2 {
+            continue;
+        }
+        if let Some(f) = fuser.fuse(&y, offered) {
+            if n >= WARM_MS {
+                fused.push((stated_s, f));
+            }
+        }
+    }
+    for i in 0..N {
+        out.clock_ppm[i] = clocks[i].error_ppm();
+    }
+    fused
+}
+
+/// (read instant s, fused rate) per sample of the lockstep array.
+fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
+    let chips: [Chip; N] = core::array::from_fn(|i| {
+        Chip::Icm(Icm42688Model::new(
+            noise(i, r.scale_errors),
+            r.profile,
+            r.seed * 31 + i as u64,
+            70,
+        ))
+    });
+    let cs: [CsLine; N] = Default::default();
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let mut g: Vec<_> = (0..N)
+        .map(|i| {
+            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let mut g = Icm42688::new(d);
+            g.init(&mut delay, Config::default()).expect("init");
+            g
+        })
+        .collect();
+    let mut fuser = Fuser::new();
+    let mut fused = Vec::new();
+    for n in 0..r.ms {
+        with_bus(&bus, |b| b.advance(1e-3));
+        // The lockstep chips sample the profile at the bus's f32 time
+        // (summed in f32: 0.5 ms off after 5 s), so their truth is there.
+        let now_s = with_bus(&bus, |b| b.time_s()).unwrap_or(0.0) as f64;
+        let mut y = [[0.0f32; N]; 3];
+        for (i, gi) in g.iter_mut().enumerate() {
+            if let Ok(v) = Gyro::read(gi) {
+                for a in 0..3 {
+                    y[a][i] = v.rate_dps[a];
+                }
+            }
+        }
+        if let Some(f) = fuser.fuse(&y, 0b1111) {
+            if n >= WARM_MS {
+                fused.push((now_s, f));
+            }
+        }
+    }
+    fused
+}

@@ -1,0 +1,258 @@
+//! Each chip's clock against the board's: a tracker that maps a chip's
+//! own timestamps (µs of its oscillator, or of CLKIN) onto the board's
+//! microsecond clock.
+//!
+//! Its observations are pairs (chip stamp, board time) of one sample: the
+//! chip's FIFO timestamp and the board timer's capture of the same
+//! sample's data-ready pulse on INT1, exact to the timer's 1 µs tick. The
+//! read's own time would only bound the sample from above; a free-running
+//! chip sweeps every phase against the reads, so the lower envelope of
+//! those bounds converges, but a chip on CLKIN keeps one phase for ever,
+//! and so does one whose clock is within 0.05 % of the board's for
+//! seconds: only the capture gives the instant within microseconds every
+//! time, so the board wires INT1 of each ICM-42688-P to a capture channel.
+//!
+//! The tracker is a second-order loop on the anchor (a stamp and its board
+//! time) and the ratio (board µs per chip µs): each observation moves the
+//! anchor by 1/16 of its residual and the ratio by 1/1024 of it per µs of
+//! stamp since the last one (critically damped, a time constant of some 16
+//! observations). It starts from the ratio of two observations 20 ms
+//! apart, so an RC oscillator 8 % off is acquired at once. Sums stay in
+//! f32 over deltas of milliseconds, so no f64 runs on the board.
+
+/// An instant on the board's clock, in 1/16 µs (wraps after 268 s;
+/// compared by wrapping difference, valid within ±134 s).
+pub type Instant16 = u32;
+
+/// 1/16 µs per µs.
+pub const Q: f32 = 16.0;
+
+/// Difference `a − b` of two instants, in 1/16 µs.
+pub fn since(a: Instant16, b: Instant16) -> i32 {
+    a.wrapping_sub(b) as i32
+}
+
+/// Where a tracker is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ClockState {
+    /// No observation yet.
+    #[default]
+    Empty,
+    /// One observation: waiting for a second far enough for a ratio.
+    Acquiring,
+    /// Tracking anchor and ratio.
+    Tracking,
+}
+
+/// The baseline of the first ratio, chip µs.
+const ACQUIRE_US: i32 = 20_000;
+/// Gain on the anchor.
+const K_ANCHOR: f32 = 1.0 / 16.0;
+/// Gain on the ratio (per µs of baseline).
+const K_RATIO: f32 = 1.0 / 1024.0;
+/// A residual beyond this many µs is not a clock's wander but a jump (a
+/// chip reset, a capture of another sample): it is counted and not
+/// learnt; three in a row start the tracker again.
+pub const JUMP_US: f32 = 40.0;
+/// One chip's clock against the board's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ChipClock {
+    state: ClockState,
+    anchor_stamp: u32,
+    /// Board time of the anchor, µs, and its fraction of a µs.
+    anchor_us: u32,
+    anchor_frac: f32,
+    /// Board µs per chip µs.
+    ratio: f32,
+    jumps_in_row: u8,
+    /// Observations that jumped (see [`JUMP_US`]).
+    pub jumps: u32,
+    /// The last residual, µs (observed minus predicted).
+    pub last_residual_us: f32,
+}
+
+impl ChipClock {
+    /// A tracker with no observation.
+    pub const fn new() -> Self {
+        Self {
+            state: ClockState::Empty,
+            anchor_stamp: 0,
+            anchor_us: 0,
+            anchor_frac: 0.0,
+            ratio: 1.0,
+            jumps_in_row: 0,
+            jumps: 0,
+            last_residual_us: 0.0,
+        }
+    }
+
+    /// Where it is.
+    pub fn state(&self) -> ClockState {
+        self.state
+    }
+
+    /// Board µs per chip µs (1.0 before the first ratio).
+    pub fn ratio(&self) -> f32 {
+        self.ratio
+    }
+
+    /// The chip's clock error against the board's, parts per million
+    /// (positive: the chip's clock is fast).
+    pub fn error_ppm(&self) -> f32 {
+        (1.0 / self.ratio - 1.0) * 1e6
+    }
+
+    /// Forget everything (the chip restarted: its stamps start again).
+    pub fn reset(&mut self) {
+        let jumps = self.jumps;
+        *self = Self::new();
+        self.jumps = jumps;
+    }
+
+    /// The residual of board time `board_us` + `frac` against the
+    /// prediction for `stamp`, µs, and the stamp's distance from the
+    /// anchor, chip µs.
+    fn residual(&self, stamp: u32, board_us: u32, frac: f32) -> (f32, f32) {
+        let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
+        let b = board_us.wrapping_sub(self.anchor_us) as i32 as f32 + frac - self.anchor_frac;
+        (b - self.ratio * d, d)
+    }
+
+    /// Move the anchor to `stamp`, at its predicted board time plus `by`
+    /// µs.
+    fn advance_anchor(&mut self, stamp: u32, d: f32, by: f32) {
+        let t = self.anchor_frac + self.ratio * d + by;
+        let whole = libm::floorf(t);
+        self.anchor_us = self.anchor_us.wrapping_add(whole as i32 as u32);
+        self.anchor_frac = t - whole;
+        self.anchor_stamp = stamp;
+    }
+
+    /// One sample's stamp and the board time of its data-ready pulse,
+    /// captured by a 1 µs timer (truncated: the pulse came within the
+    /// µs after).
+    pub fn observe(&mut self, stamp: u32, capture_us: u32) {
+        let frac = 0.5;
+        match self.state {
+            ClockState::Empty => {
+                self.anchor_stamp = stamp;
+                self.anchor_us = capture_us;
+                self.anchor_frac = frac;
+                self.state = ClockState::Acquiring;
+            }
+            ClockState::Acquiring => {
+                let d = stamp.wrapping_sub(self.anchor_stamp) as i32;
+                if d < ACQUIRE_US {
+                    return;
+                }
+                let b = capture_us.wrapping_sub(self.anchor_us) as i32 as f32;
+                let r = b / d as f32;
+                if (0.8..1.25).contains(&r) {
+                    self.ratio = r;
+                    self.anchor_stamp = stamp;
+                    self.anchor_us = capture_us;
+                    self.state = ClockState::Tracking;
+                } else {
+                    self.reset();
+                }
+            }
+            ClockState::Tracking => {
+                let (e, d) = self.residual(stamp, capture_us, frac);
+                self.last_residual_us = e;
+                if libm::fabsf(e) > JUMP_US {
+                    self.jumps = self.jumps.wrapping_add(1);
+                    self.jumps_in_row += 1;
+                    if self.jumps_in_row >= 3 {
+                        self.reset();
+                    }
+                    return;
+                }
+                self.jumps_in_row = 0;
+                if d > 0.0 {
+                    self.ratio += K_RATIO * e / d;
+                }
+                self.advance_anchor(stamp, d, K_ANCHOR * e);
+            }
+        }
+    }
+
+    /// The board instant of chip stamp `stamp`, or `None` before the
+    /// tracker has a ratio.
+    pub fn board_instant(&self, stamp: u32) -> Option<Instant16> {
+        if self.state != ClockState::Tracking {
+            return None;
+        }
+        let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
+        let off = (self.anchor_frac + self.ratio * d) * Q;
+        Some(
+            self.anchor_us
+                .wrapping_mul(16)
+                .wrapping_add(libm::roundf(off) as i32 as u32),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Board time (µs, f64) of chip stamp `s` for a chip whose clock runs
+    /// `1 + e` times the board's, started at board time `t0`.
+    fn board_of(s: u32, e: f64, t0: f64) -> f64 {
+        t0 + s as f64 / (1.0 + e)
+    }
+
+    #[test]
+    fn captures_give_the_sample_instants_to_a_fraction_of_a_microsecond() {
+        for e in [0.08, 0.01, 0.0, -0.01, -0.08] {
+            let mut c = ChipClock::new();
+            let t0 = 12_345.678;
+            let mut worst: f64 = 0.0;
+            for k in 0..4000u32 {
+                let s = k * 500; // 2 kHz in chip µs
+                let b = board_of(s, e, t0);
+                c.observe(s, b as u32);
+                if k > 200 {
+                    let got = c.board_instant(s).unwrap() as f64 / 16.0;
+                    worst = worst.max((got - b).abs());
+                }
+            }
+            assert!(worst < 0.7, "clock {e}: {worst} µs");
+            assert!(
+                (c.error_ppm() as f64 - e * 1e6).abs() < 20.0,
+                "{}",
+                c.error_ppm()
+            );
+        }
+    }
+
+    #[test]
+    fn a_jump_is_counted_not_learnt_and_three_restart() {
+        let mut c = ChipClock::new();
+        for k in 0..100u32 {
+            c.observe(k * 1000, 5000 + k * 1000);
+        }
+        let before = c.board_instant(100_000).unwrap();
+        c.observe(100_000, 5000 + 100_000 + 300);
+        assert_eq!(c.jumps, 1);
+        assert_eq!(c.board_instant(100_000), Some(before));
+        c.observe(101_000, 9_000_000);
+        c.observe(102_000, 9_001_000);
+        assert_eq!(c.state(), ClockState::Empty);
+        assert_eq!(c.jumps, 3);
+    }
+
+    #[test]
+    fn stamps_and_board_time_wrap() {
+        let mut c = ChipClock::new();
+        let s0 = u32::MAX - 50_000;
+        let b0 = u32::MAX - 30_000;
+        for k in 0..200u32 {
+            c.observe(s0.wrapping_add(k * 1000), b0.wrapping_add(k * 1000));
+        }
+        let s = s0.wrapping_add(199 * 1000);
+        let want = b0.wrapping_add(199 * 1000).wrapping_mul(16);
+        assert!(since(c.board_instant(s).unwrap(), want).abs() <= 12);
+    }
+}
