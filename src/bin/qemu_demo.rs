@@ -340,7 +340,9 @@ fn main() -> ! {
             c.restarted
         );
     }
-    let accounted = c.iter().all(|c| c.reads + c.errors + c.not_read == SAMPLES);
+    let accounted = c
+        .iter()
+        .all(|c| c.reads + c.errors + c.not_read + c.late == SAMPLES);
     defmt::info!(
         "samples {} overruns {} accounted {}",
         SAMPLES,

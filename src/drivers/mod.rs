@@ -26,6 +26,18 @@ pub enum ReadFault {
     /// A configuration register read back differs from what the driver
     /// set (corrupted): the chip must be restarted.
     Config,
+    /// The chip has no sample for the instant asked for yet (its delay is
+    /// longer than the array's, or its clock is still being acquired).
+    /// Not a fault: the sample is neither lost nor counted.
+    Late,
+}
+
+/// A board timer's capture of a chip's data-ready pulse: the board's
+/// clock, µs, of the newest pulse (an input-capture channel on the chip's
+/// INT1). `None` before the first.
+pub trait SampleCapture {
+    /// The newest capture, µs.
+    fn last_us(&mut self) -> Option<u32>;
 }
 
 /// One step of a non-blocking restart ([`Gyro::restart`]).

@@ -356,6 +356,21 @@ impl<'a, const N: usize> EmuBus<'a, N> {
     }
 }
 
+/// The board timer's input capture of chip `index`'s INT1 on `bus`
+/// ([`EmuBus::int1_capture_us`]).
+pub struct EmuCapture<'a, 'b, const N: usize> {
+    /// The bus.
+    pub bus: &'a core::cell::RefCell<EmuBus<'b, N>>,
+    /// The chip.
+    pub index: usize,
+}
+
+impl<const N: usize> crate::drivers::SampleCapture for EmuCapture<'_, '_, N> {
+    fn last_us(&mut self) -> Option<u32> {
+        with_bus(self.bus, |b| b.int1_capture_us(self.index)).flatten()
+    }
+}
+
 /// Run `f` on the bus behind its `RefCell`, if nothing else holds it
 /// (the harness never nests borrows; `None` rather than a panic path if
 /// it ever did).

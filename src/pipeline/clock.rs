@@ -177,6 +177,17 @@ impl ChipClock {
         }
     }
 
+    /// The board time of chip stamp `stamp`, whole µs (wrapping as the
+    /// board's µs clock does), or `None` before the tracker has a ratio.
+    pub fn board_us(&self, stamp: u32) -> Option<u32> {
+        if self.state != ClockState::Tracking {
+            return None;
+        }
+        let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
+        let off = self.anchor_frac + self.ratio * d;
+        Some(self.anchor_us.wrapping_add(libm::floorf(off) as i32 as u32))
+    }
+
     /// The board instant of chip stamp `stamp`, or `None` before the
     /// tracker has a ratio.
     pub fn board_instant(&self, stamp: u32) -> Option<Instant16> {

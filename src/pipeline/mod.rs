@@ -21,6 +21,7 @@ pub mod align;
 pub mod clock;
 pub mod selftest;
 pub mod startup;
+pub mod timed;
 pub mod tracker;
 
 use crate::algo::calib::{CalConfig, RelCal};
@@ -131,9 +132,12 @@ pub struct GyroCounters {
     /// Restarts that completed (the chip configured and sampling again).
     pub restarted: u32,
     /// Samples in which the gyro was not read because it was being
-    /// restarted or waiting for its next attempt. Every sample is one of
-    /// `reads`, `errors` or `not_read`.
+    /// restarted or waiting for its next attempt.
     pub not_read: u32,
+    /// Samples in which the gyro had nothing yet for the instant asked for
+    /// ([`ReadFault::Late`]): not a fault. Every sample is one of `reads`,
+    /// `errors`, `not_read` or `late`.
+    pub late: u32,
 }
 
 impl Health {
@@ -550,6 +554,10 @@ impl<const N: usize> Pipeline<N> {
         let c = &mut self.counters[i];
         let h = &mut self.health[i];
         let r = match r {
+            Err(ReadFault::Late) => {
+                c.late = c.late.saturating_add(1);
+                return None;
+            }
             Err(e) => {
                 c.errors = c.errors.saturating_add(1);
                 match e {

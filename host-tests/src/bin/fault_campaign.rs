@@ -286,7 +286,7 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
     }
     if let Some(c) = last_counters {
         for (g, c) in c.iter().enumerate() {
-            let total = c.reads + c.errors + c.not_read;
+            let total = c.reads + c.errors + c.not_read + c.late;
             if total != samples {
                 bad.push(format!(
                     "2: gyro {g}: reads + errors + not read = {total} of {samples}"

@@ -1,0 +1,307 @@
+//! The real pipeline over four ICM-42688-P on their own clocks, each read
+//! through [`TimedIcm`] (FIFO, INT1 captures, alignment to one instant per
+//! sample): fused error at the stated instant against the same chips as
+//! ideal lockstep samplers through the same pipeline; faults through the
+//! timed path (a stuck chip, a reset, a stalled bus, CLKIN lost) handled,
+//! and nothing flagged for timing.
+
+use std::cell::RefCell;
+
+use embedded_hal_bus::spi::RefCellDevice;
+use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+use gyro_array::drivers::Gyro;
+use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::{
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault, Icm42688Model,
+    NoiseParams, RateProfile,
+};
+use gyro_array::pipeline::timed::TimedIcm;
+use gyro_array::pipeline::{Pipeline, PipelineConfig};
+
+const N: usize = 4;
+/// The array's output delay for 2 kHz chips through `Filter::BOARD_2K`
+/// (`timing-eval`).
+const DELAY_US: u32 = 1950;
+
+fn sway() -> RateProfile {
+    RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [95.0, -57.0, 76.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    }
+}
+
+fn noise(i: usize) -> NoiseParams {
+    NoiseParams {
+        bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+        ..NoiseParams::ICM42688
+    }
+}
+
+/// What happens to the array at a millisecond.
+#[derive(Clone, Copy, PartialEq)]
+enum Event {
+    Stuck(usize),
+    Reset(usize),
+    /// The loop stalls for this many ms (the bus advances, nothing is read).
+    Stall(u32),
+    ClkInLost,
+}
+
+struct Result {
+    rms_dps: [f64; 3],
+    flags_seen: [u8; N],
+    counters: [gyro_array::pipeline::GyroCounters; N],
+    timing: [gyro_array::pipeline::timed::TimingCounters; N],
+    clock_inputs: [ClockInput; N],
+    /// The first ms at which chip i was flagged, if it was.
+    flagged_at: [Option<u32>; N],
+    /// The ms at which each chip was last outside fusion.
+    last_out: [Option<u32>; N],
+}
+
+fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
+    let chips: [Chip; N] = core::array::from_fn(|i| {
+        let mut c = Icm42688Model::new(noise(i), sway(), 40 + i as u64, 70);
+        let pll = [0.009, -0.01, 0.002, -0.004][i];
+        c.set_timing(Some(ChipTiming {
+            pll: ClockParams {
+                offset: pll,
+                drift_per_s: 1e-5,
+                wander: 2e-4,
+                wander_period_s: 9.0,
+            },
+            ..ChipTiming::pll(0.0)
+        }));
+        Chip::Icm(c)
+    });
+    let cs: [CsLine; N] = Default::default();
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
+    if clkin {
+        with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
+    }
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let cfg = Config {
+        odr: Odr::Hz2000,
+        filter: Filter::BOARD_2K,
+        clock: if clkin {
+            ClockInput::ClkIn
+        } else {
+            ClockInput::Internal
+        },
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    };
+    let mut t: Vec<_> = (0..N)
+        .map(|i| {
+            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let mut g = Icm42688::new(d);
+            g.init(&mut delay, cfg).expect("init");
+            TimedIcm::new(
+                g,
+                EmuCapture {
+                    bus: &bus,
+                    index: i,
+                },
+            )
+        })
+        .collect();
+    for ti in t.iter_mut() {
+        ti.driver().flush_fifo().expect("flush");
+    }
+    let mut pipe = Pipeline::<N>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    )
+    .expect("pipeline");
+    let mut sq = [0.0f64; 3];
+    let mut count = 0u32;
+    let mut flags_seen = [0u8; N];
+    let mut flagged_at = [None; N];
+    let mut last_out = [None; N];
+    let mut n = 0;
+    while n < ms {
+        for (at, e) in events {
+            if *at != n {
+                continue;
+            }
+            match *e {
+                Event::Stuck(i) => with_bus(&bus, |b| b.chips[i].set_fault(Fault::Stuck)),
+                Event::Reset(i) => with_bus(&bus, |b| b.chips[i].power_cycle()),
+                Event::ClkInLost => with_bus(&bus, |b| b.clkin_hz = None),
+                Event::Stall(k) => {
+                    for _ in 0..k {
+                        with_bus(&bus, |b| b.advance(1e-3));
+                    }
+                    pipe.note_overrun(k);
+                    n += k;
+                    Some(())
+                }
+            };
+        }
+        with_bus(&bus, |b| b.advance(1e-3));
+        let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
+        let stated_s = (now_us - DELAY_US as f64) * 1e-6;
+        let at = ((now_us - DELAY_US as f64) as u64 as u32).wrapping_mul(16);
+        for ti in t.iter_mut() {
+            ti.set_instant(at);
+        }
+        let out = {
+            let (a, rest) = t.split_at_mut(1);
+            let (b, rest) = rest.split_at_mut(1);
+            let (c, d) = rest.split_at_mut(1);
+            let mut g: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
+            pipe.step(&mut g)
+        };
+        for i in 0..N {
+            let f = pipe.health()[i].flags;
+            flags_seen[i] |= f;
+            if f != 0 && flagged_at[i].is_none() {
+                flagged_at[i] = Some(n);
+            }
+            if out.offered.iter().any(|m| m & (1 << i) == 0) && n > 300 {
+                last_out[i] = Some(n);
+            }
+        }
+        if n >= 600 && out.fused.iter().all(|f| f.is_some()) {
+            let truth = sway().at_f64(stated_s);
+            for a in 0..3 {
+                let f = out.fused[a].map_or(0.0, |f| f.rate_dps as f64);
+                sq[a] += (f - truth[a]).powi(2);
+            }
+            count += 1;
+        }
+        n += 1;
+    }
+    Result {
+        rms_dps: sq.map(|s| (s / count.max(1) as f64).sqrt()),
+        flags_seen,
+        counters: *pipe.counters(),
+        timing: core::array::from_fn(|i| t[i].counters),
+        clock_inputs: core::array::from_fn(|i| t[i].clock_input()),
+        flagged_at,
+        last_out,
+    }
+}
+
+/// The same chips as ideal lockstep samplers, polled, through the same
+/// pipeline: RMS fused error against the truth at the read.
+fn run_lockstep(ms: u32) -> [f64; 3] {
+    let chips: [Chip; N] = core::array::from_fn(|i| {
+        Chip::Icm(Icm42688Model::new(noise(i), sway(), 40 + i as u64, 70))
+    });
+    let cs: [CsLine; N] = Default::default();
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let mut g: Vec<_> = (0..N)
+        .map(|i| {
+            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let mut g = Icm42688::new(d);
+            g.init(&mut delay, Config::default()).expect("init");
+            g
+        })
+        .collect();
+    let mut pipe = Pipeline::<N>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    )
+    .expect("pipeline");
+    let mut sq = [0.0f64; 3];
+    let mut count = 0u32;
+    for n in 0..ms {
+        with_bus(&bus, |b| b.advance(1e-3));
+        // The lockstep chips sample at the bus's f32 time.
+        let now_s = with_bus(&bus, |b| b.time_s()).unwrap_or(0.0) as f64;
+        let out = {
+            let (a, rest) = g.split_at_mut(1);
+            let (b, rest) = rest.split_at_mut(1);
+            let (c, d) = rest.split_at_mut(1);
+            let mut gy: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
+            pipe.step(&mut gy)
+        };
+        if n >= 600 && out.fused.iter().all(|f| f.is_some()) {
+            let truth = sway().at_f64(now_s);
+            for a in 0..3 {
+                let f = out.fused[a].map_or(0.0, |f| f.rate_dps as f64);
+                sq[a] += (f - truth[a]).powi(2);
+            }
+            count += 1;
+        }
+    }
+    sq.map(|s| (s / count.max(1) as f64).sqrt())
+}
+
+#[test]
+fn aligned_fusion_matches_the_lockstep_array_and_flags_nothing() {
+    let lock = run_lockstep(5000);
+    for clkin in [false, true] {
+        let r = run_timed(clkin, 5000, &[]);
+        println!(
+            "clkin {clkin}: fused RMS {:.4?} °/s, lockstep {:.4?}; late {:?}; samples {:?}",
+            r.rms_dps,
+            lock,
+            r.counters.map(|c| c.late),
+            r.timing.map(|t| t.samples)
+        );
+        for a in 0..3 {
+            let ratio = r.rms_dps[a] / lock[a];
+            assert!(ratio < 1.10, "clkin {clkin}, axis {a}: {ratio:.3}");
+        }
+        assert_eq!(r.flags_seen, [0; N], "clkin {clkin}: flagged");
+        for i in 0..N {
+            let c = r.counters[i];
+            assert_eq!(c.errors, 0, "clkin {clkin}, chip {i}");
+            // Late only while the trackers acquire (the first tens of ms).
+            assert!(c.late < 60, "clkin {clkin}, chip {i}: {} late", c.late);
+            assert_eq!(c.reads + c.errors + c.not_read + c.late, 5000);
+            assert_eq!(r.timing[i].overflows, 0);
+        }
+    }
+}
+
+#[test]
+fn a_stuck_chip_is_flagged_through_the_timed_path() {
+    let r = run_timed(false, 3000, &[(2000, Event::Stuck(2))]);
+    let at = r.flagged_at[2].expect("stuck chip flagged");
+    assert!((2000..2020).contains(&at), "flagged at {at}");
+    assert_eq!(r.flags_seen[0] | r.flags_seen[1] | r.flags_seen[3], 0);
+}
+
+#[test]
+fn a_reset_chip_is_restarted_and_rejoins_at_its_new_phase() {
+    let r = run_timed(false, 4000, &[(1500, Event::Reset(1))]);
+    let c = r.counters[1];
+    assert_eq!((c.resets, c.restarted), (1, 1));
+    // Back in fusion within 150 ms (restart steps, its 45 ms start-up,
+    // the tracker's 20 ms acquisition, `stuck_after` good samples).
+    let back = r.last_out[1].expect("was out");
+    assert!(back < 1650, "last out at {back}");
+    assert_eq!(r.flags_seen[0] | r.flags_seen[2] | r.flags_seen[3], 0);
+}
+
+#[test]
+fn a_stalled_bus_is_a_gap_not_a_fault() {
+    // 200 ms without a read: every FIFO (128 packets at 2 kHz: 64 ms)
+    // overflows; each chip's overflow is counted, and it is back at once.
+    let r = run_timed(false, 2000, &[(1000, Event::Stall(200))]);
+    for i in 0..N {
+        assert_eq!(r.timing[i].overflows, 1, "chip {i}");
+        assert_eq!(r.counters[i].errors, 0, "chip {i}");
+    }
+    assert_eq!(r.flags_seen, [0; N]);
+}
+
+#[test]
+fn losing_clkin_moves_each_chip_to_its_own_clock() {
+    let r = run_timed(true, 3000, &[(1500, Event::ClkInLost)]);
+    for i in 0..N {
+        assert_eq!(r.timing[i].clkin_lost, 1, "chip {i}");
+        assert_eq!(r.clock_inputs[i], ClockInput::Internal);
+        assert_eq!(r.counters[i].errors, 0, "chip {i}");
+        let back = r.last_out[i].expect("was out");
+        assert!(back < 1600, "chip {i} last out at {back}");
+    }
+    assert_eq!(r.flags_seen, [0; N]);
+}

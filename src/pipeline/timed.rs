@@ -1,0 +1,248 @@
+//! An ICM-42688-P read through its FIFO and put on the board's clock: the
+//! driver's samples with their stamps ([`Icm42688::read_fifo`]), the
+//! chip's clock tracked from its INT1 captures ([`ChipClock`]), each
+//! sample's instant less the chip's signal-path delay, and the rate at the
+//! array's common instant ([`Aligner`]). It is a [`Gyro`], so the pipeline
+//! fuses aligned rates without knowing how they were made.
+//!
+//! The instant each read is for is set before it ([`TimedIcm::set_instant`]):
+//! the board loop states one instant for the whole array, a fixed delay
+//! behind its own clock. A chip with nothing for it yet answers
+//! [`ReadFault::Late`], which the pipeline neither counts as an error nor
+//! fuses. An overflow (a stalled bus) is a gap: the aligner starts again
+//! and the chip is late until it has two samples again; it is counted
+//! here, not held against the chip.
+
+use embedded_hal::spi::SpiDevice;
+
+use super::align::{Aligned, Aligner};
+use super::clock::{ChipClock, ClockState, Instant16, Q};
+use crate::drivers::icm42688::{ClockInput, Config, Error, FifoSample, Icm42688, Sampling};
+use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
+
+/// Moving means kept per chip: 8 ms at 2 kHz, room for an instant up to
+/// 8 ms behind the newest sample (the ADXRS453's, for comparison).
+pub const ALIGN_CAP: usize = 16;
+
+/// What the timing layer counted for one chip.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TimingCounters {
+    /// Samples read from the FIFO.
+    pub samples: u32,
+    /// Reads with nothing for the instant asked for.
+    pub late: u32,
+    /// FIFO overflows (the FIFO was flushed: a gap).
+    pub overflows: u32,
+    /// Captures that did not fit the tracked clock (see
+    /// [`super::clock::JUMP_US`]).
+    pub jumps: u32,
+    /// Times the chip was moved off CLKIN to its own clock because no
+    /// sample came for [`CLKIN_LOST_READS`] reads.
+    pub clkin_lost: u32,
+}
+
+/// Reads without a sample after which a chip on CLKIN is taken to have lost
+/// it (at 2 kHz, 20 reads without one of 40 expected samples) and is moved
+/// to its own clock: the chip's grid stops without CLKIN (see
+/// `emu::timing`), and its own PLL keeps it sampling.
+pub const CLKIN_LOST_READS: u16 = 20;
+
+/// An ICM-42688-P on the board's clock.
+pub struct TimedIcm<SPI, C> {
+    g: Icm42688<SPI>,
+    capture: C,
+    clock: ChipClock,
+    align: Aligner<ALIGN_CAP>,
+    /// The signal path's delay, chip µs.
+    path_us: f32,
+    /// Chip µs between samples.
+    period_us: u32,
+    at: Option<Instant16>,
+    last_raw: [i16; 3],
+    /// Reads in a row without a sample.
+    dry: u16,
+    /// What was counted.
+    pub counters: TimingCounters,
+}
+
+impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
+    /// Wrap a driver set up (or to be restarted) with FIFO sampling
+    /// `cfg`, and the capture of its INT1.
+    pub fn new(g: Icm42688<SPI>, capture: C) -> Self {
+        let cfg = g.config();
+        let per_ms = libm::roundf(cfg.odr.hz() / 1000.0).max(1.0);
+        Self {
+            g,
+            capture,
+            clock: ChipClock::new(),
+            align: Aligner::new(per_ms as u8),
+            path_us: cfg.filter.group_delay_us(cfg.odr),
+            period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
+            at: None,
+            last_raw: [0; 3],
+            dry: 0,
+            counters: TimingCounters::default(),
+        }
+    }
+
+    /// The driver.
+    pub fn driver(&mut self) -> &mut Icm42688<SPI> {
+        &mut self.g
+    }
+
+    /// The chip's clock tracker.
+    pub fn clock(&self) -> &ChipClock {
+        &self.clock
+    }
+
+    /// Where the chip takes its clock from now.
+    pub fn clock_input(&self) -> ClockInput {
+        self.g.config().clock
+    }
+
+    /// The instant (board clock, 1/16 µs) the next read is for.
+    pub fn set_instant(&mut self, at: Instant16) {
+        self.at = Some(at);
+    }
+
+    /// Start again (after a restart: new stamps, a new phase).
+    fn forget(&mut self) {
+        self.clock.reset();
+        self.align.clear();
+    }
+
+    fn take(&mut self, s: &[FifoSample], capture: Option<u32>) {
+        let Some(newest) = s.last() else {
+            return;
+        };
+        if let Some(c) = capture {
+            // The capture is of the newest sample read, or of one that came
+            // after the FIFO's count was latched: the tracked clock tells.
+            let mut stamp = newest.stamp_us;
+            if let Some(p) = self.clock.board_us(stamp) {
+                let ahead = c.wrapping_sub(p) as i32;
+                if ahead > (self.period_us / 2) as i32 {
+                    stamp = stamp.wrapping_add(self.period_us);
+                }
+            }
+            let jumps = self.clock.jumps;
+            self.clock.observe(stamp, c);
+            self.counters.jumps = self
+                .counters
+                .jumps
+                .wrapping_add(self.clock.jumps.wrapping_sub(jumps));
+        }
+        let lsb = self.g.full_scale().lsb_per_dps();
+        // The delay is in the chip's time: on the board's clock it scales
+        // with the chip's clock.
+        let delay = (self.path_us * self.clock.ratio() * Q) as u32;
+        for x in s {
+            if let Some(t) = self.clock.board_instant(x.stamp_us) {
+                self.align
+                    .push(t.wrapping_sub(delay), x.raw.map(|v| v as f32 / lsb));
+            }
+        }
+        self.last_raw = newest.raw;
+        self.counters.samples = self.counters.samples.wrapping_add(s.len() as u32);
+    }
+}
+
+impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
+    fn read(&mut self) -> Result<Reading, ReadFault> {
+        let mut buf = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 8];
+        let mut fresh = false;
+        loop {
+            let r = self.g.read_fifo(&mut buf);
+            let capture = self.capture.last_us();
+            match r {
+                Ok(f) => {
+                    fresh |= f.samples > 0;
+                    self.take(&buf[..f.samples], capture);
+                    if f.left == 0 {
+                        break;
+                    }
+                }
+                Err(Error::ChipReset) => return Err(ReadFault::Reset),
+                Err(Error::FifoOverflow) => {
+                    self.counters.overflows = self.counters.overflows.wrapping_add(1);
+                    self.align.clear();
+                    break;
+                }
+                Err(Error::Spi(_)) => return Err(ReadFault::Bus),
+                Err(_) => {
+                    // A bad header or a short FIFO: the stream was out of
+                    // step (flushed); the samples around it are gone.
+                    self.align.clear();
+                    return Err(ReadFault::BadResponse);
+                }
+            }
+        }
+        self.dry = if fresh { 0 } else { self.dry.saturating_add(1) };
+        if self.dry >= CLKIN_LOST_READS && self.g.config().clock == ClockInput::ClkIn {
+            // CLKIN is gone: the chip's own clock from now on (a few
+            // checked writes; its read-back follows the new setting).
+            let cfg = Config {
+                clock: ClockInput::Internal,
+                ..self.g.config()
+            };
+            self.g
+                .configure_path(cfg)
+                .map_err(|_| ReadFault::BadResponse)?;
+            self.g.configure(cfg).map_err(|_| ReadFault::BadResponse)?;
+            self.counters.clkin_lost = self.counters.clkin_lost.wrapping_add(1);
+            self.forget();
+            self.dry = 0;
+        }
+        let at = self.at.ok_or(ReadFault::Late)?;
+        match self.align.at(at) {
+            Aligned::Rate(rate_dps) => {
+                let mut saturated = 0;
+                for (i, r) in self.last_raw.iter().enumerate() {
+                    if *r == i16::MAX || *r == i16::MIN {
+                        saturated |= 1 << i;
+                    }
+                }
+                Ok(Reading {
+                    raw: self.last_raw,
+                    rate_dps,
+                    axes: 0b111,
+                    saturated,
+                })
+            }
+            Aligned::Late | Aligned::Missing => {
+                self.counters.late = self.counters.late.wrapping_add(1);
+                Err(ReadFault::Late)
+            }
+        }
+    }
+
+    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
+        let r = self.g.restart(step);
+        if step == 0 || r == Ok(Restart::Done) {
+            self.forget();
+        }
+        r
+    }
+
+    fn check_config(&mut self) -> Result<(), ReadFault> {
+        self.g.check_config()
+    }
+
+    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
+        self.g.temperature_c()
+    }
+}
+
+/// Whether `cfg` is one a [`TimedIcm`] can run.
+pub fn fits(cfg: &Config) -> bool {
+    cfg.sampling == Sampling::Fifo
+}
+
+/// Whether the tracker has the chip's clock.
+pub fn tracking(c: &ChipClock) -> bool {
+    c.state() == ClockState::Tracking
+}
