@@ -19,7 +19,7 @@ use gyro_array::drivers::icm42688::{
     ClockInput, Config, FifoSample, Filter, Icm42688, Odr, Sampling,
 };
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
     RateProfile,
@@ -63,6 +63,11 @@ pub struct Run {
     pub restart_at_ms: Option<u32>,
     /// Give the chips scale errors of ±1 % (otherwise none).
     pub scale_errors: bool,
+    /// Out-of-band vibration at the timed chips' dies (the lockstep
+    /// sampler has no signal path to alias it, so it sees none).
+    pub vibration: Vibration,
+    /// Also measure the errors below 100 Hz.
+    pub band_limited: bool,
 }
 
 /// What one run measured, per axis.
@@ -70,6 +75,11 @@ pub struct Run {
 pub struct Outcome {
     /// RMS of (fused − truth at the stated instant), °/s, per axis.
     pub rms_dps: [f64; 3],
+    /// The same below 100 Hz (where the antenna's loops work), and the
+    /// lockstep array's.
+    pub rms_below_100_dps: [f64; 3],
+    /// See `rms_below_100_dps`.
+    pub lockstep_rms_below_100_dps: [f64; 3],
     /// The same for the lockstep array (truth at the read).
     pub lockstep_rms_dps: [f64; 3],
     /// The lag that best aligns the fused rate with the truth, minus the
@@ -86,7 +96,7 @@ pub struct Outcome {
     pub clock_ppm: [f32; N],
 }
 
-fn timings(c: Clocks) -> [ChipTiming; N] {
+fn timings(c: Clocks, vibration: Vibration) -> [ChipTiming; N] {
     let free = [
         ClockParams {
             offset: 0.008,
@@ -114,7 +124,7 @@ fn timings(c: Clocks) -> [ChipTiming; N] {
             Clocks::ClkIn => ClockParams::fixed(0.02),
         },
         rc: ClockParams::fixed(-0.07),
-        ..ChipTiming::pll(0.0)
+        vibration,
     })
 }
 
@@ -148,6 +158,18 @@ pub fn run(r: Run) -> Outcome {
             .iter()
             .map(|s| s.1[a] - truth(&r.profile, s.0)[a])
             .collect::<Vec<_>>());
+        if r.band_limited {
+            let e: Vec<f64> = timed
+                .iter()
+                .map(|s| s.1[a] - truth(&r.profile, s.0)[a])
+                .collect();
+            let l: Vec<f64> = lock
+                .iter()
+                .map(|s| s.1[a] - truth(&r.profile, s.0)[a])
+                .collect();
+            out.rms_below_100_dps[a] = rms_below(&e, 1000.0, 100.0);
+            out.lockstep_rms_below_100_dps[a] = rms_below(&l, 1000.0, 100.0);
+        }
         // The lag: the error regressed on the truth's derivative, the
         // truth itself (a scale error) and 1 (a bias), by least squares;
         // e ≈ −lag·ẇ + k·w + b.
@@ -181,6 +203,28 @@ fn lag_fit(rows: &[[f64; 4]]) -> f64 {
         return 0.0;
     }
     ata.lu().solve(&atb).map_or(0.0, |b| -b[0])
+}
+
+/// RMS of the part of `x` (sampled at `fs`) below `f_max`, from its DFT
+/// (Parseval over the bins below `f_max`, DC included).
+pub fn rms_below(x: &[f64], fs: f64, f_max: f64) -> f64 {
+    let n = x.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let kmax = (f_max / fs * n as f64) as usize;
+    let mut p = 0.0;
+    for k in 0..kmax.min(n / 2) {
+        let (mut re, mut im) = (0.0, 0.0);
+        let w = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+        for (i, v) in x.iter().enumerate() {
+            re += v * (w * i as f64).cos();
+            im += v * (w * i as f64).sin();
+        }
+        let m = (re * re + im * im) / (n as f64 * n as f64);
+        p += if k == 0 { m } else { 2.0 * m };
+    }
+    p.sqrt()
 }
 
 fn rms(x: &[f64]) -> f64 {
@@ -221,7 +265,7 @@ impl Fuser {
 
 /// (stated instant s, fused rate) per output sample.
 fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
-    let t = timings(r.clocks);
+    let t = timings(r.clocks, r.vibration);
     let chips: [Chip; N] = core::array::from_fn(|i| {
         let mut c = Icm42688Model::new(
             noise(i, r.scale_errors),
