@@ -4,7 +4,7 @@
 #![no_main]
 use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
 use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{Config, Icm42688};
+use gyro_array::drivers::icm42688::{ClockInput, Config, FifoSample, Icm42688, Odr, Sampling};
 use gyro_array::drivers::Gyro;
 use libfuzzer_sys::fuzz_target;
 mod common;
@@ -47,7 +47,31 @@ impl embedded_hal::delay::DelayNs for NoDelay {
 fuzz_target!(|data: &[u8]| {
     let which = data.first().copied().unwrap_or(0);
     let spi = Miso(Bytes(data.get(1..).unwrap_or(&[])));
-    if which & 1 == 0 {
+    if which & 3 == 2 {
+        // The FIFO path: packets, counts and headers from a hostile chip.
+        let mut g = Icm42688::new(spi);
+        let cfg = Config {
+            odr: Odr::Hz2000,
+            clock: if which & 4 == 0 {
+                ClockInput::Internal
+            } else {
+                ClockInput::ClkIn
+            },
+            sampling: Sampling::Fifo,
+            ..Config::default()
+        };
+        let _ = g.init(&mut NoDelay, cfg);
+        let mut buf = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 4];
+        for _ in 0..6 {
+            if let Ok(r) = g.read_fifo(&mut buf) {
+                assert!(r.samples <= buf.len());
+            }
+            let _ = g.check_config();
+        }
+    } else if which & 1 == 0 {
         let mut g = Icm42688::new(spi);
         let _ = g.init(&mut NoDelay, Config::default());
         let _ = g.self_test(&mut NoDelay, 1 + (which >> 4) as u16);

@@ -19,6 +19,7 @@ impl Gyro for G<'_, '_> {
             0 => Err(ReadFault::Bus),
             1 => Err(ReadFault::Reset),
             2 => Err(ReadFault::Parity),
+            3 => Err(ReadFault::Late),
             _ => {
                 let raw = [b.u16() as i16, b.u16() as i16, b.u16() as i16];
                 let rate = if b.u8() < 240 {
