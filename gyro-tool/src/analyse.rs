@@ -65,6 +65,12 @@ pub fn run(file: &PathBuf) -> Res<bool> {
         st.frames,
         st.corrupt + st.too_long + st.version + st.malformed
     );
+    // The instant each sample's rate describes, and how steady it is.
+    let mut summary = crate::summary::Summary::default();
+    for r in &frames {
+        summary.add(r);
+    }
+    print!("{}", summary.timing_report());
     let tau0 = tau0_s.unwrap_or(1e-3);
     if best.len() < 16 {
         println!("fewer than 16 contiguous fused samples: no Allan deviation");

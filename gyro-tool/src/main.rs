@@ -1127,8 +1127,8 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
             (Frame::Sample(s), What::Samples) => {
                 if !header_done {
                     let mut h: Vec<String> = [
-                        "link_seq", "seq", "t_us", "x_dps", "y_dps", "z_dps", "valid", "degraded",
-                        "used_x", "used_y", "used_z",
+                        "link_seq", "seq", "t_us", "age_x_us", "age_y_us", "age_z_us", "x_dps",
+                        "y_dps", "z_dps", "valid", "degraded", "used_x", "used_y", "used_z",
                     ]
                     .map(String::from)
                     .to_vec();
@@ -1137,6 +1137,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     header_done = true;
                 }
                 let mut r = lead(d.link_seq, s.seq, s.t_us);
+                r.extend(s.age_us.iter().map(|v| v.to_string()));
                 r.extend(s.rate_dps.iter().map(|v| v.to_string()));
                 r.extend([s.valid, s.degraded].iter().map(|v| v.to_string()));
                 r.extend(s.used.iter().map(|v| v.to_string()));
@@ -1171,6 +1172,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
             (Frame::Raw(s), What::Raw) => {
                 if !header_done {
                     let mut h = vec!["link_seq".to_string(), "seq".into(), "t_us".into()];
+                    h.extend((0..s.age_us.len()).map(|i| format!("g{i}_age_us")));
                     for i in 0..s.rate_dps.len() {
                         h.extend(["x", "y", "z"].map(|a| format!("g{i}_{a}_dps")));
                     }
@@ -1179,6 +1181,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     header_done = true;
                 }
                 let mut r = lead(d.link_seq, s.seq, s.t_us);
+                r.extend(s.age_us.iter().map(|v| v.to_string()));
                 for g in &s.rate_dps {
                     r.extend(g.iter().map(|v| v.to_string()));
                 }
@@ -1202,11 +1205,13 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                     ]
                     .map(String::from)
                     .to_vec();
-                    // The online relative calibration of every gyro.
+                    // The online relative calibration and the clock of
+                    // every gyro.
                     for i in 0..s.gyros.len() {
                         for q in ["scale_ppm", "bias_mdps"] {
                             h.extend(["x", "y", "z"].map(|a| format!("g{i}_{q}_{a}")));
                         }
+                        h.extend(["clock", "clock_ppm", "late"].map(|q| format!("g{i}_{q}")));
                     }
                     w.write_record(&h)?;
                     header_done = true;
@@ -1227,6 +1232,11 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                 for g in &s.gyros {
                     r.extend(g.scale_ppm.iter().map(|v| v.to_string()));
                     r.extend(g.bias_mdps.iter().map(|v| v.to_string()));
+                    r.extend([
+                        format!("{:?}", g.clock),
+                        g.clock_ppm.to_string(),
+                        g.late.to_string(),
+                    ]);
                 }
                 w.write_record(&r)?;
             }

@@ -2,7 +2,7 @@
 //! newest status, and a CRC-32 of the fused rates (to compare with the
 //! firmware's own). Shared by `record`, `watch` and `check`.
 
-use gyro_array::link::msg::{Ack, Frame, Noise, Sample, Status};
+use gyro_array::link::msg::{Ack, ClockSource, Frame, Noise, Sample, Status};
 use gyro_array::link::wire::{DecodeStats, Decoded, FrameError};
 
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
@@ -26,6 +26,12 @@ pub struct Summary {
     pub last_sample: Option<Sample>,
     pub last_status: Option<Status>,
     pub noise: Vec<(u32, Noise)>,
+    /// Per axis, the delay every valid sample stated (`age_us`), µs.
+    pub ages_us: [Vec<u16>; 3],
+    /// Spacing of consecutive sample frames' `t_us` (where no sample is
+    /// missing between them), µs.
+    pub spacing_us: Vec<i64>,
+    last_t_us: Option<(u32, u64)>,
     last_link: Option<u32>,
     digest: crc::Digest<'static, u32>,
 }
@@ -46,6 +52,9 @@ impl Default for Summary {
             last_sample: None,
             last_status: None,
             noise: Vec::new(),
+            ages_us: Default::default(),
+            spacing_us: Vec::new(),
+            last_t_us: None,
             last_link: None,
             digest: CRC32.digest(),
         }
@@ -75,6 +84,17 @@ impl Summary {
                 if let Some(n) = s.noise {
                     self.noise.push((s.seq, n));
                 }
+                for a in 0..3 {
+                    if s.valid & (1 << a) != 0 {
+                        self.ages_us[a].push(s.age_us[a]);
+                    }
+                }
+                if let Some((seq, t)) = self.last_t_us {
+                    if s.seq.wrapping_sub(seq) == 1 {
+                        self.spacing_us.push(s.t_us as i64 - t as i64);
+                    }
+                }
+                self.last_t_us = Some((s.seq, s.t_us));
                 self.last_sample = Some(s.clone());
             }
             Frame::Raw(r) => {
@@ -137,12 +157,62 @@ impl Summary {
         );
         if self.samples > 0 {
             s += &format!("fused-rate CRC-32: {:#010x}\n", self.fused_crc32());
+            s += &self.timing_report();
         }
         for (i, a) in self.acks.iter().enumerate() {
             s += &format!("ack {i}: command {:?} -> {:?}\n", a.id, a.result);
         }
         if let Some(st) = &self.last_status {
             s += &format!("last status: {}\n", status_line(st));
+        }
+        s
+    }
+}
+
+impl Summary {
+    /// The delay the samples stated (the fused rate describes `t_us −
+    /// age_us`), per axis: median, range and its jitter (standard
+    /// deviation); and the spacing of the frames' `t_us`.
+    pub fn timing_report(&self) -> String {
+        let mut s = String::from("stated delay (age_us):");
+        for (a, v) in self.ages_us.iter().enumerate() {
+            let name = ["x", "y", "z"][a];
+            if v.is_empty() {
+                s += &format!(" {name} -;");
+                continue;
+            }
+            let mut sorted = v.clone();
+            sorted.sort_unstable();
+            let mean = v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64;
+            let sd =
+                (v.iter().map(|x| (*x as f64 - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+            s += &format!(
+                " {name} median {} µs, {}..={}, jitter {:.1} µs;",
+                sorted[sorted.len() / 2],
+                sorted[0],
+                sorted[sorted.len() - 1],
+                sd
+            );
+        }
+        s.pop();
+        s.push('\n');
+        if !self.spacing_us.is_empty() {
+            let n = self.spacing_us.len() as f64;
+            let mean = self.spacing_us.iter().map(|x| *x as f64).sum::<f64>() / n;
+            let sd = (self
+                .spacing_us
+                .iter()
+                .map(|x| (*x as f64 - mean).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt();
+            let (lo, hi) = (
+                self.spacing_us.iter().min().copied().unwrap_or(0),
+                self.spacing_us.iter().max().copied().unwrap_or(0),
+            );
+            s += &format!(
+                "sample spacing (t_us): mean {mean:.1} µs, {lo}..={hi}, jitter {sd:.1} µs\n"
+            );
         }
         s
     }
@@ -161,8 +231,17 @@ pub fn status_line(st: &Status) -> String {
         .iter()
         .map(|g| format!("{:+}ppm/{:+}m", g.scale_ppm[2], g.bias_mdps[2]))
         .collect();
+    let clocks: Vec<String> = st
+        .gyros
+        .iter()
+        .map(|g| match g.clock {
+            ClockSource::Polled => "polled".to_string(),
+            ClockSource::Own => format!("own {:+}ppm late {}", g.clock_ppm, g.late),
+            ClockSource::ClkIn => format!("clkin {:+}ppm late {}", g.clock_ppm, g.late),
+        })
+        .collect();
     format!(
-        "seq {} t {:.3} s | {:?} {:?} div {} | overruns {} | link sent {} dropped {} cmds {}/{} | stack {} B | gyro flags [{}] | z calibration [{}]",
+        "seq {} t {:.3} s | {:?} {:?} div {} | overruns {} | link sent {} dropped {} cmds {}/{} | stack {} B | gyro flags [{}] | z calibration [{}] | clocks [{}]",
         st.seq,
         st.t_us as f64 * 1e-6,
         st.settings.mode,
@@ -175,6 +254,7 @@ pub fn status_line(st: &Status) -> String {
         st.link.rejected,
         st.stack_peak,
         flags.join(" "),
-        cal.join(" ")
+        cal.join(" "),
+        clocks.join(", ")
     )
 }

@@ -146,7 +146,7 @@ fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
         let stated_s = (now_us - DELAY_US as f64) * 1e-6;
         let at = ((now_us - DELAY_US as f64) as u64 as u32).wrapping_mul(16);
         for ti in t.iter_mut() {
-            ti.set_instant(at);
+            ti.set_instant(at, DELAY_US);
         }
         let out = {
             let (a, rest) = t.split_at_mut(1);
@@ -166,6 +166,8 @@ fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
             }
         }
         if n >= 600 && out.fused.iter().all(|f| f.is_some()) {
+            // Every axis states the array's instant.
+            assert_eq!(out.age_us(), [DELAY_US as u16; 3], "ms {n}");
             let truth = sway().at_f64(stated_s);
             for a in 0..3 {
                 let f = out.fused[a].map_or(0.0, |f| f.rate_dps as f64);
@@ -222,6 +224,13 @@ fn run_lockstep(ms: u32) -> [f64; 3] {
             pipe.step(&mut gy)
         };
         if n >= 600 && out.fused.iter().all(|f| f.is_some()) {
+            // Polled chips state their driver's figure: the filters'
+            // delay and half a sample period (these lockstep models have
+            // neither, which is why they are the reference).
+            let d = Config::default().filter.group_delay_us(Odr::Hz1000) + 500.0;
+            for a in out.age_us() {
+                assert!((a as f32 - d).abs() <= 1.0, "{a} vs {d}");
+            }
             let truth = sway().at_f64(now_s);
             for a in 0..3 {
                 let f = out.fused[a].map_or(0.0, |f| f.rate_dps as f64);

@@ -309,7 +309,15 @@ fn main() -> ! {
                 break t;
             }
             if let Some((seq, t)) = status_for.take() {
-                let st = port.status(&pipe, seq, t, [1, 16, 256], 1_000_000 / FS_HZ, meter.peak());
+                let st = port.status(
+                    &pipe,
+                    seq,
+                    t,
+                    [1, 16, 256],
+                    1_000_000 / FS_HZ,
+                    meter.peak(),
+                    &[],
+                );
                 port.send(&st);
             }
             port.drain(&mut tx);

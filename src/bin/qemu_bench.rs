@@ -647,7 +647,15 @@ fn bench_loop_on(
         // the sample (timed on its own).
         if status_due {
             let s0 = t.now();
-            let st = port.status(&pipe, out.seq, u64::from(n) * 1000, [1, 16, 256], 1000, 0);
+            let st = port.status(
+                &pipe,
+                out.seq,
+                u64::from(n) * 1000,
+                [1, 16, 256],
+                1000,
+                0,
+                &[],
+            );
             port.send(&st);
             port.drain(&mut uart);
             status_worst = status_worst.max(net(t.now() - s0, pair));

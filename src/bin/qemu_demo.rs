@@ -189,7 +189,7 @@ fn main() -> ! {
             // commands.
             if let Some((seq, t)) = status_for.take() {
                 let peak = stack::stack_usage().peak;
-                let st = port.status(&pipe, seq, t, [1, 8, 64], 1_000_000 / FS_HZ, peak);
+                let st = port.status(&pipe, seq, t, [1, 8, 64], 1_000_000 / FS_HZ, peak, &[]);
                 port.send(&st);
             }
             port.drain(&mut uart);

@@ -257,9 +257,21 @@ impl<SPI: SpiDevice> Adxrs453<SPI> {
     }
 }
 
+/// The rate's bandwidth, Hz (datasheet table 1).
+pub const BANDWIDTH_HZ: f32 = 77.5;
+/// The delay the driver states, µs: the rate filter's group delay at DC
+/// taken as a 2nd-order Butterworth's (√2/ω; the datasheet gives the
+/// bandwidth, not the order), and one 1 kHz sample period, since each
+/// response carries the rate latched at the previous frame.
+pub const DELAY_US: u32 = 2904 + 1000;
+
 impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
     fn temperature_c(&mut self) -> Result<f32, ReadFault> {
         self.read_temperature_c().map_err(|_| ReadFault::Bus)
+    }
+
+    fn delay_us(&self) -> u32 {
+        DELAY_US
     }
 
     fn read(&mut self) -> Result<Reading, ReadFault> {

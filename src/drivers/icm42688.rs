@@ -1158,6 +1158,13 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         self.read_temperature_c().map_err(|_| ReadFault::Bus)
     }
 
+    /// Polled: the filters' group delay and half a sample period (the
+    /// newest sample is 0 to 1 period old at the read).
+    fn delay_us(&self) -> u32 {
+        let c = self.config;
+        libm::roundf(c.filter.group_delay_us(c.odr) + 0.5e6 / c.odr.hz()) as u32
+    }
+
     /// The configuration `init` set, one of three groups per call (as PX4
     /// re-checks one register at a time, so each call costs the same few
     /// transactions): REG_BANK_SEL and the burst INTF_CONFIG0 ..

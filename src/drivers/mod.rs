@@ -92,4 +92,11 @@ pub trait Gyro {
     fn temperature_c(&mut self) -> Result<f32, ReadFault> {
         Err(ReadFault::BadResponse)
     }
+
+    /// How long before its read a reading's rate was the true rate, µs:
+    /// the part's filters and how old its newest sample is, as the part's
+    /// configuration and datasheet give them (an ideal sampler: 0).
+    fn delay_us(&self) -> u32 {
+        0
+    }
 }

@@ -21,7 +21,7 @@ pub mod wire;
 mod tests;
 
 /// Protocol version, the first byte of every payload.
-pub const VERSION: u8 = 3;
+pub const VERSION: u8 = 4;
 
 /// UART speed: 2 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
 /// BRR = 2.625) and within reach of common USB-serial bridges.

@@ -65,9 +65,13 @@ pub struct Sample {
     /// Sample sequence number (counts every sample period, missed ones too).
     #[serde(with = "postcard::fixint::le")]
     pub seq: u32,
-    /// Time of the sample, µs since boot.
+    /// Time of the sample (when it was read and queued), µs since boot.
     #[serde(with = "postcard::fixint::le")]
     pub t_us: u64,
+    /// Per axis, how long before `t_us` the fused rate was the true rate,
+    /// µs: the instant it describes is `t_us − age_us[a]` (the chips'
+    /// filters and the array's alignment included; 0 where not valid).
+    pub age_us: [u16; 3],
     /// Fused rate x, y, z, °/s; NaN where the axis is not valid.
     pub rate_dps: [f32; 3],
     /// Bit a set: axis a has a fused value.
@@ -114,6 +118,8 @@ pub struct Raw {
     /// Time of the sample, µs since boot.
     #[serde(with = "postcard::fixint::le")]
     pub t_us: u64,
+    /// Per gyro, how long before `t_us` its rate was the true rate, µs.
+    pub age_us: Vec<u16, MAX_GYROS>,
     /// Per gyro, x, y, z in °/s (NaN where not read or absent).
     pub rate_dps: Vec<[f32; 3], MAX_GYROS>,
     /// Per gyro, health flags.
@@ -142,6 +148,27 @@ pub struct GyroStatus {
     /// Online relative calibration per board axis: the chip's bias against
     /// the median chip, m°/s.
     pub bias_mdps: [i16; 3],
+    /// Where the chip's samples take their time from.
+    pub clock: ClockSource,
+    /// The chip's clock against the board's, ppm (positive: fast; 0 where
+    /// not tracked).
+    pub clock_ppm: i32,
+    /// Samples in which the chip had nothing yet for the stated instant.
+    pub late: u32,
+}
+
+/// Where a chip's samples take their time from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ClockSource {
+    /// Its data registers are polled: the newest sample, its delay the
+    /// driver's figure.
+    #[default]
+    Polled,
+    /// Its FIFO, on its own oscillator, tracked against the board's clock.
+    Own,
+    /// Its FIFO, on the board's CLKIN.
+    ClkIn,
 }
 
 /// Counters and settings.

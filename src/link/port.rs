@@ -13,8 +13,8 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, Command, Frame, FrameRef, FusionMethod, GyroStatus, LinkCounters, Mode, Noise, Op, Raw,
-    Reject, Sample, Settings, Status, MAX_GYROS,
+    Ack, ClockSource, Command, Frame, FrameRef, FusionMethod, GyroStatus, LinkCounters, Mode,
+    Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
 };
 use super::ring::ByteRing;
 use super::wire::{
@@ -172,6 +172,7 @@ impl<const TX: usize> Port<TX> {
                 let mut s = Sample {
                     seq: out.seq,
                     t_us,
+                    age_us: out.age_us(),
                     rate_dps: [f32::NAN; 3],
                     valid: 0,
                     degraded: 0,
@@ -201,9 +202,14 @@ impl<const TX: usize> Port<TX> {
                 for r in out.rate_dps.iter().take(MAX_GYROS) {
                     let _ = rates.push(*r);
                 }
+                let mut age_us = Vec::<u16, MAX_GYROS>::new();
+                for d in out.delay_us.iter().take(MAX_GYROS) {
+                    let _ = age_us.push((*d).min(u16::MAX as u32) as u16);
+                }
                 let r = Raw {
                     seq: out.seq,
                     t_us,
+                    age_us,
                     rate_dps: rates,
                     health,
                 };
@@ -245,7 +251,10 @@ impl<const TX: usize> Port<TX> {
         due
     }
 
-    /// The status frame: settings, the link's and the pipeline's counters.
+    /// The status frame: settings, the link's and the pipeline's counters,
+    /// and each chip's clock (`clocks[i]`: its source and its error
+    /// against the board's clock, ppm; missing entries read as polled).
+    #[allow(clippy::too_many_arguments)]
     pub fn status<const N: usize>(
         &self,
         pipe: &Pipeline<N>,
@@ -254,6 +263,7 @@ impl<const TX: usize> Port<TX> {
         noise_tau: [u16; 3],
         sample_us: u32,
         stack_peak: u32,
+        clocks: &[(ClockSource, i32)],
     ) -> Frame {
         let mut gyros = Vec::<GyroStatus, MAX_GYROS>::new();
         let cal = pipe.calibration();
@@ -282,6 +292,9 @@ impl<const TX: usize> Port<TX> {
                 restarted: c.restarted,
                 scale_ppm,
                 bias_mdps,
+                clock: clocks.get(i).map_or(ClockSource::Polled, |c| c.0),
+                clock_ppm: clocks.get(i).map_or(0, |c| c.1),
+                late: c.late,
             });
         }
         Frame::Status(Status {

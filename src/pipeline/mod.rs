@@ -195,6 +195,9 @@ pub struct Output<const N: usize> {
     pub seq: u32,
     /// Per-gyro rates, °/s (NaN where not read).
     pub rate_dps: [[f32; 3]; N],
+    /// Per gyro, how long before the read its rate was true, µs
+    /// ([`Gyro::delay_us`]; 0 where not read).
+    pub delay_us: [u32; N],
     /// Per axis, the gyros offered to fusion.
     pub offered: [u8; 3],
     /// Per axis, the fused sample.
@@ -213,6 +216,29 @@ pub struct Output<const N: usize> {
     /// an estimate, made the loop's worst sample (10 030 instructions,
     /// `cargo xtask bench`, fault scenario B).
     pub busy: bool,
+}
+
+impl<const N: usize> Output<N> {
+    /// Per axis, how long before the read the fused rate was true, µs: the
+    /// fusion weights' mean of the chips' delays (for a slow signal, a
+    /// weighted mean of delayed copies is that copy delayed by the mean).
+    /// 0 where the axis has no fused value.
+    pub fn age_us(&self) -> [u16; 3] {
+        let mut age = [0u16; 3];
+        for (a, f) in self.fused.iter().enumerate() {
+            let Some(f) = f else { continue };
+            let mut d = 0.0f32;
+            let mut w_sum = 0.0f32;
+            for (w, us) in f.weights.iter().zip(self.delay_us) {
+                d += *w * us as f32;
+                w_sum += *w;
+            }
+            if w_sum > 0.0 {
+                age[a] = libm::roundf(d / w_sum).min(u16::MAX as f32) as u16;
+            }
+        }
+        age
+    }
 }
 
 /// One axis's calibration and fusion ([`RelCal::fuse_probed`]), out of
@@ -407,6 +433,7 @@ impl<const N: usize> Pipeline<N> {
         let mut out = Output {
             seq: self.seq,
             rate_dps: [[f32::NAN; 3]; N],
+            delay_us: [0; N],
             offered: [0; 3],
             fused: [None; 3],
             noise_probe_dps: [None; 3],
@@ -441,6 +468,7 @@ impl<const N: usize> Pipeline<N> {
                 }
                 if let Ok(r) = r {
                     out.rate_dps[i] = self.board_rates(i, &r);
+                    out.delay_us[i] = g.delay_us();
                 }
                 // The die temperature, for the bias model: one gyro in
                 // turn, between configuration checks.

@@ -59,6 +59,8 @@ pub struct TimedIcm<SPI, C> {
     /// Chip µs between samples.
     period_us: u32,
     at: Option<Instant16>,
+    /// How far the instant asked for is behind the read, µs.
+    behind_us: u32,
     last_raw: [i16; 3],
     /// Reads in a row without a sample.
     dry: u16,
@@ -80,6 +82,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             path_us: cfg.filter.group_delay_us(cfg.odr),
             period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
             at: None,
+            behind_us: 0,
             last_raw: [0; 3],
             dry: 0,
             counters: TimingCounters::default(),
@@ -101,9 +104,11 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.g.config().clock
     }
 
-    /// The instant (board clock, 1/16 µs) the next read is for.
-    pub fn set_instant(&mut self, at: Instant16) {
+    /// The instant (board clock, 1/16 µs) the next read is for, and how
+    /// far it is behind the read, µs (what [`Gyro::delay_us`] states).
+    pub fn set_instant(&mut self, at: Instant16, behind_us: u32) {
         self.at = Some(at);
+        self.behind_us = behind_us;
     }
 
     /// Start again (after a restart: new stamps, a new phase).
@@ -234,6 +239,10 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
 
     fn temperature_c(&mut self) -> Result<f32, ReadFault> {
         self.g.temperature_c()
+    }
+
+    fn delay_us(&self) -> u32 {
+        self.behind_us
     }
 }
 

@@ -353,6 +353,7 @@ mod tests {
             let out = Output::<1> {
                 seq: k,
                 rate_dps: [[0.0; 3]],
+                delay_us: [0],
                 offered: [0; 3],
                 fused: [None; 3],
                 noise_probe_dps: [
@@ -411,6 +412,7 @@ mod tests {
             let out = Output::<1> {
                 seq,
                 rate_dps: [[0.0; 3]],
+                delay_us: [0],
                 offered: [0; 3],
                 fused: [None; 3],
                 noise_probe_dps: [Some(p), (k % 130 != 77).then_some(p), Some(p)],
@@ -461,6 +463,7 @@ mod tests {
             let out = Output::<1> {
                 seq: first.wrapping_add(k),
                 rate_dps: [[0.0; 3]],
+                delay_us: [0],
                 offered: [0; 3],
                 fused: [None; 3],
                 noise_probe_dps: [(!gap).then_some(p), Some(p), Some(p)],

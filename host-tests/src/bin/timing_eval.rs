@@ -153,6 +153,7 @@ fn sample_frame_bytes() -> usize {
     let s = Sample {
         seq: u32::MAX,
         t_us: u64::MAX,
+        age_us: [u16::MAX; 3],
         rate_dps: [123.456; 3],
         valid: 7,
         degraded: 0x87,
