@@ -85,6 +85,6 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     for c in p.counters() {
-        assert_eq!(c.reads + c.errors + c.not_read, samples);
+        assert_eq!(c.reads + c.errors + c.not_read + c.late, samples);
     }
 });
