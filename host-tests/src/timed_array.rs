@@ -94,6 +94,11 @@ pub struct Outcome {
     pub fifo_errors: u32,
     /// Chip clock errors the trackers found, ppm (chip 0..3).
     pub clock_ppm: [f32; N],
+    /// Per output sample: the stated instant (s) and the fused rate.
+    pub fused: Vec<(f64, [f64; 3])>,
+    /// Per ms after warm-up: how far each chip's newest mean lies behind
+    /// the read, µs (NaN before it has one).
+    pub newest_behind_us: Vec<[f64; N]>,
 }
 
 fn timings(c: Clocks, vibration: Vibration) -> [ChipTiming; N] {
@@ -149,6 +154,7 @@ pub fn run(r: Run) -> Outcome {
     let mut out = Outcome::default();
     let timed = timed(&r, &mut out);
     let lock = lockstep(&r);
+    out.fused = timed.clone();
     for a in 0..3 {
         out.rms_dps[a] = rms(&timed
             .iter()
@@ -391,6 +397,14 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
         }
         let stated_s = now_s - r.delay_us as f64 * 1e-6;
         let t_q: Instant16 = ((stated_s * 1e6 * 16.0) as u64) as u32;
+        if n >= WARM_MS {
+            let now_q = ((now_s * 1e6 * 16.0) as u64) as u32;
+            out.newest_behind_us.push(core::array::from_fn(|i| {
+                align[i]
+                    .newest()
+                    .map_or(f64::NAN, |t| now_q.wrapping_sub(t) as i32 as f64 / 16.0)
+            }));
+        }
         let mut y = [[0.0f32; N]; 3];
         let mut offered = 0u8;
         for i in 0..N {

@@ -15,6 +15,12 @@
 //!   and swaying at 2 Hz: the E-DAVAR estimates (fed the array's noise
 //!   probe) against the fused error's Allan deviation and the fused rate's.
 //!
+//! - `timing`: four ICM-42688-P on their own clocks, read every
+//!   millisecond: how far each chip's newest sample lies behind the read
+//!   (each chip's phase drifts at its own clock's rate; one on CLKIN holds
+//!   still), and the fused error against the truth at instants shifted
+//!   from the one the board states: least at the stated instant.
+//!
 //! Each figure also prints the figures it shows (RMS errors, ratios), so
 //! what the picture claims comes from this command.
 
@@ -38,6 +44,7 @@ enum Figure {
     Edavar,
     Replay,
     Motion,
+    Timing,
 }
 
 /// Draw the evaluation figures (SVG).
@@ -62,6 +69,7 @@ fn main() -> Result<(), Err> {
         Figure::Edavar,
         Figure::Replay,
         Figure::Motion,
+        Figure::Timing,
     ];
     let figs = if args.figures.is_empty() {
         &all[..]
@@ -74,6 +82,7 @@ fn main() -> Result<(), Err> {
             Figure::Edavar => edavar(&args.out, args.seed)?,
             Figure::Replay => replay(&args.out, args.seed)?,
             Figure::Motion => motion(&args.out, args.seed)?,
+            Figure::Timing => timing(&args.out, args.seed)?,
         }
     }
     Ok(())
@@ -715,6 +724,160 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
             .legend(|(x, y)| Circle::new((x + 10, y), 4, RED.filled()));
         legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
+    root.present()?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+fn timing(out: &Path, seed: u64) -> Result<(), Err> {
+    use gyro_array::drivers::icm42688::{Filter, Odr};
+    use gyro_array::emu::timing::Vibration;
+    use host_tests::timed_array::{self, Clocks};
+    let profile = RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [95.0, -57.0, 76.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    };
+    let run = |clocks| {
+        timed_array::run(timed_array::Run {
+            profile,
+            clocks,
+            odr: Odr::Hz2000,
+            filter: Filter::BOARD_2K,
+            delay_us: 1950,
+            ms: 4000,
+            seed,
+            restart_at_ms: None,
+            scale_errors: false,
+            vibration: Vibration::NONE,
+            band_limited: false,
+        })
+    };
+    let (free, clkin) = (run(Clocks::Free), run(Clocks::ClkIn));
+    let path = out.join("timing.svg");
+    let root = SVGBackend::new(&path, (1100, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((1, 2));
+    // (a) each chip's newest mean behind the read, free-running, 400 ms.
+    let mut chart = ChartBuilder::on(&panels[0])
+        .caption(
+            "Each chip's newest sample behind the read",
+            ("sans-serif", 17),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0f64..400f64, 900f64..2150f64)?;
+    chart
+        .configure_mesh()
+        .x_desc("time (ms)")
+        .y_desc("read − newest mean's instant (µs)")
+        .draw()?;
+    let names = [
+        "chip 0, PLL +0.8 %",
+        "chip 1, PLL −1 %",
+        "chip 2, PLL +0.3 %",
+        "chip 3, RC −7 %",
+    ];
+    for (i, name) in names.iter().enumerate() {
+        let pts: Vec<(f64, f64)> = free
+            .newest_behind_us
+            .iter()
+            .take(400)
+            .enumerate()
+            .filter(|(_, v)| v[i].is_finite())
+            .map(|(k, v)| (k as f64, v[i]))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts, PALETTE[i].stroke_width(2)))?
+            .label(*name)
+            .legend(move |(x, y)| {
+                PathElement::new([(x, y), (x + 20, y)], PALETTE[i].stroke_width(2))
+            });
+    }
+    let on: Vec<(f64, f64)> = clkin
+        .newest_behind_us
+        .iter()
+        .take(400)
+        .enumerate()
+        .map(|(k, v)| (k as f64, v[0]))
+        .collect();
+    chart
+        .draw_series(LineSeries::new(on, BLACK.stroke_width(2)))?
+        .label("chip 0 on CLKIN")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    chart
+        .draw_series(LineSeries::new(
+            [(0.0, 1950.0), (400.0, 1950.0)],
+            RED.stroke_width(1),
+        ))?
+        .label("the stated instant (1 950 µs)")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
+    legend(&mut chart, SeriesLabelPosition::LowerRight)?;
+    // (b) fused error RMS against the truth at shifted instants.
+    let shift_rms = |o: &timed_array::Outcome, a: usize, lag_us: f64| {
+        let e: f64 = o
+            .fused
+            .iter()
+            .map(|(t, f)| (f[a] - profile.at_f64(t - lag_us * 1e-6)[a]).powi(2))
+            .sum();
+        (e / o.fused.len().max(1) as f64).sqrt()
+    };
+    let lags: Vec<f64> = (-50..=50).map(|k| k as f64 * 10.0).collect();
+    let curves: Vec<(&str, Vec<(f64, f64)>, RGBColor)> = vec![
+        (
+            "x, free-running",
+            lags.iter().map(|l| (*l, shift_rms(&free, 0, *l))).collect(),
+            PALETTE[0],
+        ),
+        (
+            "x, CLKIN",
+            lags.iter()
+                .map(|l| (*l, shift_rms(&clkin, 0, *l)))
+                .collect(),
+            PALETTE[1],
+        ),
+    ];
+    let top = curves
+        .iter()
+        .flat_map(|c| c.1.iter().map(|p| p.1))
+        .fold(0.0f64, f64::max);
+    let mut chart = ChartBuilder::on(&panels[1])
+        .caption(
+            "Fused error against the truth at shifted instants (95 °/s, 2 Hz)",
+            ("sans-serif", 17),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(-500f64..500f64, 0f64..top * 1.05)?;
+    chart
+        .configure_mesh()
+        .x_desc("truth taken this much earlier than stated (µs)")
+        .y_desc("RMS error (°/s)")
+        .draw()?;
+    println!("timing: fused x RMS error at the stated instant and ±100, ±500 µs from it (°/s)");
+    for (name, pts, c) in curves {
+        let at = |l: f64| {
+            pts.iter()
+                .find(|p| (p.0 - l).abs() < 1e-9)
+                .map_or(f64::NAN, |p| p.1)
+        };
+        println!(
+            "  {name}: {:.4} at 0, {:.4} / {:.4} at ∓100, {:.4} / {:.4} at ∓500",
+            at(0.0),
+            at(-100.0),
+            at(100.0),
+            at(-500.0),
+            at(500.0)
+        );
+        chart
+            .draw_series(LineSeries::new(pts, c.stroke_width(2)))?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperMiddle)?;
     root.present()?;
     println!("wrote {}", path.display());
     Ok(())
