@@ -729,6 +729,9 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
     Ok(())
 }
 
+/// A named curve and its colour.
+type Curve<'a> = (&'a str, Vec<(f64, f64)>, RGBColor);
+
 fn timing(out: &Path, seed: u64) -> Result<(), Err> {
     use gyro_array::drivers::icm42688::{Filter, Odr};
     use gyro_array::emu::timing::Vibration;
@@ -825,7 +828,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
         (e / o.fused.len().max(1) as f64).sqrt()
     };
     let lags: Vec<f64> = (-50..=50).map(|k| k as f64 * 10.0).collect();
-    let curves: Vec<(&str, Vec<(f64, f64)>, RGBColor)> = vec![
+    let curves: Vec<Curve> = vec![
         (
             "x, free-running",
             lags.iter().map(|l| (*l, shift_rms(&free, 0, *l))).collect(),
