@@ -67,8 +67,102 @@ fn main() -> ! {
         ok &= bench_davar::<1024, 35, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker");
     }
     ok &= bench_selftest(&t, ipt, &mut rng);
+    ok &= bench_timed_read(&t, ipt);
     ok &= bench_loops(&t, ipt);
     exit(ok)
+}
+
+/// One ICM-42688-P's read, on the emulated bus with the bus's own time
+/// metered out: polled (the data registers, as the board's loop reads
+/// them today) against the timed path (`TimedIcm`: the FIFO at 2 kHz, two
+/// samples a read, the INT1 capture, the clock tracker, the moving mean
+/// and the interpolation to the stated instant). The chip keeps its own
+/// time on a clock 0.3 % fast, so reads find one, two or three samples.
+fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
+    use core::cell::RefCell;
+    use embedded_hal_bus::spi::RefCellDevice;
+    use gyro_array::drivers::icm42688::{Config, Filter, Icm42688, Odr, Sampling};
+    use gyro_array::drivers::Gyro;
+    use gyro_array::emu::{
+        with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Icm42688Model,
+        NoiseParams, RateProfile,
+    };
+    use gyro_array::pipeline::timed::TimedIcm;
+
+    const READS: u32 = 400;
+    let mut ok = true;
+    for timed in [false, true] {
+        let cs: [CsLine; 1] = Default::default();
+        let mut chip = Icm42688Model::new(NoiseParams::ICM42688, RateProfile::constant(2.0), 3, 70);
+        if timed {
+            chip.set_timing(Some(ChipTiming::pll(0.003)));
+        }
+        let bus = RefCell::new(EmuBus::new([Chip::Icm(chip)], &cs));
+        let mut delay = EmuDelay::new(&bus, 1e-3);
+        let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+        let mut g = Icm42688::new(dev);
+        let cfg = if timed {
+            Config {
+                odr: Odr::Hz2000,
+                filter: Filter::BOARD_2K,
+                sampling: Sampling::Fifo,
+                ..Config::default()
+            }
+        } else {
+            Config::default()
+        };
+        if g.init(&mut delay, cfg).is_err() {
+            defmt::error!("timed read bench: init failed");
+            return false;
+        }
+        with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
+        let meter = || with_bus(&bus, |b| b.meter).unwrap_or_default();
+        let pair = pair_cost(t);
+        let mut timed_g = TimedIcm::new(
+            g,
+            EmuCapture {
+                bus: &bus,
+                index: 0,
+            },
+        );
+        let (mut sum, mut worst, mut good) = (0.0f32, 0.0f32, 0u32);
+        for n in 0..READS + 100 {
+            with_bus(&bus, |b| b.advance(1e-3));
+            let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
+            let at = ((now_us - 1950.0) as u32).wrapping_mul(16);
+            timed_g.set_instant(at, 1950);
+            let m0 = meter();
+            let t0 = t.now();
+            let r = if timed {
+                black_box(timed_g.read())
+            } else {
+                black_box(Gyro::read(timed_g.driver()))
+            };
+            let dt = t.now() - t0;
+            let m1 = meter();
+            // The bus's own time (the chip models standing in for the
+            // SPI peripheral and the silicon), and one clock pair per
+            // metered operation, out.
+            let bus_ticks =
+                m1.ticks.wrapping_sub(m0.ticks) as f32 + m1.ops.wrapping_sub(m0.ops) as f32 * pair;
+            let own = (net(dt, pair) - bus_ticks).max(0.0) * ipt;
+            if n >= 100 {
+                sum += own;
+                worst = worst.max(own);
+                good += u32::from(r.is_ok());
+            }
+        }
+        defmt::info!(
+            "one ICM-42688-P read, {=str}: mean {=f32} worst {=f32} instructions (bus time out), {=u32} of {=u32} reads with a rate",
+            if timed { "timed (FIFO 2 kHz, capture, tracker, aligner)" } else { "polled (data registers)" },
+            sum / READS as f32,
+            worst,
+            good,
+            READS
+        );
+        ok &= good == READS;
+    }
+    ok
 }
 
 /// The board's loop under four fault scenarios: A and B on a still board

@@ -664,6 +664,8 @@ pub struct FifoRead {
 
 /// FIFO packet size, bytes (packet 3).
 pub const FIFO_PACKET: usize = 16;
+/// Most packets one burst of [`Icm42688::read_fifo`] reads.
+pub const MAX_PER_READ: usize = 4;
 /// The header of a packet 3 with accel and gyro slots and an ODR
 /// timestamp; the low two bits flag an ODR change and are not checked.
 const HEADER_EXPECTED: u8 = bits::HEADER_ACCEL | bits::HEADER_GYRO | bits::HEADER_TIMESTAMP_ODR;
@@ -831,8 +833,9 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     ///
     /// One transaction in the usual case: a burst from INT_STATUS through
     /// FIFO_COUNTH/L into FIFO_DATA (the address stays on FIFO_DATA), with
-    /// room for one packet; a second one for the rest when the count says
-    /// more came (a fast chip clock, a late read). Each header is checked;
+    /// room for the packets a millisecond makes at the ODR; one more for
+    /// the rest when the count says more came (a fast chip clock, a late
+    /// read). Each header is checked;
     /// FIFO_FULL, a bad header or a short FIFO flush it and return a typed
     /// error, so the next read starts on a packet boundary and the caller
     /// counts the gap. Timestamps are extended from 16 bits by their
@@ -841,11 +844,17 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         if self.config.sampling != Sampling::Fifo {
             return Err(Error::NotFifo);
         }
-        let mut b = [0u8; 3 + FIFO_PACKET];
+        // Room for the packets one read usually finds (one per ms of the
+        // ODR): what the count does not cover reads 0x80 and is not looked
+        // at, and a packet arriving during the burst is read again whole
+        // (FIFO_RESUME_PARTIAL_RD is clear).
+        let k = self.per_read();
+        let mut b = [0u8; 3 + FIFO_PACKET * MAX_PER_READ];
+        let first = &mut b[..3 + FIFO_PACKET * k];
         self.spi
             .transaction(&mut [
                 Operation::Write(&[reg::INT_STATUS | READ]),
-                Operation::Read(&mut b),
+                Operation::Read(first),
             ])
             .map_err(Error::Spi)?;
         let status = b[0];
@@ -858,37 +867,62 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             return Err(Error::FifoOverflow);
         }
         let count = u16::from_be_bytes([b[1], b[2]]) as usize;
+        let want = count.min(out.len());
         let mut read = FifoRead {
             status,
             samples: 0,
-            left: 0,
+            left: count - want,
         };
-        if count == 0 {
-            return Ok(read);
-        }
-        let mut packet = [0u8; FIFO_PACKET];
-        packet.copy_from_slice(&b[3..]);
-        let want = count.min(out.len());
-        read.left = count - want;
-        for i in 0..want {
-            if i > 0 {
-                self.spi
-                    .transaction(&mut [
-                        Operation::Write(&[reg::FIFO_DATA | READ]),
-                        Operation::Read(&mut packet),
-                    ])
-                    .map_err(Error::Spi)?;
-            }
-            match self.parse_packet(&packet) {
-                Ok(s) => out[i] = s,
-                Err(e) => {
-                    self.flush_fifo()?;
-                    return Err(e);
-                }
-            }
+        let in_first = want.min(k);
+        for i in 0..in_first {
+            let mut p = [0u8; FIFO_PACKET];
+            p.copy_from_slice(&b[3 + FIFO_PACKET * i..3 + FIFO_PACKET * (i + 1)]);
+            self.take_packet(&p, &mut out[i])?;
             read.samples = i + 1;
         }
+        // The rest, in one more burst from FIFO_DATA.
+        let mut i = in_first;
+        while i < want {
+            let n = (want - i).min(MAX_PER_READ);
+            let rest = &mut b[..FIFO_PACKET * n];
+            self.spi
+                .transaction(&mut [
+                    Operation::Write(&[reg::FIFO_DATA | READ]),
+                    Operation::Read(rest),
+                ])
+                .map_err(Error::Spi)?;
+            for j in 0..n {
+                let mut p = [0u8; FIFO_PACKET];
+                p.copy_from_slice(&b[FIFO_PACKET * j..FIFO_PACKET * (j + 1)]);
+                self.take_packet(&p, &mut out[i + j])?;
+                read.samples = i + j + 1;
+            }
+            i += n;
+        }
         Ok(read)
+    }
+
+    /// Packets the first burst of [`Self::read_fifo`] makes room for: one
+    /// per millisecond of the ODR (the board reads every millisecond).
+    fn per_read(&self) -> usize {
+        (libm::roundf(self.config.odr.hz() / 1000.0) as usize).clamp(1, MAX_PER_READ)
+    }
+
+    fn take_packet(
+        &mut self,
+        p: &[u8; FIFO_PACKET],
+        to: &mut FifoSample,
+    ) -> Result<(), Error<SPI::Error>> {
+        match self.parse_packet(p) {
+            Ok(s) => {
+                *to = s;
+                Ok(())
+            }
+            Err(e) => {
+                self.flush_fifo()?;
+                Err(e)
+            }
+        }
     }
 
     fn parse_packet(&mut self, p: &[u8; FIFO_PACKET]) -> Result<FifoSample, Error<SPI::Error>> {
@@ -1588,6 +1622,39 @@ mod tests {
         assert_eq!(out[0].stamp_us, 0xFFF0 + 1000);
         assert_eq!(out[1].stamp_us, 0xFFF0 + 2000);
         assert_eq!(g.read_fifo(&mut out).unwrap().samples, 0);
+        spi.done();
+    }
+
+    #[test]
+    fn at_2_khz_one_burst_holds_two_packets_and_the_rest_comes_in_one_more() {
+        let mut two = vec![0x08, 0x00, 0x02];
+        two.extend(packet([1, 1, 1], 100));
+        two.extend(packet([2, 2, 2], 600));
+        let mut one = vec![0x08, 0x00, 0x01];
+        one.extend(packet([3, 3, 3], 1100));
+        one.extend([0x80; 16]); // room for a second, not counted
+        let mut four = vec![0x08, 0x00, 0x04];
+        four.extend(packet([4, 4, 4], 1600));
+        four.extend(packet([5, 5, 5], 2100));
+        let mut rest = packet([6, 6, 6], 2600).to_vec();
+        rest.extend(packet([7, 7, 7], 3100));
+        let mut s = Vec::new();
+        s.extend(rd(0x2D, &two));
+        s.extend(rd(0x2D, &one));
+        s.extend(rd(0x2D, &four));
+        s.extend(rd(0x30, &rest));
+        let (mut spi, mut g) = fifo_driver(&s);
+        g.config.odr = Odr::Hz2000;
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 8];
+        assert_eq!(g.read_fifo(&mut out).unwrap().samples, 2);
+        assert_eq!(out[1].raw, [2, 2, 2]);
+        assert_eq!(g.read_fifo(&mut out).unwrap().samples, 1);
+        assert_eq!(g.read_fifo(&mut out).unwrap().samples, 4);
+        assert_eq!(out[3].raw, [7, 7, 7]);
+        assert_eq!(out[3].stamp_us, 3100);
         spi.done();
     }
 

@@ -320,11 +320,13 @@ impl<'a, const N: usize> EmuBus<'a, N> {
     /// The board timer's capture of chip `i`'s INT1 (its last data-ready
     /// pulse), µs of bus time, truncated to the timer's 1 µs tick: the
     /// input-capture channel each ICM-42688-P's INT1 is wired to.
-    pub fn int1_capture_us(&self, i: usize) -> Option<u32> {
-        match self.chips.get(i)? {
+    /// (Metered like a bus operation: on the board it is a register read
+    /// of a few instructions; here it is the model's f64 arithmetic.)
+    pub fn int1_capture_us(&mut self, i: usize) -> Option<u32> {
+        self.metered(|b| match b.chips.get(i)? {
             Chip::Icm(c) => c.int1_at_s().map(|t| (t * 1e6) as u64 as u32),
             Chip::Adx(_) => None,
-        }
+        })
     }
 
     /// Emulated time in seconds, f64 (the chips on their own clocks run on

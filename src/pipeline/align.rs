@@ -98,14 +98,17 @@ impl<const CAP: usize> Aligner<CAP> {
         // newest, so a wrap between them does no harm).
         let k = 1.0 / self.n as f32;
         let mut v = [0.0f32; 3];
-        let mut dt = 0i64;
+        // The n instants lie within a few ms of each other: their
+        // distances from the newest sum well inside an i32 (an i64 sum
+        // and division cost some 100 instructions on the Cortex-M4).
+        let mut dt = 0i32;
         for (ti, ri) in &self.raw[..self.n] {
             for a in 0..3 {
                 v[a] += ri[a];
             }
-            dt += since(*ti, t) as i64;
+            dt = dt.saturating_add(since(*ti, t));
         }
-        let mean_t = t.wrapping_add((dt / self.n as i64) as i32 as u32);
+        let mean_t = t.wrapping_add((dt / self.n as i32) as u32);
         let v = v.map(|x| x * k);
         let j = (self.head + self.len) % CAP;
         self.ring[j] = (mean_t, v);

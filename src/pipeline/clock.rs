@@ -32,6 +32,13 @@ pub fn since(a: Instant16, b: Instant16) -> i32 {
     a.wrapping_sub(b) as i32
 }
 
+/// ⌊x⌋ for |x| < 2³¹ by the FPU's truncating conversion (libm's `floorf`
+/// is some 20 instructions of bit arithmetic on the Cortex-M4).
+fn floor_i32(x: f32) -> i32 {
+    let t = x as i32;
+    t - i32::from((t as f32) > x)
+}
+
 /// Where a tracker is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -123,9 +130,9 @@ impl ChipClock {
     /// µs.
     fn advance_anchor(&mut self, stamp: u32, d: f32, by: f32) {
         let t = self.anchor_frac + self.ratio * d + by;
-        let whole = libm::floorf(t);
-        self.anchor_us = self.anchor_us.wrapping_add(whole as i32 as u32);
-        self.anchor_frac = t - whole;
+        let whole = floor_i32(t);
+        self.anchor_us = self.anchor_us.wrapping_add(whole as u32);
+        self.anchor_frac = t - whole as f32;
         self.anchor_stamp = stamp;
     }
 
@@ -185,7 +192,7 @@ impl ChipClock {
         }
         let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
         let off = self.anchor_frac + self.ratio * d;
-        Some(self.anchor_us.wrapping_add(libm::floorf(off) as i32 as u32))
+        Some(self.anchor_us.wrapping_add(floor_i32(off) as u32))
     }
 
     /// The board instant of chip stamp `stamp`, or `None` before the
@@ -199,7 +206,7 @@ impl ChipClock {
         Some(
             self.anchor_us
                 .wrapping_mul(16)
-                .wrapping_add(libm::roundf(off) as i32 as u32),
+                .wrapping_add(floor_i32(off + 0.5) as u32),
         )
     }
 }

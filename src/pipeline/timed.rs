@@ -17,7 +17,9 @@ use embedded_hal::spi::SpiDevice;
 
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
-use crate::drivers::icm42688::{ClockInput, Config, Error, FifoSample, Icm42688, Sampling};
+use crate::drivers::icm42688::{
+    ClockInput, Config, Error, FifoSample, Icm42688, Sampling, MAX_PER_READ,
+};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
 /// Moving means kept per chip: 8 ms at 2 kHz, room for an instant up to
@@ -158,7 +160,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         let mut buf = [FifoSample {
             raw: [0; 3],
             stamp_us: 0,
-        }; 8];
+        }; MAX_PER_READ];
         let mut fresh = false;
         loop {
             let r = self.g.read_fifo(&mut buf);
