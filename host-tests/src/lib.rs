@@ -5,6 +5,7 @@
 
 pub mod single_chip;
 pub mod timed_array;
+pub mod timed_board;
 
 pub mod calibration {
     //! The static calibration procedure on the emulated array (issue 9):

@@ -91,7 +91,7 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
 
     const READS: u32 = 400;
     let mut ok = true;
-    for timed in [false, true] {
+    for (timed, fifo_only) in [(false, false), (true, true), (true, false)] {
         let cs: [CsLine; 1] = Default::default();
         let mut chip = Icm42688Model::new(NoiseParams::ICM42688, RateProfile::constant(2.0), 3, 70);
         if timed {
@@ -133,10 +133,18 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
             timed_g.set_instant(at, 1950);
             let m0 = meter();
             let t0 = t.now();
-            let r = if timed {
-                black_box(timed_g.read())
+            let r = if fifo_only {
+                let mut buf = [gyro_array::drivers::icm42688::FifoSample {
+                    raw: [0; 3],
+                    stamp_us: 0,
+                }; 4];
+                black_box(timed_g.driver().read_fifo(&mut buf))
+                    .map(|_| ())
+                    .map_err(|_| gyro_array::drivers::ReadFault::Bus)
+            } else if timed {
+                black_box(timed_g.read()).map(|_| ())
             } else {
-                black_box(Gyro::read(timed_g.driver()))
+                black_box(Gyro::read(timed_g.driver())).map(|_| ())
             };
             let dt = t.now() - t0;
             let m1 = meter();
@@ -154,7 +162,13 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         }
         defmt::info!(
             "one ICM-42688-P read, {=str}: mean {=f32} worst {=f32} instructions (bus time out), {=u32} of {=u32} reads with a rate",
-            if timed { "timed (FIFO 2 kHz, capture, tracker, aligner)" } else { "polled (data registers)" },
+            if fifo_only {
+                "the FIFO read alone (2 kHz)"
+            } else if timed {
+                "timed (FIFO 2 kHz, capture, tracker, aligner)"
+            } else {
+                "polled (data registers)"
+            },
             sum / READS as f32,
             worst,
             good,

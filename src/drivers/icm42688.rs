@@ -755,6 +755,9 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     /// and FIFO (each with read-back) and start the gyro in low-noise
     /// mode; with the FIFO, flush what the gyro's start-up produced.
     pub fn init(&mut self, delay: &mut impl DelayNs, cfg: Config) -> Result<(), Error<SPI::Error>> {
+        // Kept first, so a restart after a failed init sets this
+        // configuration too (the FIFO, the clock), not the last one.
+        self.config = cfg;
         self.write(reg::DEVICE_CONFIG, SOFT_RESET)?;
         delay.delay_ms(1); // datasheet: wait 1 ms after a soft reset
         self.write(reg::REG_BANK_SEL, 0)?;
@@ -1199,39 +1202,41 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         libm::roundf(c.filter.group_delay_us(c.odr) + 0.5e6 / c.odr.hz()) as u32
     }
 
-    /// The configuration `init` set, one of three groups per call (as PX4
-    /// re-checks one register at a time, so each call costs the same few
-    /// transactions): REG_BANK_SEL and the burst INTF_CONFIG0 ..
-    /// GYRO_ACCEL_CONFIG0 (0x4C..=0x52; ACCEL_CONFIG0 skipped); FIFO_CONFIG,
-    /// FIFO_CONFIG1, INT_CONFIG and the burst INT_CONFIG1, INT_SOURCE0;
-    /// bank 1, GYRO_CONFIG_STATIC2..5 in one burst and INTF_CONFIG5.
+    /// The configuration `init` set, as PX4 re-checks its register table a
+    /// little at a time: on every call REG_BANK_SEL and the burst
+    /// INTF_CONFIG0 .. GYRO_ACCEL_CONFIG0 (0x4C..=0x52, ACCEL_CONFIG0
+    /// skipped: the range and rate, whose corruption rescales the data
+    /// silently, power, AFSR, clock, UI filter), then one of three groups in
+    /// turn: FIFO_CONFIG and FIFO_CONFIG1; INT_CONFIG and the burst
+    /// INT_CONFIG1, INT_SOURCE0; bank 1, GYRO_CONFIG_STATIC2..5 in one burst
+    /// and INTF_CONFIG5.
     fn check_config(&mut self) -> Result<(), ReadFault> {
         let cfg = self.config;
         let bus = |_| ReadFault::Bus;
         let group = self.check_group;
         self.check_group = (self.check_group + 1) % 3;
         let same = |ok: bool| if ok { Ok(()) } else { Err(ReadFault::Config) };
+        same(self.read(reg::REG_BANK_SEL).map_err(bus)? == 0)?;
+        let mut b = [0u8; 7];
+        self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
+        same(
+            b == [
+                cfg.intf_config0(),
+                cfg.intf_config1(),
+                GYRO_MODE_LN,
+                cfg.gyro_config0(),
+                b[4], // ACCEL_CONFIG0: not set by this driver
+                cfg.gyro_config1(),
+                cfg.gyro_accel_config0(),
+            ],
+        )?;
         match group {
             0 => {
-                same(self.read(reg::REG_BANK_SEL).map_err(bus)? == 0)?;
-                let mut b = [0u8; 7];
-                self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
-                same(
-                    b == [
-                        cfg.intf_config0(),
-                        cfg.intf_config1(),
-                        GYRO_MODE_LN,
-                        cfg.gyro_config0(),
-                        b[4], // ACCEL_CONFIG0: not set by this driver
-                        cfg.gyro_config1(),
-                        cfg.gyro_accel_config0(),
-                    ],
-                )
+                same(self.read(reg::FIFO_CONFIG).map_err(bus)? == cfg.fifo_config())?;
+                same(self.read(reg::FIFO_CONFIG1).map_err(bus)? == cfg.fifo_config1())
             }
             1 => {
                 let [c, c1, s0] = cfg.int1();
-                same(self.read(reg::FIFO_CONFIG).map_err(bus)? == cfg.fifo_config())?;
-                same(self.read(reg::FIFO_CONFIG1).map_err(bus)? == cfg.fifo_config1())?;
                 same(self.read(reg::INT_CONFIG).map_err(bus)? == c)?;
                 let mut b = [0u8; 2];
                 self.read_burst(reg::INT_CONFIG1, &mut b).map_err(bus)?;
@@ -1250,52 +1255,117 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         }
     }
 
-    /// `init` in steps: soft reset; 1 ms later identify and set the signal
-    /// path and clock; then range, rate, FIFO and start the gyro; after the
-    /// 45 ms gyro start-up flush the FIFO (with FIFO sampling) and done.
-    /// Each step is a handful of transactions, so a restart never makes a
-    /// heavy sample. The configuration is the last one set.
+    /// `init` in steps of at most six transactions, so that a restart
+    /// never makes a heavy sample: soft reset; 1 ms later identify; then
+    /// the configuration's checked writes ([`Config::setup`]), a few a
+    /// step (bank 1 first: pin 9 is CLKIN before RTC_MODE asks for it);
+    /// the gyro started, RESET_DONE cleared; after the 45 ms gyro start-up
+    /// the FIFO flushed (with FIFO sampling), done. The configuration is
+    /// the last one set.
     fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
         let bus = |_| ReadFault::Bus;
+        let bad = |_| ReadFault::BadResponse;
         let cfg = self.config;
+        let again = |step: u8, wait_us: u32| Ok(Restart::Again { step, wait_us });
         match step {
             0 => {
                 self.write(reg::DEVICE_CONFIG, SOFT_RESET).map_err(bus)?;
-                Ok(Restart::Again {
-                    step: 1,
-                    wait_us: 1000,
-                })
+                again(1, 1000)
             }
             1 => {
                 self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
                 if self.read(reg::WHO_AM_I).map_err(bus)? != WHO_AM_I_VALUE {
                     return Err(ReadFault::BadResponse);
                 }
-                self.configure_path(cfg)
-                    .map_err(|_| ReadFault::BadResponse)?;
-                Ok(Restart::Again {
-                    step: 2,
-                    wait_us: 0,
-                })
+                again(2, 0)
             }
-            2 => {
-                self.configure(cfg).map_err(|_| ReadFault::BadResponse)?;
-                self.configure_fifo(cfg)
-                    .map_err(|_| ReadFault::BadResponse)?;
-                self.write_checked(reg::PWR_MGMT0, GYRO_MODE_LN)
-                    .map_err(|_| ReadFault::BadResponse)?;
-                self.read(reg::INT_STATUS).map_err(bus)?;
-                Ok(Restart::Again {
-                    step: 3,
-                    wait_us: 45_000,
-                })
-            }
-            3 if cfg.sampling == Sampling::Fifo => {
-                self.flush_fifo().map_err(bus)?;
+            RESTART_FLUSH => {
+                if cfg.sampling == Sampling::Fifo {
+                    self.flush_fifo().map_err(bus)?;
+                }
                 Ok(Restart::Done)
             }
-            _ => Ok(Restart::Done),
+            s => {
+                let table = cfg.setup().ok_or(ReadFault::BadResponse)?;
+                let mut pos = (s - 2) as usize;
+                let mut cost = 0;
+                let mut bank1 = false;
+                while let Some(&(bank, r, v)) = table.get(pos) {
+                    // A write and its read-back, and a bank change (bank 1
+                    // is left again before the step ends).
+                    let switch = u8::from(bank == 1) != u8::from(bank1);
+                    let c = 2 + if switch { 1 } else { 0 } + if bank == 1 && !bank1 { 1 } else { 0 };
+                    if cost + c > 6 {
+                        break;
+                    }
+                    if switch {
+                        self.write(reg::REG_BANK_SEL, bank).map_err(bus)?;
+                        bank1 = bank == 1;
+                    }
+                    let w = self.write_checked(r, v);
+                    if w.is_err() && bank1 {
+                        self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                    }
+                    w.map_err(bad)?;
+                    cost += 2 + u8::from(switch);
+                    pos += 1;
+                }
+                if bank1 {
+                    self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                }
+                if pos < table.len() {
+                    return again(2 + pos as u8, 0);
+                }
+                // All set: clear RESET_DONE (set by the reset), then wait
+                // for the gyro's start-up.
+                self.full_scale = cfg.full_scale;
+                self.stamp = None;
+                self.read(reg::INT_STATUS).map_err(bus)?;
+                again(RESTART_FLUSH, 45_000)
+            }
         }
+    }
+}
+
+/// The restart step after the gyro's start-up.
+const RESTART_FLUSH: u8 = 201;
+
+impl Config {
+    /// Every checked write `init` makes, in order, as (bank, register,
+    /// value): bank 1 (the AAF, pin 9), then INTF_CONFIG1, the UI filter,
+    /// range and rate, the FIFO and INT1, and the gyro's power last.
+    /// `None` for an AAF setting the driver does not know.
+    pub fn setup(&self) -> Option<heapless::Vec<(u8, u8, u8), 16>> {
+        let (st, pin9) = self.bank1()?;
+        let mut v = heapless::Vec::new();
+        for (i, x) in st.iter().enumerate() {
+            v.push((1, reg::GYRO_CONFIG_STATIC2 + i as u8, *x)).ok()?;
+        }
+        v.push((1, reg::INTF_CONFIG5, pin9)).ok()?;
+        let fifo = self.sampling == Sampling::Fifo;
+        let [c, c1, s0] = self.int1();
+        for (r, x) in [
+            (reg::INTF_CONFIG1, self.intf_config1()),
+            (reg::GYRO_CONFIG1, self.gyro_config1()),
+            (reg::GYRO_ACCEL_CONFIG0, self.gyro_accel_config0()),
+            (reg::GYRO_CONFIG0, self.gyro_config0()),
+            (reg::INTF_CONFIG0, self.intf_config0()),
+            (reg::FIFO_CONFIG1, self.fifo_config1()),
+            (reg::FIFO_CONFIG, self.fifo_config()),
+        ] {
+            v.push((0, r, x)).ok()?;
+        }
+        if fifo {
+            for (r, x) in [
+                (reg::INT_CONFIG, c),
+                (reg::INT_CONFIG1, c1),
+                (reg::INT_SOURCE0, s0),
+            ] {
+                v.push((0, r, x)).ok()?;
+            }
+        }
+        v.push((0, reg::PWR_MGMT0, GYRO_MODE_LN)).ok()?;
+        Some(v)
     }
 }
 
@@ -1490,67 +1560,78 @@ mod tests {
         // INT_STATUS with RESET_DONE: the chip reset since it was set up.
         s.extend(rd(0x25, &[0x80, 0x00, 0x80, 0x00, 0x80, 0x00, 0, 0, 0x10]));
         s.extend(wr(0x11, 0x01)); // step 0: soft reset
-        s.extend(wr(0x76, 0x00)); // step 1: bank 0, id, signal path
+        s.extend(wr(0x76, 0x00)); // step 1: bank 0, id
         s.extend(rd(0x75, &[0x47]));
-        path(&mut s, AAF_258, 0x00, 0x51, 0x16, 0x11);
-        wrc(&mut s, 0x4F, 0x06); // step 2: the configuration set before
+        // Then at most six transactions a step: bank 1 (AAF 258 Hz, pin 9).
+        s.extend(wr(0x76, 0x01));
+        wrc(&mut s, 0x0B, AAF_258[0]);
+        wrc(&mut s, 0x0C, AAF_258[1]);
+        s.extend(wr(0x76, 0x00));
+        s.extend(wr(0x76, 0x01));
+        wrc(&mut s, 0x0D, AAF_258[2]);
+        wrc(&mut s, 0x0E, AAF_258[3]);
+        s.extend(wr(0x76, 0x00));
+        s.extend(wr(0x76, 0x01));
+        wrc(&mut s, 0x7B, 0x00);
+        s.extend(wr(0x76, 0x00));
+        wrc(&mut s, 0x4D, 0x51); // AFSR off
+        wrc(&mut s, 0x51, 0x16);
+        wrc(&mut s, 0x52, 0x11);
+        wrc(&mut s, 0x4F, 0x06); // the configuration set before
         wrc(&mut s, 0x4C, 0x30);
         wrc(&mut s, 0x5F, 0x00);
         wrc(&mut s, 0x16, 0x00);
-        wrc(&mut s, 0x4E, 0x0C);
+        wrc(&mut s, 0x4E, 0x0C); // gyro on, then RESET_DONE cleared
         s.extend(rd(0x2D, &[0x10]));
         let mut spi = Mock::new(&s);
         let mut g = Icm42688::new(spi.clone());
         assert_eq!(Gyro::read(&mut g), Err(ReadFault::Reset));
-        assert_eq!(
-            g.restart(0),
-            Ok(Restart::Again {
-                step: 1,
-                wait_us: 1000
-            })
-        );
-        assert_eq!(
-            g.restart(1),
-            Ok(Restart::Again {
-                step: 2,
-                wait_us: 0
-            })
-        );
-        assert_eq!(
-            g.restart(2),
-            Ok(Restart::Again {
-                step: 3,
-                wait_us: 45_000
-            })
-        );
-        assert_eq!(g.restart(3), Ok(Restart::Done));
+        let mut step = 0;
+        let mut waits = Vec::new();
+        loop {
+            match g.restart(step) {
+                Ok(Restart::Again { step: s, wait_us }) => {
+                    waits.push(wait_us);
+                    step = s;
+                }
+                Ok(Restart::Done) => break,
+                Err(e) => panic!("{e:?}"),
+            }
+        }
+        // Reset, identity, six steps of writes, the 45 ms start-up.
+        assert_eq!(waits, [1000, 0, 0, 0, 0, 0, 0, 45_000]);
         spi.done();
     }
 
     #[test]
-    fn config_check_reads_back_three_groups_in_turn() {
-        let mut s = Vec::new();
-        // Group 0: REG_BANK_SEL, 0x4C..=0x52 in one burst (±2000 °/s,
+    fn config_check_reads_the_core_every_time_and_three_groups_in_turn() {
+        // The core: REG_BANK_SEL, 0x4C..=0x52 in one burst (±2000 °/s,
         // 1 kHz as `new` assumes).
-        s.extend(rd(0x76, &[0x00]));
-        s.extend(rd(0x4C, &[0x30, 0x51, 0x0C, 0x06, 0x06, 0x16, 0x11]));
-        // Group 1: FIFO_CONFIG, FIFO_CONFIG1, INT_CONFIG, then INT_CONFIG1
-        // and INT_SOURCE0 in one burst (reset values without the FIFO).
+        let core = |s: &mut Vec<T<u8>>, intf1: u8| {
+            s.extend(rd(0x76, &[0x00]));
+            s.extend(rd(0x4C, &[0x30, intf1, 0x0C, 0x06, 0x06, 0x16, 0x11]));
+        };
+        let mut s = Vec::new();
+        // Group 0: FIFO_CONFIG, FIFO_CONFIG1 (reset values without the FIFO).
+        core(&mut s, 0x51);
         s.extend(rd(0x16, &[0x00]));
         s.extend(rd(0x5F, &[0x00]));
+        // Group 1: INT_CONFIG, then INT_CONFIG1 and INT_SOURCE0 in one burst.
+        core(&mut s, 0x51);
         s.extend(rd(0x14, &[0x00]));
         s.extend(rd(0x64, &[0x10, 0x10]));
         // Group 2: bank 1, GYRO_CONFIG_STATIC2..5 in one burst, INTF_CONFIG5.
+        core(&mut s, 0x51);
         s.extend(wr(0x76, 0x01));
         s.extend(rd(0x0B, &AAF_258));
         s.extend(rd(0x7B, &[0x00]));
         s.extend(wr(0x76, 0x00));
-        // Group 0 again: AFSR back on (a reset value): not what was set.
-        s.extend(rd(0x76, &[0x00]));
-        s.extend(rd(0x4C, &[0x30, 0x91, 0x0C, 0x06, 0x06, 0x16, 0x11]));
-        // Group 1 again: the FIFO on behind the driver's back.
-        s.extend(rd(0x16, &[0x40]));
-        // Group 2 again: the AAF at another setting.
+        // Then: AFSR back on (a reset value) in the core; INT1 set up
+        // behind the driver's back; the AAF at another setting.
+        core(&mut s, 0x91);
+        core(&mut s, 0x51);
+        s.extend(rd(0x14, &[0x03]));
+        core(&mut s, 0x51);
         s.extend(wr(0x76, 0x01));
         s.extend(rd(0x0B, &[0xA0, 13, 170, 0x80]));
         s.extend(rd(0x7B, &[0x00]));

@@ -16,8 +16,9 @@
 //! time) and the ratio (board µs per chip µs): each observation moves the
 //! anchor by 1/16 of its residual and the ratio by 1/1024 of it per µs of
 //! stamp since the last one (critically damped, a time constant of some 16
-//! observations). It starts from the ratio of two observations 20 ms
-//! apart, so an RC oscillator 8 % off is acquired at once. Sums stay in
+//! observations). It starts from the ratio of two observations 20 reads
+//! apart, so an RC oscillator 8 % off is acquired at once, and chips that
+//! started together acquire together. Sums stay in
 //! f32 over deltas of milliseconds, so no f64 runs on the board.
 
 /// An instant on the board's clock, in 1/16 µs (wraps after 268 s;
@@ -52,8 +53,15 @@ pub enum ClockState {
     Tracking,
 }
 
-/// The baseline of the first ratio, chip µs.
-const ACQUIRE_US: i32 = 20_000;
+/// Observations the first ratio spans: one a read, so chips that started
+/// together (the board flushes every FIFO at once) acquire on the same
+/// read, whatever their clocks; 20 reads, 20 ms.
+const ACQUIRE_OBS: u8 = 20;
+/// The shortest baseline of the first ratio, chip µs.
+const ACQUIRE_US: i32 = 10_000;
+/// A baseline longer than this is not one count of stamps (a flush or a
+/// restart came between): acquisition starts again.
+const ACQUIRE_MAX_US: i32 = 1_000_000;
 /// Gain on the anchor.
 const K_ANCHOR: f32 = 1.0 / 16.0;
 /// Gain on the ratio (per µs of baseline).
@@ -73,6 +81,8 @@ pub struct ChipClock {
     /// Board µs per chip µs.
     ratio: f32,
     jumps_in_row: u8,
+    /// Observations since acquisition began.
+    seen: u8,
     /// Observations that jumped (see [`JUMP_US`]).
     pub jumps: u32,
     /// The last residual, µs (observed minus predicted).
@@ -89,6 +99,7 @@ impl ChipClock {
             anchor_frac: 0.0,
             ratio: 1.0,
             jumps_in_row: 0,
+            seen: 0,
             jumps: 0,
             last_residual_us: 0.0,
         }
@@ -146,11 +157,22 @@ impl ChipClock {
                 self.anchor_stamp = stamp;
                 self.anchor_us = capture_us;
                 self.anchor_frac = frac;
+                self.seen = 1;
                 self.state = ClockState::Acquiring;
             }
             ClockState::Acquiring => {
                 let d = stamp.wrapping_sub(self.anchor_stamp) as i32;
-                if d < ACQUIRE_US {
+                if !(0..=ACQUIRE_MAX_US).contains(&d) {
+                    // The stamps went back, or jumped far: a new count
+                    // (a flush, a restart). Start from this one.
+                    self.anchor_stamp = stamp;
+                    self.anchor_us = capture_us;
+                    self.anchor_frac = frac;
+                    self.seen = 1;
+                    return;
+                }
+                self.seen = self.seen.saturating_add(1);
+                if self.seen < ACQUIRE_OBS || d < ACQUIRE_US {
                     return;
                 }
                 let b = capture_us.wrapping_sub(self.anchor_us) as i32 as f32;
@@ -193,6 +215,31 @@ impl ChipClock {
         let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
         let off = self.anchor_frac + self.ratio * d;
         Some(self.anchor_us.wrapping_add(floor_i32(off) as u32))
+    }
+
+    /// The chip stamp of board time `board_us`, or `None` before the
+    /// tracker has a ratio (the inverse of [`Self::board_us`]).
+    pub fn stamp_at(&self, board_us: u32) -> Option<u32> {
+        if self.state != ClockState::Tracking {
+            return None;
+        }
+        let b = board_us.wrapping_sub(self.anchor_us) as i32 as f32 - self.anchor_frac;
+        Some(
+            self.anchor_stamp
+                .wrapping_add(floor_i32(b / self.ratio + 0.5) as u32),
+        )
+    }
+
+    /// Take this observation as the anchor, keeping the ratio: after a gap
+    /// in the samples, where the clock's wander over the gap (up to some
+    /// 100 µs over a third of a second) is a phase to take, not a jump.
+    pub fn reanchor(&mut self, stamp: u32, capture_us: u32) {
+        if self.state == ClockState::Tracking {
+            self.anchor_stamp = stamp;
+            self.anchor_us = capture_us;
+            self.anchor_frac = 0.5;
+            self.jumps_in_row = 0;
+        }
     }
 
     /// The board instant of chip stamp `stamp`, or `None` before the
@@ -259,6 +306,31 @@ mod tests {
         c.observe(102_000, 9_001_000);
         assert_eq!(c.state(), ClockState::Empty);
         assert_eq!(c.jumps, 3);
+    }
+
+    #[test]
+    fn acquisition_starts_again_when_the_stamps_go_back() {
+        let mut c = ChipClock::new();
+        c.observe(900_000, 10);
+        // A flush: the stamps restart low. Without a fresh anchor the
+        // baseline would stay negative for 900 ms.
+        for k in 1..=20u32 {
+            c.observe(k * 1_000, k * 1_000);
+        }
+        assert_eq!(c.state(), ClockState::Tracking);
+        assert!((c.ratio() - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn stamp_at_inverts_board_us() {
+        let mut c = ChipClock::new();
+        for k in 0..200u32 {
+            c.observe(k * 1000, 7_000 + (k as f64 * 1000.0 / 1.01) as u32);
+        }
+        for s in [150_000u32, 199_000, 500_000] {
+            let b = c.board_us(s).unwrap();
+            assert!(c.stamp_at(b).unwrap().abs_diff(s) <= 2, "{s}");
+        }
     }
 
     #[test]

@@ -50,6 +50,14 @@ pub struct TimingCounters {
 /// `emu::timing`), and its own PLL keeps it sampling.
 pub const CLKIN_LOST_READS: u16 = 20;
 
+/// Reads with samples after a gap (an overflow, a restart, a stream out
+/// of step) before a chip answers again. Time alone would bring the chips
+/// that shared a gap back one by one, a read apart as their phases fall,
+/// and for a read two of four could be fused, one of them perhaps faulty;
+/// a count of reads brings them back together (4 reads hold 8 samples at
+/// 2 kHz, more than the stated instant needs).
+pub const REJOIN_READS: u8 = 4;
+
 /// An ICM-42688-P on the board's clock.
 pub struct TimedIcm<SPI, C> {
     g: Icm42688<SPI>,
@@ -66,6 +74,15 @@ pub struct TimedIcm<SPI, C> {
     last_raw: [i16; 3],
     /// Reads in a row without a sample.
     dry: u16,
+    /// Reads with samples still to come before the aligner answers again
+    /// after a gap (see [`REJOIN_READS`]).
+    rejoin: u8,
+    /// Added to the driver's stamps: after a flush the driver extends them
+    /// from 16 bits again, from a base of its own; this puts them back on
+    /// the tracked clock's count (see [`TimedIcm::rebase`]).
+    stamp_offset: u32,
+    /// The next samples need [`Self::stamp_offset`] found again.
+    rebase: bool,
     /// What was counted.
     pub counters: TimingCounters,
 }
@@ -87,6 +104,9 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             behind_us: 0,
             last_raw: [0; 3],
             dry: 0,
+            rejoin: REJOIN_READS,
+            stamp_offset: 0,
+            rebase: false,
             counters: TimingCounters::default(),
         }
     }
@@ -116,17 +136,53 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// Start again (after a restart: new stamps, a new phase).
     fn forget(&mut self) {
         self.clock.reset();
+        self.gap();
+        self.stamp_offset = 0;
+        self.rebase = false;
+    }
+
+    /// A gap in the samples (the FIFO was flushed): the aligner starts
+    /// again; the clock is kept, and the stamps are put back on its count
+    /// by the first capture after the gap.
+    fn gap(&mut self) {
         self.align.clear();
+        self.rejoin = REJOIN_READS;
+        self.rebase = true;
+        if self.clock.state() != ClockState::Tracking {
+            // Nothing to put the new stamps back on: acquire afresh.
+            self.clock.reset();
+        }
+    }
+
+    /// The driver's stamps restart their high bits after a flush (a 16-bit
+    /// stamp wraps every 65 ms, and a gap can be longer): the tracked clock
+    /// predicts the newest sample's stamp from its capture well within
+    /// that (tens of µs after a gap of seconds), which fixes the high bits.
+    fn rebase(&mut self, newest: u32, capture_us: u32) {
+        if let Some(pred) = self.clock.stamp_at(capture_us) {
+            let near =
+                pred.wrapping_add((newest as u16).wrapping_sub(pred as u16) as i16 as i32 as u32);
+            self.stamp_offset = near.wrapping_sub(newest);
+        }
+        self.rebase = false;
     }
 
     fn take(&mut self, s: &[FifoSample], capture: Option<u32>) {
         let Some(newest) = s.last() else {
             return;
         };
-        if let Some(c) = capture {
+        let mut rebased = false;
+        if let (true, Some(c)) = (self.rebase, capture) {
+            self.rebase(newest.stamp_us, c);
+            rebased = true;
+        }
+        let off = self.stamp_offset;
+        if let (true, Some(c)) = (rebased, capture) {
+            self.clock.reanchor(newest.stamp_us.wrapping_add(off), c);
+        } else if let Some(c) = capture {
             // The capture is of the newest sample read, or of one that came
             // after the FIFO's count was latched: the tracked clock tells.
-            let mut stamp = newest.stamp_us;
+            let mut stamp = newest.stamp_us.wrapping_add(off);
             if let Some(p) = self.clock.board_us(stamp) {
                 let ahead = c.wrapping_sub(p) as i32;
                 if ahead > (self.period_us / 2) as i32 {
@@ -145,7 +201,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         // with the chip's clock.
         let delay = (self.path_us * self.clock.ratio() * Q) as u32;
         for x in s {
-            if let Some(t) = self.clock.board_instant(x.stamp_us) {
+            if let Some(t) = self.clock.board_instant(x.stamp_us.wrapping_add(off)) {
                 self.align
                     .push(t.wrapping_sub(delay), x.raw.map(|v| v as f32 / lsb));
             }
@@ -176,19 +232,22 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 Err(Error::ChipReset) => return Err(ReadFault::Reset),
                 Err(Error::FifoOverflow) => {
                     self.counters.overflows = self.counters.overflows.wrapping_add(1);
-                    self.align.clear();
+                    self.gap();
                     break;
                 }
                 Err(Error::Spi(_)) => return Err(ReadFault::Bus),
                 Err(_) => {
                     // A bad header or a short FIFO: the stream was out of
                     // step (flushed); the samples around it are gone.
-                    self.align.clear();
+                    self.gap();
                     return Err(ReadFault::BadResponse);
                 }
             }
         }
         self.dry = if fresh { 0 } else { self.dry.saturating_add(1) };
+        if fresh && self.rejoin > 0 {
+            self.rejoin -= 1;
+        }
         if self.dry >= CLKIN_LOST_READS && self.g.config().clock == ClockInput::ClkIn {
             // CLKIN is gone: the chip's own clock from now on (a few
             // checked writes; its read-back follows the new setting).
@@ -205,6 +264,10 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.dry = 0;
         }
         let at = self.at.ok_or(ReadFault::Late)?;
+        if self.rejoin > 0 {
+            self.counters.late = self.counters.late.wrapping_add(1);
+            return Err(ReadFault::Late);
+        }
         match self.align.at(at) {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;

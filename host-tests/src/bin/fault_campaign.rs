@@ -351,6 +351,285 @@ fn pipe_backoff(pipe: &gyro_array::pipeline::Pipeline<5>, chip: usize, n: u32) -
     }
 }
 
+/// A timing event of the timed campaign (no chip fault: the chips'
+/// samples stay good).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Timing {
+    /// The chip's PLL fails for a while: it runs on its RC oscillator.
+    ClockToRc,
+    /// CLKIN stops (every chip on it at once), for good.
+    ClkInLost,
+    /// The loop stalls this many ms (the bus does not): FIFOs overflow.
+    Stall(u32),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct TimingEvent {
+    chip: usize,
+    what: Timing,
+    start: u32,
+    end: u32,
+}
+
+/// A timed run's draw: the motion, whether the chips are on CLKIN and
+/// their PLL errors, chip faults (as [`draw`], the ICM-42688-P's only) and
+/// one or two timing events.
+fn draw_timed(
+    seed: u64,
+    samples: u32,
+) -> (
+    RateProfile,
+    host_tests::timed_board::Timing,
+    Vec<Injection>,
+    Vec<TimingEvent>,
+) {
+    use gyro_array::emu::timing::ClockParams;
+    let (profile, inj) = draw(seed, samples);
+    let inj: Vec<Injection> = inj.into_iter().filter(|i| i.chip < 4).collect();
+    let mut rng = Rng::new(seed ^ 0x5EED_71AE);
+    let clkin = rng.uniform() < 0.5;
+    let pll = core::array::from_fn(|_| ClockParams {
+        offset: 0.02 * (rng.uniform() as f64 - 0.5),
+        drift_per_s: 2e-5 * (rng.uniform() as f64 - 0.5),
+        wander: 1e-3 * rng.uniform() as f64,
+        wander_period_s: 2.0 + 10.0 * rng.uniform() as f64,
+    });
+    let mut ev = Vec::new();
+    for _ in 0..1 + (rng.next_u32() % 2) {
+        let start = 300 + rng.next_u32() % (samples / 2);
+        let chip = (rng.next_u32() % 4) as usize;
+        let what = match rng.next_u32() % 3 {
+            0 => Timing::ClockToRc,
+            1 if clkin => Timing::ClkInLost,
+            _ => Timing::Stall(80 + rng.next_u32() % 300),
+        };
+        let end = match what {
+            Timing::ClockToRc => start + 200 + rng.next_u32() % 800,
+            _ => start + 1,
+        };
+        ev.push(TimingEvent {
+            chip,
+            what,
+            start,
+            end,
+        });
+    }
+    (
+        profile,
+        host_tests::timed_board::Timing { clkin, pll },
+        inj,
+        ev,
+    )
+}
+
+/// The timed campaign's run: the invariants of [`run`] on the timed board
+/// (truth at the stated instant), and 6: no chip is flagged for a timing
+/// event alone, and a fused value is missing only while the chips re-find
+/// their clocks after one (a lost CLKIN: 60 samples; a stall or a clock
+/// switch: 40).
+fn run_timed(seed: u64, samples: u32) -> Vec<String> {
+    let (profile, timing, inj, ev) = draw_timed(seed, samples);
+    let mut bad: Vec<String> = Vec::new();
+    let mut at_power_up = [Fault::None; 4];
+    for i in &inj {
+        if let (Kind::Fault(f), 0) = (i.kind, i.start) {
+            at_power_up[i.chip] = f;
+        }
+    }
+    let mut out_at = vec![None::<u32>; inj.len()];
+    let mut back_at = vec![None::<u32>; inj.len()];
+    let mut stalled = 0u32;
+    let mut last_counters = None;
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        host_tests::timed_board::run(
+            profile,
+            seed,
+            samples,
+            timing,
+            at_power_up,
+            |n| {
+                ev.iter()
+                    .filter(|e| e.start == n)
+                    .map(|e| match e.what {
+                        Timing::Stall(k) => k,
+                        _ => 0,
+                    })
+                    .sum()
+            },
+            |smp| {
+                let n = smp.n;
+                gyro_array::emu::with_bus(smp.bus, |b| {
+                    for i in &inj {
+                        if n + 1 == i.start {
+                            match i.kind {
+                                Kind::Fault(f) => b.chips[i.chip].set_fault(f),
+                                Kind::PowerCycle => b.chips[i.chip].power_cycle(),
+                                Kind::CorruptConfig => b.chips[i.chip].corrupt_config(),
+                            }
+                        }
+                        if n + 1 == i.end
+                            && !matches!(i.kind, Kind::PowerCycle | Kind::CorruptConfig)
+                        {
+                            b.chips[i.chip].set_fault(Fault::None);
+                        }
+                    }
+                    for e in &ev {
+                        match e.what {
+                            Timing::ClockToRc if n + 1 == e.start || n + 1 == e.end => {
+                                if let Some(c) = b.chips[e.chip].icm() {
+                                    c.fail_pll(n + 1 == e.start);
+                                }
+                            }
+                            Timing::ClkInLost if n + 1 == e.start => b.clkin_hz = None,
+                            _ => {}
+                        }
+                    }
+                });
+                stalled += ev
+                    .iter()
+                    .filter(|e| e.start == n)
+                    .map(|e| match e.what {
+                        Timing::Stall(k) => k,
+                        _ => 0,
+                    })
+                    .sum::<u32>();
+                let out = smp.out;
+                if out.seq != n + stalled {
+                    bad.push(format!(
+                        "2: sequence {} at step {n} (+{stalled} stalled)",
+                        out.seq
+                    ));
+                }
+                let truth = profile.at_f64(smp.stated_s);
+                let faulty_now = |c: usize| {
+                    inj.iter().any(|i| {
+                        i.chip == c
+                            && (i.active(n)
+                                || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 250
+                                || i.kind == Kind::CorruptConfig
+                                    && n >= i.start
+                                    && n < i.start + 350)
+                    })
+                };
+                let regrace = ev.iter().any(|e| {
+                    let grace = match e.what {
+                        Timing::ClkInLost => 60,
+                        _ => 40,
+                    };
+                    n >= e.start && n < e.start + grace
+                        || e.what == Timing::ClockToRc && n >= e.end && n < e.end + grace
+                });
+                for (k, i) in inj.iter().enumerate() {
+                    let used = out.offered.iter().any(|m| m & (1 << i.chip) != 0);
+                    if i.active(n) {
+                        if !used && out_at[k].is_none() {
+                            out_at[k] = Some(n);
+                        }
+                        let flagged = smp.pipe.health()[i.chip].flags != 0;
+                        if i.deterministic() && used && n >= i.start + 20 {
+                            let frozen_ok = i.kind == Kind::Fault(Fault::Stuck) && !flagged;
+                            if !frozen_ok {
+                                bad.push(format!(
+                                    "3: chip {} used at step {n} during {:?}",
+                                    i.chip, i.kind
+                                ));
+                            }
+                        }
+                    } else if n >= i.end && used && back_at[k].is_none() {
+                        back_at[k] = Some(n);
+                    }
+                }
+                // 6: a chip with no fault of its own is never flagged.
+                for c in 0..4 {
+                    let ever_faulty = inj.iter().any(|i| i.chip == c);
+                    if !ever_faulty && smp.pipe.health()[c].flags != 0 {
+                        bad.push(format!(
+                            "6: chip {c} flagged {:#04x} at step {n} with no fault of its own",
+                            smp.pipe.health()[c].flags
+                        ));
+                    }
+                }
+                if std::env::var_os("CAMPAIGN_TRACE").is_some() {
+                    println!(
+                        "{n} offered {:?} fused x {:?} truth {:.2} rates x {:?} flags {:?}",
+                        out.offered,
+                        out.fused[0].map(|f| (f.rate_dps, f.fallback, f.used(), f.weights)),
+                        truth[0],
+                        out.rate_dps.iter().map(|r| r[0]).collect::<Vec<_>>(),
+                        smp.pipe
+                            .health()
+                            .iter()
+                            .map(|h| h.flags)
+                            .collect::<Vec<_>>()
+                    );
+                }
+                let faulty = (0..4).filter(|c| faulty_now(*c)).count();
+                if 4 - faulty > faulty {
+                    for (a, f) in out.fused.iter().enumerate() {
+                        match f {
+                            Some(f) if (f.rate_dps as f64 - truth[a]).abs() <= 1.0 => {}
+                            Some(f) => bad.push(format!(
+                                "4: axis {a} fused {:.2} vs truth {:.2} at step {n}",
+                                f.rate_dps, truth[a]
+                            )),
+                            None if regrace || n < 100 => {}
+                            None => bad.push(format!("6: axis {a} has no fused value at step {n}")),
+                        }
+                    }
+                }
+                last_counters = Some(*smp.pipe.counters());
+            },
+        );
+    }));
+    if result.is_err() {
+        bad.push("1: panic".into());
+        return bad;
+    }
+    if let Some(c) = last_counters {
+        for (g, c) in c.iter().enumerate() {
+            let total = c.reads + c.errors + c.not_read + c.late;
+            if total != samples {
+                bad.push(format!(
+                    "2: gyro {g}: reads + errors + not read + late = {total} of {samples}"
+                ));
+            }
+        }
+    }
+    for (k, i) in inj.iter().enumerate() {
+        if i.deterministic() && i.end > i.start + 20 {
+            match out_at[k] {
+                Some(o) if o <= i.start + 20 => {}
+                o => bad.push(format!(
+                    "3: chip {} out at {o:?} after {:?} from {}",
+                    i.chip, i.kind, i.start
+                )),
+            }
+        }
+        if i.end < samples.saturating_sub(600) {
+            // As the polled board, plus the restarts' four slotted steps,
+            // the tracker's 20 ms acquisition, and a back-off cycle (up to
+            // the longest, the chip may have been lost for a while).
+            let restart = match i.kind {
+                Kind::PowerCycle | Kind::Fault(Fault::PoweredOff) => 46 + 16 + 30,
+                Kind::CorruptConfig => 3 * 250 + 46 + 30,
+                _ => 30,
+            };
+            let limit = i.end + 100 + restart + 1000;
+            if limit >= samples {
+                continue;
+            }
+            match back_at[k] {
+                Some(b) if b <= limit => {}
+                b => bad.push(format!(
+                    "5: chip {} back at {b:?} after {:?} ended at {} (limit {limit})",
+                    i.chip, i.kind, i.end
+                )),
+            }
+        }
+    }
+    bad
+}
+
 /// Randomised fault injection on the emulated board (issue 10).
 #[derive(clap::Parser)]
 #[command(name = "fault-campaign")]
@@ -364,6 +643,12 @@ struct Args {
     /// Samples per run (at least 1000: the faults are placed in them).
     #[arg(long, default_value_t = SAMPLES, value_parser = clap::value_parser!(u32).range(1000..))]
     samples: u32,
+    /// The timed board: four ICM-42688-P on their own clocks (CLKIN or
+    /// free-running), their FIFOs, the alignment, and timing events (a
+    /// clock falling back to RC, CLKIN lost, a stalled bus) beside the
+    /// faults.
+    #[arg(long)]
+    timed: bool,
 }
 
 fn main() -> ExitCode {
@@ -371,7 +656,7 @@ fn main() -> ExitCode {
     // Panics are caught per run and counted; keep their default message off
     // the terminal.
     std::panic::set_hook(Box::new(|_| {}));
-    let violations: [AtomicU32; 5] = Default::default();
+    let violations: [AtomicU32; 6] = Default::default();
     let failed_runs = AtomicU32::new(0);
     let next = AtomicU32::new(0);
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
@@ -384,16 +669,25 @@ fn main() -> ExitCode {
                     break;
                 }
                 let seed = args.seed + r;
-                let bad = run(seed, args.samples);
+                let bad = if args.timed {
+                    run_timed(seed, args.samples)
+                } else {
+                    run(seed, args.samples)
+                };
                 if !bad.is_empty() {
                     failed_runs.fetch_add(1, Ordering::Relaxed);
                     for b in &bad {
                         let k = b.as_bytes()[0] - b'1';
-                        violations[k as usize % 5].fetch_add(1, Ordering::Relaxed);
+                        violations[k as usize % 6].fetch_add(1, Ordering::Relaxed);
                     }
-                    let (_, inj) = draw(seed, args.samples);
+                    let what = if args.timed {
+                        let (_, t, inj, ev) = draw_timed(seed, args.samples);
+                        format!("clkin {}, faults {inj:?}, timing {ev:?}", t.clkin)
+                    } else {
+                        format!("faults {:?}", draw(seed, args.samples).1)
+                    };
                     reports.lock().unwrap().push(format!(
-                        "seed {seed}: {} violation(s), first: {}; faults {inj:?}",
+                        "seed {seed}: {} violation(s), first: {}; {what}",
                         bad.len(),
                         bad[0]
                     ));
@@ -412,15 +706,21 @@ fn main() -> ExitCode {
         "deterministic fault out within 20 samples, kept out",
         "fused within 1 °/s where a healthy majority exists",
         "back in fusion after the fault ends",
+        "timing alone flags no chip and loses no fused value (timed board)",
     ];
     println!(
-        "fault campaign: {} runs × {} samples from seed {}; runs with a violation: {}",
+        "fault campaign{}: {} runs × {} samples from seed {}; runs with a violation: {}",
+        if args.timed { " (timed board)" } else { "" },
         args.runs,
         args.samples,
         args.seed,
         failed_runs.load(Ordering::Relaxed)
     );
-    for (i, n) in names.iter().enumerate() {
+    for (i, n) in names
+        .iter()
+        .enumerate()
+        .take(if args.timed { 6 } else { 5 })
+    {
         println!(
             "  invariant {}: {n}: {} violations",
             i + 1,

@@ -1,0 +1,156 @@
+//! The board's four ICM-42688-P on their own clocks through the real
+//! pipeline: drivers on the FIFO path, each wrapped in [`TimedIcm`] (INT1
+//! captures, clock tracker, alignment to one stated instant per sample),
+//! start-up failures marked and restarted as the board does. The timed
+//! fault campaign's harness (`fault-campaign --timed`).
+//!
+//! The ADXRS453 is left out: at the array's instant its rate, 3.9 ms old,
+//! is always late (docs/timing.md).
+
+use std::cell::RefCell;
+
+use embedded_hal_bus::spi::RefCellDevice;
+use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+use gyro_array::drivers::Gyro;
+use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::{
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault, Icm42688Model,
+    NoiseParams, RateProfile,
+};
+use gyro_array::pipeline::timed::TimedIcm;
+use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
+
+/// Chips.
+pub const N: usize = 4;
+/// The stated instant's distance behind the read, µs (`timing-eval`).
+pub const DELAY_US: u32 = 1950;
+
+/// The bus of the timed board.
+pub type Bus<'a> = RefCell<EmuBus<'a, N>>;
+
+/// How a run's chips keep time.
+#[derive(Clone, Copy, Debug)]
+pub struct Timing {
+    /// The board drives CLKIN (at 32 kHz) and the chips use it.
+    pub clkin: bool,
+    /// Each chip's PLL error.
+    pub pll: [ClockParams; N],
+}
+
+/// What the harness hands each sample's callback.
+pub struct Sample<'a, 'b> {
+    /// Pipeline steps so far (this one included: 0 for the first).
+    pub n: u32,
+    /// The bus (inject faults, stop CLKIN, …).
+    pub bus: &'a Bus<'b>,
+    /// The pipeline's output.
+    pub out: &'a Output<N>,
+    /// The pipeline.
+    pub pipe: &'a Pipeline<N>,
+    /// The instant the sample states, s of bus time.
+    pub stated_s: f64,
+}
+
+/// Run `samples` pipeline steps. `stall(n)` > 0 before step `n` makes the
+/// loop miss that many periods (the bus advances, nothing is read, the
+/// pipeline is told of the overrun). `each` runs after every step.
+pub fn run(
+    profile: RateProfile,
+    seed: u64,
+    samples: u32,
+    timing: Timing,
+    at_power_up: [Fault; N],
+    stall: impl Fn(u32) -> u32,
+    mut each: impl FnMut(Sample<'_, '_>),
+) -> [gyro_array::pipeline::timed::TimingCounters; N] {
+    let chips: [Chip; N] = core::array::from_fn(|i| {
+        let p = NoiseParams {
+            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+            ..NoiseParams::ICM42688
+        };
+        let mut c =
+            Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
+        c.set_timing(Some(ChipTiming {
+            pll: timing.pll[i],
+            ..ChipTiming::pll(0.0)
+        }));
+        let mut c = Chip::Icm(c);
+        c.set_fault(at_power_up[i]);
+        c
+    });
+    let cs: [CsLine; N] = Default::default();
+    let bus: Bus = RefCell::new(EmuBus::new(chips, &cs));
+    if timing.clkin {
+        with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
+    }
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let cfg = Config {
+        odr: Odr::Hz2000,
+        filter: Filter::BOARD_2K,
+        clock: if timing.clkin {
+            ClockInput::ClkIn
+        } else {
+            ClockInput::Internal
+        },
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    };
+    let Ok(mut pipe) = Pipeline::<N>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ) else {
+        panic!("pipeline settings")
+    };
+    let mut t: Vec<_> = (0..N)
+        .map(|i| {
+            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let mut g = Icm42688::new(d);
+            if g.init(&mut delay, cfg).is_err() {
+                pipe.mark_init_failed(i);
+            }
+            TimedIcm::new(
+                g,
+                EmuCapture {
+                    bus: &bus,
+                    index: i,
+                },
+            )
+        })
+        .collect();
+    // The chips set up first ran while the others were: one start for all.
+    for ti in t.iter_mut() {
+        let _ = ti.driver().flush_fifo();
+    }
+    for n in 0..samples {
+        let k = stall(n);
+        if k > 0 {
+            for _ in 0..k {
+                with_bus(&bus, |b| b.advance(1e-3));
+            }
+            pipe.note_overrun(k);
+        }
+        with_bus(&bus, |b| b.advance(1e-3));
+        let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
+        let stated_us = now_us - DELAY_US as f64;
+        let at = (stated_us as u64 as u32).wrapping_mul(16);
+        for ti in t.iter_mut() {
+            ti.set_instant(at, DELAY_US);
+        }
+        let out = {
+            let (a, rest) = t.split_at_mut(1);
+            let (b, rest) = rest.split_at_mut(1);
+            let (c, d) = rest.split_at_mut(1);
+            let mut g: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
+            pipe.step(&mut g)
+        };
+        each(Sample {
+            n,
+            bus: &bus,
+            out: &out,
+            pipe: &pipe,
+            stated_s: stated_us * 1e-6,
+        });
+    }
+    core::array::from_fn(|i| t[i].counters)
+}
