@@ -20,6 +20,7 @@ impl Gyro for G<'_, '_> {
             1 => Err(ReadFault::Reset),
             2 => Err(ReadFault::Parity),
             3 => Err(ReadFault::Late),
+            4 => Err(ReadFault::Acquiring),
             _ => {
                 let raw = [b.u16() as i16, b.u16() as i16, b.u16() as i16];
                 let rate = if b.u8() < 240 {

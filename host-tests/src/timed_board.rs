@@ -144,6 +144,14 @@ pub fn run(
             let mut g: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
             pipe.step(&mut g)
         };
+        if std::env::var_os("CAMPAIGN_TRACE").is_some() {
+            println!(
+                "{n} timing {:?}",
+                t.iter()
+                    .map(|x| (x.counters.missing, x.counters.acquiring, x.counters.jumps))
+                    .collect::<Vec<_>>()
+            );
+        }
         each(Sample {
             n,
             bus: &bus,

@@ -1294,7 +1294,8 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                     // A write and its read-back, and a bank change (bank 1
                     // is left again before the step ends).
                     let switch = u8::from(bank == 1) != u8::from(bank1);
-                    let c = 2 + if switch { 1 } else { 0 } + if bank == 1 && !bank1 { 1 } else { 0 };
+                    let c =
+                        2 + if switch { 1 } else { 0 } + if bank == 1 && !bank1 { 1 } else { 0 };
                     if cost + c > 6 {
                         break;
                     }

@@ -26,10 +26,13 @@ pub enum ReadFault {
     /// A configuration register read back differs from what the driver
     /// set (corrupted): the chip must be restarted.
     Config,
-    /// The chip has no sample for the instant asked for yet (its delay is
-    /// longer than the array's, or its clock is still being acquired).
-    /// Not a fault: the sample is neither lost nor counted.
+    /// The chip has no sample for the instant asked for (its delay is
+    /// longer than the array's: a clock on its RC oscillator, slow). Not a
+    /// fault: the sample is neither lost nor counted.
     Late,
+    /// The chip is finding its clock again (after a start, a restart, a
+    /// gap in its samples), back within a few reads. Not a fault either.
+    Acquiring,
 }
 
 /// A board timer's capture of a chip's data-ready pulse: the board's

@@ -83,8 +83,13 @@ pub struct ChipClock {
     jumps_in_row: u8,
     /// Observations since acquisition began.
     seen: u8,
+    /// The observations that jumped in a row (stamp, capture µs).
+    jumped: [(u32, u32); 2],
     /// Observations that jumped (see [`JUMP_US`]).
     pub jumps: u32,
+    /// Times the tracker gave up: three jumps in a row, or a first ratio
+    /// no clock could have (a stamp or a capture that is not one).
+    pub lost: u32,
     /// The last residual, µs (observed minus predicted).
     pub last_residual_us: f32,
 }
@@ -100,7 +105,9 @@ impl ChipClock {
             ratio: 1.0,
             jumps_in_row: 0,
             seen: 0,
+            jumped: [(0, 0); 2],
             jumps: 0,
+            lost: 0,
             last_residual_us: 0.0,
         }
     }
@@ -123,9 +130,10 @@ impl ChipClock {
 
     /// Forget everything (the chip restarted: its stamps start again).
     pub fn reset(&mut self) {
-        let jumps = self.jumps;
+        let (jumps, lost) = (self.jumps, self.lost);
         *self = Self::new();
         self.jumps = jumps;
+        self.lost = lost;
     }
 
     /// The residual of board time `board_us` + `frac` against the
@@ -183,6 +191,7 @@ impl ChipClock {
                     self.anchor_us = capture_us;
                     self.state = ClockState::Tracking;
                 } else {
+                    self.lost = self.lost.wrapping_add(1);
                     self.reset();
                 }
             }
@@ -191,8 +200,31 @@ impl ChipClock {
                 self.last_residual_us = e;
                 if libm::fabsf(e) > JUMP_US {
                     self.jumps = self.jumps.wrapping_add(1);
-                    self.jumps_in_row += 1;
-                    if self.jumps_in_row >= 3 {
+                    if self.jumps_in_row < 2 {
+                        self.jumped[self.jumps_in_row as usize] = (stamp, capture_us);
+                        self.jumps_in_row += 1;
+                        return;
+                    }
+                    // Three in a row. If they lie on one line, the clock
+                    // changed its rate (a PLL that failed over to the RC
+                    // oscillator, 5–8 % off): take the new rate and go on.
+                    // If not, the stamps are not a clock's: lost.
+                    let [(s0, c0), (s1, c1)] = self.jumped;
+                    let d = stamp.wrapping_sub(s0) as i32;
+                    let r = capture_us.wrapping_sub(c0) as i32 as f32 / d as f32;
+                    let mid =
+                        c0.wrapping_add(
+                            floor_i32(r * s1.wrapping_sub(s0) as i32 as f32 + 0.5) as u32
+                        );
+                    let fits = d > 0 && (0.8..1.25).contains(&r) && c1.abs_diff(mid) <= 3;
+                    self.jumps_in_row = 0;
+                    if fits {
+                        self.ratio = r;
+                        self.anchor_stamp = stamp;
+                        self.anchor_us = capture_us;
+                        self.anchor_frac = frac;
+                    } else {
+                        self.lost = self.lost.wrapping_add(1);
                         self.reset();
                     }
                     return;
@@ -303,9 +335,9 @@ mod tests {
         assert_eq!(c.jumps, 1);
         assert_eq!(c.board_instant(100_000), Some(before));
         c.observe(101_000, 9_000_000);
-        c.observe(102_000, 9_001_000);
+        c.observe(102_000, 9_001_500);
         assert_eq!(c.state(), ClockState::Empty);
-        assert_eq!(c.jumps, 3);
+        assert_eq!((c.jumps, c.lost), (3, 1));
     }
 
     #[test]
@@ -319,6 +351,22 @@ mod tests {
         }
         assert_eq!(c.state(), ClockState::Tracking);
         assert!((c.ratio() - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_step_in_the_clock_rate_is_followed_not_lost() {
+        // 1 000 chip µs a ms, then the PLL fails: 1 000 chip µs take
+        // 1 070 board µs from then on.
+        let mut c = ChipClock::new();
+        let mut b = 0u32;
+        for k in 0..300u32 {
+            b += if k < 200 { 1000 } else { 1070 };
+            c.observe(k * 1000, b);
+        }
+        assert_eq!(c.lost, 0);
+        assert!((c.ratio() - 1.07).abs() < 1e-3, "{}", c.ratio());
+        let got = c.board_us(299_000).unwrap();
+        assert!(got.abs_diff(b) <= 2, "{got} vs {b}");
     }
 
     #[test]

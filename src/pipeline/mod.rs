@@ -135,8 +135,8 @@ pub struct GyroCounters {
     /// restarted or waiting for its next attempt.
     pub not_read: u32,
     /// Samples in which the gyro had nothing yet for the instant asked for
-    /// ([`ReadFault::Late`]): not a fault. Every sample is one of `reads`,
-    /// `errors`, `not_read` or `late`.
+    /// ([`ReadFault::Late`], [`ReadFault::Acquiring`]): not a fault. Every
+    /// sample is one of `reads`, `errors`, `not_read` or `late`.
     pub late: u32,
 }
 
@@ -442,6 +442,8 @@ impl<const N: usize> Pipeline<N> {
         };
         self.seq = self.seq.wrapping_add(1);
         let seq = out.seq;
+        // Healthy chips finding their clocks again after a gap.
+        let mut acquiring = 0u8;
         for (i, g) in gyros.iter_mut().enumerate() {
             let before = self.health[i].flags;
             if self.health[i].recovery != Recovery::Running {
@@ -459,6 +461,13 @@ impl<const N: usize> Pipeline<N> {
                 } else {
                     g.read()
                 };
+                // (Good before, so the gap is a shared one: a chip whose
+                // own errors keep breaking its stream does not hold the
+                // others back.)
+                let h = &self.health[i];
+                if r == Err(ReadFault::Acquiring) && h.flags == 0 && h.good_run > 0 {
+                    acquiring |= 1 << i;
+                }
                 if let Some(axes) = self.account(i, r) {
                     for (a, off) in out.offered.iter_mut().enumerate() {
                         if axes & (1 << a) != 0 {
@@ -492,6 +501,12 @@ impl<const N: usize> Pipeline<N> {
             }
         }
         for a in 0..3 {
+            // A pair cannot outvote a faulty member; while a healthy chip is
+            // only finding its clock again (back within a few reads), a
+            // pair is not fused.
+            if acquiring != 0 && out.offered[a].count_ones() < 3 {
+                out.offered[a] = 0;
+            }
             let mut y = [f32::NAN; N];
             for (i, v) in y.iter_mut().enumerate() {
                 *v = out.rate_dps[i][a];
@@ -582,7 +597,7 @@ impl<const N: usize> Pipeline<N> {
         let c = &mut self.counters[i];
         let h = &mut self.health[i];
         let r = match r {
-            Err(ReadFault::Late) => {
+            Err(ReadFault::Late | ReadFault::Acquiring) => {
                 c.late = c.late.saturating_add(1);
                 return None;
             }

@@ -7,9 +7,11 @@
 //!
 //! The instant each read is for is set before it ([`TimedIcm::set_instant`]):
 //! the board loop states one instant for the whole array, a fixed delay
-//! behind its own clock. A chip with nothing for it yet answers
-//! [`ReadFault::Late`], which the pipeline neither counts as an error nor
-//! fuses. An overflow (a stalled bus) is a gap: the aligner starts again
+//! behind its own clock. A chip with nothing for it answers
+//! [`ReadFault::Late`] (its delay is longer than the array's) or
+//! [`ReadFault::Acquiring`] (finding its clock again), which the pipeline
+//! neither counts as an error nor fuses; while a chip is acquiring, the
+//! pipeline fuses no pair. An overflow (a stalled bus) is a gap: the aligner starts again
 //! and the chip is late until it has two samples again; it is counted
 //! here, not held against the chip.
 
@@ -34,11 +36,17 @@ pub struct TimingCounters {
     pub samples: u32,
     /// Reads with nothing for the instant asked for.
     pub late: u32,
+    /// Of those, reads with the instant older than every sample kept (a
+    /// gap behind it) or the clock not yet acquired.
+    pub acquiring: u32,
     /// FIFO overflows (the FIFO was flushed: a gap).
     pub overflows: u32,
     /// Captures that did not fit the tracked clock (see
     /// [`super::clock::JUMP_US`]).
     pub jumps: u32,
+    /// Reads whose instant fell behind every sample kept, the clock
+    /// tracking (a gap, or instants out of order).
+    pub missing: u32,
     /// Times the chip was moved off CLKIN to its own clock because no
     /// sample came for [`CLKIN_LOST_READS`] reads.
     pub clkin_lost: u32,
@@ -218,6 +226,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             stamp_us: 0,
         }; MAX_PER_READ];
         let mut fresh = false;
+        let lost = self.clock.lost;
         loop {
             let r = self.g.read_fifo(&mut buf);
             let capture = self.capture.last_us();
@@ -244,6 +253,13 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 }
             }
         }
+        if self.clock.lost != lost {
+            // The stamps or captures stopped making sense (a garbled
+            // stream, a clock that jumped): a read error, so a chip that
+            // keeps doing it is flagged and restarted, not left acquiring.
+            self.gap();
+            return Err(ReadFault::BadResponse);
+        }
         self.dry = if fresh { 0 } else { self.dry.saturating_add(1) };
         if fresh && self.rejoin > 0 {
             self.rejoin -= 1;
@@ -264,9 +280,10 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.dry = 0;
         }
         let at = self.at.ok_or(ReadFault::Late)?;
-        if self.rejoin > 0 {
+        if self.rejoin > 0 || !tracking(&self.clock) {
             self.counters.late = self.counters.late.wrapping_add(1);
-            return Err(ReadFault::Late);
+            self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
+            return Err(ReadFault::Acquiring);
         }
         match self.align.at(at) {
             Aligned::Rate(rate_dps) => {
@@ -283,9 +300,15 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                     saturated,
                 })
             }
-            Aligned::Late | Aligned::Missing => {
+            Aligned::Late => {
                 self.counters.late = self.counters.late.wrapping_add(1);
                 Err(ReadFault::Late)
+            }
+            Aligned::Missing => {
+                self.counters.late = self.counters.late.wrapping_add(1);
+                self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
+                self.counters.missing = self.counters.missing.wrapping_add(1);
+                Err(ReadFault::Acquiring)
             }
         }
     }
