@@ -552,6 +552,12 @@ impl Default for Config {
 }
 
 impl Config {
+    /// The delay a polled read of this configuration carries, µs: the
+    /// filters' group delay and half a sample period.
+    pub fn polled_delay_us(&self) -> u32 {
+        libm::roundf(self.filter.group_delay_us(self.odr) + 0.5e6 / self.odr.hz()) as u32
+    }
+
     /// GYRO_CONFIG0.
     fn gyro_config0(&self) -> u8 {
         ((self.full_scale as u8) << 5) | self.odr as u8
@@ -718,6 +724,9 @@ pub struct Icm42688<SPI> {
     stamp: Option<u32>,
     /// RESET_DONE was seen by a read that could not report it.
     reset_seen: bool,
+    /// [`Gyro::delay_us`] for the configuration set (worked out when it is
+    /// set: the loop asks every sample).
+    delay_us: u32,
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -733,6 +742,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             check_group: 0,
             stamp: None,
             reset_seen: false,
+            delay_us: 0,
         }
     }
 
@@ -991,6 +1001,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write_checked(reg::GYRO_CONFIG0, v)?;
         self.full_scale = FullScale::from_bits(v >> 5);
         self.config = cfg;
+        self.delay_us = cfg.polled_delay_us();
         Ok(())
     }
 
@@ -1088,6 +1099,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write_checked(reg::GYRO_CONFIG0, saved.gyro_config0)?;
         self.full_scale = FullScale::from_bits(saved.gyro_config0 >> 5);
         self.config = saved.config;
+        self.delay_us = saved.config.polled_delay_us();
 
         let mut st = SelfTest {
             response_lsb,
@@ -1198,8 +1210,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
     /// Polled: the filters' group delay and half a sample period (the
     /// newest sample is 0 to 1 period old at the read).
     fn delay_us(&self) -> u32 {
-        let c = self.config;
-        libm::roundf(c.filter.group_delay_us(c.odr) + 0.5e6 / c.odr.hz()) as u32
+        self.delay_us
     }
 
     /// The configuration `init` set, as PX4 re-checks its register table a

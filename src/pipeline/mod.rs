@@ -227,15 +227,12 @@ impl<const N: usize> Output<N> {
         let mut age = [0u16; 3];
         for (a, f) in self.fused.iter().enumerate() {
             let Some(f) = f else { continue };
-            let mut d = 0.0f32;
-            let mut w_sum = 0.0f32;
-            for (w, us) in f.weights.iter().zip(self.delay_us) {
-                d += *w * us as f32;
-                w_sum += *w;
+            // The weights sum to 1 (or are all 0: a held output, age 0).
+            let mut d = 0.5f32;
+            for (w, us) in f.weights.iter().zip(self.delay_us.iter()) {
+                d += *w * *us as f32;
             }
-            if w_sum > 0.0 {
-                age[a] = libm::roundf(d / w_sum).min(u16::MAX as f32) as u16;
-            }
+            age[a] = d.min(u16::MAX as f32) as u16;
         }
         age
     }
@@ -465,7 +462,7 @@ impl<const N: usize> Pipeline<N> {
                 // own errors keep breaking its stream does not hold the
                 // others back.)
                 let h = &self.health[i];
-                if r == Err(ReadFault::Acquiring) && h.flags == 0 && h.good_run > 0 {
+                if matches!(r, Err(ReadFault::Acquiring)) && h.flags == 0 && h.good_run > 0 {
                     acquiring |= 1 << i;
                 }
                 if let Some(axes) = self.account(i, r) {
