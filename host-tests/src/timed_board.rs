@@ -52,6 +52,14 @@ pub struct Sample<'a, 'b> {
     pub stated_s: f64,
 }
 
+/// What a run leaves behind.
+pub struct Ran {
+    /// What each chip's timing layer counted.
+    pub timing: [gyro_array::pipeline::timed::TimingCounters; N],
+    /// Where each chip takes its clock from at the end.
+    pub clock_inputs: [ClockInput; N],
+}
+
 /// Run `samples` pipeline steps. `stall(n)` > 0 before step `n` makes the
 /// loop miss that many periods (the bus advances, nothing is read, the
 /// pipeline is told of the overrun). `each` runs after every step.
@@ -63,7 +71,7 @@ pub fn run(
     at_power_up: [Fault; N],
     stall: impl Fn(u32) -> u32,
     mut each: impl FnMut(Sample<'_, '_>),
-) -> [gyro_array::pipeline::timed::TimingCounters; N] {
+) -> Ran {
     let chips: [Chip; N] = core::array::from_fn(|i| {
         let p = NoiseParams {
             bias_dps: [0.02, -0.015, 0.01, -0.005][i],
@@ -160,5 +168,8 @@ pub fn run(
             stated_s: stated_us * 1e-6,
         });
     }
-    core::array::from_fn(|i| t[i].counters)
+    Ran {
+        timing: core::array::from_fn(|i| t[i].counters),
+        clock_inputs: core::array::from_fn(|i| t[i].clock_input()),
+    }
 }

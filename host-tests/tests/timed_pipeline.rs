@@ -9,20 +9,16 @@ use std::cell::RefCell;
 
 use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688, Odr};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::ClockParams;
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault, Icm42688Model,
-    NoiseParams, RateProfile,
+    with_bus, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model, NoiseParams, RateProfile,
 };
-use gyro_array::pipeline::timed::TimedIcm;
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const N: usize = 4;
-/// The array's output delay for 2 kHz chips through `Filter::BOARD_2K`
-/// (`timing-eval`).
-const DELAY_US: u32 = 1950;
+use host_tests::timed_board::{self, DELAY_US};
 
 fn sway() -> RateProfile {
     RateProfile {
@@ -63,126 +59,77 @@ struct Result {
 }
 
 fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
-    let chips: [Chip; N] = core::array::from_fn(|i| {
-        let mut c = Icm42688Model::new(noise(i), sway(), 40 + i as u64, 70);
-        let pll = [0.009, -0.01, 0.002, -0.004][i];
-        c.set_timing(Some(ChipTiming {
-            pll: ClockParams {
-                offset: pll,
-                drift_per_s: 1e-5,
-                wander: 2e-4,
-                wander_period_s: 9.0,
-            },
-            ..ChipTiming::pll(0.0)
-        }));
-        Chip::Icm(c)
-    });
-    let cs: [CsLine; N] = Default::default();
-    let bus = RefCell::new(EmuBus::new(chips, &cs));
-    if clkin {
-        with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
-    }
-    let mut delay = EmuDelay::new(&bus, 1e-3);
-    let cfg = Config {
-        odr: Odr::Hz2000,
-        filter: Filter::BOARD_2K,
-        clock: if clkin {
-            ClockInput::ClkIn
-        } else {
-            ClockInput::Internal
-        },
-        sampling: Sampling::Fifo,
-        ..Config::default()
+    let timing = timed_board::Timing {
+        clkin,
+        pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
+            offset,
+            drift_per_s: 1e-5,
+            wander: 2e-4,
+            wander_period_s: 9.0,
+        }),
     };
-    let mut t: Vec<_> = (0..N)
-        .map(|i| {
-            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
-            let mut g = Icm42688::new(d);
-            g.init(&mut delay, cfg).expect("init");
-            TimedIcm::new(
-                g,
-                EmuCapture {
-                    bus: &bus,
-                    index: i,
-                },
-            )
-        })
-        .collect();
-    for ti in t.iter_mut() {
-        ti.driver().flush_fifo().expect("flush");
-    }
-    let mut pipe = Pipeline::<N>::new(
-        PipelineConfig::default(),
-        Method::Adaptive(AdaptiveConfig::default()),
-    )
-    .expect("pipeline");
     let mut sq = [0.0f64; 3];
     let mut count = 0u32;
     let mut flags_seen = [0u8; N];
     let mut flagged_at = [None; N];
     let mut last_out = [None; N];
-    let mut n = 0;
-    while n < ms {
+    let mut counters = None;
+    // The harness counts pipeline steps; events and the reports are in ms
+    // of the run, stalls included.
+    let mut stalled = 0u32;
+    let stall = |n: u32| {
+        events
+            .iter()
+            .filter_map(|(at, e)| match e {
+                Event::Stall(k) if *at == n => Some(*k),
+                _ => None,
+            })
+            .sum()
+    };
+    let ran = timed_board::run(sway(), 40, ms, timing, [Fault::None; N], stall, |smp| {
+        let n = smp.n;
+        stalled += stall(n);
+        let ms_now = n + stalled;
+        // Inject for the next sample (the chips advance before it).
         for (at, e) in events {
-            if *at != n {
+            if *at != n + 1 {
                 continue;
             }
-            match *e {
-                Event::Stuck(i) => with_bus(&bus, |b| b.chips[i].set_fault(Fault::Stuck)),
-                Event::Reset(i) => with_bus(&bus, |b| b.chips[i].power_cycle()),
-                Event::ClkInLost => with_bus(&bus, |b| b.clkin_hz = None),
-                Event::Stall(k) => {
-                    for _ in 0..k {
-                        with_bus(&bus, |b| b.advance(1e-3));
-                    }
-                    pipe.note_overrun(k);
-                    n += k;
-                    Some(())
-                }
-            };
+            with_bus(smp.bus, |b| match *e {
+                Event::Stuck(i) => b.chips[i].set_fault(Fault::Stuck),
+                Event::Reset(i) => b.chips[i].power_cycle(),
+                Event::ClkInLost => b.clkin_hz = None,
+                Event::Stall(_) => {}
+            });
         }
-        with_bus(&bus, |b| b.advance(1e-3));
-        let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-        let stated_s = (now_us - DELAY_US as f64) * 1e-6;
-        let at = ((now_us - DELAY_US as f64) as u64 as u32).wrapping_mul(16);
-        for ti in t.iter_mut() {
-            ti.set_instant(at, DELAY_US);
-        }
-        let out = {
-            let (a, rest) = t.split_at_mut(1);
-            let (b, rest) = rest.split_at_mut(1);
-            let (c, d) = rest.split_at_mut(1);
-            let mut g: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
-            pipe.step(&mut g)
-        };
         for i in 0..N {
-            let f = pipe.health()[i].flags;
+            let f = smp.pipe.health()[i].flags;
             flags_seen[i] |= f;
             if f != 0 && flagged_at[i].is_none() {
-                flagged_at[i] = Some(n);
+                flagged_at[i] = Some(ms_now);
             }
-            if out.offered.iter().any(|m| m & (1 << i) == 0) && n > 300 {
-                last_out[i] = Some(n);
+            if smp.out.offered.iter().any(|m| m & (1 << i) == 0) && n > 300 {
+                last_out[i] = Some(ms_now);
             }
         }
-        if n >= 600 && out.fused.iter().all(|f| f.is_some()) {
+        if n >= 600 && smp.out.fused.iter().all(|f| f.is_some()) {
             // Every axis states the array's instant.
-            assert_eq!(out.age_us(), [DELAY_US as u16; 3], "ms {n}");
-            let truth = sway().at_f64(stated_s);
+            assert_eq!(smp.out.age_us(), [DELAY_US as u16; 3], "step {n}");
+            let truth = sway().at_f64(smp.stated_s);
             for a in 0..3 {
-                let f = out.fused[a].map_or(0.0, |f| f.rate_dps as f64);
+                let f = smp.out.fused[a].map_or(0.0, |f| f.rate_dps as f64);
                 sq[a] += (f - truth[a]).powi(2);
             }
             count += 1;
         }
-        n += 1;
-    }
+        counters = Some(*smp.pipe.counters());
+    });
     Result {
         rms_dps: sq.map(|s| (s / count.max(1) as f64).sqrt()),
         flags_seen,
-        counters: *pipe.counters(),
-        timing: core::array::from_fn(|i| t[i].counters),
-        clock_inputs: core::array::from_fn(|i| t[i].clock_input()),
+        counters: counters.expect("ran"),
+        timing: ran.timing,
+        clock_inputs: ran.clock_inputs,
         flagged_at,
         last_out,
     }

@@ -34,7 +34,7 @@
 //! - **AFSR** (adaptive full-scale range, INTF_CONFIG1 bits 7:6, on unless
 //!   they read 0b01): when an axis's rate crosses 100 °/s either way, that
 //!   axis's output holds its last value, bit for bit, for 1.5 ms (the
-//!   1–2 ms reported in ArduPilot issue 25025).
+//!   1–2 ms reported in ArduPilot/ardupilot#25025).
 //! - **FIFO** ([`Fifo`]): 2048 bytes of whole packets. Stream mode drops
 //!   the oldest packets to make room, stop-on-full drops the new one; both
 //!   set FIFO_FULL. Reading it empty returns 0x80 (the header's "FIFO
