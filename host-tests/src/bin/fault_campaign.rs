@@ -153,6 +153,54 @@ fn draw(seed: u64, samples: u32) -> (RateProfile, Vec<Injection>) {
     (profile, inj)
 }
 
+/// Inject for the next sample (the chips advance before it): each fault at
+/// its start, cleared at its end.
+fn inject<const N: usize>(b: &mut gyro_array::emu::EmuBus<'_, N>, inj: &[Injection], n: u32) {
+    for i in inj {
+        if n + 1 == i.start {
+            match i.kind {
+                Kind::Fault(f) => b.chips[i.chip].set_fault(f),
+                Kind::PowerCycle => b.chips[i.chip].power_cycle(),
+                Kind::CorruptConfig => b.chips[i.chip].corrupt_config(),
+            }
+        }
+        if n + 1 == i.end && !matches!(i.kind, Kind::PowerCycle | Kind::CorruptConfig) {
+            b.chips[i.chip].set_fault(Fault::None);
+        }
+    }
+}
+
+/// After a run: invariant 2 on the counters (every sample one of reads,
+/// errors, not read, late) and invariant 3 on each deterministic fault
+/// (out of fusion within 20 samples of its onset).
+fn check_after_run(
+    counters: Option<&[gyro_array::pipeline::GyroCounters]>,
+    samples: u32,
+    inj: &[Injection],
+    out_at: &[Option<u32>],
+    bad: &mut Vec<String>,
+) {
+    for (g, c) in counters.unwrap_or(&[]).iter().enumerate() {
+        let total = c.reads + c.errors + c.not_read + c.late;
+        if total != samples {
+            bad.push(format!(
+                "2: gyro {g}: reads + errors + not read + late = {total} of {samples}"
+            ));
+        }
+    }
+    for (i, out) in inj.iter().zip(out_at) {
+        if i.deterministic() && i.end > i.start + 20 {
+            match out {
+                Some(o) if *o <= i.start + 20 => {}
+                o => bad.push(format!(
+                    "3: chip {} out at {o:?} after {:?} from {}",
+                    i.chip, i.kind, i.start
+                )),
+            }
+        }
+    }
+}
+
 /// The invariants a run broke (empty: none).
 fn run(seed: u64, samples: u32) -> Vec<String> {
     let (profile, inj) = draw(seed, samples);
@@ -172,20 +220,7 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         run_board_array_from(profile, seed, samples, at_power_up, |n, bus, out, pipe| {
             // Inject for the next sample (the chips advance before it).
-            gyro_array::emu::with_bus(bus, |b| {
-                for i in &inj {
-                    if n + 1 == i.start {
-                        match i.kind {
-                            Kind::Fault(f) => b.chips[i.chip].set_fault(f),
-                            Kind::PowerCycle => b.chips[i.chip].power_cycle(),
-                            Kind::CorruptConfig => b.chips[i.chip].corrupt_config(),
-                        }
-                    }
-                    if n + 1 == i.end && !matches!(i.kind, Kind::PowerCycle | Kind::CorruptConfig) {
-                        b.chips[i.chip].set_fault(Fault::None);
-                    }
-                }
-            });
+            gyro_array::emu::with_bus(bus, |b| inject(b, &inj, n));
             if out.seq != n {
                 bad.push(format!("2: sequence {} at sample {n}", out.seq));
             }
@@ -284,26 +319,14 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
         bad.push("1: panic".into());
         return bad;
     }
-    if let Some(c) = last_counters {
-        for (g, c) in c.iter().enumerate() {
-            let total = c.reads + c.errors + c.not_read + c.late;
-            if total != samples {
-                bad.push(format!(
-                    "2: gyro {g}: reads + errors + not read = {total} of {samples}"
-                ));
-            }
-        }
-    }
+    check_after_run(
+        last_counters.as_ref().map(|c| &c[..]),
+        samples,
+        &inj,
+        &out_at,
+        &mut bad,
+    );
     for (k, i) in inj.iter().enumerate() {
-        if i.deterministic() && i.end > i.start + 20 {
-            match out_at[k] {
-                Some(o) if o <= i.start + 20 => {}
-                o => bad.push(format!(
-                    "3: chip {} out at {o:?} after {:?} from {}",
-                    i.chip, i.kind, i.start
-                )),
-            }
-        }
         if i.end < samples.saturating_sub(400) {
             let restart = match (i.kind, i.chip) {
                 (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), 4) => 100,
@@ -422,6 +445,17 @@ fn draw_timed(
     )
 }
 
+/// The ms the timed loop stalls before step `n`.
+fn stall_at(ev: &[TimingEvent], n: u32) -> u32 {
+    ev.iter()
+        .filter(|e| e.start == n)
+        .map(|e| match e.what {
+            Timing::Stall(k) => k,
+            _ => 0,
+        })
+        .sum()
+}
+
 /// The timed campaign's run: the invariants of [`run`] on the timed board
 /// (truth at the stated instant), and 6: no chip is flagged for a timing
 /// event alone, and a fused value is missing only while the chips re-find
@@ -447,32 +481,11 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
             samples,
             timing,
             at_power_up,
-            |n| {
-                ev.iter()
-                    .filter(|e| e.start == n)
-                    .map(|e| match e.what {
-                        Timing::Stall(k) => k,
-                        _ => 0,
-                    })
-                    .sum()
-            },
+            |n| stall_at(&ev, n),
             |smp| {
                 let n = smp.n;
                 gyro_array::emu::with_bus(smp.bus, |b| {
-                    for i in &inj {
-                        if n + 1 == i.start {
-                            match i.kind {
-                                Kind::Fault(f) => b.chips[i.chip].set_fault(f),
-                                Kind::PowerCycle => b.chips[i.chip].power_cycle(),
-                                Kind::CorruptConfig => b.chips[i.chip].corrupt_config(),
-                            }
-                        }
-                        if n + 1 == i.end
-                            && !matches!(i.kind, Kind::PowerCycle | Kind::CorruptConfig)
-                        {
-                            b.chips[i.chip].set_fault(Fault::None);
-                        }
-                    }
+                    inject(b, &inj, n);
                     for e in &ev {
                         match e.what {
                             Timing::ClockToRc if n + 1 == e.start || n + 1 == e.end => {
@@ -485,14 +498,7 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
                         }
                     }
                 });
-                stalled += ev
-                    .iter()
-                    .filter(|e| e.start == n)
-                    .map(|e| match e.what {
-                        Timing::Stall(k) => k,
-                        _ => 0,
-                    })
-                    .sum::<u32>();
+                stalled += stall_at(&ev, n);
                 let out = smp.out;
                 if out.seq != n + stalled {
                     bad.push(format!(
@@ -585,26 +591,14 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
         bad.push("1: panic".into());
         return bad;
     }
-    if let Some(c) = last_counters {
-        for (g, c) in c.iter().enumerate() {
-            let total = c.reads + c.errors + c.not_read + c.late;
-            if total != samples {
-                bad.push(format!(
-                    "2: gyro {g}: reads + errors + not read + late = {total} of {samples}"
-                ));
-            }
-        }
-    }
+    check_after_run(
+        last_counters.as_ref().map(|c| &c[..]),
+        samples,
+        &inj,
+        &out_at,
+        &mut bad,
+    );
     for (k, i) in inj.iter().enumerate() {
-        if i.deterministic() && i.end > i.start + 20 {
-            match out_at[k] {
-                Some(o) if o <= i.start + 20 => {}
-                o => bad.push(format!(
-                    "3: chip {} out at {o:?} after {:?} from {}",
-                    i.chip, i.kind, i.start
-                )),
-            }
-        }
         if i.end < samples.saturating_sub(600) {
             // As the polled board, plus the restarts' four slotted steps,
             // the tracker's 20 ms acquisition, and a back-off cycle (up to
