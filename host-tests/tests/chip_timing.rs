@@ -271,3 +271,55 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
         .unwrap();
     assert!((best - want).abs() < 15e-6, "lag {best} vs {want}");
 }
+
+#[test]
+fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
+    use embedded_hal_bus::spi::RefCellDevice;
+    use gyro_array::drivers::adxrs453::{Adxrs453, DELAY_US};
+    use gyro_array::drivers::Gyro;
+    use gyro_array::emu::{AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay};
+    use std::cell::RefCell;
+    // A 2 Hz, 50 °/s sine on z; no noise. The rate leaves the part's
+    // 77.5 Hz filter late, and each response carries the rate latched at
+    // the frame before (a millisecond earlier).
+    let profile = RateProfile {
+        base_dps: [0.0; 3],
+        sine_dps: [0.0, 0.0, 50.0],
+        sine_hz: 2.0,
+        sine_start_s: 0.0,
+    };
+    let mut m = Adxrs453Model::new(NoiseParams::IDEAL, profile, 3, 2);
+    m.set_timing(Some(AdxTiming {
+        clock: ClockParams::fixed(0.002),
+        vibration: Vibration::NONE,
+    }));
+    let cs: [CsLine; 1] = Default::default();
+    let bus = RefCell::new(EmuBus::new([Chip::Adx(m)], &cs));
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let mut g = Adxrs453::new(dev, 2);
+    g.init(&mut delay).expect("init");
+    let mut read = Vec::new();
+    for _ in 0..2000 {
+        with_bus(&bus, |b| b.advance(1e-3));
+        let t = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0);
+        if let Ok(r) = Gyro::read(&mut g) {
+            read.push((t, r.rate_dps[2] as f64));
+        }
+    }
+    let err = |lag_us: f64| {
+        read[200..]
+            .iter()
+            .map(|(t, v)| (v - profile.at_f64(t - lag_us * 1e-6)[2]).powi(2))
+            .sum::<f64>()
+    };
+    let best = (0..8000)
+        .map(|k| k as f64)
+        .min_by(|a, b| err(*a).total_cmp(&err(*b)))
+        .unwrap_or(0.0);
+    // The 4 kHz update adds half its period on average.
+    assert!(
+        (best - DELAY_US as f64 - 125.0).abs() < 100.0,
+        "lag {best} µs, stated {DELAY_US}"
+    );
+}

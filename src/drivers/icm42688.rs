@@ -480,21 +480,29 @@ impl Filter {
     /// model's filters are built the same way and their delay is measured
     /// against this (`host-tests/tests/chip_timing.rs`).
     pub fn group_delay_us(&self, odr: Odr) -> f32 {
-        let w = |hz: f32| 2.0 * core::f32::consts::PI * hz;
-        let mut d = 0.0;
-        if self.aaf_delt != 0 {
-            d += core::f32::consts::SQRT_2 / w(aaf_hz(self.aaf_delt));
-        }
-        if let Some(k) = ui_divisor(self.ui_bw) {
-            let bw = odr.hz().max(400.0) / k;
-            d += match self.ui_order {
-                0 | 1 => 1.0,
-                2 => core::f32::consts::SQRT_2,
-                _ => 2.0,
-            } / w(bw);
-        }
-        d * 1e6
+        let aaf = (self.aaf_delt != 0).then(|| aaf_hz(self.aaf_delt));
+        let ui = ui_divisor(self.ui_bw).map(|k| (self.ui_order, odr.hz().max(400.0) / k));
+        path_delay_us(aaf, ui)
     }
+}
+
+/// The DC group delay of an AAF of 3 dB bandwidth `aaf_hz` (2nd-order
+/// Butterworth, √2/ω) followed by a UI filter of (order, bandwidth)
+/// `ui` (Butterworth: 1/ω, √2/ω, 2/ω), µs; `None` for a stage that is off.
+pub fn path_delay_us(aaf_hz: Option<f32>, ui: Option<(u8, f32)>) -> f32 {
+    let w = |hz: f32| 2.0 * core::f32::consts::PI * hz;
+    let mut d = 0.0;
+    if let Some(a) = aaf_hz {
+        d += core::f32::consts::SQRT_2 / w(a);
+    }
+    if let Some((order, bw)) = ui {
+        d += match order {
+            0 | 1 => 1.0,
+            2 => core::f32::consts::SQRT_2,
+            _ => 2.0,
+        } / w(bw);
+    }
+    d * 1e6
 }
 
 /// Where the chip takes its clock from.

@@ -5,7 +5,7 @@ use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::timing::{Biquad, ClockParams, Vibration};
 use super::{corrupt, Fault, Rng};
-use crate::drivers::adxrs453::{c_to_tem, cmd, fault, reg, LSB_PER_DPS};
+use crate::drivers::adxrs453::{c_to_tem, cmd, fault, reg, BANDWIDTH_HZ, LSB_PER_DPS};
 
 /// Give a response its parity bits: P0 (bit 28) odd over 31:16, P1 (bit 0)
 /// odd over 15:0.
@@ -25,8 +25,6 @@ fn seal(mut r: u32) -> u32 {
 /// refreshed; 4 kHz is well above the 77.5 Hz bandwidth and makes the
 /// update's own half-period delay (0.125 ms) small beside the filter's.
 pub const ADX_UPDATE_HZ: f64 = 4000.0;
-/// The ADXRS453's rate bandwidth, Hz (datasheet table 1, "Bandwidth").
-pub const ADX_BANDWIDTH_HZ: f64 = 77.5;
 
 /// How an emulated ADXRS453 keeps time: its internal oscillator (no clock
 /// input) and the vibration at its die.
@@ -51,12 +49,6 @@ struct AdxTimed {
     now_s: f64,
     lp: Biquad,
     primed: bool,
-}
-
-impl AdxTimed {
-    /// The filter's group delay at DC, s.
-    const DELAY_S: f64 =
-        core::f64::consts::SQRT_2 / (2.0 * core::f64::consts::PI * ADX_BANDWIDTH_HZ);
 }
 
 /// An emulated ADXRS453 mounted on board axis `axis`.
@@ -124,22 +116,12 @@ impl Adxrs453Model {
             next_tick_s: None,
             now_s: 0.0,
             lp: Biquad::lowpass(
-                ADX_BANDWIDTH_HZ,
+                BANDWIDTH_HZ as f64,
                 core::f64::consts::FRAC_1_SQRT_2,
                 ADX_UPDATE_HZ,
             ),
             primed: false,
         });
-    }
-
-    /// The delay of the part's filter at DC, s (0 for the lockstep
-    /// sampler).
-    pub fn path_delay_s(&self) -> f64 {
-        if self.timed.is_some() {
-            AdxTimed::DELAY_S
-        } else {
-            0.0
-        }
     }
 
     /// The error terms it was built with.

@@ -187,21 +187,6 @@ impl Icm42688Model {
         self.timed.as_ref().map_or(0, |t| t.made)
     }
 
-    /// Packets the FIFO dropped for want of room since its last flush.
-    pub fn fifo_dropped(&self) -> u32 {
-        self.timed.as_ref().map_or(0, |t| t.fifo.dropped)
-    }
-
-    /// The signal path's group delay at DC for the settings in force, s
-    /// (0 for the lockstep sampler).
-    pub fn path_delay_s(&self) -> f64 {
-        if self.timed.is_some() {
-            self.path_settings().group_delay_s()
-        } else {
-            0.0
-        }
-    }
-
     fn reset(&mut self) {
         self.bank0 = [0; 128];
         self.bank0[reg::GYRO_CONFIG0 as usize] = GYRO_CONFIG0_RESET;

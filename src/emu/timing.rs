@@ -234,24 +234,11 @@ pub struct PathSettings {
 }
 
 impl PathSettings {
-    /// The group delay at DC of the path these settings make, s: each
-    /// Butterworth section's `1/ω` (order 1), `√2/ω` (order 2) or `2/ω`
-    /// (order 3). This is what the model delays a slow signal by; the
-    /// driver states its own figure (from the same formula) beside it.
+    /// The group delay at DC of the path these settings make, s: the
+    /// driver's formula ([`crate::drivers::icm42688::path_delay_us`]), which
+    /// the model's simulated filters are checked against.
     pub fn group_delay_s(&self) -> f64 {
-        let w = |hz: f32| 2.0 * core::f64::consts::PI * hz as f64;
-        let mut d = 0.0;
-        if let Some(a) = self.aaf_hz {
-            d += core::f64::consts::SQRT_2 / w(a);
-        }
-        if let Some((order, bw)) = self.ui {
-            d += match order {
-                1 => 1.0,
-                2 => core::f64::consts::SQRT_2,
-                _ => 2.0,
-            } / w(bw);
-        }
-        d
+        crate::drivers::icm42688::path_delay_us(self.aaf_hz, self.ui) as f64 * 1e-6
     }
 }
 

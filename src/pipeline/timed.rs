@@ -19,9 +19,7 @@ use embedded_hal::spi::SpiDevice;
 
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
-use crate::drivers::icm42688::{
-    ClockInput, Config, Error, FifoSample, Icm42688, Sampling, MAX_PER_READ,
-};
+use crate::drivers::icm42688::{ClockInput, Config, Error, FifoSample, Icm42688, MAX_PER_READ};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
 /// Moving means kept per chip: 8 ms at 2 kHz, room for an instant up to
@@ -332,11 +330,6 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn delay_us(&self) -> u32 {
         self.behind_us
     }
-}
-
-/// Whether `cfg` is one a [`TimedIcm`] can run.
-pub fn fits(cfg: &Config) -> bool {
-    cfg.sampling == Sampling::Fifo
 }
 
 /// Whether the tracker has the chip's clock.
