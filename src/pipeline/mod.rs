@@ -439,18 +439,31 @@ impl<const N: usize> Pipeline<N> {
         };
         self.seq = self.seq.wrapping_add(1);
         let seq = out.seq;
+        // The gyro (in turn) whose configuration is read back this
+        // sample, and the one whose temperature is read: decided once a
+        // sample, not once a gyro.
+        let every = self.cfg.check_every;
+        let (mut check, mut temp) = (usize::MAX, usize::MAX);
+        if every != 0 {
+            let turn = (seq / every) as usize % N;
+            let phase = seq % every;
+            if phase == CHECK_AT % every {
+                check = turn;
+            }
+            if self.calibrated && phase == TEMP_AT % every {
+                temp = turn;
+            }
+        }
         // Healthy chips finding their clocks again after a gap.
         let mut acquiring = 0u8;
         for (i, g) in gyros.iter_mut().enumerate() {
             let before = self.health[i].flags;
+            let mut offered_any = false;
             if self.health[i].recovery != Recovery::Running {
                 self.counters[i].not_read = self.counters[i].not_read.saturating_add(1);
                 self.recover(i, &mut **g, seq);
             } else {
-                let every = self.cfg.check_every;
-                let due = every != 0
-                    && seq % every == CHECK_AT % every
-                    && (seq / every) as usize % N == i;
+                let due = i == check;
                 // One gyro in turn also has its configuration read back.
                 out.busy |= due;
                 let r = if due {
@@ -466,10 +479,9 @@ impl<const N: usize> Pipeline<N> {
                     acquiring |= 1 << i;
                 }
                 if let Some(axes) = self.account(i, r) {
+                    offered_any = axes != 0;
                     for (a, off) in out.offered.iter_mut().enumerate() {
-                        if axes & (1 << a) != 0 {
-                            *off |= 1 << i;
-                        }
+                        *off |= ((axes >> a) & 1) << i;
                     }
                 }
                 if let Ok(r) = r {
@@ -478,11 +490,7 @@ impl<const N: usize> Pipeline<N> {
                 }
                 // The die temperature, for the bias model: one gyro in
                 // turn, between configuration checks.
-                if self.calibrated
-                    && every != 0
-                    && seq % every == TEMP_AT % every
-                    && (seq / every) as usize % N == i
-                {
+                if i == temp {
                     out.busy = true;
                     if let Ok(t) = g.temperature_c() {
                         self.temps[i] = Some(t);
@@ -492,7 +500,6 @@ impl<const N: usize> Pipeline<N> {
             if self.health[i].flags != before {
                 out.health_changed |= 1 << i;
             }
-            let offered_any = out.offered.iter().any(|m| m & (1 << i) != 0);
             if !offered_any {
                 self.counters[i].excluded = self.counters[i].excluded.saturating_add(1);
             }

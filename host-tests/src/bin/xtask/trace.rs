@@ -178,6 +178,7 @@ fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String) {
         return (false, "?".into());
     };
     let mut innermost = None;
+    let mut first = None;
     let mut emu = false;
     while let Ok(Some(f)) = frames.next() {
         if let Some(name) = f.function.as_ref().and_then(|n| n.demangle().ok()) {
@@ -188,12 +189,28 @@ fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String) {
             {
                 emu = true;
             }
-            if innermost.is_none() {
+            // `XTASK_TRACE_LINES=1`: by the line of this crate's code the
+            // instruction comes from (its innermost frame in the crate),
+            // not by function.
+            if std::env::var_os("XTASK_TRACE_LINES").is_some() {
+                if innermost.is_none() && name.contains("gyro_array::") {
+                    let loc = f.location.as_ref();
+                    let file = loc
+                        .and_then(|l| l.file)
+                        .and_then(|p| p.rsplit('/').next())
+                        .unwrap_or("?");
+                    let line = loc.and_then(|l| l.line).unwrap_or(0);
+                    innermost = Some(format!("{} {file}:{line}", short_name(&name)));
+                }
+            } else if innermost.is_none() {
                 innermost = Some(short_name(&name));
+            }
+            if first.is_none() {
+                first = Some(short_name(&name));
             }
         }
     }
-    (emu, innermost.unwrap_or_else(|| "?".into()))
+    (emu, innermost.or(first).unwrap_or_else(|| "?".into()))
 }
 
 /// A demangled path without its hash and crate-internal generics, for
@@ -399,6 +416,27 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .collect();
     println!(
         "  its extra over the mean sample, by function (innermost inline frame): {}",
+        line.join(", ")
+    );
+    // Where the mean sample goes: what a cut in the mean must come from.
+    let mut all: Vec<(usize, f64)> = scenario
+        .all_by_fn
+        .iter()
+        .enumerate()
+        .map(|(id, &c)| (id, c as f64 / n))
+        .collect();
+    all.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let line: Vec<String> = all
+        .iter()
+        .take(if std::env::var_os("XTASK_TRACE_LINES").is_some() {
+            400
+        } else {
+            16
+        })
+        .map(|&(id, x)| format!("{x:.0} {}", fn_names.get(id).map_or("?", |s| s)))
+        .collect();
+    println!(
+        "  the mean sample, by function (innermost inline frame): {}",
         line.join(", ")
     );
 }
