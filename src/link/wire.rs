@@ -373,7 +373,7 @@ mod crc_tests {
                 x ^= x << 13;
                 x ^= x >> 17;
                 x ^= x << 5;
-                *b = if x % 5 == 0 { 0 } else { x as u8 };
+                *b = if x.is_multiple_of(5) { 0 } else { x as u8 };
             }
             let ours = v[..len].iter().fold(0xFFFF, |c, &b| crc_byte(c, b));
             assert_eq!(ours, CRC16.checksum(&v[..len]), "{len} bytes");

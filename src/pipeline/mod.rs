@@ -444,9 +444,8 @@ impl<const N: usize> Pipeline<N> {
         // sample, not once a gyro.
         let every = self.cfg.check_every;
         let (mut check, mut temp) = (usize::MAX, usize::MAX);
-        if every != 0 {
-            let turn = (seq / every) as usize % N;
-            let phase = seq % every;
+        if let (Some(round), Some(phase)) = (seq.checked_div(every), seq.checked_rem(every)) {
+            let turn = round as usize % N;
             if phase == CHECK_AT % every {
                 check = turn;
             }
