@@ -21,7 +21,7 @@ use gyro_array::drivers::icm42688::{
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams, PathModel,
     RateProfile,
 };
 use gyro_array::pipeline::align::{Aligned, Aligner};
@@ -130,6 +130,7 @@ fn timings(c: Clocks, vibration: Vibration) -> [ChipTiming; N] {
         },
         rc: ClockParams::fixed(-0.07),
         vibration,
+        path: PathModel::Filters,
     })
 }
 

@@ -223,6 +223,28 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         true,
     );
+    ok &= bench_timed_loop_on(
+        t,
+        ipt,
+        "faults K: four ICM-42688-P on their own clocks (PLLs +0.8 %, -1 %, +0.3 %, one on its RC oscillator at -7 %), FIFO at 2 kHz, swaying 95 deg/s at 2 Hz; gyro 2 stuck 1.5-2.5 s, gyro 1 powered off 4.5-4.6 s, gyro 3 spiking 50 deg/s on 5 % of samples 6.0-7.0 s",
+        RateProfile {
+            base_dps: [0.0, 10.0, -20.0],
+            sine_dps: [95.0, 60.0, 40.0],
+            sine_hz: 2.0,
+            sine_start_s: 0.0,
+        },
+        91,
+        false,
+        [0.008, -0.01, 0.003, -0.07],
+        &[
+            (1500, 2, Fault::Stuck),
+            (2500, 2, Fault::None),
+            (4500, 1, Fault::PoweredOff),
+            (4600, 1, Fault::None),
+            (6000, 3, Fault::Spikes { prob: 0.05, magnitude_dps: 50.0 }),
+            (7000, 3, Fault::None),
+        ],
+    );
     if true {
         return ok;
     }
@@ -629,13 +651,10 @@ fn bench_loop_on(
     use gyro_array::drivers::icm42688::Icm42688;
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::{board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay};
-    use gyro_array::link::msg::Settings;
-    use gyro_array::link::port::Port;
     use gyro_array::pipeline::startup::start_array;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
-    const SAMPLES: u32 = 8000;
     let cs: [CsLine; 5] = Default::default();
     let bus = RefCell::new(EmuBus::new(board_array(profile, seed), &cs));
     let dt = 1e-3;
@@ -683,14 +702,211 @@ fn bench_loop_on(
         "bench whole loop: reading the 5 gyros alone (drivers + emulated SPI): mean {=u32} instructions",
         (read_ticks * ipt / READS as f32) as u32
     );
-    let mut port = Port::<2048>::new(Settings::default());
-    let mut uart = NullUart(0);
     // From here the emulated bus times its own operations: the chip models
     // stand in for the SPI peripheral and the silicon, so their
     // instructions are not the firmware's (on the board the CPU waits for
     // the bus instead: the bus time is printed with the figures).
     with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
     let meter = || with_bus(&bus, |b| (b.meter, b.bytes)).unwrap_or_default();
+    let meter = &meter;
+    run_loop(
+        t,
+        ipt,
+        faults,
+        all,
+        &mut pipe,
+        noise,
+        meter,
+        |n| {
+            with_bus(&bus, |b| {
+                for &(at, chip, fault) in plan {
+                    if at == n {
+                        if let Some(c) = b.chips.get_mut(chip) {
+                            c.set_fault(fault);
+                        }
+                    }
+                }
+                b.advance(dt);
+            });
+        },
+        |pipe| {
+            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+            pipe.step(&mut gyros)
+        },
+    )
+}
+
+/// The whole loop as the board runs it on chips that keep their own
+/// time: four ICM-42688-P (`clkin`: on the board's 32 kHz CLKIN; else on
+/// their own PLLs, `pll` off) read through their FIFOs at 2 kHz by
+/// [`TimedIcm`] (INT1 captures, clock tracker, aligner), each sample at
+/// one stated instant 1 950 µs behind the read, fused on 3 axes, the
+/// E-DAVARs and the link as in [`bench_loop_on`]. The chips' paths are
+/// the delay model (`emu::PathModel::Delay`: the 32 kHz filters are too
+/// slow for QEMU). The ADXRS453 is not read: at the array's instant its
+/// rate is always late (docs/timing.md).
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn bench_timed_loop_on(
+    t: &Ticks,
+    ipt: f32,
+    faults: &str,
+    profile: gyro_array::emu::RateProfile,
+    seed: u64,
+    clkin: bool,
+    pll: [f64; 4],
+    plan: &[(u32, usize, gyro_array::emu::Fault)],
+) -> bool {
+    use core::cell::RefCell;
+    use embedded_hal_bus::spi::RefCellDevice;
+    use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+    use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+    use gyro_array::drivers::Gyro;
+    use gyro_array::emu::timing::ClockParams;
+    use gyro_array::emu::{
+        with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Icm42688Model,
+        NoiseParams, PathModel,
+    };
+    use gyro_array::pipeline::timed::TimedIcm;
+    use gyro_array::pipeline::tracker::{self, NoiseTracker};
+    use gyro_array::pipeline::{Pipeline, PipelineConfig};
+    const DELAY_US: u32 = 1950;
+
+    let chips: [Chip; 4] = core::array::from_fn(|i| {
+        let p = NoiseParams {
+            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+            ..NoiseParams::ICM42688
+        };
+        let mut c = Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
+        c.set_timing(Some(ChipTiming {
+            pll: ClockParams {
+                offset: pll[i],
+                drift_per_s: 1e-5,
+                wander: 2e-4,
+                wander_period_s: 3.0 + i as f64,
+            },
+            path: PathModel::Delay,
+            ..ChipTiming::pll(0.0)
+        }));
+        Chip::Icm(c)
+    });
+    let cs: [CsLine; 4] = Default::default();
+    let bus = RefCell::new(EmuBus::new(chips, &cs));
+    if clkin {
+        with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
+    }
+    let mut delay = EmuDelay::new(&bus, 1e-3);
+    let cfg = Config {
+        odr: Odr::Hz2000,
+        filter: Filter::BOARD_2K,
+        clock: if clkin {
+            ClockInput::ClkIn
+        } else {
+            ClockInput::Internal
+        },
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    };
+    let Ok(mut pipe) = Pipeline::<4>::new(
+        PipelineConfig::default(),
+        Method::Adaptive(AdaptiveConfig::default()),
+    ) else {
+        exit(false)
+    };
+    let dev =
+        |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i])).unwrap_or_else(|_| exit(false));
+    let timed = |i: usize, pipe: &mut Pipeline<4>, delay: &mut EmuDelay<'_, '_, 4>| {
+        let mut g = Icm42688::new(dev(i));
+        if g.init(delay, cfg).is_err() {
+            defmt::warn!("timed loop bench: gyro {=usize} failed its init", i);
+            pipe.mark_init_failed(i);
+        }
+        TimedIcm::new(g, EmuCapture { bus: &bus, index: i })
+    };
+    let (mut g0, mut g1, mut g2, mut g3) = (
+        timed(0, &mut pipe, &mut delay),
+        timed(1, &mut pipe, &mut delay),
+        timed(2, &mut pipe, &mut delay),
+        timed(3, &mut pipe, &mut delay),
+    );
+    // One start for all (the chips set up first ran while the others were).
+    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
+        let _ = g.driver().flush_fifo();
+    }
+    let mut slot = core::mem::MaybeUninit::<NoiseTracker<1024, 35, 9>>::uninit();
+    let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::config(1024)) else {
+        exit(false)
+    };
+    with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
+    let meter = || with_bus(&bus, |b| (b.meter, b.bytes)).unwrap_or_default();
+    let ok = run_loop(
+        t,
+        ipt,
+        faults,
+        false,
+        &mut pipe,
+        noise,
+        &meter,
+        |n| {
+            with_bus(&bus, |b| {
+                for &(at, chip, fault) in plan {
+                    if at == n {
+                        if let Some(c) = b.chips.get_mut(chip) {
+                            c.set_fault(fault);
+                        }
+                    }
+                }
+                b.advance(1e-3);
+            });
+        },
+        |pipe| {
+            // The board's timer would give this instant; the bus's clock
+            // stands in for it.
+            let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
+            let at = ((now_us as u64 as u32).wrapping_sub(DELAY_US)).wrapping_mul(16);
+            let mut gyros: [&mut TimedIcm<_, _>; 4] = [&mut g0, &mut g1, &mut g2, &mut g3];
+            for g in gyros.iter_mut() {
+                g.set_instant(at, DELAY_US);
+            }
+            let [a, b, c, d] = gyros;
+            let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
+            pipe.step(&mut gyros)
+        },
+    );
+    let late: [u32; 4] = [g0.counters.late, g1.counters.late, g2.counters.late, g3.counters.late];
+    defmt::info!(
+        "bench whole loop, {=str}: late answers per chip {=[?]}, FIFO overflows {=[?]}",
+        faults,
+        late,
+        [g0.counters.overflows, g1.counters.overflows, g2.counters.overflows, g3.counters.overflows]
+    );
+    ok
+}
+
+/// The measured part of the whole-loop bench, whatever the chips: per
+/// sample, `before(n)` (faults, the bus's time) untimed, then `step`
+/// (read + calibrate + fuse), the E-DAVARs and the link frame, timed and
+/// marked for the exact count; the UART and the status frame in the idle
+/// time after, timed on their own. `meter` reads the emulated bus's own
+/// ticks and bytes.
+#[allow(clippy::too_many_arguments)]
+fn run_loop<const N: usize>(
+    t: &Ticks,
+    ipt: f32,
+    faults: &str,
+    all: bool,
+    pipe: &mut gyro_array::pipeline::Pipeline<N>,
+    noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 9>,
+    meter: &dyn Fn() -> (gyro_array::emu::Meter, u32),
+    mut before: impl FnMut(u32),
+    mut step: impl FnMut(&mut gyro_array::pipeline::Pipeline<N>) -> gyro_array::pipeline::Output<N>,
+) -> bool {
+    use gyro_array::link::msg::Settings;
+    use gyro_array::link::port::Port;
+    const SAMPLES: u32 = 8000;
+    let mut port = Port::<2048>::new(Settings::default());
+    let mut uart = NullUart(0);
+    let pair = pair_cost(t);
     // One clock read, in ticks (averaged: a single one is below a tick).
     let clock_cost = {
         const READS: u32 = 4096;
@@ -714,23 +930,11 @@ fn bench_loop_on(
     mark::scenario();
     for n in 0..SAMPLES {
         mark::sample();
-        with_bus(&bus, |b| {
-            for &(at, chip, fault) in plan {
-                if at == n {
-                    if let Some(c) = b.chips.get_mut(chip) {
-                        c.set_fault(fault);
-                    }
-                }
-            }
-            b.advance(dt);
-        });
+        before(n);
         let (m0, _) = meter();
         let t0 = t.now();
         mark::fuse();
-        let out = {
-            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-            pipe.step(&mut gyros)
-        };
+        let out = step(pipe);
         mark::off();
         let t1 = t.now();
         let (m1, _) = meter();

@@ -1305,11 +1305,11 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                 Ok(Restart::Done)
             }
             s => {
-                let table = cfg.setup().ok_or(ReadFault::BadResponse)?;
                 let mut pos = (s - 2) as usize;
                 let mut cost = 0;
                 let mut bank1 = false;
-                while let Some(&(bank, r, v)) = table.get(pos) {
+                while let Some(w) = cfg.setup_write(pos) {
+                    let (bank, r, v) = w.ok_or(ReadFault::BadResponse)?;
                     // A write and its read-back, and a bank change (bank 1
                     // is left again before the step ends).
                     let switch = u8::from(bank == 1) != u8::from(bank1);
@@ -1333,7 +1333,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                 if bank1 {
                     self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
                 }
-                if pos < table.len() {
+                if cfg.setup_write(pos).is_some() {
                     return again(2 + pos as u8, 0);
                 }
                 // All set: clear RESET_DONE (set by the reset), then wait
@@ -1351,43 +1351,42 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
 const RESTART_FLUSH: u8 = 201;
 
 impl Config {
-    /// Every checked write `init` makes, in order, as (bank, register,
-    /// value): bank 1 (the AAF, pin 9), then INTF_CONFIG1, the UI filter,
-    /// range and rate, the FIFO and INT1, and the gyro's power last.
-    /// `None` for an AAF setting the driver does not know.
-    pub fn setup(&self) -> Option<heapless::Vec<(u8, u8, u8), 16>> {
-        let (st, pin9) = self.bank1()?;
-        let mut v = heapless::Vec::new();
-        for (i, x) in st.iter().enumerate() {
-            v.push((1, reg::GYRO_CONFIG_STATIC2 + i as u8, *x)).ok()?;
-        }
-        v.push((1, reg::INTF_CONFIG5, pin9)).ok()?;
+    /// Write `i` of the checked writes a restart makes, in order, as
+    /// (bank, register, value): bank 1 (the AAF, pin 9), then
+    /// INTF_CONFIG1, the UI filter, range and rate, the FIFO and INT1, and
+    /// the gyro's power last. `None` past the last; `Some(None)` for an
+    /// AAF setting the driver does not know. Worked out one at a time: a
+    /// restart step makes a few of them, and the whole table built and
+    /// returned by value (a `heapless::Vec`) cost some 1 300 instructions
+    /// a step in copies on the Cortex-M4 (`cargo xtask bench-loop`,
+    /// scenario A, the loop's worst sample).
+    pub fn setup_write(&self, i: usize) -> Option<Option<(u8, u8, u8)>> {
         let fifo = self.sampling == Sampling::Fifo;
-        let [c, c1, s0] = self.int1();
-        for (r, x) in [
-            (reg::INTF_CONFIG1, self.intf_config1()),
-            (reg::GYRO_CONFIG1, self.gyro_config1()),
-            (reg::GYRO_ACCEL_CONFIG0, self.gyro_accel_config0()),
-            (reg::GYRO_CONFIG0, self.gyro_config0()),
-            (reg::INTF_CONFIG0, self.intf_config0()),
-            (reg::FIFO_CONFIG1, self.fifo_config1()),
-            (reg::FIFO_CONFIG, self.fifo_config()),
-        ] {
-            v.push((0, r, x)).ok()?;
-        }
-        if fifo {
-            for (r, x) in [
-                (reg::INT_CONFIG, c),
-                (reg::INT_CONFIG1, c1),
-                (reg::INT_SOURCE0, s0),
-            ] {
-                v.push((0, r, x)).ok()?;
+        let w = match i {
+            0..=3 => self
+                .bank1()
+                .map(|(st, _)| (1, reg::GYRO_CONFIG_STATIC2 + i as u8, st[i])),
+            4 => self.bank1().map(|(_, pin9)| (1, reg::INTF_CONFIG5, pin9)),
+            5 => Some((0, reg::INTF_CONFIG1, self.intf_config1())),
+            6 => Some((0, reg::GYRO_CONFIG1, self.gyro_config1())),
+            7 => Some((0, reg::GYRO_ACCEL_CONFIG0, self.gyro_accel_config0())),
+            8 => Some((0, reg::GYRO_CONFIG0, self.gyro_config0())),
+            9 => Some((0, reg::INTF_CONFIG0, self.intf_config0())),
+            10 => Some((0, reg::FIFO_CONFIG1, self.fifo_config1())),
+            11 => Some((0, reg::FIFO_CONFIG, self.fifo_config())),
+            12..=14 if fifo => {
+                let v = self.int1();
+                let r = [reg::INT_CONFIG, reg::INT_CONFIG1, reg::INT_SOURCE0];
+                Some((0, r[i - 12], v[i - 12]))
             }
-        }
-        v.push((0, reg::PWR_MGMT0, GYRO_MODE_LN)).ok()?;
-        Some(v)
+            12 if !fifo => Some((0, reg::PWR_MGMT0, GYRO_MODE_LN)),
+            15 if fifo => Some((0, reg::PWR_MGMT0, GYRO_MODE_LN)),
+            _ => return None,
+        };
+        Some(w)
     }
 }
+
 
 #[cfg(test)]
 mod tests {

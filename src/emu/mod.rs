@@ -21,7 +21,7 @@ use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
 pub use adxrs453::{AdxTiming, Adxrs453Model};
-pub use icm42688::{ChipTiming, Icm42688Model};
+pub use icm42688::{ChipTiming, Icm42688Model, PathModel};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;

@@ -47,6 +47,13 @@ struct Block {
     fw: u64,
     emu: u64,
     by_fn: Vec<(u32, u64)>,
+    /// Instructions of compiler_builtins' own routines (memcpy, memset,
+    /// soft float): counted as whoever called them, the emulator or the
+    /// firmware (these leaf routines are entered from their caller's last
+    /// block).
+    builtin: u64,
+    /// The function id of its last instruction that is not a builtin's.
+    last_id: Option<u32>,
 }
 
 /// What a marker does.
@@ -173,10 +180,11 @@ fn markers(elf: &Path) -> Result<HashMap<u64, Mark>, String> {
 /// Whether the instruction at `addr` is the emulator's (or the bench
 /// clock's): any inline frame in `gyro_array::emu` (not `EmuCs`) or
 /// `board::qemu::ticks`; and its innermost frame's function.
-fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String) {
+fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String, bool) {
     let Ok(mut frames) = loader.find_frames(addr) else {
-        return (false, "?".into());
+        return (false, "?".into(), true);
     };
+    let mut builtin = false;
     let mut innermost = None;
     let mut first = None;
     let mut emu = false;
@@ -208,9 +216,12 @@ fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String) {
             if first.is_none() {
                 first = Some(short_name(&name));
             }
+            builtin |= name.starts_with("compiler_builtins::") || name.starts_with("__aeabi");
         }
     }
-    (emu, innermost.or(first).unwrap_or_else(|| "?".into()))
+    let name = innermost.or(first);
+    let builtin = builtin || name.is_none();
+    (emu, name.unwrap_or_else(|| "?".into()), builtin)
 }
 
 /// A demangled path without its hash and crate-internal generics, for
@@ -232,8 +243,12 @@ fn parse(
     loader: &addr2line::Loader,
 ) -> (Vec<Scenario>, Vec<String>) {
     let mut blocks: HashMap<u64, Block> = HashMap::new();
-    // Per instruction address: (emulator's?, function id).
-    let mut at: HashMap<u64, (bool, u32)> = HashMap::new();
+    // Per instruction address: (emulator's?, function id, a builtin?).
+    let mut at: HashMap<u64, (bool, u32, bool)> = HashMap::new();
+    // Whether the last block that was not a builtin's was the emulator's.
+    let mut caller_emu = false;
+    // And its last instruction's function id: builtins are charged to it.
+    let mut caller_id: Option<u32> = None;
     let mut names: Vec<String> = Vec::new();
     let mut ids: HashMap<String, u32> = HashMap::new();
     let mut building: Option<(u64, Block)> = None;
@@ -258,18 +273,26 @@ fn parse(
                 if *start == u64::MAX {
                     *start = addr;
                 }
-                let (e, id) = *at.entry(addr).or_insert_with(|| {
-                    let (e, name) = classify(loader, addr);
+                let (e, id, builtin) = *at.entry(addr).or_insert_with(|| {
+                    let (e, name, builtin) = classify(loader, addr);
+                    let builtin = builtin && !e;
                     let next = ids.len() as u32;
                     let id = *ids.entry(name.clone()).or_insert_with(|| {
                         names.push(name);
                         next
                     });
-                    (e, id)
+                    (e, id, builtin)
                 });
                 if e {
                     block.emu += 1;
+                } else if builtin {
+                    block.builtin += 1;
+                    match block.by_fn.iter_mut().find(|(f, _)| *f == id) {
+                        Some((_, n)) => *n += 1,
+                        None => block.by_fn.push((id, 1)),
+                    }
                 } else {
+                    block.last_id = Some(id);
                     block.fw += 1;
                     match block.by_fn.iter_mut().find(|(f, _)| *f == id) {
                         Some((_, n)) => *n += 1,
@@ -286,7 +309,7 @@ fn parse(
             // which is not counted).
             if start != u64::MAX {
                 let b = blocks.entry(start).or_default();
-                if block.fw + block.emu > b.fw + b.emu {
+                if block.fw + block.emu + block.builtin > b.fw + b.emu + b.builtin {
                     *b = block;
                 }
             }
@@ -317,18 +340,53 @@ fn parse(
             Some(Mark::Phase(p)) => phase = Some(*p),
             Some(Mark::Off) => phase = None,
             None => {
+                let Some(b) = blocks.get(&pc) else { continue };
+                // A block of builtins alone is its caller's.
+                let builtin_only = b.fw + b.emu == 0;
+                let builtin_emu = if builtin_only {
+                    caller_emu
+                } else {
+                    caller_emu = b.emu > b.fw;
+                    if b.last_id.is_some() {
+                        caller_id = b.last_id;
+                    }
+                    false
+                };
                 let (Some(p), Some(s)) = (
                     phase,
                     scenarios.last_mut().and_then(|s| s.samples.last_mut()),
                 ) else {
                     continue;
                 };
-                let Some(b) = blocks.get(&pc) else { continue };
-                s.fw[p] += b.fw;
+                if builtin_emu {
+                    if p == 0 {
+                        s.bus += b.builtin;
+                    }
+                    continue;
+                }
+                s.fw[p] += b.fw + b.builtin;
                 if p == 0 {
                     s.bus += b.emu;
                 }
-                for &(id, n) in &b.by_fn {
+                let lines = std::env::var_os("XTASK_TRACE_LINES").is_some();
+                let charged: Vec<(u32, u64)> = b
+                    .by_fn
+                    .iter()
+                    .map(|&(id, n)| match (builtin_only && lines, caller_id) {
+                        // By line: a builtin under the line that called it.
+                        (true, Some(c)) => {
+                            let key = format!("{} <- {}", names[id as usize], names[c as usize]);
+                            let next = ids.len() as u32;
+                            let id = *ids.entry(key.clone()).or_insert_with(|| {
+                                names.push(key);
+                                next
+                            });
+                            (id, n)
+                        }
+                        _ => (id, n),
+                    })
+                    .collect();
+                for (id, n) in charged {
                     let id = id as usize;
                     if by_fn.len() <= id {
                         by_fn.resize(id + 1, 0);
