@@ -21,8 +21,8 @@ use gyro_array::drivers::icm42688::{
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams, PathModel,
-    RateProfile,
+    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    PathModel, RateProfile,
 };
 use gyro_array::pipeline::align::{Aligned, Aligner};
 use gyro_array::pipeline::clock::{ChipClock, Instant16};

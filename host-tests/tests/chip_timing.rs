@@ -350,7 +350,14 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
                 path,
                 ..ChipTiming::pll(0.008)
             };
-            run(chip(profile, NoiseParams::IDEAL, t), cfg, None, 600, |_, _| {}, |_| false)
+            run(
+                chip(profile, NoiseParams::IDEAL, t),
+                cfg,
+                None,
+                600,
+                |_, _| {},
+                |_| false,
+            )
         });
         let [f, d] = &runs;
         assert_eq!(f.samples.len(), d.samples.len());

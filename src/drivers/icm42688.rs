@@ -735,6 +735,12 @@ pub struct Icm42688<SPI> {
     /// [`Gyro::delay_us`] for the configuration set (worked out when it is
     /// set: the loop asks every sample).
     delay_us: u32,
+    /// FIFO packets the first burst of a read makes room for (see
+    /// [`Self::read_fifo`]), worked out when the configuration is set.
+    per_read: usize,
+    /// The FIFO bursts' buffer: kept, so a read does not zero 67 bytes
+    /// first (some 45 instructions a read on the Cortex-M4).
+    fifo_buf: [u8; 3 + FIFO_PACKET * MAX_PER_READ],
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -751,6 +757,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             stamp: None,
             reset_seen: false,
             delay_us: 0,
+            per_read: 1,
+            fifo_buf: [0; 3 + FIFO_PACKET * MAX_PER_READ],
         }
     }
 
@@ -776,6 +784,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // Kept first, so a restart after a failed init sets this
         // configuration too (the FIFO, the clock), not the last one.
         self.config = cfg;
+        self.per_read = cfg.per_read();
         self.write(reg::DEVICE_CONFIG, SOFT_RESET)?;
         delay.delay_ms(1); // datasheet: wait 1 ms after a soft reset
         self.write(reg::REG_BANK_SEL, 0)?;
@@ -869,16 +878,15 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // ODR): what the count does not cover reads 0x80 and is not looked
         // at, and a packet arriving during the burst is read again whole
         // (FIFO_RESUME_PARTIAL_RD is clear).
-        let k = self.per_read();
-        let mut b = [0u8; 3 + FIFO_PACKET * MAX_PER_READ];
-        let first = &mut b[..3 + FIFO_PACKET * k];
+        let k = self.per_read.clamp(1, MAX_PER_READ);
+        let first = &mut self.fifo_buf[..3 + FIFO_PACKET * k];
         self.spi
             .transaction(&mut [
                 Operation::Write(&[reg::INT_STATUS | READ]),
                 Operation::Read(first),
             ])
             .map_err(Error::Spi)?;
-        let status = b[0];
+        let [status, count_h, count_l, ..] = self.fifo_buf;
         if status & RESET_DONE != 0 || self.reset_seen {
             self.reset_seen = false;
             return Err(Error::ChipReset);
@@ -887,7 +895,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             self.flush_fifo()?;
             return Err(Error::FifoOverflow);
         }
-        let count = u16::from_be_bytes([b[1], b[2]]) as usize;
+        let count = u16::from_be_bytes([count_h, count_l]) as usize;
         let want = count.min(out.len());
         let mut read = FifoRead {
             status,
@@ -897,7 +905,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         let in_first = want.min(k);
         for i in 0..in_first {
             let mut p = [0u8; FIFO_PACKET];
-            p.copy_from_slice(&b[3 + FIFO_PACKET * i..3 + FIFO_PACKET * (i + 1)]);
+            p.copy_from_slice(&self.fifo_buf[3 + FIFO_PACKET * i..3 + FIFO_PACKET * (i + 1)]);
             self.take_packet(&p, &mut out[i])?;
             read.samples = i + 1;
         }
@@ -905,7 +913,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         let mut i = in_first;
         while i < want {
             let n = (want - i).min(MAX_PER_READ);
-            let rest = &mut b[..FIFO_PACKET * n];
+            let rest = &mut self.fifo_buf[..FIFO_PACKET * n];
             self.spi
                 .transaction(&mut [
                     Operation::Write(&[reg::FIFO_DATA | READ]),
@@ -914,19 +922,13 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
                 .map_err(Error::Spi)?;
             for j in 0..n {
                 let mut p = [0u8; FIFO_PACKET];
-                p.copy_from_slice(&b[FIFO_PACKET * j..FIFO_PACKET * (j + 1)]);
+                p.copy_from_slice(&self.fifo_buf[FIFO_PACKET * j..FIFO_PACKET * (j + 1)]);
                 self.take_packet(&p, &mut out[i + j])?;
                 read.samples = i + j + 1;
             }
             i += n;
         }
         Ok(read)
-    }
-
-    /// Packets the first burst of [`Self::read_fifo`] makes room for: one
-    /// per millisecond of the ODR (the board reads every millisecond).
-    fn per_read(&self) -> usize {
-        (libm::roundf(self.config.odr.hz() / 1000.0) as usize).clamp(1, MAX_PER_READ)
     }
 
     fn take_packet(
@@ -1010,6 +1012,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.full_scale = FullScale::from_bits(v >> 5);
         self.config = cfg;
         self.delay_us = cfg.polled_delay_us();
+        self.per_read = cfg.per_read();
         Ok(())
     }
 
@@ -1108,6 +1111,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.full_scale = FullScale::from_bits(saved.gyro_config0 >> 5);
         self.config = saved.config;
         self.delay_us = saved.config.polled_delay_us();
+        self.per_read = saved.config.per_read();
 
         let mut st = SelfTest {
             response_lsb,
@@ -1351,6 +1355,12 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
 const RESTART_FLUSH: u8 = 201;
 
 impl Config {
+    /// Packets the first burst of [`Icm42688::read_fifo`] makes room for:
+    /// one per millisecond of the ODR (the board reads every millisecond).
+    pub fn per_read(&self) -> usize {
+        (libm::roundf(self.odr.hz() / 1000.0) as usize).clamp(1, MAX_PER_READ)
+    }
+
     /// Write `i` of the checked writes a restart makes, in order, as
     /// (bank, register, value): bank 1 (the AAF, pin 9), then
     /// INTF_CONFIG1, the UI filter, range and rate, the FIFO and INT1, and
@@ -1386,7 +1396,6 @@ impl Config {
         Some(w)
     }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -1745,6 +1754,7 @@ mod tests {
         s.extend(rd(0x30, &rest));
         let (mut spi, mut g) = fifo_driver(&s);
         g.config.odr = Odr::Hz2000;
+        g.per_read = g.config.per_read();
         let mut out = [FifoSample {
             raw: [0; 3],
             stamp_us: 0,

@@ -41,7 +41,10 @@ pub struct Aligner<const CAP: usize> {
     n: usize,
     raw: [(Instant16, [f32; 3]); MAX_MEAN],
     raw_len: usize,
+    /// The slot the next raw sample goes to.
     raw_head: usize,
+    /// 1 / n.
+    inv_n: f32,
 }
 
 impl<const CAP: usize> Aligner<CAP> {
@@ -49,20 +52,22 @@ impl<const CAP: usize> Aligner<CAP> {
     /// [`MAX_MEAN`]).
     pub const fn new(n: u8) -> Self {
         let n = n as usize;
+        let n = if n == 0 {
+            1
+        } else if n > MAX_MEAN {
+            MAX_MEAN
+        } else {
+            n
+        };
         Self {
             ring: [(0, [0.0; 3]); CAP],
             len: 0,
             head: 0,
-            n: if n == 0 {
-                1
-            } else if n > MAX_MEAN {
-                MAX_MEAN
-            } else {
-                n
-            },
+            n,
             raw: [(0, [0.0; 3]); MAX_MEAN],
             raw_len: 0,
             raw_head: 0,
+            inv_n: 1.0 / n as f32,
         }
     }
 
@@ -70,6 +75,7 @@ impl<const CAP: usize> Aligner<CAP> {
     pub fn clear(&mut self) {
         self.len = 0;
         self.raw_len = 0;
+        self.raw_head = 0;
     }
 
     /// Means held.
@@ -84,34 +90,37 @@ impl<const CAP: usize> Aligner<CAP> {
 
     /// One sample: the rate, and the board instant it describes.
     pub fn push(&mut self, t: Instant16, rate_dps: [f32; 3]) {
-        let i = (self.raw_head + self.raw_len) % self.n;
-        self.raw[i] = (t, rate_dps);
-        if self.raw_len < self.n {
+        // (Wraps by compare, not `%`: a division and its multiply-back
+        // each time, three a push, on the Cortex-M4.)
+        let n = self.n.min(MAX_MEAN);
+        let i = self.raw_head;
+        if let Some(slot) = self.raw.get_mut(i) {
+            *slot = (t, rate_dps);
+        }
+        self.raw_head = if i + 1 >= n { 0 } else { i + 1 };
+        if self.raw_len < n {
             self.raw_len += 1;
-            if self.raw_len < self.n {
+            if self.raw_len < n {
                 return;
             }
-        } else {
-            self.raw_head = (self.raw_head + 1) % self.n;
         }
         // The mean of the n, at the mean of their instants (taken from the
-        // newest, so a wrap between them does no harm).
-        let k = 1.0 / self.n as f32;
+        // newest, so a wrap between them does no harm). The n instants lie
+        // within a few ms of each other: their distances from the newest
+        // sum well inside an i32 (an i64 sum and division cost some 100
+        // instructions on the Cortex-M4).
         let mut v = [0.0f32; 3];
-        // The n instants lie within a few ms of each other: their
-        // distances from the newest sum well inside an i32 (an i64 sum
-        // and division cost some 100 instructions on the Cortex-M4).
         let mut dt = 0i32;
-        for (ti, ri) in &self.raw[..self.n] {
-            for a in 0..3 {
-                v[a] += ri[a];
-            }
+        for (ti, ri) in &self.raw[..n] {
+            v[0] += ri[0];
+            v[1] += ri[1];
+            v[2] += ri[2];
             dt = dt.saturating_add(since(*ti, t));
         }
-        let mean_t = t.wrapping_add((dt / self.n as i32) as u32);
-        let v = v.map(|x| x * k);
+        let mean_t = t.wrapping_add((dt / n as i32) as u32);
+        let k = self.inv_n;
         let j = (self.head + self.len) % CAP;
-        self.ring[j] = (mean_t, v);
+        self.ring[j] = (mean_t, [v[0] * k, v[1] * k, v[2] * k]);
         if self.len < CAP {
             self.len += 1;
         } else {
