@@ -989,7 +989,7 @@ fn run_loop<const N: usize>(
         noise.push(&out);
         let t2 = t.now();
         mark::link();
-        port.publish(&out, u64::from(n) * 1000, &pipe, &noise.at_taus([0, 4, 8]));
+        port.publish(&out, u64::from(n) * 1000, pipe, &noise.at_taus([0, 4, 8]));
         let status_due = port.status_due(out.seq);
         mark::off();
         let t3 = t.now();
@@ -1005,7 +1005,7 @@ fn run_loop<const N: usize>(
         if status_due {
             let s0 = t.now();
             let st = port.status(
-                &pipe,
+                pipe,
                 out.seq,
                 u64::from(n) * 1000,
                 [1, 16, 256],
