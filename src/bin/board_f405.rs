@@ -5,7 +5,7 @@
 //! PB1, PC4); SPI2 (PB13 SCK, PB14 MISO, PB15 MOSI, mode 0, 5.25 MHz: rated
 //! to 8 MHz) to one ADXRS453 on the z axis (CS on PC5). The output link
 //! (`gyro_array::link`, `docs/link.md`) is USART1 (PA9 TX, PA10 RX) at
-//! 2 Mbaud, 8N1. SysTick paces sampling at 1 kHz; a tick that comes
+//! 6 Mbaud, 8N1 (`link::BAUD`). SysTick paces sampling at 1 kHz; a tick that comes
 //! before the previous sample is done is counted as an overrun.
 //! Logs go out over RTT (defmt); flash and run with `cargo flash`.
 //!

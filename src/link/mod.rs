@@ -23,9 +23,16 @@ mod tests;
 /// Protocol version, the first byte of every payload.
 pub const VERSION: u8 = 4;
 
-/// UART speed: 2 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
-/// BRR = 2.625) and within reach of common USB-serial bridges.
-pub const BAUD: u32 = 2_000_000;
+/// UART speed: 6 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
+/// oversampling by 8, USARTDIV = 1.75), on RS-422 to the antenna
+/// controller (TIA-422 carries 10 Mbit/s over 12 m), and within reach of
+/// FT232H, FT2232H and CH343 USB bridges (not of CP2102N: 3 Mbaud). At
+/// this speed the status frame, queued after its sample's frame, is on the
+/// wire before the next sample frame comes, so no sample frame ever waits
+/// behind one: at 2 Mbaud the status frame (385 B, 1.9 ms) held the next
+/// sample frames back by up to 1.5 ms, over the 2.5 ms the antenna allows
+/// from the true rate to the frame (docs/timing.md).
+pub const BAUD: u32 = 6_000_000;
 
 /// Bytes the link carries per sample period of `sample_us` at [`BAUD`],
 /// 8N1.
