@@ -13,7 +13,7 @@ use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault, Icm42688Model,
     NoiseParams, RateProfile,
@@ -36,6 +36,8 @@ pub struct Timing {
     pub clkin: bool,
     /// Each chip's PLL error.
     pub pll: [ClockParams; N],
+    /// Out-of-band vibration at the chips' dies.
+    pub vibration: Vibration,
 }
 
 /// What the harness hands each sample's callback.
@@ -81,6 +83,7 @@ pub fn run(
             Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
         c.set_timing(Some(ChipTiming {
             pll: timing.pll[i],
+            vibration: timing.vibration,
             ..ChipTiming::pll(0.0)
         }));
         let mut c = Chip::Icm(c);

@@ -11,7 +11,7 @@ use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688, Odr};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::ClockParams;
+use gyro_array::emu::timing::{ClockParams, Tone, Vibration};
 use gyro_array::emu::{
     with_bus, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model, NoiseParams, RateProfile,
 };
@@ -59,7 +59,18 @@ struct Result {
 }
 
 fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
+    run_timed_with(clkin, ms, events, Vibration::NONE, [Fault::None; N])
+}
+
+fn run_timed_with(
+    clkin: bool,
+    ms: u32,
+    events: &[(u32, Event)],
+    vibration: Vibration,
+    at_power_up: [Fault; N],
+) -> Result {
     let timing = timed_board::Timing {
+        vibration,
         clkin,
         pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
             offset,
@@ -86,7 +97,7 @@ fn run_timed(clkin: bool, ms: u32, events: &[(u32, Event)]) -> Result {
             })
             .sum()
     };
-    let ran = timed_board::run(sway(), 40, ms, timing, [Fault::None; N], stall, |smp| {
+    let ran = timed_board::run(sway(), 40, ms, timing, at_power_up, stall, |smp| {
         let n = smp.n;
         stalled += stall(n);
         let ms_now = n + stalled;
@@ -265,4 +276,33 @@ fn losing_clkin_moves_each_chip_to_its_own_clock() {
         assert!(back < 1600, "chip {i} last out at {back}");
     }
     assert_eq!(r.flags_seen, [0; N]);
+}
+
+#[test]
+fn vibration_is_no_spike_and_a_spiking_chip_is_flagged() {
+    // The board's harshest fault-free case: the 95 °/s, 2 Hz sway and
+    // 20 °/s tones at 600, 950, 1 100 and 3 000 Hz through the chips' own
+    // filters at 32 kHz: no sample is taken for a spike.
+    let tone = |hz: f64| Tone {
+        amp_dps: [20.0; 3],
+        hz,
+    };
+    let vib = Vibration {
+        tones: [tone(600.0), tone(950.0), tone(1100.0), tone(3000.0)],
+    };
+    let r = run_timed_with(false, 1500, &[], vib, [Fault::None; N]);
+    assert!(r.timing.iter().all(|t| t.spikes == 0), "{:?}", r.timing);
+    assert_eq!(r.flags_seen, [0; N]);
+    // A chip spiking 200 °/s on 5 % of its samples: its spikes are left
+    // out and it is flagged, and the fused rate stays on the truth.
+    let mut faults = [Fault::None; N];
+    faults[1] = Fault::Spikes {
+        prob: 0.05,
+        magnitude_dps: 200.0,
+    };
+    let r = run_timed_with(false, 1500, &[], Vibration::NONE, faults);
+    assert!(r.timing[1].spikes > 50, "{:?}", r.timing[1]);
+    assert!([0, 2, 3].iter().all(|&i| r.timing[i].spikes == 0));
+    assert_ne!(r.flags_seen[1], 0);
+    assert!(r.rms_dps.iter().all(|&e| e < 0.1), "{:?}", r.rms_dps);
 }

@@ -1280,7 +1280,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
 
     /// `init` in steps of at most six transactions, so that a restart
     /// never makes a heavy sample: soft reset; 1 ms later identify; then
-    /// the configuration's checked writes ([`Config::setup`]), a few a
+    /// the configuration's checked writes ([`Config::setup_write`]), a few a
     /// step (bank 1 first: pin 9 is CLKIN before RTC_MODE asks for it);
     /// the gyro started, RESET_DONE cleared; after the 45 ms gyro start-up
     /// the FIFO flushed (with FIFO sampling), done. The configuration is

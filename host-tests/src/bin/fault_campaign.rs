@@ -439,7 +439,11 @@ fn draw_timed(
     }
     (
         profile,
-        host_tests::timed_board::Timing { clkin, pll },
+        host_tests::timed_board::Timing {
+            clkin,
+            pll,
+            vibration: gyro_array::emu::timing::Vibration::NONE,
+        },
         inj,
         ev,
     )
