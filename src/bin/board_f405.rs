@@ -50,7 +50,7 @@ use gyro_array::drivers::icm42688::Icm42688;
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::Port;
-use gyro_array::link::BAUD;
+use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
@@ -195,10 +195,25 @@ fn main() -> ! {
         adx_hz,
         &mut rcc,
     );
+    // USART1 reaches pclk2 / 8 (oversampling by 8): the link's rate on the
+    // PLL's 84 MHz; on the internal oscillator alone (16 MHz: the crystal
+    // and the PLL failed) the fallback rate, logged, so the board still
+    // talks to a controller that can follow it.
+    let baud = if rcc.clocks.pclk2().raw() / 8 >= BAUD {
+        BAUD
+    } else {
+        defmt::error!(
+            "link: pclk2 {} Hz cannot make {} baud; {} baud instead",
+            rcc.clocks.pclk2().raw(),
+            BAUD,
+            FALLBACK_BAUD
+        );
+        FALLBACK_BAUD
+    };
     let Ok(serial) = Serial::new(
         dp.USART1,
         (gpioa.pa9, gpioa.pa10),
-        SerialConfig::default().baudrate(BAUD.bps()),
+        SerialConfig::default().baudrate(baud.bps()),
         &mut rcc,
     ) else {
         give_up("USART1 at the link's baud rate")

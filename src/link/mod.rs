@@ -34,6 +34,11 @@ pub const VERSION: u8 = 4;
 /// from the true rate to the frame (docs/timing.md).
 pub const BAUD: u32 = 6_000_000;
 
+/// The link's speed when the board runs on its internal 16 MHz oscillator
+/// alone (crystal and PLL failed): the fastest USART1 reaches there
+/// (16 MHz / 8), where the status frame again delays the sample frames.
+pub const FALLBACK_BAUD: u32 = 2_000_000;
+
 /// Bytes the link carries per sample period of `sample_us` at [`BAUD`],
 /// 8N1.
 pub const fn frame_budget(sample_us: u32) -> u32 {
