@@ -15,8 +15,8 @@ use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, S
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault, Icm42688Model,
-    NoiseParams, RateProfile,
+    timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault,
+    RateProfile,
 };
 use gyro_array::pipeline::timed::TimedIcm;
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
@@ -74,22 +74,18 @@ pub fn run(
     stall: impl Fn(u32) -> u32,
     mut each: impl FnMut(Sample<'_, '_>),
 ) -> Ran {
-    let chips: [Chip; N] = core::array::from_fn(|i| {
-        let p = NoiseParams {
-            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
-            ..NoiseParams::ICM42688
-        };
-        let mut c =
-            Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
-        c.set_timing(Some(ChipTiming {
+    let mut chips = timed_array(
+        profile,
+        seed,
+        core::array::from_fn(|i| ChipTiming {
             pll: timing.pll[i],
             vibration: timing.vibration,
             ..ChipTiming::pll(0.0)
-        }));
-        let mut c = Chip::Icm(c);
-        c.set_fault(at_power_up[i]);
-        c
-    });
+        }),
+    );
+    for (c, f) in chips.iter_mut().zip(at_power_up) {
+        c.set_fault(f);
+    }
     let cs: [CsLine; N] = Default::default();
     let bus: Bus = RefCell::new(EmuBus::new(chips, &cs));
     if timing.clkin {

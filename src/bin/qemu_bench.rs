@@ -789,22 +789,17 @@ fn bench_timed_loop_on(
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::timing::ClockParams;
     use gyro_array::emu::{
-        with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Icm42688Model,
-        NoiseParams, PathModel,
+        timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, PathModel,
     };
     use gyro_array::pipeline::timed::TimedIcm;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
     const DELAY_US: u32 = 1950;
 
-    let chips: [Chip; 4] = core::array::from_fn(|i| {
-        let p = NoiseParams {
-            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
-            ..NoiseParams::ICM42688
-        };
-        let mut c =
-            Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
-        c.set_timing(Some(ChipTiming {
+    let chips = timed_array(
+        profile,
+        seed,
+        core::array::from_fn(|i| ChipTiming {
             pll: ClockParams {
                 offset: pll[i],
                 drift_per_s: 1e-5,
@@ -813,9 +808,8 @@ fn bench_timed_loop_on(
             },
             path: PathModel::Delay,
             ..ChipTiming::pll(0.0)
-        }));
-        Chip::Icm(c)
-    });
+        }),
+    );
     let cs: [CsLine; 4] = Default::default();
     let bus = RefCell::new(EmuBus::new(chips, &cs));
     if clkin {

@@ -532,6 +532,22 @@ pub fn mounted_board(temp: TempProfile) -> [Mount; 5] {
     })
 }
 
+/// The timed board's array: four ICM-42688-P keeping their own time as
+/// `timing` says, each with its own noise seed and a small bias (no scale
+/// error: the timing figures compare it with the same chips in lockstep).
+pub fn timed_array(profile: RateProfile, seed: u64, timing: [ChipTiming; 4]) -> [Chip; 4] {
+    core::array::from_fn(|i| {
+        let p = NoiseParams {
+            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+            ..NoiseParams::ICM42688
+        };
+        let mut c =
+            Icm42688Model::new(p, profile, seed.wrapping_mul(31).wrapping_add(i as u64), 70);
+        c.set_timing(Some(timing[i]));
+        Chip::Icm(c)
+    })
+}
+
 /// The board's array: four ICM-42688-P (chips 0..=3, all axes) and one
 /// ADXRS453 on the z axis (chip 4), each with its own noise seed and
 /// a small per-chip bias and scale error.

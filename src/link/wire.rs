@@ -51,6 +51,22 @@ pub fn encode<T: Serialize>(link_seq: u32, body: &T, out: &mut [u8]) -> Result<u
     frame_payload(payload.get(..k).ok_or(EncodeError::TooLong)?, out)
 }
 
+/// The version byte and the envelope (`link_seq`, `body`) at the start of
+/// `out`: the payload less its CRC; its length.
+fn version_and_envelope<T: Serialize>(
+    link_seq: u32,
+    body: &T,
+    out: &mut [u8],
+) -> Result<usize, EncodeError> {
+    let (head, rest) = out.split_first_mut().ok_or(EncodeError::TooLong)?;
+    *head = VERSION;
+    let env = Envelope { link_seq, body };
+    Ok(postcard::to_slice(&env, rest)
+        .map_err(|_| EncodeError::TooLong)?
+        .len()
+        + 1)
+}
+
 /// The first step of [`encode`]: the payload (version, envelope,
 /// CRC) into `payload`; its length.
 pub fn encode_payload<T: Serialize>(
@@ -61,13 +77,7 @@ pub fn encode_payload<T: Serialize>(
     let payload = payload
         .get_mut(..MAX_PAYLOAD.min(payload.len()))
         .ok_or(EncodeError::TooLong)?;
-    let (head, rest) = payload.split_first_mut().ok_or(EncodeError::TooLong)?;
-    *head = VERSION;
-    let env = Envelope { link_seq, body };
-    let n = postcard::to_slice(&env, rest)
-        .map_err(|_| EncodeError::TooLong)?
-        .len()
-        + 1;
+    let n = version_and_envelope(link_seq, body, payload)?;
     let (data, tail) = payload
         .split_at_mut_checked(n)
         .ok_or(EncodeError::TooLong)?;
@@ -105,6 +115,19 @@ const CRC_TABLE: [u16; 256] = {
     t
 };
 
+/// One byte of the in-place COBS pass: a zero byte closes the open run
+/// (its code byte gets the run's length) and becomes the next run's code
+/// byte. Returns the open run's code byte and length.
+#[inline(always)]
+fn cobs_step<'a>(b: &'a mut u8, code: &'a mut u8, run: u8) -> (&'a mut u8, u8) {
+    if *b == 0 {
+        *code = run;
+        (b, 1)
+    } else {
+        (code, run + 1)
+    }
+}
+
 /// [`encode`] straight into `room`: the payload is serialised at
 /// `room[1..]`, then one pass over it computes the CRC and COBS-encodes
 /// it where it lies, each zero byte becoming the length code of the run
@@ -127,13 +150,7 @@ pub fn encode_in_place<T: Serialize>(
     // Version and envelope at room[1..=n]; the CRC goes at n + 1, n + 2
     // and the delimiter at n + 3.
     let (_, rest) = room.split_first_mut().ok_or(EncodeError::TooLong)?;
-    let (head, body_room) = rest.split_first_mut().ok_or(EncodeError::TooLong)?;
-    *head = VERSION;
-    let env = Envelope { link_seq, body };
-    let n = postcard::to_slice(&env, body_room)
-        .map_err(|_| EncodeError::TooLong)?
-        .len()
-        + 1;
+    let n = version_and_envelope(link_seq, body, rest)?;
     let k = n + 2;
     if k > IN_PLACE_MAX {
         return Err(EncodeError::TooLong);
@@ -149,26 +166,13 @@ pub fn encode_in_place<T: Serialize>(
     let mut run = 1u8;
     let mut crc = 0xFFFFu32;
     for b in data.iter_mut() {
-        let v = *b;
-        crc = (crc << 8) ^ u32::from(CRC_TABLE[usize::from((crc >> 8) as u8 ^ v)]);
-        if v == 0 {
-            *code = run;
-            code = b;
-            run = 1;
-        } else {
-            run += 1;
-        }
+        crc = (crc << 8) ^ u32::from(CRC_TABLE[usize::from((crc >> 8) as u8 ^ *b)]);
+        (code, run) = cobs_step(b, code, run);
     }
     *crc_lo = crc as u8;
     *crc_hi = (crc >> 8) as u8;
     for b in [crc_lo, crc_hi] {
-        if *b == 0 {
-            *code = run;
-            code = b;
-            run = 1;
-        } else {
-            run += 1;
-        }
+        (code, run) = cobs_step(b, code, run);
     }
     *code = run;
     if let Some(d) = end.first_mut() {

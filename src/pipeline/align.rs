@@ -43,8 +43,6 @@ pub struct Aligner<const CAP: usize> {
     raw_len: usize,
     /// The slot the next raw sample goes to.
     raw_head: usize,
-    /// 1 / n.
-    inv_n: f32,
 }
 
 impl<const CAP: usize> Aligner<CAP> {
@@ -67,7 +65,6 @@ impl<const CAP: usize> Aligner<CAP> {
             raw: [(0, [0.0; 3]); MAX_MEAN],
             raw_len: 0,
             raw_head: 0,
-            inv_n: 1.0 / n as f32,
         }
     }
 
@@ -118,7 +115,7 @@ impl<const CAP: usize> Aligner<CAP> {
             dt = dt.saturating_add(since(*ti, t));
         }
         let mean_t = t.wrapping_add((dt / n as i32) as u32);
-        let k = self.inv_n;
+        let k = 1.0 / n as f32;
         let j = (self.head + self.len) % CAP;
         self.ring[j] = (mean_t, [v[0] * k, v[1] * k, v[2] * k]);
         if self.len < CAP {

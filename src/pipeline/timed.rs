@@ -203,14 +203,12 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// Whether raw sample `x` is one the chip's filters could have made
     /// after the last one taken (see [`SPIKE_DPS`]); counts it if not.
     fn plausible(&mut self, x: [i16; 3], lim: i32) -> bool {
-        let near = |a: [i16; 3], b: [i16; 3], lim: i32| {
-            (0..3).all(|k| (i32::from(a[k]) - i32::from(b[k])).abs() <= lim)
-        };
+        let near = |b: [i16; 3]| (0..3).all(|k| (i32::from(x[k]) - i32::from(b[k])).abs() <= lim);
         let ok = match (self.last_ok, self.pending) {
             (None, _) => true,
-            (Some(last), _) if near(x, last, lim) => true,
+            (Some(last), _) if near(last) => true,
             // Two in a row that agree: a new level, not a spike.
-            (_, Some(p)) => near(x, p, lim),
+            (_, Some(p)) => near(p),
             _ => false,
         };
         if ok {
