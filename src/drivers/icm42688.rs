@@ -670,7 +670,7 @@ pub struct FifoSample {
 pub struct FifoRead {
     /// INT_STATUS as read with the count.
     pub status: u8,
-    /// Samples written to the caller's buffer.
+    /// Samples handed to the caller.
     pub samples: usize,
     /// Samples left in the FIFO (more than the buffer held).
     pub left: usize,
@@ -685,6 +685,39 @@ pub const MAX_PER_READ: usize = 4;
 const HEADER_EXPECTED: u8 = bits::HEADER_ACCEL | bits::HEADER_GYRO | bits::HEADER_TIMESTAMP_ODR;
 /// The header bits checked against [`HEADER_EXPECTED`].
 const HEADER_MASK: u8 = 0xFC;
+
+/// Parse whole packets from `bytes`, handing each sample to `each` and
+/// counting it in `samples`; the first bad packet stops it (its error).
+/// `stamp` is the last sample's extended timestamp.
+fn parse_packets<E>(
+    bytes: &[u8],
+    stamp: &mut Option<u32>,
+    samples: &mut usize,
+    each: &mut impl FnMut(FifoSample),
+) -> Option<Error<E>> {
+    for p in bytes.chunks_exact(FIFO_PACKET) {
+        let h = p[0];
+        if h & bits::HEADER_MSG != 0 {
+            return Some(Error::FifoShort);
+        }
+        if h & HEADER_MASK != HEADER_EXPECTED {
+            return Some(Error::FifoBadHeader(h));
+        }
+        let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
+        let stamp16 = u16::from_be_bytes([p[14], p[15]]);
+        let stamp_us = match *stamp {
+            Some(last) => last.wrapping_add(stamp16.wrapping_sub(last as u16) as u32),
+            None => stamp16 as u32,
+        };
+        *stamp = Some(stamp_us);
+        each(FifoSample {
+            raw: [w(7), w(9), w(11)],
+            stamp_us,
+        });
+        *samples += 1;
+    }
+    None
+}
 
 /// The configuration a self-test saved, restored by
 /// [`Icm42688::self_test_end`].
@@ -859,7 +892,22 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         Ok(())
     }
 
-    /// Read what the FIFO holds, oldest first, into `out`.
+    /// Read what the FIFO holds, oldest first, into `out` (at most
+    /// `out.len()` samples; the rest stay for the next read).
+    pub fn read_fifo(&mut self, out: &mut [FifoSample]) -> Result<FifoRead, Error<SPI::Error>> {
+        let mut i = 0;
+        self.read_fifo_with(out.len(), |s| {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = s;
+            }
+            i += 1;
+        })
+    }
+
+    /// Read up to `max` of the samples the FIFO holds, oldest first, each
+    /// handed to `each` as its packet is parsed (no buffer between the
+    /// bus and the caller: the board's loop reads four chips a
+    /// millisecond).
     ///
     /// One transaction in the usual case: a burst from INT_STATUS through
     /// FIFO_COUNTH/L into FIFO_DATA (the address stays on FIFO_DATA), with
@@ -868,9 +916,14 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     /// read). Each header is checked;
     /// FIFO_FULL, a bad header or a short FIFO flush it and return a typed
     /// error, so the next read starts on a packet boundary and the caller
-    /// counts the gap. Timestamps are extended from 16 bits by their
+    /// counts the gap (the samples handed over before the bad packet are
+    /// the caller's to drop). Timestamps are extended from 16 bits by their
     /// difference from the last (reads must come within 65 ms).
-    pub fn read_fifo(&mut self, out: &mut [FifoSample]) -> Result<FifoRead, Error<SPI::Error>> {
+    pub fn read_fifo_with(
+        &mut self,
+        max: usize,
+        mut each: impl FnMut(FifoSample),
+    ) -> Result<FifoRead, Error<SPI::Error>> {
         if self.config.sampling != Sampling::Fifo {
             return Err(Error::NotFifo);
         }
@@ -896,23 +949,22 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             return Err(Error::FifoOverflow);
         }
         let count = u16::from_be_bytes([count_h, count_l]) as usize;
-        let want = count.min(out.len());
+        let want = count.min(max);
         let mut read = FifoRead {
             status,
             samples: 0,
             left: count - want,
         };
         let in_first = want.min(k);
-        for i in 0..in_first {
-            let mut p = [0u8; FIFO_PACKET];
-            p.copy_from_slice(&self.fifo_buf[3 + FIFO_PACKET * i..3 + FIFO_PACKET * (i + 1)]);
-            self.take_packet(&p, &mut out[i])?;
-            read.samples = i + 1;
-        }
-        // The rest, in one more burst from FIFO_DATA.
-        let mut i = in_first;
-        while i < want {
-            let n = (want - i).min(MAX_PER_READ);
+        let mut bad = parse_packets(
+            &self.fifo_buf[3..3 + FIFO_PACKET * in_first],
+            &mut self.stamp,
+            &mut read.samples,
+            &mut each,
+        );
+        // The rest, in more bursts from FIFO_DATA.
+        while bad.is_none() && read.samples < want {
+            let n = (want - read.samples).min(MAX_PER_READ);
             let rest = &mut self.fifo_buf[..FIFO_PACKET * n];
             self.spi
                 .transaction(&mut [
@@ -920,53 +972,20 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
                     Operation::Read(rest),
                 ])
                 .map_err(Error::Spi)?;
-            for j in 0..n {
-                let mut p = [0u8; FIFO_PACKET];
-                p.copy_from_slice(&self.fifo_buf[FIFO_PACKET * j..FIFO_PACKET * (j + 1)]);
-                self.take_packet(&p, &mut out[i + j])?;
-                read.samples = i + j + 1;
-            }
-            i += n;
+            bad = parse_packets(
+                &self.fifo_buf[..FIFO_PACKET * n],
+                &mut self.stamp,
+                &mut read.samples,
+                &mut each,
+            );
         }
-        Ok(read)
-    }
-
-    fn take_packet(
-        &mut self,
-        p: &[u8; FIFO_PACKET],
-        to: &mut FifoSample,
-    ) -> Result<(), Error<SPI::Error>> {
-        match self.parse_packet(p) {
-            Ok(s) => {
-                *to = s;
-                Ok(())
-            }
-            Err(e) => {
+        match bad {
+            None => Ok(read),
+            Some(e) => {
                 self.flush_fifo()?;
                 Err(e)
             }
         }
-    }
-
-    fn parse_packet(&mut self, p: &[u8; FIFO_PACKET]) -> Result<FifoSample, Error<SPI::Error>> {
-        let h = p[0];
-        if h & bits::HEADER_MSG != 0 {
-            return Err(Error::FifoShort);
-        }
-        if h & HEADER_MASK != HEADER_EXPECTED {
-            return Err(Error::FifoBadHeader(h));
-        }
-        let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
-        let stamp16 = u16::from_be_bytes([p[14], p[15]]);
-        let stamp_us = match self.stamp {
-            Some(last) => last.wrapping_add(stamp16.wrapping_sub(last as u16) as u32),
-            None => stamp16 as u32,
-        };
-        self.stamp = Some(stamp_us);
-        Ok(FifoSample {
-            raw: [w(7), w(9), w(11)],
-            stamp_us,
-        })
     }
 
     /// Die temperature, °C: TEMP_DATA1/0 (0x1D, 0x1E), big-endian

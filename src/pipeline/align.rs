@@ -1,19 +1,24 @@
 //! One chip's samples brought to the array's common output instants.
 //!
-//! Each sample arrives with the board instant it describes: its
-//! data-ready time on the board's clock ([`super::clock`]) less the chip's
-//! signal-path delay. The aligner first takes the moving mean of the last
-//! `n` samples (a chip at `n` times the output rate: the mean of `n` has
-//! zeros at the output rate and its multiples, so what the chip's filters
-//! pass near them does not fold into band; moving, so each new sample
-//! gives a new mean and the newest is only (n − 1)/2 samples old), then
-//! interpolates linearly between the two means around the instant asked
-//! for. A sample repeated by
-//! the chip's clock being slow, or skipped by its being fast, is neither:
-//! the FIFO gives every sample once, and the instant asked for falls
-//! between two of them wherever the chip's phase is.
+//! The aligner works in the chip's own time: each sample is kept with its
+//! FIFO timestamp, raw, and the instant a read asks for is put on the
+//! chip's clock once ([`super::clock::ChipClock::chip_instant`]), not each
+//! sample on the board's. The chip's signal-path delay is a fixed time on
+//! its own clock, so it is added there, exactly, whatever the clock's rate.
+//!
+//! It first takes the moving mean of the last `n` samples (a chip at `n`
+//! times the output rate: the mean of `n` has zeros at the output rate and
+//! its multiples, so what the chip's filters pass near them does not fold
+//! into band; moving, so each new sample gives a new mean and the newest is
+//! only (n − 1)/2 samples old), then interpolates linearly between the two
+//! means around the instant asked for. The means are integer sums of the
+//! raw LSB, worked out for the means a read looks at; only the two it
+//! interpolates between become °/s. A sample repeated by the chip's clock being slow, or
+//! skipped by its being fast, is neither: the FIFO gives every sample
+//! once, and the instant asked for falls between two of them wherever the
+//! chip's phase is.
 
-use super::clock::{since, Instant16};
+use super::clock::since;
 
 /// What [`Aligner::at`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,23 +36,26 @@ pub enum Aligned {
 /// Raw samples a moving mean can span.
 pub const MAX_MEAN: usize = 8;
 
-/// The aligner of one chip: the last `CAP` moving means.
+/// The aligner of one chip: its last `CAP` samples, raw, each with its
+/// stamp (chip µs). The moving means are worked out when a read asks for
+/// an instant, for the two it falls between: a push is a store, and a
+/// chip gives two or more samples for each read.
 #[derive(Clone, Copy, Debug)]
 pub struct Aligner<const CAP: usize> {
-    ring: [(Instant16, [f32; 3]); CAP],
+    ring: [(u32, [i16; 3]); CAP],
     len: usize,
     head: usize,
     /// Samples per mean.
     n: usize,
-    raw: [(Instant16, [f32; 3]); MAX_MEAN],
-    raw_len: usize,
-    /// The slot the next raw sample goes to.
-    raw_head: usize,
 }
+
+/// One moving mean: its instant (1/16 chip µs) and the sum of its raw
+/// samples.
+type Mean = (u32, [i32; 3]);
 
 impl<const CAP: usize> Aligner<CAP> {
     /// An aligner over moving means of `n` samples (1 for none; at most
-    /// [`MAX_MEAN`]).
+    /// [`MAX_MEAN`], and fewer than `CAP`).
     pub const fn new(n: u8) -> Self {
         let n = n as usize;
         let n = if n == 0 {
@@ -58,104 +66,105 @@ impl<const CAP: usize> Aligner<CAP> {
             n
         };
         Self {
-            ring: [(0, [0.0; 3]); CAP],
+            ring: [(0, [0; 3]); CAP],
             len: 0,
             head: 0,
-            n,
-            raw: [(0, [0.0; 3]); MAX_MEAN],
-            raw_len: 0,
-            raw_head: 0,
+            n: if n < CAP { n } else { CAP - 1 },
         }
     }
 
     /// Forget every sample (a gap: an overflow, a restart).
     pub fn clear(&mut self) {
         self.len = 0;
-        self.raw_len = 0;
-        self.raw_head = 0;
+        self.head = 0;
     }
 
     /// Means held.
     pub fn len(&self) -> usize {
-        self.len
+        (self.len + 1).saturating_sub(self.n)
     }
 
     /// Whether none is held.
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.len() == 0
     }
 
-    /// One sample: the rate, and the board instant it describes.
-    pub fn push(&mut self, t: Instant16, rate_dps: [f32; 3]) {
+    /// One sample: its stamp (chip µs) and its raw value.
+    pub fn push(&mut self, stamp_us: u32, raw: [i16; 3]) {
         // (Wraps by compare, not `%`: a division and its multiply-back
-        // each time, three a push, on the Cortex-M4.)
-        let n = self.n.min(MAX_MEAN);
-        let i = self.raw_head;
-        if let Some(slot) = self.raw.get_mut(i) {
-            *slot = (t, rate_dps);
+        // each time on the Cortex-M4.)
+        let mut j = self.head + self.len;
+        if j >= CAP {
+            j -= CAP;
         }
-        self.raw_head = if i + 1 >= n { 0 } else { i + 1 };
-        if self.raw_len < n {
-            self.raw_len += 1;
-            if self.raw_len < n {
-                return;
-            }
+        if let Some(slot) = self.ring.get_mut(j) {
+            *slot = (stamp_us, raw);
         }
-        // The mean of the n, at the mean of their instants (taken from the
-        // newest, so a wrap between them does no harm). The n instants lie
-        // within a few ms of each other: their distances from the newest
-        // sum well inside an i32 (an i64 sum and division cost some 100
-        // instructions on the Cortex-M4).
-        let mut v = [0.0f32; 3];
-        let mut dt = 0i32;
-        for (ti, ri) in &self.raw[..n] {
-            v[0] += ri[0];
-            v[1] += ri[1];
-            v[2] += ri[2];
-            dt = dt.saturating_add(since(*ti, t));
-        }
-        let mean_t = t.wrapping_add((dt / n as i32) as u32);
-        let k = 1.0 / n as f32;
-        let j = (self.head + self.len) % CAP;
-        self.ring[j] = (mean_t, [v[0] * k, v[1] * k, v[2] * k]);
         if self.len < CAP {
             self.len += 1;
         } else {
-            self.head = (self.head + 1) % CAP;
+            self.head = if self.head + 1 >= CAP { 0 } else { self.head + 1 };
         }
     }
 
-    /// The newest averaged sample's instant.
-    pub fn newest(&self) -> Option<Instant16> {
-        (self.len > 0).then(|| self.ring[(self.head + self.len - 1) % CAP].0)
+    /// The moving mean ending at sample `k` (0 the oldest held; `k ≥ n − 1`):
+    /// at the mean of its stamps (from the newest, so a wrap between them
+    /// does no harm; their distances are a few ms), as the sum of its raw
+    /// samples (exact in integers).
+    fn mean(&self, k: usize) -> Mean {
+        let n = self.n;
+        let at = |i: usize| self.ring[(self.head + i) % CAP];
+        let (t, mut sum) = {
+            let (t, r) = at(k);
+            (t, r.map(i32::from))
+        };
+        let mut behind = 0u32;
+        for i in 1..n {
+            let (ti, ri) = at(k - i);
+            behind = behind.wrapping_add(t.wrapping_sub(ti));
+            for a in 0..3 {
+                sum[a] += i32::from(ri[a]);
+            }
+        }
+        let mean_t = t.wrapping_mul(16).wrapping_sub(behind.wrapping_mul(16) / n as u32);
+        (mean_t, sum)
     }
 
-    /// The rate at instant `t`: linear between the averaged samples on
-    /// either side of it.
-    pub fn at(&self, t: Instant16) -> Aligned {
-        if self.len == 0 {
+    /// The newest mean's instant, 1/16 chip µs.
+    pub fn newest(&self) -> Option<u32> {
+        (self.len >= self.n).then(|| self.mean(self.len - 1).0)
+    }
+
+    /// The rate at chip instant `t` (1/16 µs of the stamps): linear
+    /// between the means on either side of it, °/s at `dps_per_lsb`.
+    pub fn at(&self, t: u32, dps_per_lsb: f32) -> Aligned {
+        let n = self.n;
+        if self.len < n {
             return Aligned::Missing;
         }
-        let mut later = self.ring[(self.head + self.len - 1) % CAP];
+        let k = dps_per_lsb / n as f32;
+        let dps = |s: [i32; 3]| s.map(|v| v as f32 * k);
+        let mut later = self.mean(self.len - 1);
         if since(t, later.0) > 0 {
             return Aligned::Late;
         }
-        for k in (0..self.len - 1).rev() {
-            let earlier = self.ring[(self.head + k) % CAP];
+        for j in (n - 1..self.len - 1).rev() {
+            let earlier = self.mean(j);
             let span = since(later.0, earlier.0);
             let into = since(t, earlier.0);
             if into >= 0 && span > 0 {
                 let f = into as f32 / span as f32;
+                let (e, l) = (dps(earlier.1), dps(later.1));
                 let mut r = [0.0; 3];
                 for a in 0..3 {
-                    r[a] = earlier.1[a] + f * (later.1[a] - earlier.1[a]);
+                    r[a] = e[a] + f * (l[a] - e[a]);
                 }
                 return Aligned::Rate(r);
             }
             later = earlier;
         }
         if since(t, later.0) == 0 {
-            return Aligned::Rate(later.1);
+            return Aligned::Rate(dps(later.1));
         }
         Aligned::Missing
     }
@@ -165,53 +174,52 @@ impl<const CAP: usize> Aligner<CAP> {
 mod tests {
     use super::*;
 
-    /// A 1 kHz instant grid in 1/16 µs.
-    fn ms(k: u32) -> Instant16 {
-        k.wrapping_mul(16_000)
-    }
-
     #[test]
     fn interpolates_between_the_samples_around_the_instant() {
         let mut a = Aligner::<4>::new(1);
-        assert_eq!(a.at(ms(0)), Aligned::Missing);
-        a.push(ms(10), [1.0, 2.0, 3.0]);
-        a.push(ms(11), [3.0, 2.0, -1.0]);
-        assert_eq!(a.at(ms(11) + 1), Aligned::Late);
-        assert_eq!(a.at(ms(10) - 1), Aligned::Missing);
-        let Aligned::Rate(r) = a.at(ms(10) + 4000) else {
+        assert_eq!(a.at(0, 1.0), Aligned::Missing);
+        // 1 kHz samples, chip µs; instants asked in 1/16 µs.
+        a.push(10_000, [2, 4, 6]);
+        a.push(11_000, [6, 4, -2]);
+        assert_eq!(a.at(11_000 * 16 + 1, 0.5), Aligned::Late);
+        assert_eq!(a.at(10_000 * 16 - 1, 0.5), Aligned::Missing);
+        let Aligned::Rate(r) = a.at(10_000 * 16 + 4000, 0.5) else {
             panic!()
         };
         assert_eq!(r, [1.5, 2.0, 2.0]);
-        assert_eq!(a.at(ms(10)), Aligned::Rate([1.0, 2.0, 3.0]));
-        assert_eq!(a.at(ms(11)), Aligned::Rate([3.0, 2.0, -1.0]));
+        assert_eq!(a.at(10_000 * 16, 0.5), Aligned::Rate([1.0, 2.0, 3.0]));
+        assert_eq!(a.at(11_000 * 16, 0.5), Aligned::Rate([3.0, 2.0, -1.0]));
     }
 
     #[test]
     fn moving_means_and_the_last_cap() {
-        let mut a = Aligner::<3>::new(2);
-        // 2 kHz samples of a ramp of 1 °/s per ms: each mean of two is the
-        // ramp at their mean instant.
+        let mut a = Aligner::<4>::new(2);
+        // 2 kHz samples of a ramp of 1 LSB per 500 µs: each mean of two
+        // is the ramp at their mean instant.
         for k in 0..20u32 {
-            a.push(k * 8000, [k as f32 * 0.5, 0.0, 0.0]);
+            a.push(k * 500, [k as i16, 0, 0]);
         }
         assert_eq!(a.len(), 3);
         // The newest mean (samples 18, 19) describes 9.25 ms.
-        assert_eq!(a.newest(), Some(18 * 8000 + 4000));
-        assert_eq!(a.at(18 * 8000 + 4000), Aligned::Rate([9.25, 0.0, 0.0]));
+        assert_eq!(a.newest(), Some(9_250 * 16));
+        assert_eq!(a.at(9_250 * 16, 1.0), Aligned::Rate([18.5, 0.0, 0.0]));
         // Between two means: still the ramp.
-        let Aligned::Rate(r) = a.at(17 * 8000 + 6000) else {
+        let Aligned::Rate(r) = a.at(8_875 * 16, 1.0) else {
             panic!()
         };
-        assert!((r[0] - 8.875).abs() < 1e-6);
-        assert_eq!(a.at(16 * 8000), Aligned::Missing);
+        assert!((r[0] - 17.75).abs() < 1e-5, "{r:?}");
+        assert_eq!(a.at(8_000 * 16, 1.0), Aligned::Missing);
     }
 
     #[test]
-    fn instants_wrap() {
-        let mut a = Aligner::<4>::new(1);
-        let t0 = u32::MAX - 8000;
-        a.push(t0, [0.0; 3]);
-        a.push(t0.wrapping_add(16_000), [2.0; 3]);
-        assert_eq!(a.at(t0.wrapping_add(8000)), Aligned::Rate([1.0; 3]));
+    fn stamps_wrap() {
+        let mut a = Aligner::<8>::new(2);
+        let s0 = u32::MAX - 700;
+        for k in 0..4u32 {
+            a.push(s0.wrapping_add(k * 500), [k as i16 * 2; 3]);
+        }
+        // Means at s0 + 250, + 750, + 1250 (the last two past the wrap).
+        let t = s0.wrapping_add(1_000).wrapping_mul(16);
+        assert_eq!(a.at(t, 1.0), Aligned::Rate([4.0; 3]));
     }
 }

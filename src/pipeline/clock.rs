@@ -277,15 +277,39 @@ impl ChipClock {
     /// The board instant of chip stamp `stamp`, or `None` before the
     /// tracker has a ratio.
     pub fn board_instant(&self, stamp: u32) -> Option<Instant16> {
+        self.board_instant16(stamp.wrapping_mul(16))
+    }
+
+    /// The board instant of chip instant `chip16` (1/16 µs of the chip's
+    /// stamps), or `None` before the tracker has a ratio.
+    pub fn board_instant16(&self, chip16: u32) -> Option<Instant16> {
         if self.state != ClockState::Tracking {
             return None;
         }
-        let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
-        let off = (self.anchor_frac + self.ratio * d) * Q;
+        let d = chip16.wrapping_sub(self.anchor_stamp.wrapping_mul(16)) as i32 as f32;
+        let off = self.anchor_frac * Q + self.ratio * d;
         Some(
             self.anchor_us
                 .wrapping_mul(16)
                 .wrapping_add(floor_i32(off + 0.5) as u32),
+        )
+    }
+
+    /// The chip instant (1/16 µs of its stamps) of board instant `at`, or
+    /// `None` before the tracker has a ratio: the inverse of
+    /// [`Self::board_instant16`], what an aligner in the chip's own time
+    /// asks for. One conversion a read, where converting each sample
+    /// would be two.
+    pub fn chip_instant(&self, at: Instant16) -> Option<u32> {
+        if self.state != ClockState::Tracking {
+            return None;
+        }
+        let b = at.wrapping_sub(self.anchor_us.wrapping_mul(16)) as i32 as f32
+            - self.anchor_frac * Q;
+        Some(
+            self.anchor_stamp
+                .wrapping_mul(16)
+                .wrapping_add(floor_i32(b / self.ratio + 0.5) as u32),
         )
     }
 }
@@ -378,6 +402,20 @@ mod tests {
         for s in [150_000u32, 199_000, 500_000] {
             let b = c.board_us(s).unwrap();
             assert!(c.stamp_at(b).unwrap().abs_diff(s) <= 2, "{s}");
+        }
+    }
+
+    #[test]
+    fn chip_instant_inverts_board_instant16() {
+        let mut c = ChipClock::new();
+        for k in 0..200u32 {
+            c.observe(k * 500, 7_000 + (k as f64 * 500.0 / 0.93) as u32);
+        }
+        // Instants a few ms either side of the anchor, in 1/16 µs.
+        for chip16 in [199 * 500 * 16 - 40_000, 199 * 500 * 16 + 7, 199 * 500 * 16 + 9_999] {
+            let b = c.board_instant16(chip16).unwrap();
+            let back = c.chip_instant(b).unwrap();
+            assert!(since(back, chip16).abs() <= 1, "{chip16}: {back}");
         }
     }
 

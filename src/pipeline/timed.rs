@@ -19,11 +19,12 @@ use embedded_hal::spi::SpiDevice;
 
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
-use crate::drivers::icm42688::{ClockInput, Config, Error, FifoSample, Icm42688, MAX_PER_READ};
+use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, MAX_PER_READ};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
-/// Moving means kept per chip: 8 ms at 2 kHz, room for an instant up to
-/// 8 ms behind the newest sample (the ADXRS453's, for comparison).
+/// Samples kept per chip: 8 ms at 2 kHz, room for an instant up to 7 ms
+/// behind the newest sample (the ADXRS453's filter delay, for comparison,
+/// is 2.9 ms). A power of two, so the ring's index is a mask.
 pub const ALIGN_CAP: usize = 16;
 
 /// What the timing layer counted for one chip.
@@ -85,8 +86,8 @@ pub struct TimedIcm<SPI, C> {
     capture: C,
     clock: ChipClock,
     align: Aligner<ALIGN_CAP>,
-    /// The signal path's delay, chip µs.
-    path_us: f32,
+    /// The signal path's delay, 1/16 µs of the chip's clock.
+    path16: u32,
     /// Chip µs between samples.
     period_us: u32,
     at: Option<Instant16>,
@@ -104,11 +105,7 @@ pub struct TimedIcm<SPI, C> {
     stamp_offset: u32,
     /// The next samples need [`Self::stamp_offset`] found again.
     rebase: bool,
-    /// The last sample taken, raw (`None` after a gap).
-    last_ok: Option<[i16; 3]>,
-    /// A sample left out as a spike, waiting to be confirmed as a new
-    /// level by the next.
-    pending: Option<[i16; 3]>,
+    spike: SpikeCheck,
     /// A spike was left out in this read.
     spiked: bool,
     /// What was counted.
@@ -126,7 +123,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             capture,
             clock: ChipClock::new(),
             align: Aligner::new(per_ms as u8),
-            path_us: cfg.filter.group_delay_us(cfg.odr),
+            path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
             period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
             at: None,
             behind_us: 0,
@@ -135,8 +132,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             rejoin: REJOIN_READS,
             stamp_offset: 0,
             rebase: false,
-            last_ok: None,
-            pending: None,
+            spike: SpikeCheck::new(),
             spiked: false,
             counters: TimingCounters::default(),
         }
@@ -177,8 +173,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// by the first capture after the gap.
     fn gap(&mut self) {
         self.align.clear();
-        self.last_ok = None;
-        self.pending = None;
+        self.spike = SpikeCheck::new();
         self.rejoin = REJOIN_READS;
         self.rebase = true;
         if self.clock.state() != ClockState::Tracking {
@@ -200,92 +195,114 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.rebase = false;
     }
 
-    /// Whether raw sample `x` is one the chip's filters could have made
-    /// after the last one taken (see [`SPIKE_DPS`]); counts it if not.
-    fn plausible(&mut self, x: [i16; 3], lim: i32) -> bool {
-        let near = |b: [i16; 3]| (0..3).all(|k| (i32::from(x[k]) - i32::from(b[k])).abs() <= lim);
-        let ok = match (self.last_ok, self.pending) {
-            (None, _) => true,
-            (Some(last), _) if near(last) => true,
-            // Two in a row that agree: a new level, not a spike.
-            (_, Some(p)) => near(p),
-            _ => false,
-        };
-        if ok {
-            self.last_ok = Some(x);
-            self.pending = None;
-        } else {
-            self.pending = Some(x);
-            self.spiked = true;
-            self.counters.spikes = self.counters.spikes.wrapping_add(1);
-        }
-        ok
-    }
-
-    fn take(&mut self, s: &[FifoSample], capture: Option<u32>) {
-        let Some(newest) = s.last() else {
+    /// The clock's observation for one FIFO read: the newest sample's
+    /// stamp (driver count) and the INT1 capture after it.
+    fn observe(&mut self, newest: u32, capture: Option<u32>) {
+        let Some(c) = capture else {
             return;
         };
-        let mut rebased = false;
-        if let (true, Some(c)) = (self.rebase, capture) {
-            self.rebase(newest.stamp_us, c);
-            rebased = true;
+        if self.rebase {
+            self.rebase(newest, c);
+            self.clock.reanchor(newest.wrapping_add(self.stamp_offset), c);
+            return;
         }
-        let off = self.stamp_offset;
-        if let (true, Some(c)) = (rebased, capture) {
-            self.clock.reanchor(newest.stamp_us.wrapping_add(off), c);
-        } else if let Some(c) = capture {
-            // The capture is of the newest sample read, or of one that came
-            // after the FIFO's count was latched: the tracked clock tells.
-            let mut stamp = newest.stamp_us.wrapping_add(off);
-            if let Some(p) = self.clock.board_us(stamp) {
-                let ahead = c.wrapping_sub(p) as i32;
-                if ahead > (self.period_us / 2) as i32 {
-                    stamp = stamp.wrapping_add(self.period_us);
-                }
-            }
-            let jumps = self.clock.jumps;
-            self.clock.observe(stamp, c);
-            self.counters.jumps = self
-                .counters
-                .jumps
-                .wrapping_add(self.clock.jumps.wrapping_sub(jumps));
-        }
-        let lsb = self.g.full_scale().lsb_per_dps();
-        // The delay is in the chip's time: on the board's clock it scales
-        // with the chip's clock.
-        let delay = (self.path_us * self.clock.ratio() * Q) as u32;
-        let lim = (SPIKE_DPS * lsb) as i32;
-        for x in s {
-            if !self.plausible(x.raw, lim) {
-                continue;
-            }
-            if let Some(t) = self.clock.board_instant(x.stamp_us.wrapping_add(off)) {
-                self.align
-                    .push(t.wrapping_sub(delay), x.raw.map(|v| v as f32 / lsb));
+        // The capture is of the newest sample read, or of one that came
+        // after the FIFO's count was latched: the tracked clock tells.
+        let mut stamp = newest.wrapping_add(self.stamp_offset);
+        if let Some(p) = self.clock.board_us(stamp) {
+            let ahead = c.wrapping_sub(p) as i32;
+            if ahead > (self.period_us / 2) as i32 {
+                stamp = stamp.wrapping_add(self.period_us);
             }
         }
-        self.last_raw = newest.raw;
-        self.counters.samples = self.counters.samples.wrapping_add(s.len() as u32);
+        let jumps = self.clock.jumps;
+        self.clock.observe(stamp, c);
+        self.counters.jumps = self
+            .counters
+            .jumps
+            .wrapping_add(self.clock.jumps.wrapping_sub(jumps));
+    }
+}
+
+/// The spike check (see [`SPIKE_DPS`]): the last sample taken, and one
+/// left out waiting to be confirmed as a new level by the next.
+#[derive(Clone, Copy, Debug)]
+struct SpikeCheck {
+    last: [i16; 3],
+    has_last: bool,
+    pending: [i16; 3],
+    has_pending: bool,
+}
+
+impl SpikeCheck {
+    const fn new() -> Self {
+        Self {
+            last: [0; 3],
+            has_last: false,
+            pending: [0; 3],
+            has_pending: false,
+        }
+    }
+
+    /// Whether raw sample `x` is one the chip's filters could have made
+    /// after the last one taken, `lim` LSB a step.
+    fn pass(&mut self, x: [i16; 3], lim: u32) -> bool {
+        let near = |b: [i16; 3]| {
+            let d = |k: usize| (i32::from(x[k]) - i32::from(b[k])).unsigned_abs();
+            d(0).max(d(1)).max(d(2)) <= lim
+        };
+        // Two in a row that agree: a new level, not a spike.
+        if !self.has_last || near(self.last) || (self.has_pending && near(self.pending)) {
+            self.last = x;
+            self.has_last = true;
+            self.has_pending = false;
+            true
+        } else {
+            self.pending = x;
+            self.has_pending = true;
+            false
+        }
     }
 }
 
 impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn read(&mut self) -> Result<Reading, ReadFault> {
-        let mut buf = [FifoSample {
-            raw: [0; 3],
-            stamp_us: 0,
-        }; MAX_PER_READ];
         let mut fresh = false;
         let lost = self.clock.lost;
         self.spiked = false;
+        let lim = (SPIKE_DPS * self.g.full_scale().lsb_per_dps()) as u32;
         loop {
-            let r = self.g.read_fifo(&mut buf);
+            // Each sample goes to the aligner as it is parsed, on the
+            // driver's stamps: the clock is needed only for the instant a
+            // read asks for.
+            let mut newest = None;
+            let Self {
+                g,
+                align,
+                spike,
+                spiked,
+                counters,
+                last_raw,
+                ..
+            } = self;
+            let r = g.read_fifo_with(MAX_PER_READ, |x| {
+                newest = Some(x.stamp_us);
+                *last_raw = x.raw;
+                if spike.pass(x.raw, lim) {
+                    align.push(x.stamp_us, x.raw);
+                } else {
+                    *spiked = true;
+                    counters.spikes = counters.spikes.wrapping_add(1);
+                }
+            });
             let capture = self.capture.last_us();
             match r {
                 Ok(f) => {
                     fresh |= f.samples > 0;
-                    self.take(&buf[..f.samples], capture);
+                    self.counters.samples = self.counters.samples.wrapping_add(f.samples as u32);
+                    if let Some(s) = newest {
+                        self.observe(s, capture);
+                    }
                     if f.left == 0 {
                         break;
                     }
@@ -342,7 +359,18 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
             return Err(ReadFault::Acquiring);
         }
-        match self.align.at(at) {
+        // The instant on the chip's clock, on the driver's stamps, plus the
+        // path's delay (a time on the chip's clock): the samples that
+        // describe it.
+        let Some(chip) = self.clock.chip_instant(at) else {
+            self.counters.late = self.counters.late.wrapping_add(1);
+            self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
+            return Err(ReadFault::Acquiring);
+        };
+        let t = chip
+            .wrapping_sub(self.stamp_offset.wrapping_mul(16))
+            .wrapping_add(self.path16);
+        match self.align.at(t, 1.0 / self.g.full_scale().lsb_per_dps()) {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;
                 for (i, r) in self.last_raw.iter().enumerate() {
