@@ -103,7 +103,11 @@ impl<const CAP: usize> Aligner<CAP> {
         if self.len < CAP {
             self.len += 1;
         } else {
-            self.head = if self.head + 1 >= CAP { 0 } else { self.head + 1 };
+            self.head = if self.head + 1 >= CAP {
+                0
+            } else {
+                self.head + 1
+            };
         }
     }
 
@@ -126,7 +130,9 @@ impl<const CAP: usize> Aligner<CAP> {
                 sum[a] += i32::from(ri[a]);
             }
         }
-        let mean_t = t.wrapping_mul(16).wrapping_sub(behind.wrapping_mul(16) / n as u32);
+        let mean_t = t
+            .wrapping_mul(16)
+            .wrapping_sub(behind.wrapping_mul(16) / n as u32);
         (mean_t, sum)
     }
 

@@ -304,8 +304,8 @@ impl ChipClock {
         if self.state != ClockState::Tracking {
             return None;
         }
-        let b = at.wrapping_sub(self.anchor_us.wrapping_mul(16)) as i32 as f32
-            - self.anchor_frac * Q;
+        let b =
+            at.wrapping_sub(self.anchor_us.wrapping_mul(16)) as i32 as f32 - self.anchor_frac * Q;
         Some(
             self.anchor_stamp
                 .wrapping_mul(16)
@@ -412,7 +412,11 @@ mod tests {
             c.observe(k * 500, 7_000 + (k as f64 * 500.0 / 0.93) as u32);
         }
         // Instants a few ms either side of the anchor, in 1/16 µs.
-        for chip16 in [199 * 500 * 16 - 40_000, 199 * 500 * 16 + 7, 199 * 500 * 16 + 9_999] {
+        for chip16 in [
+            199 * 500 * 16 - 40_000,
+            199 * 500 * 16 + 7,
+            199 * 500 * 16 + 9_999,
+        ] {
             let b = c.board_instant16(chip16).unwrap();
             let back = c.chip_instant(b).unwrap();
             assert!(since(back, chip16).abs() <= 1, "{chip16}: {back}");

@@ -90,6 +90,10 @@ pub struct TimedIcm<SPI, C> {
     path16: u32,
     /// Chip µs between samples.
     period_us: u32,
+    /// °/s per LSB at the configured full scale.
+    dps_per_lsb: f32,
+    /// The spike check's limit, LSB (see [`SPIKE_DPS`]).
+    spike_lsb: u32,
     at: Option<Instant16>,
     /// How far the instant asked for is behind the read, µs.
     behind_us: u32,
@@ -125,6 +129,8 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             align: Aligner::new(per_ms as u8),
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
             period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
+            dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
+            spike_lsb: (SPIKE_DPS * cfg.full_scale.lsb_per_dps()) as u32,
             at: None,
             behind_us: 0,
             last_raw: [0; 3],
@@ -203,7 +209,8 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         };
         if self.rebase {
             self.rebase(newest, c);
-            self.clock.reanchor(newest.wrapping_add(self.stamp_offset), c);
+            self.clock
+                .reanchor(newest.wrapping_add(self.stamp_offset), c);
             return;
         }
         // The capture is of the newest sample read, or of one that came
@@ -270,7 +277,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         let mut fresh = false;
         let lost = self.clock.lost;
         self.spiked = false;
-        let lim = (SPIKE_DPS * self.g.full_scale().lsb_per_dps()) as u32;
+        let lim = self.spike_lsb;
         loop {
             // Each sample goes to the aligner as it is parsed, on the
             // driver's stamps: the clock is needed only for the instant a
@@ -370,7 +377,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         let t = chip
             .wrapping_sub(self.stamp_offset.wrapping_mul(16))
             .wrapping_add(self.path16);
-        match self.align.at(t, 1.0 / self.g.full_scale().lsb_per_dps()) {
+        match self.align.at(t, self.dps_per_lsb) {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;
                 for (i, r) in self.last_raw.iter().enumerate() {
