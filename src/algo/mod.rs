@@ -8,5 +8,7 @@ pub mod kalman;
 pub mod math;
 pub mod mixture;
 pub mod mounting;
+pub mod pointing;
+pub mod predict;
 pub mod qualify;
 pub mod stats;
