@@ -4,11 +4,58 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 pub mod single_chip;
+
+pub mod latency {
+    //! The board's delay from a sample's read to the antenna, shared by
+    //! `timing-eval` (its latency budget) and `pointing-eval` (when each
+    //! sample reaches the positioner).
+
+    /// The board loop's worst sample, µs: `cargo xtask bench-loop`'s
+    /// target (10 000 instructions) at the STM32F405's 168 MHz.
+    pub const LOOP_US: f64 = 10_000.0 / 168.0;
+
+    /// Bytes of the largest sample frame on the wire (every field filled,
+    /// an E-DAVAR estimate included, five gyros), through the link's own
+    /// encoder.
+    pub fn sample_frame_bytes() -> usize {
+        use gyro_array::link::msg::{Frame, Noise, Sample};
+        let s = Sample {
+            seq: u32::MAX,
+            t_us: u64::MAX,
+            age_us: [u16::MAX; 3],
+            rate_dps: [123.456; 3],
+            valid: 7,
+            degraded: 0x87,
+            used: [0x1F; 3],
+            health: [0x1F; 5].into_iter().collect(),
+            noise: Some(Noise {
+                axis: 2,
+                seq: u32::MAX,
+                len: u16::MAX,
+                bridged: u8::MAX,
+                sigma_dps: [1.0; 3],
+            }),
+        };
+        let mut buf = [0u8; 512];
+        gyro_array::link::wire::encode(u32::MAX, &Frame::Sample(s), &mut buf).unwrap_or(0)
+    }
+
+    /// The frame's time on the wire at the link's speed (8N1), µs.
+    pub fn wire_us(frame_bytes: usize) -> f64 {
+        frame_bytes as f64 * 10.0 / gyro_array::link::BAUD as f64 * 1e6
+    }
+
+    /// From the read to the sample frame's last byte at the antenna, µs:
+    /// the loop's worst sample and the largest frame on the wire.
+    pub fn read_to_antenna_us() -> f64 {
+        LOOP_US + wire_us(sample_frame_bytes())
+    }
+}
 pub mod timed_array;
 pub mod timed_board;
 
 pub mod calibration {
-    //! The static calibration procedure on the emulated array (issue 9):
+    //! The static calibration procedure on the emulated array:
     //! a rate table (±100 °/s about each board axis at 25 °C) and a
     //! thermal chamber (still, at 5, 25 and 45 °C), each held for `hold`
     //! samples, read through the real drivers and pipeline (with an

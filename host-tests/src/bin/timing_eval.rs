@@ -142,41 +142,13 @@ fn array_delay_us(odr: Odr, filter: Filter) -> u32 {
     ((d / 10.0).ceil() * 10.0) as u32
 }
 
-/// The board loop's worst sample, instructions (`cargo xtask bench-loop`'s
-/// target), at the STM32F405's 168 MHz.
-const LOOP_US: f64 = 10_000.0 / 168.0;
-
-/// Bytes of the largest sample frame on the wire (every field filled, an
-/// E-DAVAR estimate included, five gyros), through the link's own encoder.
-fn sample_frame_bytes() -> usize {
-    use gyro_array::link::msg::{Frame, Noise, Sample};
-    let s = Sample {
-        seq: u32::MAX,
-        t_us: u64::MAX,
-        age_us: [u16::MAX; 3],
-        rate_dps: [123.456; 3],
-        valid: 7,
-        degraded: 0x87,
-        used: [0x1F; 3],
-        health: [0x1F; 5].into_iter().collect(),
-        noise: Some(Noise {
-            axis: 2,
-            seq: u32::MAX,
-            len: u16::MAX,
-            bridged: u8::MAX,
-            sigma_dps: [1.0; 3],
-        }),
-    };
-    let mut buf = [0u8; 512];
-    gyro_array::link::wire::encode(u32::MAX, &Frame::Sample(s), &mut buf).unwrap_or(0)
-}
+use host_tests::latency::{sample_frame_bytes, wire_us, LOOP_US};
 
 /// Delay from the true rate to the sample frame's last byte on the wire,
 /// ms: the stated instant's distance behind the read, the loop's worst
 /// sample, the frame at the link's speed (8N1).
 fn to_wire_ms(delay_us: f64, frame_bytes: usize) -> f64 {
-    let wire_us = frame_bytes as f64 * 10.0 / gyro_array::link::BAUD as f64 * 1e6;
-    (delay_us + LOOP_US + wire_us) * 1e-3
+    (delay_us + LOOP_US + wire_us(frame_bytes)) * 1e-3
 }
 
 /// Fused error against the truth at the stated instant, over motion
@@ -355,7 +327,7 @@ fn budget(s: &Setting, frame: usize) {
     let path = s.filter.group_delay_us(s.odr) as f64;
     let mean = (n - 1.0) / 2.0 * period;
     let array = array_delay_us(s.odr, s.filter) as f64;
-    let wire = frame as f64 * 10.0 / gyro_array::link::BAUD as f64 * 1e6;
+    let wire = wire_us(frame);
     println!("latency budget, {} (x, y, z alike), µs:", s.name);
     println!("  chip filters (AAF, UI filter; driver's figure)  {path:>7.0}");
     println!("  moving mean of {n}: half its span                {mean:>7.0}");
