@@ -5,7 +5,9 @@
 //! - `gyro watch --from SRC`: the live view alone.
 //! - `--send OP` (record, watch): commands to the board, acknowledged in
 //!   the stream: `status`, `divider=N`, `status-every=N`,
-//!   `mode=fused|raw`, `method=mean|zhang|adaptive`.
+//!   `mode=fused|raw`, `method=mean|zhang|adaptive`,
+//!   `compensation=off|frame|MICROSECONDS` (the delay compensation: off,
+//!   to the frame's last byte, or to a horizon after the sample's time).
 //! - `gyro check FILE`: integrity of a recording (no corrupt frame, no
 //!   gap), optionally against the firmware's own count and CRC-32.
 //! - `gyro decode FILE --what samples|noise|raw|status -o CSV`.
@@ -32,7 +34,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand, ValueEnum};
-use gyro_array::link::msg::{Command, Frame, FusionMethod, Mode, Op, Reject};
+use gyro_array::link::msg::{Command, Compensation, Frame, FusionMethod, Mode, Op, Reject};
 use gyro_array::link::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -338,9 +340,14 @@ fn parse_op(s: &str) -> Result<Op, String> {
         ("method", "mean") => Op::SetMethod(FusionMethod::Mean),
         ("method", "zhang") => Op::SetMethod(FusionMethod::Zhang),
         ("method", "adaptive") => Op::SetMethod(FusionMethod::Adaptive),
+        ("compensation", "off") => Op::SetCompensation(Compensation::Off),
+        ("compensation", "frame") => Op::SetCompensation(Compensation::ToFrame),
+        ("compensation", v) => {
+            Op::SetCompensation(Compensation::Horizon(u16::try_from(num(v)?).unwrap_or(u16::MAX)))
+        }
         _ => {
             return Err(format!(
-                "{s:?}: expected status, divider=N, status-every=N, mode=fused|raw or method=mean|zhang|adaptive"
+                "{s:?}: expected status, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
             ))
         }
     })
@@ -1127,8 +1134,21 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
             (Frame::Sample(s), What::Samples) => {
                 if !header_done {
                     let mut h: Vec<String> = [
-                        "link_seq", "seq", "t_us", "age_x_us", "age_y_us", "age_z_us", "x_dps",
-                        "y_dps", "z_dps", "valid", "degraded", "used_x", "used_y", "used_z",
+                        "link_seq",
+                        "seq",
+                        "t_us",
+                        "age_x_us",
+                        "age_y_us",
+                        "age_z_us",
+                        "predicted_us",
+                        "x_dps",
+                        "y_dps",
+                        "z_dps",
+                        "valid",
+                        "degraded",
+                        "used_x",
+                        "used_y",
+                        "used_z",
                     ]
                     .map(String::from)
                     .to_vec();
@@ -1138,6 +1158,7 @@ fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
                 }
                 let mut r = lead(d.link_seq, s.seq, s.t_us);
                 r.extend(s.age_us.iter().map(|v| v.to_string()));
+                r.push(s.predicted_us.map_or(String::new(), |v| v.to_string()));
                 r.extend(s.rate_dps.iter().map(|v| v.to_string()));
                 r.extend([s.valid, s.degraded].iter().map(|v| v.to_string()));
                 r.extend(s.used.iter().map(|v| v.to_string()));

@@ -28,6 +28,10 @@ pub struct Summary {
     pub noise: Vec<(u32, Noise)>,
     /// Per axis, the delay every valid sample stated (`age_us`), µs.
     pub ages_us: [Vec<u16>; 3],
+    /// The horizons of the sample frames whose rates were predicted
+    /// (`predicted_us`), µs, and the frames that were not.
+    pub predicted_us: Vec<u16>,
+    pub not_predicted: u64,
     /// Spacing of consecutive sample frames' `t_us` (where no sample is
     /// missing between them), µs.
     pub spacing_us: Vec<i64>,
@@ -53,6 +57,8 @@ impl Default for Summary {
             last_status: None,
             noise: Vec::new(),
             ages_us: Default::default(),
+            predicted_us: Vec::new(),
+            not_predicted: 0,
             spacing_us: Vec::new(),
             last_t_us: None,
             last_link: None,
@@ -88,6 +94,10 @@ impl Summary {
                     if s.valid & (1 << a) != 0 {
                         self.ages_us[a].push(s.age_us[a]);
                     }
+                }
+                match s.predicted_us {
+                    Some(d) => self.predicted_us.push(d),
+                    None => self.not_predicted += 1,
                 }
                 if let Some((seq, t)) = self.last_t_us {
                     if s.seq.wrapping_sub(seq) == 1 {
@@ -196,6 +206,23 @@ impl Summary {
         }
         s.pop();
         s.push('\n');
+        if !self.predicted_us.is_empty() {
+            let mut d = self.predicted_us.clone();
+            d.sort_unstable();
+            s += &format!(
+                "delay compensation: {} sample frames predicted to t_us + {}..={} µs (median {}), {} measured as they are\n",
+                d.len(),
+                d[0],
+                d[d.len() - 1],
+                d[d.len() / 2],
+                self.not_predicted
+            );
+        } else {
+            s += &format!(
+                "delay compensation: off ({} sample frames measured as they are)\n",
+                self.not_predicted
+            );
+        }
         if !self.spacing_us.is_empty() {
             let n = self.spacing_us.len() as f64;
             let mean = self.spacing_us.iter().map(|x| *x as f64).sum::<f64>() / n;

@@ -23,6 +23,7 @@ pub mod latency {
             seq: u32::MAX,
             t_us: u64::MAX,
             age_us: [u16::MAX; 3],
+            predicted_us: Some(u16::MAX),
             rate_dps: [123.456; 3],
             valid: 7,
             degraded: 0x87,

@@ -5,68 +5,36 @@
 //! it (the chips' filters, the alignment, the link); on a vehicle's motion
 //! every millisecond of it is pointing error (`algo::pointing`). The
 //! predictor fits a straight line, by least squares, to the last `K`
-//! samples of each axis (1 ms apart) and reads it `h` ahead of the newest:
-//! a fixed FIR, ŷ = Σ w_j y_j, its weights worked out once for the horizon
-//! (K multiply-adds an axis a sample). It is exact for a rate that changes
-//! linearly; on a curve it leaves (K/2 + h)·h/2·ÿ, and it passes white
-//! noise with the gain √Σw² ([`Predictor::noise_gain`]), so K trades the
-//! curve's error against the noise's (`pointing-eval` picks it).
+//! samples of each axis (one sample period apart) and reads it `h` after
+//! the newest, each axis at its own horizon (their delays differ). It is
+//! exact for a rate that changes linearly; on a curve it leaves an error
+//! that grows with K and h, and it passes white noise with the gain
+//! [`Predictor::noise_gain`], so K trades the curve's error against the
+//! noise's (`pointing-eval` measures them and picks K).
 
 /// One axis-triple's predictor over the last `K` samples.
 #[derive(Clone, Copy, Debug)]
 pub struct Predictor<const K: usize> {
     ring: [[f32; 3]; K],
     len: usize,
+    /// The oldest sample's slot.
     head: usize,
-    /// Weights, oldest sample first.
-    w: [f32; K],
-    horizon_s: f32,
+}
+
+impl<const K: usize> Default for Predictor<K> {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl<const K: usize> Predictor<K> {
-    /// A predictor `horizon_s` ahead of the newest of samples `period_s`
-    /// apart (K ≥ 2; K = 1 gives the newest sample, no prediction).
-    pub fn new(horizon_s: f32, period_s: f32) -> Self {
-        let mut p = Self {
+    /// Empty.
+    pub const fn new() -> Self {
+        Self {
             ring: [[0.0; 3]; K],
             len: 0,
             head: 0,
-            w: [0.0; K],
-            horizon_s,
-        };
-        p.set_horizon(horizon_s, period_s);
-        p
-    }
-
-    /// The horizon, s.
-    pub fn horizon_s(&self) -> f32 {
-        self.horizon_s
-    }
-
-    /// Set the horizon (a command, or the link's delay changed).
-    pub fn set_horizon(&mut self, horizon_s: f32, period_s: f32) {
-        self.horizon_s = horizon_s;
-        if K < 2 || period_s <= 0.0 {
-            self.w = [0.0; K];
-            if let Some(last) = self.w.last_mut() {
-                *last = 1.0;
-            }
-            return;
         }
-        // x_j = j (j = 0 the oldest), the line read at x = K − 1 + h/T:
-        // w_j = 1/K + (x_j − x̄)(x − x̄)/Sxx.
-        let k = K as f32;
-        let mean = (k - 1.0) / 2.0;
-        let sxx = k * (k * k - 1.0) / 12.0;
-        let x = k - 1.0 + horizon_s / period_s;
-        for (j, w) in self.w.iter_mut().enumerate() {
-            *w = 1.0 / k + (j as f32 - mean) * (x - mean) / sxx;
-        }
-    }
-
-    /// √Σw²: the predicted rate's white noise against one sample's.
-    pub fn noise_gain(&self) -> f32 {
-        libm::sqrtf(self.w.iter().map(|w| w * w).sum())
     }
 
     /// Forget the samples (a gap: an axis without a fused value).
@@ -75,15 +43,15 @@ impl<const K: usize> Predictor<K> {
         self.head = 0;
     }
 
-    /// Whether it has the `K` samples a prediction needs.
+    /// Whether it holds the `K` samples a prediction needs.
     pub fn ready(&self) -> bool {
-        self.len == K
+        self.len == K && K > 0
     }
 
-    /// One sample per axis; the prediction once `K` are held, else `None`.
-    pub fn push(&mut self, y: [f32; 3]) -> Option<[f32; 3]> {
+    /// One sample per axis, one sample period after the last.
+    pub fn push(&mut self, y: [f32; 3]) {
         if K == 0 {
-            return None;
+            return;
         }
         let mut j = self.head + self.len;
         if j >= K {
@@ -92,22 +60,48 @@ impl<const K: usize> Predictor<K> {
         self.ring[j] = y;
         if self.len < K {
             self.len += 1;
-            if self.len < K {
-                return None;
-            }
         } else {
             self.head = if self.head + 1 >= K { 0 } else { self.head + 1 };
         }
-        let mut out = [0.0f32; 3];
+    }
+
+    /// Each axis's least-squares line through the `K` samples, read
+    /// `ahead[a]` sample periods after the newest (K = 1: the newest as it
+    /// is); `None` until `K` are held.
+    pub fn at(&self, ahead: [f32; 3]) -> Option<[f32; 3]> {
+        if !self.ready() {
+            return None;
+        }
+        // x_j = j (j = 0 the oldest): ȳ + slope·(x − x̄), x = K − 1 + ahead.
+        let k = K as f32;
+        let mean_x = (k - 1.0) / 2.0;
+        let sxx = k * (k * k - 1.0) / 12.0;
+        let (mut sum, mut sxy) = ([0.0f32; 3], [0.0f32; 3]);
         let mut i = self.head;
-        for w in &self.w {
+        for j in 0..K {
+            let dx = j as f32 - mean_x;
             let s = &self.ring[i];
-            out[0] += w * s[0];
-            out[1] += w * s[1];
-            out[2] += w * s[2];
+            for a in 0..3 {
+                sum[a] += s[a];
+                sxy[a] += dx * s[a];
+            }
             i = if i + 1 >= K { 0 } else { i + 1 };
         }
-        Some(out)
+        Some(core::array::from_fn(|a| {
+            let slope = if sxx > 0.0 { sxy[a] / sxx } else { 0.0 };
+            sum[a] / k + slope * (k - 1.0 - mean_x + ahead[a])
+        }))
+    }
+
+    /// The predicted rate's white noise against one sample's, read
+    /// `ahead` periods after the newest: √(1/K + (x − x̄)²/Sxx).
+    pub fn noise_gain(ahead: f32) -> f32 {
+        let k = K as f32;
+        if K < 2 {
+            return 1.0;
+        }
+        let d = k - 1.0 - (k - 1.0) / 2.0 + ahead;
+        libm::sqrtf(1.0 / k + d * d / (k * (k * k - 1.0) / 12.0))
     }
 }
 
@@ -116,30 +110,45 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_ramp_is_predicted_exactly_and_the_weights_sum_to_one() {
-        let mut p = Predictor::<8>::new(0.0021, 0.001);
-        assert!((p.w.iter().sum::<f32>() - 1.0).abs() < 1e-5);
-        let mut got = None;
+    fn a_ramp_is_predicted_exactly() {
+        let mut p = Predictor::<8>::new();
+        assert_eq!(p.at([0.0; 3]), None);
         for k in 0..20 {
             let t = k as f32 * 0.001;
-            got = p.push([100.0 * t, -3.0, 5.0 + 40.0 * t]);
+            p.push([100.0 * t, -3.0, 5.0 + 40.0 * t]);
         }
-        let t = 19.0 * 0.001 + 0.0021;
-        let g = got.unwrap();
+        // 2.1 periods ahead on x and z, none on y.
+        let g = p.at([2.1, 0.0, 2.1]).unwrap();
+        let t = 0.019 + 0.0021;
         assert!((g[0] - 100.0 * t).abs() < 1e-4, "{g:?}");
         assert!((g[1] + 3.0).abs() < 1e-5);
         assert!((g[2] - (5.0 + 40.0 * t)).abs() < 1e-4);
     }
 
     #[test]
-    fn noise_gain_is_the_fits_variance() {
-        // The least-squares line's variance at x: 1/K + (x − x̄)²/Sxx.
-        let p = Predictor::<8>::new(0.002, 0.001);
-        let x = 7.0 + 2.0;
-        let want = (1.0 / 8.0 + (x - 3.5f32).powi(2) / 42.0).sqrt();
-        assert!((p.noise_gain() - want).abs() < 1e-5);
-        // One sample, no prediction: the newest as it is.
-        let mut one = Predictor::<1>::new(0.002, 0.001);
-        assert_eq!(one.push([1.0, 2.0, 3.0]), Some([1.0, 2.0, 3.0]));
+    fn noise_gain_is_the_fits_spread() {
+        // The gain against the empirical spread of predictions of white
+        // noise.
+        let mut p = Predictor::<3>::new();
+        let mut x: u32 = 7;
+        let (mut n, mut ss) = (0.0f64, 0.0f64);
+        for _ in 0..200_000 {
+            // Uniform on (−√3, √3): unit variance.
+            x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let u = (x >> 8) as f32 / (1u32 << 24) as f32;
+            p.push([(2.0 * u - 1.0) * 3f32.sqrt(), 0.0, 0.0]);
+            if let Some(v) = p.at([2.136, 0.0, 0.0]) {
+                n += 1.0;
+                ss += f64::from(v[0]) * f64::from(v[0]);
+            }
+        }
+        let got = (ss / n).sqrt() as f32;
+        let want = Predictor::<3>::noise_gain(2.136);
+        assert!((got - want).abs() < 0.02 * want, "{got} vs {want}");
+        // One sample: no prediction, the newest as it is.
+        let mut one = Predictor::<1>::new();
+        one.push([1.0, 2.0, 3.0]);
+        assert_eq!(one.at([5.0; 3]), Some([1.0, 2.0, 3.0]));
+        assert_eq!(Predictor::<1>::noise_gain(5.0), 1.0);
     }
 }

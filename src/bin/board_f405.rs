@@ -223,6 +223,9 @@ fn main() -> ! {
     let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(Settings::default())) else {
         give_up("link port taken twice")
     };
+    // The delay compensation predicts each frame's rates to its last byte
+    // at the rate the link runs.
+    port.set_timing(baud, 1_000_000 / FS_HZ);
     let bus = RefCell::new(spi1);
     let bus2 = RefCell::new(spi2);
 

@@ -167,8 +167,8 @@ fn main() -> ! {
     #[allow(unsafe_code)]
     let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
     let mut port = Port::<1024>::new(Settings::default());
-    // CRC-32 of the fused rates of every sample frame, as the firmware
-    // computed them (NaN where an axis has none, as the frame carries).
+    // CRC-32 of the rates of every sample frame, as the firmware computed
+    // them (NaN where an axis has none, as the frame carries).
     let crc32 = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
     let mut digest = crc32.digest();
     let mut sample_frames = 0u32;
@@ -238,8 +238,9 @@ fn main() -> ! {
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         if port.counters().sent != before {
             sample_frames += 1;
-            for f in &out.fused {
-                let r = f.map_or(f32::NAN, |f| f.rate_dps);
+            // What the frame carried (the rates predicted to its last byte:
+            // the link's delay compensation).
+            for r in port.last_sample_rates().unwrap_or([f32::NAN; 3]) {
                 digest.update(&r.to_le_bytes());
             }
         }

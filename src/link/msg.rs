@@ -72,6 +72,11 @@ pub struct Sample {
     /// µs: the instant it describes is `t_us − age_us[a]` (the chips'
     /// filters and the array's alignment included; 0 where not valid).
     pub age_us: [u16; 3],
+    /// Delay compensation ([`Compensation`]): `Some(d)`, the rates are
+    /// predicted to `t_us + d` from the recent samples (the instant the
+    /// measurement described is still `t_us − age_us`); `None`, they are the
+    /// measured rates.
+    pub predicted_us: Option<u16>,
     /// Fused rate x, y, z, °/s; NaN where the axis is not valid.
     pub rate_dps: [f32; 3],
     /// Bit a set: axis a has a fused value.
@@ -242,7 +247,28 @@ pub struct Settings {
     pub divider: u16,
     /// One status frame every `status_every` samples (0 = on request only).
     pub status_every: u32,
+    /// Delay compensation of the sample frames.
+    pub compensation: Compensation,
 }
+
+/// What the sample frames' rates are predicted to ([`Sample::predicted_us`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Compensation {
+    /// The measured rates.
+    Off,
+    /// The instant the frame's last byte leaves the board (its time on the
+    /// wire after `t_us`): what leaves the reference pointing loop the
+    /// least error (`pointing-eval`); the default.
+    ToFrame,
+    /// A horizon the controller sets, µs after `t_us` (at most
+    /// [`MAX_HORIZON_US`]).
+    Horizon(u16),
+}
+
+/// The longest horizon [`Compensation::Horizon`] takes, µs: a line fitted
+/// to a few milliseconds says little about the rate further out.
+pub const MAX_HORIZON_US: u16 = 10_000;
 
 impl Default for Settings {
     fn default() -> Self {
@@ -251,6 +277,7 @@ impl Default for Settings {
             method: FusionMethod::Adaptive,
             divider: 1,
             status_every: 1000,
+            compensation: Compensation::ToFrame,
         }
     }
 }
@@ -305,4 +332,6 @@ pub enum Op {
     SetStatusEvery(u32),
     /// Send a status frame now.
     RequestStatus,
+    /// Select the delay compensation of the sample frames.
+    SetCompensation(Compensation),
 }

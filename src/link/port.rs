@@ -13,8 +13,9 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, ClockSource, Command, Frame, FrameRef, FusionMethod, GyroStatus, LinkCounters, Mode,
-    Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
+    Ack, ClockSource, Command, Compensation, Frame, FrameRef, FusionMethod, GyroStatus,
+    LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
+    MAX_HORIZON_US,
 };
 use super::ring::ByteRing;
 use super::wire::{
@@ -22,6 +23,7 @@ use super::wire::{
     IN_PLACE_MAX, MAX_PAYLOAD,
 };
 use crate::algo::fusion::{AdaptiveConfig, Method};
+use crate::algo::predict::Predictor;
 use crate::pipeline::{Output, Pipeline};
 
 /// Where the E-DAVAR estimates come from (the pipeline's noise tracker).
@@ -45,6 +47,22 @@ impl NoiseSource for () {
 
 /// Longest command frame the board accepts (commands are ≤ 16 bytes).
 pub const RX_MAX: usize = 64;
+
+/// Samples the delay compensation fits its line to: the length that leaves
+/// the reference pointing loop the least error over the vehicle profiles
+/// (`pointing-eval`: K = 2 to 16 measured; longer fits lag on the 8 Hz
+/// road, two samples pass more noise). At the board's 2.1 ms horizon the
+/// predicted rate's white noise is 2.25 times the measured rate's
+/// ([`Predictor::noise_gain`]), all of it at high frequency (the line's
+/// slope), which the positioner integrates away: the pointing error's
+/// share from noise grows 3–7 %.
+pub const PREDICT_K: usize = 3;
+
+/// Bytes of a sample frame on the wire the horizon of
+/// [`Compensation::ToFrame`] allows for: the largest (five gyros, an
+/// E-DAVAR estimate; `link::tests` checks it). A frame without an estimate
+/// ends before the instant stated, by some 20 µs at 6 Mbaud.
+pub const SAMPLE_FRAME_MAX: u32 = 80;
 
 impl FusionMethod {
     /// The fusion method with its default settings.
@@ -71,6 +89,15 @@ pub struct Port<const TX: usize> {
     status_requested: bool,
     /// Encoding scratch, kept so that a frame zeroes no buffers.
     payload: [u8; MAX_PAYLOAD],
+    /// The fused rates' recent samples, for the delay compensation.
+    predictor: Predictor<PREDICT_K>,
+    /// The sequence number of the last sample the predictor took.
+    predictor_seq: Option<u32>,
+    /// The UART's speed, baud, and the sample period, µs.
+    baud: u32,
+    sample_us: u32,
+    /// The rates of the last sample frame queued.
+    last_rates: Option<[f32; 3]>,
 }
 
 impl<const TX: usize> Port<TX> {
@@ -86,6 +113,38 @@ impl<const TX: usize> Port<TX> {
             noise_sent: [None; 3],
             status_requested: false,
             payload: [0; MAX_PAYLOAD],
+            predictor: Predictor::new(),
+            predictor_seq: None,
+            baud: super::BAUD,
+            sample_us: 1000,
+            last_rates: None,
+        }
+    }
+
+    /// The rates the last sample frame queued carried (predicted, when the
+    /// compensation is on): what a recording of the link holds.
+    pub fn last_sample_rates(&self) -> Option<[f32; 3]> {
+        self.last_rates
+    }
+
+    /// The UART's speed and the sample period the delay compensation works
+    /// with (by default [`super::BAUD`] and 1 ms).
+    pub fn set_timing(&mut self, baud: u32, sample_us: u32) {
+        self.baud = baud.max(1);
+        self.sample_us = sample_us.max(1);
+    }
+
+    /// How far after `t_us` a sample frame's rates are predicted to, µs,
+    /// under the settings in force (`None`: not predicted).
+    pub fn horizon_us(&self) -> Option<u16> {
+        match self.settings.compensation {
+            Compensation::Off => None,
+            Compensation::ToFrame => Some(
+                (SAMPLE_FRAME_MAX * 10 * 1_000_000)
+                    .div_ceil(self.baud)
+                    .min(u16::MAX as u32) as u16,
+            ),
+            Compensation::Horizon(h) => Some(h),
         }
     }
 
@@ -159,6 +218,19 @@ impl<const TX: usize> Port<TX> {
         pipe: &Pipeline<N>,
         noise: &impl NoiseSource,
     ) {
+        // Every sample goes to the predictor, sent or not; a missed sample
+        // or an axis without a value starts its fit again.
+        let fused = out.fused.map(|f| f.map(|f| f.rate_dps));
+        let follows = self
+            .predictor_seq
+            .is_none_or(|q| out.seq.wrapping_sub(q) == 1);
+        if !follows || fused.iter().any(|f| !f.is_some_and(f32::is_finite)) {
+            self.predictor.clear();
+        }
+        if let [Some(x), Some(y), Some(z)] = fused {
+            self.predictor.push([x, y, z]);
+        }
+        self.predictor_seq = Some(out.seq);
         let div = u32::from(self.settings.divider.max(1));
         if !out.seq.is_multiple_of(div) {
             return;
@@ -169,10 +241,12 @@ impl<const TX: usize> Port<TX> {
         }
         match self.settings.mode {
             Mode::Fused => {
+                let age_us = out.age_us();
                 let mut s = Sample {
                     seq: out.seq,
                     t_us,
-                    age_us: out.age_us(),
+                    age_us,
+                    predicted_us: None,
                     rate_dps: [f32::NAN; 3],
                     valid: 0,
                     degraded: 0,
@@ -188,6 +262,16 @@ impl<const TX: usize> Port<TX> {
                         s.used[a] = f.used();
                     }
                 }
+                // Each axis's line read from the instant its measurement
+                // describes to the instant stated (`t_us + d`).
+                if let Some(d) = self.horizon_us() {
+                    let per = self.sample_us as f32;
+                    let ahead = age_us.map(|a| (f32::from(a) + f32::from(d)) / per);
+                    if let Some(p) = self.predictor.at(ahead) {
+                        s.rate_dps = p;
+                        s.predicted_us = Some(d);
+                    }
+                }
                 // Bit 7: no static calibration record in use.
                 s.degraded |= u8::from(!pipe.calibrated()) << 7;
                 // An estimate describes a sample half a window back: on a
@@ -195,7 +279,11 @@ impl<const TX: usize> Port<TX> {
                 if !out.busy {
                     s.noise = self.next_noise(noise);
                 }
+                let sent = self.counters.sent;
                 self.send_ref(FrameRef::Sample(&s));
+                if self.counters.sent != sent {
+                    self.last_rates = Some(s.rate_dps);
+                }
             }
             Mode::Raw => {
                 let mut rates = Vec::<[f32; 3], MAX_GYROS>::new();
@@ -395,6 +483,14 @@ impl<const TX: usize> Port<TX> {
                 self.settings.status_every = n;
             }
             Op::RequestStatus => self.status_requested = true,
+            Op::SetCompensation(c) => {
+                if let Compensation::Horizon(h) = c {
+                    if h > MAX_HORIZON_US {
+                        return Err(Reject::OutOfRange);
+                    }
+                }
+                self.settings.compensation = c;
+            }
         }
         Ok(())
     }

@@ -25,6 +25,7 @@ fn big_sample(n: usize) -> Frame {
         seq: u32::MAX,
         t_us: u64::MAX,
         age_us: [u16::MAX; 3],
+        predicted_us: Some(u16::MAX),
         rate_dps: [-1234.5; 3],
         valid: 7,
         degraded: 7,
@@ -59,6 +60,7 @@ fn big_status(n: usize) -> Frame {
             method: FusionMethod::Adaptive,
             divider: 1000,
             status_every: u32::MAX,
+            compensation: Compensation::Horizon(u16::MAX),
         },
         noise_tau: [u16::MAX; 3],
         sample_us: u32::MAX,
@@ -178,6 +180,11 @@ fn the_largest_frames_fit_one_sample_period_at_1_khz() {
         assert!(st + ack + periods * s <= periods * budget);
     }
     assert_eq!(budget, 600);
+    // The delay compensation's horizon allows for the largest sample frame.
+    assert_eq!(
+        super::port::SAMPLE_FRAME_MAX as usize,
+        wire_len(&big_sample(5))
+    );
 }
 
 #[test]
@@ -385,6 +392,11 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
         (Op::SetStatusEvery(50), Err(Reject::OutOfRange)),
         (Op::SetStatusEvery(0), Ok(())),
         (Op::RequestStatus, Ok(())),
+        (
+            Op::SetCompensation(Compensation::Horizon(MAX_HORIZON_US + 1)),
+            Err(Reject::OutOfRange),
+        ),
+        (Op::SetCompensation(Compensation::Horizon(3000)), Ok(())),
     ];
     for (id, (op, want)) in cases.iter().enumerate() {
         let got = exchange(&mut port, &mut pipe, &command_bytes(id as u8, *op));
@@ -399,14 +411,20 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
     }
     let s = port.settings();
     assert_eq!(
-        (s.divider, s.mode, s.method, s.status_every),
-        (10, Mode::Raw, FusionMethod::Mean, 0)
+        (s.divider, s.mode, s.method, s.status_every, s.compensation),
+        (
+            10,
+            Mode::Raw,
+            FusionMethod::Mean,
+            0,
+            Compensation::Horizon(3000)
+        )
     );
     assert_eq!(pipe.fusion().method(), Method::Mean);
     assert!(port.status_due(1), "requested");
     assert!(!port.status_due(2), "request cleared, periodic off");
     let c = port.counters();
-    assert_eq!((c.accepted, c.rejected), (5, 3));
+    assert_eq!((c.accepted, c.rejected), (6, 4));
 }
 
 #[test]
@@ -479,7 +497,7 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x02, 0x04, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x1b, 0xe9, 0x00]
+        [0x02, 0x05, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x7a, 0x51, 0x00]
     );
     let n = encode(
         5,
@@ -492,6 +510,98 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x03, 0x04, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x83, 0x55, 0x00]
+        [0x03, 0x05, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0xc6, 0x3a, 0x00]
+    );
+}
+
+/// The output of one sample with every axis fused at `rate` and the chips'
+/// delay `age_us`.
+fn output(seq: u32, rate: [f32; 3], age_us: u32) -> crate::pipeline::Output<4> {
+    use crate::algo::fusion::Fused;
+    crate::pipeline::Output {
+        seq,
+        rate_dps: [rate; 4],
+        delay_us: [age_us; 4],
+        offered: [0b1111; 3],
+        fused: rate.map(|r| {
+            Some(Fused {
+                rate_dps: r,
+                weights: [0.25; 4],
+                rejected: 0,
+                fallback: false,
+            })
+        }),
+        noise_probe_dps: [None; 3],
+        health_changed: 0,
+        busy: false,
+    }
+}
+
+/// The sample frames `port` sends for `outs`.
+fn samples(port: &mut Port<1024>, outs: &[crate::pipeline::Output<4>]) -> std::vec::Vec<Sample> {
+    let pipe = pipeline();
+    let mut got = std::vec::Vec::new();
+    for (k, o) in outs.iter().enumerate() {
+        port.publish(o, 1_000 * k as u64, &pipe, &());
+        for f in exchange(port, &mut pipeline(), &[]) {
+            if let Frame::Sample(s) = f {
+                got.push(s);
+            }
+        }
+    }
+    got
+}
+
+#[test]
+fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
+    // A rate rising 2 °/s per ms on x, falling 1 on z, measured 2 ms late.
+    let ramp = |k: u32| [2.0 * k as f32, 5.0, -(k as f32)];
+    let outs: std::vec::Vec<_> = (0..10).map(|k| output(k, ramp(k), 2000)).collect();
+    let mut port = Port::<1024>::new(Settings::default());
+    let got = samples(&mut port, &outs);
+    assert_eq!(got.len(), 10);
+    let d = port.horizon_us().expect("on by default");
+    // The frame's end at 6 Mbaud: the largest sample frame, 10 bits a byte.
+    assert_eq!(d, 134);
+    for (k, s) in got.iter().enumerate() {
+        if k + 1 < super::port::PREDICT_K {
+            // Not enough samples to fit yet: the measured rates, unstated.
+            assert_eq!(s.predicted_us, None);
+            assert_eq!(s.rate_dps, ramp(k as u32));
+            continue;
+        }
+        assert_eq!(s.predicted_us, Some(d));
+        // The ramp at t_us + d: 2 ms of age and d µs past t_us.
+        let ahead = (2000.0 + f32::from(d)) / 1000.0;
+        let want = [2.0 * (k as f32 + ahead), 5.0, -(k as f32 + ahead)];
+        for a in 0..3 {
+            assert!(
+                (s.rate_dps[a] - want[a]).abs() < 1e-3,
+                "{k}: {:?} vs {want:?}",
+                s.rate_dps
+            );
+        }
+    }
+    // Off: the measured rates. A missed sample starts the fit again.
+    let mut port = Port::<1024>::new(Settings {
+        compensation: Compensation::Off,
+        ..Settings::default()
+    });
+    assert!(samples(&mut port, &outs)
+        .iter()
+        .all(|s| s.predicted_us.is_none()));
+    let mut port = Port::<1024>::new(Settings::default());
+    let gap = [
+        output(0, ramp(0), 2000),
+        output(1, ramp(1), 2000),
+        output(2, ramp(2), 2000),
+        output(5, ramp(5), 2000),
+    ];
+    let got = samples(&mut port, &gap);
+    assert_eq!(
+        got.iter()
+            .map(|s| s.predicted_us.is_some())
+            .collect::<std::vec::Vec<_>>(),
+        [false, false, true, false]
     );
 }

@@ -269,11 +269,12 @@ fn diff(a: &[Vec<f64>; 3], b: &[Vec<f64>; 3]) -> [Vec<f64>; 3] {
 /// The `K`-sample prediction of `feed` `h` ahead (the raw value until K
 /// are held).
 fn predicted<const K: usize>(feed: &Feed, h_s: f64) -> Feed {
-    let mut p = Predictor::<K>::new(h_s as f32, 1e-3);
+    let mut p = Predictor::<K>::new();
+    let ahead = [(h_s / 1e-3) as f32; 3];
     feed.iter()
         .map(|y| {
-            let f = y.map(|v| v as f32);
-            match p.push(f) {
+            p.push(y.map(|v| v as f32));
+            match p.at(ahead) {
                 Some(v) => v.map(f64::from),
                 None => *y,
             }
