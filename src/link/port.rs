@@ -64,6 +64,13 @@ pub const PREDICT_K: usize = 3;
 /// ends before the instant stated, by some 20 µs at 6 Mbaud.
 pub const SAMPLE_FRAME_MAX: u32 = 80;
 
+/// The loop's time from the sample's read (`t_us`) to its frame being
+/// queued, µs, that [`Compensation::ToFrame`] allows for: the loop's
+/// 10 000-instruction budget at the STM32F405's 168 MHz (`cargo xtask
+/// bench-loop` measures the loop; its mean on the timed board is some
+/// 10 600, 63 µs).
+pub const LOOP_US: u32 = 60;
+
 impl FusionMethod {
     /// The fusion method with its default settings.
     pub fn method(self) -> Method {
@@ -139,11 +146,10 @@ impl<const TX: usize> Port<TX> {
     pub fn horizon_us(&self) -> Option<u16> {
         match self.settings.compensation {
             Compensation::Off => None,
-            Compensation::ToFrame => Some(
-                (SAMPLE_FRAME_MAX * 10 * 1_000_000)
-                    .div_ceil(self.baud)
-                    .min(u16::MAX as u32) as u16,
-            ),
+            Compensation::ToFrame => {
+                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud);
+                Some((LOOP_US + wire).min(u16::MAX as u32) as u16)
+            }
             Compensation::Horizon(h) => Some(h),
         }
     }

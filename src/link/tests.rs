@@ -561,8 +561,9 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
     let got = samples(&mut port, &outs);
     assert_eq!(got.len(), 10);
     let d = port.horizon_us().expect("on by default");
-    // The frame's end at 6 Mbaud: the largest sample frame, 10 bits a byte.
-    assert_eq!(d, 134);
+    // The frame's end at 6 Mbaud: the loop's time, then the largest sample
+    // frame, 10 bits a byte.
+    assert_eq!(d, 60 + 134);
     for (k, s) in got.iter().enumerate() {
         if k + 1 < super::port::PREDICT_K {
             // Not enough samples to fit yet: the measured rates, unstated.

@@ -7,10 +7,12 @@
 //! - one ICM-42688-P, statically calibrated (scale and bias fitted against
 //!   the truth over the first seconds: a rate-table calibration);
 //! - the plain mean of the four chips' aligned rates;
-//! - the shipped fusion, as the board streams it;
-//! - the shipped fusion with delay compensation (`algo::predict`), for
-//!   several fit lengths and two horizons: the frame's arrival, and the
-//!   middle of the millisecond the controller holds it.
+//! - the shipped fusion without delay compensation (the measured rates);
+//! - the shipped fusion with it (`algo::predict`, as the link does), for
+//!   several fit lengths and three horizons: the frame's end as the board
+//!   works it out (the link's default, `Port::horizon_us`), its arrival as
+//!   `latency::read_to_antenna_us` has it, and the middle of the
+//!   millisecond the controller holds it.
 //!
 //! The board is the timed one (`host_tests::timed_board`): four chips on
 //! their own clocks through the real drivers, `TimedIcm` and the pipeline.
@@ -504,7 +506,7 @@ fn main() {
         for (name, c, f) in [
             ("one ICM-42688-P (static cal.)", &one_c, &one_f),
             ("plain mean of four", &mean_c, &mean_f),
-            ("shipped fusion", &clean.fused, &faulty.fused),
+            ("fusion, no compensation", &clean.fused, &faulty.fused),
         ] {
             let (ac, af) = (adds(c), adds(f));
             println!(
@@ -548,7 +550,17 @@ fn main() {
             fmt3(&s_faults, |s| s.p999)
         );
         // Delay compensation: fit lengths and horizons.
+        // The board's default: to the frame's last byte as the link works
+        // it out (`Port::horizon_us`: the loop's budgeted time and the
+        // largest frame on the wire).
+        let to_frame = DELAY_US as f64 * 1e-6
+            + f64::from(
+                gyro_array::link::port::Port::<64>::new(Default::default())
+                    .horizon_us()
+                    .unwrap_or(0),
+            ) * 1e-6;
         let horizons = [
+            ("to the frame's end (the board's)", to_frame),
             ("to the arrival", d_s),
             ("to the hold's middle", d_s + 0.5e-3),
         ];
@@ -572,7 +584,7 @@ fn main() {
                 let sd = stats3(&diff(&run(&t), &e_ideal));
                 let (_, sn) = split(&lp, t0, &arrive, &p.rate, &clean, &c, &t);
                 println!(
-                    "  compensated {label:<32} adds p99.9 {}  with faults {}  delay {}  noise {}",
+                    "  compensated {label:<42} adds p99.9 {}  with faults {}  delay {}  noise {}",
                     fmt3(&ac, |s| s.p999),
                     fmt3(&af, |s| s.p999),
                     fmt3(&sd, |s| s.p999),
@@ -593,12 +605,12 @@ fn main() {
         }
         if let (Some(dir), true) = (&args.svg, p.name.starts_with("highway: 30")) {
             let _ = std::fs::create_dir_all(dir);
-            let compensated = predicted::<3>(&faulty.fused, d_s);
+            let compensated = predicted::<3>(&faulty.fused, to_frame);
             let close = [
                 ("ideal gyro", e_ideal[0].clone()),
-                ("shipped fusion", run(&faulty.fused)[0].clone()),
+                ("fusion, no compensation", run(&faulty.fused)[0].clone()),
                 (
-                    "fusion, compensated (K 3, to the arrival)",
+                    "fusion, compensated as the board does (K 3, to the frame's end)",
                     run(&compensated)[0].clone(),
                 ),
             ];
@@ -642,10 +654,16 @@ fn main() {
     for (v, l) in &scores {
         println!("  {v:.4}  {l}");
     }
-    let Some(&(_, chosen)) = scores.first() else {
+    let Some(&(_, least)) = scores.first() else {
         return;
     };
-    println!("\nthe least: {chosen}; against no compensation (worst axis):");
+    // What ships: the link's K and its default horizon.
+    let board = format!(
+        "K {:>2}, to the frame's end (the board's)",
+        gyro_array::link::port::PREDICT_K
+    );
+    let chosen = comp.iter().map(|c| &c.label).find(|l| **l == board).unwrap_or(least);
+    println!("\nthe least: {least}; the board's: {chosen}, against no compensation (worst axis):");
     for c in comp.iter().filter(|c| &c.label == chosen) {
         let ratio_delay = worst(&c.s_delay) / worst(&c.sd).max(1e-12);
         let ratio_noise = worst(&c.sn) / worst(&c.s_noise).max(1e-12);
