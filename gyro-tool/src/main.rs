@@ -13,6 +13,9 @@
 //! - `gyro decode FILE --what samples|noise|raw|status -o CSV`.
 //! - `gyro analyse FILE`: Allan deviation of each fused axis and the
 //!   E-DAVAR estimates the board sent.
+//! - `gyro pointing FILE [--svg OUT]`: the recording through the reference
+//!   stabilisation loop: the pointing error its stated delay and its noise
+//!   leave, per axis.
 //!
 //! SRC is `serial:PATH[@BAUD]`, `tcp:HOST:PORT`, `unix:PATH`, `file:PATH`
 //! or `-`. Protocol: `docs/link.md`.
@@ -22,6 +25,7 @@ mod dev;
 mod edf;
 mod fit;
 mod plot;
+mod pointing;
 mod replay;
 mod source;
 mod summary;
@@ -102,6 +106,15 @@ enum Cmd {
     Analyse {
         /// The recording.
         file: PathBuf,
+    },
+    /// A recording through the reference stabilisation loop: the pointing
+    /// error its stated delay and its noise leave, per axis.
+    Pointing {
+        /// The recording.
+        file: PathBuf,
+        /// Draw the motion and the pointing error on x as SVG.
+        #[arg(long)]
+        svg: Option<PathBuf>,
     },
     /// Allan-family deviations of a rate log: CSV or whitespace text with
     /// a header line, one column per series.
@@ -367,6 +380,7 @@ fn main() -> ExitCode {
         } => check(&file, (samples, min_samples), fused_crc32, acks),
         Cmd::Decode { file, what, out } => decode(&file, what, out),
         Cmd::Analyse { file } => analyse::run(&file),
+        Cmd::Pointing { file, svg } => pointing::run(&file, svg.as_ref()),
         Cmd::Allan {
             log,
             columns,

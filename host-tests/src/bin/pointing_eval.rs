@@ -662,7 +662,11 @@ fn main() {
         "K {:>2}, to the frame's end (the board's)",
         gyro_array::link::port::PREDICT_K
     );
-    let chosen = comp.iter().map(|c| &c.label).find(|l| **l == board).unwrap_or(least);
+    let chosen = comp
+        .iter()
+        .map(|c| &c.label)
+        .find(|l| **l == board)
+        .unwrap_or(least);
     println!("\nthe least: {least}; the board's: {chosen}, against no compensation (worst axis):");
     for c in comp.iter().filter(|c| &c.label == chosen) {
         let ratio_delay = worst(&c.s_delay) / worst(&c.sd).max(1e-12);

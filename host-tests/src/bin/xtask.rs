@@ -253,6 +253,7 @@ fn demo_end_to_end() -> bool {
         "--acks",
         "ok,out-of-range",
     ])) && run(Command::new(&gyro).arg("analyse").arg(&rec))
+        && run(Command::new(&gyro).arg("pointing").arg(&rec))
 }
 
 fn build_board() -> PathBuf {
