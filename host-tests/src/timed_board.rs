@@ -23,8 +23,8 @@ use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
 
 /// Chips.
 pub const N: usize = 4;
-/// The stated instant's distance behind the read, µs (`timing-eval`).
-pub const DELAY_US: u32 = 1950;
+/// The stated instant's distance behind the read, µs: the board's.
+pub const DELAY_US: u32 = gyro_array::pipeline::timed::BOARD_DELAY_US;
 
 /// The bus of the timed board.
 pub type Bus<'a> = RefCell<EmuBus<'a, N>>;

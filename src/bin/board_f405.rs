@@ -7,6 +7,17 @@
 //! (`gyro_array::link`, `docs/link.md`) is USART1 (PA9 TX, PA10 RX) at
 //! 6 Mbaud, 8N1 (`link::BAUD`). SysTick paces sampling at 1 kHz; a tick that comes
 //! before the previous sample is done is counted as an overrun.
+//!
+//! Time (`docs/timing.md`): TIM3 CH1 on PC6 drives every ICM-42688-P's
+//! CLKIN (pin 9) at 32 kHz; each chip's INT1 pulses at every sample into
+//! TIM5 CH1–4 (PA0–PA3), captured against TIM5's µs count, the board's
+//! clock for the instants it states. After their self-tests (data
+//! registers) the chips sample into their FIFOs at 2 kHz on CLKIN; each is
+//! read through `TimedIcm` (its clock tracked from the captures, its
+//! samples brought to one instant 1 950 µs behind the read), and one that
+//! loses CLKIN moves to its own clock, tracked. The status frames carry
+//! each chip's clock and its error. The ADXRS453's reading is older than
+//! that instant (3.9 ms): read and watched, not fused (`AtInstant`).
 //! Logs go out over RTT (defmt); flash and run with `cargo flash`.
 //!
 //! Clocks (`board::f405::start_clocks`): the 8 MHz crystal and the PLL to
@@ -46,13 +57,14 @@ use gyro_array::board::f405::{self, ClockSource, CycleDelay, RxQueue};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{idle, persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::Icm42688;
+use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
 use gyro_array::drivers::Gyro;
-use gyro_array::link::msg::Settings;
+use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
 use gyro_array::link::port::Port;
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
+use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -168,6 +180,29 @@ fn main() -> ! {
     let gpioa = dp.GPIOA.split(&mut rcc);
     let gpiob = dp.GPIOB.split(&mut rcc);
     let gpioc = dp.GPIOC.split(&mut rcc);
+    // The chips' clock (TIM3 CH1, PC6) and their INT1 captures (TIM5
+    // CH1-4, PA0-PA3), before anything else takes the pins.
+    let clkin = f405::start_clkin(dp.TIM3, gpioc.pc6.into_alternate(), &mut rcc);
+    match clkin {
+        Some(hz) => defmt::info!("CLKIN {} Hz on PC6 (TIM3 CH1)", hz),
+        None => defmt::warn!(
+            "CLKIN: the timer clock does not divide to 32 kHz; the chips keep their own clocks"
+        ),
+    }
+    let Some(captures) = f405::Int1Captures::start(
+        dp.TIM5,
+        (
+            gpioa.pa0.into_alternate(),
+            gpioa.pa1.into_alternate(),
+            gpioa.pa2.into_alternate(),
+            gpioa.pa3.into_alternate(),
+        ),
+        &mut rcc,
+    ) else {
+        // Both of the board's clock trees (the PLL's 84 MHz APB1 timers,
+        // the internal oscillator's 16 MHz) are whole MHz.
+        give_up("TIM5 at 1 MHz")
+    };
     let mode = Mode {
         polarity: Polarity::IdleLow,
         phase: Phase::CaptureOnFirstTransition,
@@ -311,6 +346,57 @@ fn main() -> ! {
         pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
     }
 
+    // The chips from their self-tests (data registers) to the board's
+    // sampling: FIFO at 2 kHz, each sample's INT1 captured, on CLKIN where
+    // the board drives it (`docs/timing.md`). A chip that failed before is
+    // set up too, so its restarts bring it back to this configuration.
+    let cfg = Config {
+        odr: Odr::Hz2000,
+        filter: Filter::BOARD_2K,
+        clock: if clkin.is_some() {
+            ClockInput::ClkIn
+        } else {
+            ClockInput::Internal
+        },
+        sampling: Sampling::Fifo,
+        ..Config::default()
+    };
+    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+        if let Err(e) = g.init(&mut delay, cfg) {
+            if failed & (1 << i) == 0 {
+                defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
+            }
+            pipe.mark_init_failed(i);
+        }
+        let _ = g.flush_fifo();
+    }
+    let (mut t0, mut t1, mut t2, mut t3) = (
+        TimedIcm::new(g0, captures.channel(0)),
+        TimedIcm::new(g1, captures.channel(1)),
+        TimedIcm::new(g2, captures.channel(2)),
+        TimedIcm::new(g3, captures.channel(3)),
+    );
+    // The ADXRS453's reading is older than the array's instant: read and
+    // watched, not fused (z is the four ICM-42688-P's).
+    let mut g4 = AtInstant::new(g4, BOARD_DELAY_US);
+    // What the status frames say of each chip's clock.
+    let clocks = |t: [&TimedIcm<_, _>; 4]| {
+        let mut c = [(LinkClock::Polled, 0i32); 5];
+        for (slot, t) in c.iter_mut().zip(t) {
+            let src = match t.clock_input() {
+                ClockInput::ClkIn => LinkClock::ClkIn,
+                ClockInput::Internal => LinkClock::Own,
+            };
+            let ppm = if timed::tracking(t.clock()) {
+                t.clock().error_ppm() as i32
+            } else {
+                0
+            };
+            *slot = (src, ppm);
+        }
+        c
+    };
+
     let u = stack::stack_usage();
     defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
     watchdog.start(100.millis());
@@ -334,7 +420,7 @@ fn main() -> ! {
                     [1, 16, 256],
                     1_000_000 / FS_HZ,
                     meter.peak(),
-                    &[],
+                    &clocks([&t0, &t1, &t2, &t3]),
                 );
                 port.send(&st);
             }
@@ -349,7 +435,16 @@ fn main() -> ! {
             pipe.note_overrun(elapsed - 1);
             defmt::warn!("overrun: {} period(s) missed", elapsed - 1);
         }
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+        // One instant for the array, a fixed delay behind the read, on
+        // TIM5's µs (the captures' clock), in 1/16 µs.
+        let at = captures
+            .micros()
+            .wrapping_sub(BOARD_DELAY_US)
+            .wrapping_mul(16);
+        for t in [&mut t0, &mut t1, &mut t2, &mut t3] {
+            t.set_instant(at, BOARD_DELAY_US);
+        }
+        let mut gyros: [&mut dyn Gyro; 5] = [&mut t0, &mut t1, &mut t2, &mut t3, &mut g4];
         let out = pipe.step(&mut gyros);
         pipe.log_health_changes(&out);
         noise.push(&out);

@@ -794,7 +794,7 @@ fn bench_timed_loop_on(
     use gyro_array::pipeline::timed::TimedIcm;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
-    const DELAY_US: u32 = 1950;
+    const DELAY_US: u32 = gyro_array::pipeline::timed::BOARD_DELAY_US;
 
     let chips = timed_array(
         profile,

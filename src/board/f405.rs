@@ -194,3 +194,129 @@ impl embedded_hal_nb::serial::Read<u8> for RxQueue {
             .ok_or(nb::Error::WouldBlock)
     }
 }
+
+/// The ICM-42688-Ps' CLKIN (their pin 9, set to CLKIN through
+/// INTF_CONFIG5): TIM3 channel 1 on PC6 (AF2), at half duty. 32 kHz is in
+/// the 31–50 kHz RTC-mode range, gives the chips' 2 kHz ODR as CLKIN / 16,
+/// and both of the board's APB1 timer clocks divide to it exactly
+/// (84 MHz / 2 625 with the PLL, 16 MHz / 500 on the internal oscillator
+/// alone).
+pub const CLKIN_HZ: u32 = 32_000;
+
+/// Start CLKIN on PC6. Returns the frequency made, Hz, or `None` (and
+/// leaves the timer off) when the timer clock does not divide to
+/// [`CLKIN_HZ`] within TIM3's 16-bit period: the chips then run on their
+/// own clocks, tracked (`pipeline::clock`).
+pub fn start_clkin(
+    tim: pac::TIM3,
+    _pin: stm32f4xx_hal::gpio::Pin<'C', 6, stm32f4xx_hal::gpio::Alternate<2>>,
+    rcc: &mut Rcc,
+) -> Option<u32> {
+    use stm32f4xx_hal::rcc::Enable;
+    let clk = rcc.clocks.timclk1().raw();
+    let period = clk / CLKIN_HZ;
+    if period < 2 || period > u32::from(u16::MAX) + 1 || clk % CLKIN_HZ != 0 {
+        return None;
+    }
+    pac::TIM3::enable(rcc);
+    // RM0090 18.3.9 (PWM mode 1): high while CNT < CCR1, period ARR + 1.
+    tim.psc().write(|w| w.psc().set(0));
+    tim.arr().write(|w| w.arr().set((period - 1) as u16));
+    tim.ccr1().write(|w| w.ccr().set((period / 2) as u16));
+    tim.ccmr1_output()
+        .modify(|_, w| w.oc1m().pwm_mode1().oc1pe().set_bit());
+    tim.ccer()
+        .modify(|_, w| w.cc1e().set_bit().cc1p().clear_bit());
+    tim.egr().write(|w| w.ug().set_bit());
+    tim.cr1().modify(|_, w| w.arpe().set_bit().cen().set_bit());
+    Some(clk / period)
+}
+
+/// The chips' INT1 pulses (one at each sample: `Sampling::Fifo`'s INT1
+/// set-up), captured by TIM5 channels 1–4 on PA0–PA3 (AF2), rising edge,
+/// against TIM5 counting µs on its 32 bits (it wraps after 71 minutes;
+/// the clock tracker works in wrapping µs). TIM5's count is the board's µs
+/// clock for the instants the array states ([`Int1Captures::micros`]).
+pub struct Int1Captures {
+    tim: pac::TIM5,
+}
+
+/// The INT1 pins, in chip order.
+pub type Int1Pins = (
+    stm32f4xx_hal::gpio::Pin<'A', 0, stm32f4xx_hal::gpio::Alternate<2>>,
+    stm32f4xx_hal::gpio::Pin<'A', 1, stm32f4xx_hal::gpio::Alternate<2>>,
+    stm32f4xx_hal::gpio::Pin<'A', 2, stm32f4xx_hal::gpio::Alternate<2>>,
+    stm32f4xx_hal::gpio::Pin<'A', 3, stm32f4xx_hal::gpio::Alternate<2>>,
+);
+
+impl Int1Captures {
+    /// Start TIM5 at 1 MHz with its four channels capturing. `None` when
+    /// the timer clock is not a whole number of MHz.
+    pub fn start(tim: pac::TIM5, _pins: Int1Pins, rcc: &mut Rcc) -> Option<Self> {
+        use stm32f4xx_hal::rcc::Enable;
+        let clk = rcc.clocks.timclk1().raw();
+        if clk % 1_000_000 != 0 || clk < 1_000_000 {
+            return None;
+        }
+        pac::TIM5::enable(rcc);
+        tim.psc()
+            .write(|w| w.psc().set((clk / 1_000_000 - 1) as u16));
+        tim.arr().write(|w| w.arr().set(u32::MAX));
+        // RM0090 18.3.5: CCxS = TIx, no filter, no prescaler; CCxP = 0
+        // (rising edge: INT1 is push-pull, active high, pulsed).
+        tim.ccmr1_input().modify(|_, w| w.cc1s().ti1().cc2s().ti2());
+        tim.ccmr2_input().modify(|_, w| w.cc3s().ti3().cc4s().ti4());
+        tim.ccer().modify(|_, w| {
+            w.cc1p().clear_bit().cc1e().set_bit();
+            w.cc2p().clear_bit().cc2e().set_bit();
+            w.cc3p().clear_bit().cc3e().set_bit();
+            w.cc4p().clear_bit().cc4e().set_bit()
+        });
+        tim.egr().write(|w| w.ug().set_bit());
+        tim.cr1().modify(|_, w| w.cen().set_bit());
+        Some(Self { tim })
+    }
+
+    /// The board's µs clock (TIM5's count).
+    pub fn micros(&self) -> u32 {
+        self.tim.cnt().read().bits()
+    }
+
+    /// Chip `ch`'s capture (0..=3).
+    pub fn channel(&self, ch: usize) -> Int1Capture<'_> {
+        Int1Capture {
+            tim: &self.tim,
+            ch: ch.min(3),
+            last: None,
+        }
+    }
+}
+
+/// One chip's INT1 capture ([`crate::drivers::SampleCapture`]).
+pub struct Int1Capture<'a> {
+    tim: &'a pac::TIM5,
+    ch: usize,
+    last: Option<u32>,
+}
+
+impl crate::drivers::SampleCapture for Int1Capture<'_> {
+    #[allow(unsafe_code)]
+    fn last_us(&mut self) -> Option<u32> {
+        let sr = self.tim.sr().read().bits();
+        if sr & (1 << (1 + self.ch)) != 0 {
+            // Reading CCRx clears CCxIF (RM0090 18.4.5). A pulse captured
+            // over an unread one sets CCxOF: the register holds the newer,
+            // which is the one wanted; the flag is cleared by writing 0 to
+            // it and 1 elsewhere (rc_w0: the other channels' flags are
+            // left as they are).
+            self.last = Some(self.tim.ccr(self.ch).read().bits());
+            if sr & (1 << (9 + self.ch)) != 0 {
+                // SAFETY: SR's flags are rc_w0; writing 1 leaves them.
+                self.tim
+                    .sr()
+                    .write(|w| unsafe { w.bits(!(1 << (9 + self.ch))) });
+            }
+        }
+        self.last
+    }
+}

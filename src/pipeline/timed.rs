@@ -66,6 +66,14 @@ pub struct TimingCounters {
 /// agree with each other are a new level (a chip that saturates), taken.
 pub const SPIKE_DPS: f32 = 25.0;
 
+/// How far behind its read the board states each sample's instant, µs,
+/// for its chips at 2 kHz through `Filter::BOARD_2K`: the path's group
+/// delay (1 181), the moving mean's half-span (250) and one sample period
+/// for the newest mean to exist, for a chip 1 % slow (a PLL's limit),
+/// rounded up to 10 µs (`timing-eval` works it out from the filters and
+/// prints the budget).
+pub const BOARD_DELAY_US: u32 = 1950;
+
 /// Reads without a sample after which a chip on CLKIN is taken to have lost
 /// it (at 2 kHz, 20 reads without one of 40 expected samples) and is moved
 /// to its own clock: the chip's grid stops without CLKIN (see
@@ -429,4 +437,110 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
 /// Whether the tracker has the chip's clock.
 pub fn tracking(c: &ChipClock) -> bool {
     c.state() == ClockState::Tracking
+}
+
+/// A polled gyro in an array that states one instant `behind_us` behind
+/// the read (the board's, [`BOARD_DELAY_US`]): its reading describes its
+/// own delay behind the read ([`Gyro::delay_us`]). One whose delay is
+/// longer has nothing for the instant and answers [`ReadFault::Late`]
+/// (neither fused nor a fault) after its read, so its health is still
+/// watched: the ADXRS453, whose 2.9 ms filter and one-frame-late response
+/// make 3.9 ms, on the board's 1.95 ms instant. (Reading the ADXRS453 at
+/// the instant would need its rate predicted 2 ms forward, its noise
+/// doubled: `docs/timing.md`.)
+pub struct AtInstant<G> {
+    g: G,
+    behind_us: u32,
+}
+
+impl<G: Gyro> AtInstant<G> {
+    /// `g` in an array stating instants `behind_us` behind the read.
+    pub fn new(g: G, behind_us: u32) -> Self {
+        Self { g, behind_us }
+    }
+
+    /// The gyro.
+    pub fn inner(&mut self) -> &mut G {
+        &mut self.g
+    }
+}
+
+impl<G: Gyro> Gyro for AtInstant<G> {
+    fn read(&mut self) -> Result<Reading, ReadFault> {
+        let r = self.g.read()?;
+        if self.g.delay_us() > self.behind_us {
+            return Err(ReadFault::Late);
+        }
+        Ok(r)
+    }
+
+    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
+        self.g.restart(step)
+    }
+
+    fn check_config(&mut self) -> Result<(), ReadFault> {
+        self.g.check_config()
+    }
+
+    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
+        self.g.temperature_c()
+    }
+
+    fn delay_us(&self) -> u32 {
+        self.g.delay_us()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A gyro whose reading describes `delay_us` behind its read.
+    struct Fixed {
+        delay_us: u32,
+        fail: bool,
+    }
+
+    impl Gyro for Fixed {
+        fn read(&mut self) -> Result<Reading, ReadFault> {
+            if self.fail {
+                return Err(ReadFault::Bus);
+            }
+            Ok(Reading {
+                raw: [1, 2, 3],
+                rate_dps: [0.1, 0.2, 0.3],
+                axes: 0b100,
+                saturated: 0,
+            })
+        }
+        fn restart(&mut self, _: u8) -> Result<Restart, ReadFault> {
+            Ok(Restart::Done)
+        }
+        fn delay_us(&self) -> u32 {
+            self.delay_us
+        }
+    }
+
+    #[test]
+    fn a_gyro_older_than_the_instant_is_late_and_its_faults_still_count() {
+        let mut old = AtInstant::new(
+            Fixed {
+                delay_us: 3900,
+                fail: false,
+            },
+            BOARD_DELAY_US,
+        );
+        assert_eq!(old.read(), Err(ReadFault::Late));
+        old.inner().fail = true;
+        assert_eq!(old.read(), Err(ReadFault::Bus));
+        let mut new = AtInstant::new(
+            Fixed {
+                delay_us: 1200,
+                fail: false,
+            },
+            BOARD_DELAY_US,
+        );
+        assert!(new.read().is_ok());
+        assert_eq!(new.delay_us(), 1200);
+    }
 }

@@ -385,7 +385,7 @@ impl RttReader {
 /// `gyro record` records while three commands go the other way. Its
 /// defmt log is read over QMP (see `RttReader`).
 fn board_qemu(seconds: u64) -> bool {
-    use gyro_array::link::msg::Frame;
+    use gyro_array::link::msg::{ClockSource, Frame};
     use gyro_array::link::wire::{Decoder, MAX_FRAME};
     use gyro_array::pipeline::flag;
 
@@ -501,6 +501,9 @@ fn board_qemu(seconds: u64) -> bool {
     if !log.contains("calibration record: Missing; running uncalibrated") {
         fails.push("no typed error for the missing calibration record".into());
     }
+    if !log.contains("CLKIN 32000 Hz on PC6 (TIM3 CH1)") {
+        fails.push("CLKIN not started (TIM3 CH1 at 32 kHz)".into());
+    }
     if !log.contains("gyro 4: ADXRS453 init failed: CheckFailed") {
         fails.push("gyro 4: no typed CheckFailed error logged".into());
     }
@@ -533,6 +536,20 @@ fn board_qemu(seconds: u64) -> bool {
                     .iter()
                     .all(|g| g.flags & flag::INIT_FAILED != 0 && g.reads == 0);
             let retried = s.gyros.iter().all(|g| g.restarts > 0);
+            // The four ICM-42688-P on the board's CLKIN (TIM3 runs in QEMU),
+            // the ADXRS453 polled.
+            let clocks: Vec<_> = s.gyros.iter().map(|g| g.clock).collect();
+            let want = [
+                ClockSource::ClkIn,
+                ClockSource::ClkIn,
+                ClockSource::ClkIn,
+                ClockSource::ClkIn,
+                ClockSource::Polled,
+            ];
+            println!("board-qemu: clocks {clocks:?}");
+            if clocks != want {
+                fails.push(format!("status frames' clocks {clocks:?}, not {want:?}"));
+            }
             println!(
                 "board-qemu: status at seq {}: method {:?}, gyros out {all_out}, re-probed {retried} (restarts {:?}), stack peak {} B",
                 s.seq,
