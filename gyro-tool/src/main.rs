@@ -13,9 +13,10 @@
 //! - `gyro decode FILE --what samples|noise|raw|status -o CSV`.
 //! - `gyro analyse FILE`: Allan deviation of each fused axis and the
 //!   E-DAVAR estimates the board sent.
-//! - `gyro pointing FILE [--svg OUT]`: the recording through the reference
-//!   stabilisation loop: the pointing error its stated delay and its noise
-//!   leave, per axis.
+//! - `gyro pointing FILE [--truth CSV] [--svg OUT]`: the recording through
+//!   the reference stabilisation loop: the pointing error it adds to the
+//!   ideal gyro's per axis, split into delay and noise (and, against a
+//!   reference, calibration and faults).
 //!
 //! SRC is `serial:PATH[@BAUD]`, `tcp:HOST:PORT`, `unix:PATH`, `file:PATH`
 //! or `-`. Protocol: `docs/link.md`.
@@ -112,7 +113,13 @@ enum Cmd {
     Pointing {
         /// The recording.
         file: PathBuf,
-        /// Draw the motion and the pointing error on x as SVG.
+        /// The true rate on the board's clock (CSV: t_us,x_dps,y_dps,z_dps;
+        /// an emulated run's, `pointing-eval --write`): the error then
+        /// splits into delay, calibration, noise and faults.
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Draw the motion and the pointing error of the axis that moved
+        /// most as SVG.
         #[arg(long)]
         svg: Option<PathBuf>,
     },
@@ -380,7 +387,7 @@ fn main() -> ExitCode {
         } => check(&file, (samples, min_samples), fused_crc32, acks),
         Cmd::Decode { file, what, out } => decode(&file, what, out),
         Cmd::Analyse { file } => analyse::run(&file),
-        Cmd::Pointing { file, svg } => pointing::run(&file, svg.as_ref()),
+        Cmd::Pointing { file, truth, svg } => pointing::run(&file, truth.as_ref(), svg.as_ref()),
         Cmd::Allan {
             log,
             columns,

@@ -56,6 +56,30 @@ struct Args {
     /// Board seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
+    /// Write the 30 °/s highway run with faults as the board streams it
+    /// (`highway.glk`, the link's bytes) with its true rate
+    /// (`highway-truth.csv`) into this folder, for `gyro pointing
+    /// highway.glk --truth highway-truth.csv`.
+    #[arg(long)]
+    write: Option<PathBuf>,
+}
+
+/// The link's bytes, as a UART would take them.
+#[derive(Default)]
+struct Wire(Vec<u8>);
+
+impl embedded_hal_nb::serial::ErrorType for Wire {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for Wire {
+    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        self.0.push(b);
+        Ok(())
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
 }
 
 /// Start-up, not scored: the clocks acquire, the static calibration of the
@@ -153,6 +177,19 @@ struct Stream {
 }
 
 fn board_run(p: &Profile, seed: u64, ms: u32, faulty: bool) -> Stream {
+    board_run_to(p, seed, ms, faulty, None)
+}
+
+/// [`board_run`], the link's bytes written to `wire` as the board's port
+/// sends them (its default settings: the delay compensation on).
+fn board_run_to(
+    p: &Profile,
+    seed: u64,
+    ms: u32,
+    faulty: bool,
+    mut wire: Option<&mut Wire>,
+) -> Stream {
+    let mut port = gyro_array::link::port::Port::<4096>::new(Default::default());
     let plan = if faulty { faults(ms) } else { vec![] };
     let timing = Timing {
         clkin: false,
@@ -190,6 +227,24 @@ fn board_run(p: &Profile, seed: u64, ms: u32, faulty: bool) -> Stream {
                     if f.rate_dps.is_finite() {
                         held[a] = f.rate_dps as f64;
                     }
+                }
+            }
+            if let Some(w) = wire.as_deref_mut() {
+                port.publish(x.out, (now * 1e6) as u64, x.pipe, &());
+                if port.status_due(x.out.seq) {
+                    let st = port.status(
+                        x.pipe,
+                        x.out.seq,
+                        (now * 1e6) as u64,
+                        [1, 16, 256],
+                        1000,
+                        0,
+                        &[],
+                    );
+                    port.send(&st);
+                }
+                while port.queued() > 0 {
+                    port.drain(w);
                 }
             }
             s.now_s.push(now);
@@ -618,6 +673,30 @@ fn main() {
                 &e_other_ideal,
             ));
             yardstick.push((p.name, a_other));
+        }
+        if let (Some(dir), true) = (&args.write, p.name.starts_with("highway: 30")) {
+            let _ = std::fs::create_dir_all(dir);
+            let mut w = Wire::default();
+            let run = board_run_to(&p, args.seed, ms, true, Some(&mut w));
+            let glk = dir.join("highway.glk");
+            let csv = dir.join("highway-truth.csv");
+            // The truth at 2 kHz on the bus's clock (the frames' t_us).
+            let t_end = run.now_s.last().copied().unwrap_or(0.0) + 0.01;
+            let mut text = String::from("t_us,x_dps,y_dps,z_dps\n");
+            for k in 0..(t_end * 2000.0) as usize {
+                let t = k as f64 / 2000.0;
+                let r = p.rate.at_f64(t);
+                text += &format!("{:.1},{:.6},{:.6},{:.6}\n", t * 1e6, r[0], r[1], r[2]);
+            }
+            match (std::fs::write(&glk, &w.0), std::fs::write(&csv, text)) {
+                (Ok(()), Ok(())) => println!(
+                    "  written: {} ({} B) and {}",
+                    glk.display(),
+                    w.0.len(),
+                    csv.display()
+                ),
+                (a, b) => println!("  writing failed: {a:?} {b:?}"),
+            }
         }
         if let (Some(dir), true) = (&args.svg, p.name.starts_with("highway: 30")) {
             let _ = std::fs::create_dir_all(dir);
