@@ -29,7 +29,7 @@
 
 use std::path::PathBuf;
 
-use gyro_array::algo::pointing::{stats, Axis, ErrorStats, Loop, LoopParams};
+use gyro_array::algo::pointing::{fit_line, stats, Axis, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_array::link::msg::Frame;
 use gyro_array::link::port::{Port, PREDICT_K};
@@ -270,22 +270,12 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
             // scale and bias fitted, the rest split by the health flags.
             let eps: Vec<f64> = rates.iter().zip(&stated).map(|(x, s)| x - s).collect();
             let scored = |k: usize| fr[k].t_us as f64 - t0 >= skip as f64 * 1000.0;
-            let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-            for k in (0..fr.len()).filter(|&k| scored(k) && !fr[k].flagged) {
-                let x = stated[k];
-                n += 1.0;
-                sx += x;
-                sy += eps[k];
-                sxx += x * x;
-                sxy += x * eps[k];
-            }
-            let var = sxx - sx * sx / n.max(1.0);
-            let m = if var > 1e-6 * n {
-                (sxy - sx * sy / n) / var
-            } else {
-                0.0
-            };
-            let b = (sy - m * sx) / n.max(1.0);
+            let (m, b) = fit_line(
+                (0..fr.len())
+                    .filter(|&k| scored(k) && !fr[k].flagged)
+                    .map(|k| (stated[k], eps[k])),
+                0.0,
+            );
             let cal: Vec<f64> = stated.iter().map(|x| m * x + b).collect();
             let rest = |k: usize| eps[k] - cal[k];
             let faults: Vec<f64> = (0..fr.len())

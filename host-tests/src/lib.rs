@@ -15,30 +15,10 @@ pub mod latency {
     pub const LOOP_US: f64 = 10_000.0 / 168.0;
 
     /// Bytes of the largest sample frame on the wire (every field filled,
-    /// an E-DAVAR estimate included, five gyros), through the link's own
-    /// encoder.
+    /// an E-DAVAR estimate included, five gyros): the link's own figure,
+    /// which its tests check against its encoder.
     pub fn sample_frame_bytes() -> usize {
-        use gyro_array::link::msg::{Frame, Noise, Sample};
-        let s = Sample {
-            seq: u32::MAX,
-            t_us: u64::MAX,
-            age_us: [u16::MAX; 3],
-            predicted_us: Some(u16::MAX),
-            rate_dps: [123.456; 3],
-            valid: 7,
-            degraded: 0x87,
-            used: [0x1F; 3],
-            health: [0x1F; 5].into_iter().collect(),
-            noise: Some(Noise {
-                axis: 2,
-                seq: u32::MAX,
-                len: u16::MAX,
-                bridged: u8::MAX,
-                sigma_dps: [1.0; 3],
-            }),
-        };
-        let mut buf = [0u8; 512];
-        gyro_array::link::wire::encode(u32::MAX, &Frame::Sample(s), &mut buf).unwrap_or(0)
+        gyro_array::link::port::SAMPLE_FRAME_MAX as usize
     }
 
     /// The frame's time on the wire at the link's speed (8N1), µs.

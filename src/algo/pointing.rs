@@ -225,6 +225,29 @@ pub fn stats(e: &mut [f64]) -> ErrorStats {
     }
 }
 
+/// The least-squares line y = m·x + b through `points`: (m, b). Where x
+/// does not vary (a still vehicle: nothing to tell a scale from), m is
+/// `flat_slope` and b what is left of the mean. The scale-and-bias fit of
+/// a gyro's rate error (`pointing-eval`, `gyro pointing`).
+pub fn fit_line(points: impl IntoIterator<Item = (f64, f64)>, flat_slope: f64) -> (f64, f64) {
+    let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    for (x, y) in points {
+        n += 1.0;
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        sxy += x * y;
+    }
+    let n1 = n.max(1.0);
+    let var = sxx - sx * sx / n1;
+    let m = if var > 1e-6 * n {
+        (sxy - sx * sy / n1) / var
+    } else {
+        flat_slope
+    };
+    (m, (sy - m * sx) / n1)
+}
+
 /// The closed-form check of a rate step: the largest error, relative to
 /// R τ, of the simulated e(t) against R τ (1 − e^(−t/τ)) over 20 τ, with
 /// no tracking loop, no lead (a step has no derivative to lead) and no
@@ -351,6 +374,13 @@ mod tests {
             l.step(&mut st, 400.0 * t, 400.0, 0.0);
         }
         assert!((st.phi_dps + 200.0).abs() < 1e-9, "{}", st.phi_dps);
+    }
+
+    #[test]
+    fn a_line_is_fitted_and_a_flat_one_keeps_its_slope() {
+        let (m, b) = fit_line((0..100).map(|k| (k as f64, 3.0 * k as f64 - 2.0)), 1.0);
+        assert!((m - 3.0).abs() < 1e-12 && (b + 2.0).abs() < 1e-9);
+        assert_eq!(fit_line((0..10).map(|_| (5.0, 7.0)), 1.0), (1.0, 2.0));
     }
 
     #[test]

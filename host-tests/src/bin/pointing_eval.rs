@@ -353,27 +353,15 @@ fn worst(s: &[ErrorStats; 3]) -> f64 {
 fn calibrate_one(s: &Stream, rate: &RateProfile, chip: usize) -> Feed {
     let mut fit = [(1.0f64, 0.0f64); 3];
     for (a, f) in fit.iter_mut().enumerate() {
-        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-        for (k, c) in s.chips.iter().enumerate() {
-            if s.now_s[k] >= SKIP_S || s.now_s[k] < 0.5 || !c[chip][a].is_finite() {
-                continue;
-            }
-            let x = rate.at_f64(s.stated_s[k])[a];
-            let y = c[chip][a];
-            n += 1.0;
-            sx += x;
-            sy += y;
-            sxx += x * x;
-            sxy += x * y;
-        }
-        let var = sxx - sx * sx / n.max(1.0);
-        // Still (no variance in the truth): bias alone.
-        let scale = if var > 1e-6 * n {
-            (sxy - sx * sy / n) / var
-        } else {
-            1.0
-        };
-        *f = (scale, (sy - scale * sx) / n.max(1.0));
+        // Still (no variance in the truth): the bias alone.
+        *f = pointing::fit_line(
+            s.chips.iter().enumerate().filter_map(|(k, c)| {
+                let scored = s.now_s[k] < SKIP_S && s.now_s[k] >= 0.5;
+                (scored && c[chip][a].is_finite())
+                    .then(|| (rate.at_f64(s.stated_s[k])[a], c[chip][a]))
+            }),
+            1.0,
+        );
     }
     let mut held = [0.0f64; 3];
     s.chips
@@ -427,25 +415,12 @@ fn split(
     let mut noise_part = vec![[0.0; 3]; eps.len()];
     for a in 0..3 {
         // ε ≈ m·ω + b over the scored part.
-        let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-        for k in 0..eps.len() {
-            if s.now_s[k] < SKIP_S {
-                continue;
-            }
-            let x = rate.at_f64(s.stated_s[k])[a];
-            n += 1.0;
-            sx += x;
-            sy += eps[k][a];
-            sxx += x * x;
-            sxy += x * eps[k][a];
-        }
-        let var = sxx - sx * sx / n.max(1.0);
-        let m = if var > 1e-6 * n {
-            (sxy - sx * sy / n) / var
-        } else {
-            0.0
-        };
-        let b = (sy - m * sx) / n.max(1.0);
+        let (m, b) = pointing::fit_line(
+            (0..eps.len())
+                .filter(|&k| s.now_s[k] >= SKIP_S)
+                .map(|k| (rate.at_f64(s.stated_s[k])[a], eps[k][a])),
+            0.0,
+        );
         for k in 0..eps.len() {
             let c = m * rate.at_f64(s.stated_s[k])[a] + b;
             cal_part[k][a] = c;
