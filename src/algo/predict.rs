@@ -72,14 +72,12 @@ impl<const K: usize> Predictor<K> {
         if !self.ready() {
             return None;
         }
-        // x_j = j (j = 0 the oldest): ȳ + slope·(x − x̄), x = K − 1 + ahead.
-        let k = K as f32;
-        let mean_x = (k - 1.0) / 2.0;
-        let sxx = k * (k * k - 1.0) / 12.0;
+        // x_j = j (j = 0 the oldest): ȳ + slope·(x − x̄), x = K − 1 + ahead;
+        // the constants fold (K is a type's).
         let (mut sum, mut sxy) = ([0.0f32; 3], [0.0f32; 3]);
         let mut i = self.head;
         for j in 0..K {
-            let dx = j as f32 - mean_x;
+            let dx = j as f32 - Self::MEAN_X;
             let s = &self.ring[i];
             for a in 0..3 {
                 sum[a] += s[a];
@@ -87,11 +85,22 @@ impl<const K: usize> Predictor<K> {
             }
             i = if i + 1 >= K { 0 } else { i + 1 };
         }
+        let end = K as f32 - 1.0 - Self::MEAN_X;
         Some(core::array::from_fn(|a| {
-            let slope = if sxx > 0.0 { sxy[a] / sxx } else { 0.0 };
-            sum[a] / k + slope * (k - 1.0 - mean_x + ahead[a])
+            sum[a] * Self::INV_K + sxy[a] * Self::INV_SXX * (end + ahead[a])
         }))
     }
+
+    /// x̄ of the fit's abscissae 0 … K − 1.
+    const MEAN_X: f32 = (K as f32 - 1.0) / 2.0;
+    /// 1/K.
+    const INV_K: f32 = 1.0 / K as f32;
+    /// 1/Sxx (0 for K < 2: no slope).
+    const INV_SXX: f32 = if K < 2 {
+        0.0
+    } else {
+        12.0 / (K as f32 * (K as f32 * K as f32 - 1.0))
+    };
 
     /// The predicted rate's white noise against one sample's, read
     /// `ahead` periods after the newest: √(1/K + (x − x̄)²/Sxx).

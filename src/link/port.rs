@@ -103,6 +103,10 @@ pub struct Port<const TX: usize> {
     /// The UART's speed, baud, and the sample period, µs.
     baud: u32,
     sample_us: u32,
+    /// [`Self::horizon_us`] and 1/sample period, worked out when the
+    /// settings or the timing change, not each sample.
+    horizon: Option<u16>,
+    per_sample: f32,
     /// The rates of the last sample frame queued.
     last_rates: Option<[f32; 3]>,
 }
@@ -110,7 +114,7 @@ pub struct Port<const TX: usize> {
 impl<const TX: usize> Port<TX> {
     /// A port with `settings`; its method must be the pipeline's.
     pub fn new(settings: Settings) -> Self {
-        Self {
+        let mut p = Self {
             tx: ByteRing::new(),
             rx: Decoder::new(),
             link_seq: 0,
@@ -124,8 +128,12 @@ impl<const TX: usize> Port<TX> {
             predictor_seq: None,
             baud: super::BAUD,
             sample_us: 1000,
+            horizon: None,
+            per_sample: 1e-3,
             last_rates: None,
-        }
+        };
+        p.retime();
+        p
     }
 
     /// The rates the last sample frame queued carried (predicted, when the
@@ -139,19 +147,25 @@ impl<const TX: usize> Port<TX> {
     pub fn set_timing(&mut self, baud: u32, sample_us: u32) {
         self.baud = baud.max(1);
         self.sample_us = sample_us.max(1);
+        self.retime();
+    }
+
+    fn retime(&mut self) {
+        self.per_sample = 1.0 / self.sample_us.max(1) as f32;
+        self.horizon = match self.settings.compensation {
+            Compensation::Off => None,
+            Compensation::ToFrame => {
+                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud.max(1));
+                Some((LOOP_US + wire).min(u16::MAX as u32) as u16)
+            }
+            Compensation::Horizon(h) => Some(h),
+        };
     }
 
     /// How far after `t_us` a sample frame's rates are predicted to, µs,
     /// under the settings in force (`None`: not predicted).
     pub fn horizon_us(&self) -> Option<u16> {
-        match self.settings.compensation {
-            Compensation::Off => None,
-            Compensation::ToFrame => {
-                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud);
-                Some((LOOP_US + wire).min(u16::MAX as u32) as u16)
-            }
-            Compensation::Horizon(h) => Some(h),
-        }
+        self.horizon
     }
 
     /// The settings in force.
@@ -270,9 +284,9 @@ impl<const TX: usize> Port<TX> {
                 }
                 // Each axis's line read from the instant its measurement
                 // describes to the instant stated (`t_us + d`).
-                if let Some(d) = self.horizon_us() {
-                    let per = self.sample_us as f32;
-                    let ahead = age_us.map(|a| (f32::from(a) + f32::from(d)) / per);
+                if let Some(d) = self.horizon {
+                    let per = self.per_sample;
+                    let ahead = age_us.map(|a| (f32::from(a) + f32::from(d)) * per);
                     if let Some(p) = self.predictor.at(ahead) {
                         s.rate_dps = p;
                         s.predicted_us = Some(d);
@@ -496,6 +510,7 @@ impl<const TX: usize> Port<TX> {
                     }
                 }
                 self.settings.compensation = c;
+                self.retime();
             }
         }
         Ok(())
