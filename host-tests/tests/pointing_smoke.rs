@@ -7,7 +7,7 @@
 
 use std::process::Command;
 
-fn number_after<'a>(line: &'a str, key: &str) -> f64 {
+fn number_after(line: &str, key: &str) -> f64 {
     let rest = line
         .split(key)
         .nth(1)

@@ -212,8 +212,8 @@ fn aligned_fusion_matches_the_lockstep_array_and_flags_nothing() {
             r.counters.map(|c| c.late),
             r.timing.map(|t| t.samples)
         );
-        for a in 0..3 {
-            let ratio = r.rms_dps[a] / lock[a];
+        for (a, (got, lockstep)) in r.rms_dps.iter().zip(&lock).enumerate() {
+            let ratio = got / lockstep;
             assert!(ratio < 1.10, "clkin {clkin}, axis {a}: {ratio:.3}");
         }
         assert_eq!(r.flags_seen, [0; N], "clkin {clkin}: flagged");
