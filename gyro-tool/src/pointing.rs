@@ -29,7 +29,7 @@
 
 use std::path::PathBuf;
 
-use gyro_array::algo::pointing::{fit_line, stats, Axis, ErrorStats, Loop, LoopParams};
+use gyro_array::algo::pointing::{fit_line, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_array::link::msg::Frame;
 use gyro_array::link::port::{Port, PREDICT_K};
@@ -132,45 +132,35 @@ pub struct Report {
     pub motion: [Vec<f64>; 3],
 }
 
-/// The loop against `motion` (or none: an error signal alone), fed
-/// `feed[k]` from `arrive[k]`; the pointing error each millisecond past
-/// `skip`.
+/// The loop against `motion` (µs → °/s; or none: an error signal alone),
+/// fed `feed[k]` from `arrive[k]` (µs); the pointing error each
+/// millisecond past `skip`.
 fn through(
     lp: &Loop,
-    mut motion: Option<&mut dyn FnMut(f64) -> f64>,
+    motion: Option<&mut dyn FnMut(f64) -> f64>,
     t0: f64,
     arrive: &[f64],
     feed: &[f64],
     ms: usize,
     skip: usize,
 ) -> Vec<f64> {
-    let dt_us = lp.params().dt_s * 1e6;
-    let mut st = Axis::default();
-    let (mut g, mut dg, mut theta) = (0.0f64, 0.0f64, 0.0f64);
-    let mut k = 0usize;
-    let mut last = motion.as_mut().map_or(0.0, |m| m(t0));
+    let arrive_s: Vec<f64> = arrive.iter().map(|t| t * 1e-6).collect();
+    let feed: Vec<[f64; 1]> = feed.iter().map(|&v| [v]).collect();
     let mut out = Vec::with_capacity(ms.saturating_sub(skip));
-    for j in 0..ms * SUB {
-        let t = t0 + j as f64 * dt_us;
-        while k < feed.len() && arrive[k] <= t {
-            if k > 0 {
-                // The controller's own estimate of the rate's change, for
-                // the lead.
-                dg = (feed[k] - g) / 1e-3;
+    let mut in_s = motion.map(|m| move |t: f64| [m(t * 1e6)]);
+    lp.run_held(
+        in_s.as_mut().map(|m| m as &mut dyn FnMut(f64) -> [f64; 1]),
+        t0 * 1e-6,
+        ms * SUB,
+        &arrive_s,
+        &feed,
+        1e-3,
+        |j, _, e| {
+            if (j + 1) % SUB == 0 && (j + 1) / SUB > skip {
+                out.push(e[0]);
             }
-            g = feed[k];
-            k += 1;
-        }
-        let e = lp.step(&mut st, theta, g, dg);
-        if let Some(m) = motion.as_mut() {
-            let next = m(t + dt_us);
-            theta += 0.5 * (last + next) * dt_us * 1e-6;
-            last = next;
-        }
-        if (j + 1) % SUB == 0 && (j + 1) / SUB > skip {
-            out.push(e);
-        }
-    }
+        },
+    );
     out
 }
 

@@ -191,6 +191,53 @@ impl Loop {
         st.error_deg = e;
         e
     }
+
+    /// The loop on `A` axes fed a gyro's samples as a positioner gets
+    /// them: `feed[k]` held from `arrive_s[k]` on, the controller's estimate
+    /// of its change (for the lead) the difference of the last two received
+    /// over `period_s`; against the vehicle's rate `motion(t)` (its angle
+    /// by the trapezoid over each step; `None`: no motion, the response to
+    /// an error signal alone). `steps` steps of `dt_s` from `t0_s`;
+    /// `each(j, t, e)` gets step `j`'s start time and pointing errors.
+    #[allow(clippy::too_many_arguments)]
+    pub fn run_held<const A: usize>(
+        &self,
+        mut motion: Option<&mut dyn FnMut(f64) -> [f64; A]>,
+        t0_s: f64,
+        steps: usize,
+        arrive_s: &[f64],
+        feed: &[[f64; A]],
+        period_s: f64,
+        mut each: impl FnMut(usize, f64, &[f64; A]),
+    ) {
+        let dt = self.p.dt_s;
+        let mut st = [Axis::default(); A];
+        let (mut g, mut dg, mut theta) = ([0.0f64; A], [0.0f64; A], [0.0f64; A]);
+        let mut last = motion.as_mut().map_or([0.0; A], |m| m(t0_s));
+        let mut k = 0usize;
+        let mut e = [0.0f64; A];
+        for j in 0..steps {
+            let t = t0_s + j as f64 * dt;
+            while k < feed.len() && arrive_s[k] <= t {
+                if k > 0 {
+                    dg = core::array::from_fn(|a| (feed[k][a] - g[a]) / period_s);
+                }
+                g = feed[k];
+                k += 1;
+            }
+            for a in 0..A {
+                e[a] = self.step(&mut st[a], theta[a], g[a], dg[a]);
+            }
+            if let Some(m) = motion.as_mut() {
+                let next = m(t + dt);
+                for a in 0..A {
+                    theta[a] += 0.5 * (last[a] + next[a]) * dt;
+                }
+                last = next;
+            }
+            each(j, t, &e);
+        }
+    }
 }
 
 /// Pointing-error statistics of a run, °.

@@ -85,14 +85,15 @@ impl<const K: usize> Predictor<K> {
             }
             i = if i + 1 >= K { 0 } else { i + 1 };
         }
-        let end = K as f32 - 1.0 - Self::MEAN_X;
         Some(core::array::from_fn(|a| {
-            sum[a] * Self::INV_K + sxy[a] * Self::INV_SXX * (end + ahead[a])
+            sum[a] * Self::INV_K + sxy[a] * Self::INV_SXX * (Self::END + ahead[a])
         }))
     }
 
     /// x̄ of the fit's abscissae 0 … K − 1.
     const MEAN_X: f32 = (K as f32 - 1.0) / 2.0;
+    /// The newest sample's abscissa less x̄.
+    const END: f32 = K as f32 - 1.0 - Self::MEAN_X;
     /// 1/K.
     const INV_K: f32 = 1.0 / K as f32;
     /// 1/Sxx (0 for K < 2: no slope).
@@ -105,12 +106,11 @@ impl<const K: usize> Predictor<K> {
     /// The predicted rate's white noise against one sample's, read
     /// `ahead` periods after the newest: √(1/K + (x − x̄)²/Sxx).
     pub fn noise_gain(ahead: f32) -> f32 {
-        let k = K as f32;
         if K < 2 {
             return 1.0;
         }
-        let d = k - 1.0 - (k - 1.0) / 2.0 + ahead;
-        libm::sqrtf(1.0 / k + d * d / (k * (k * k - 1.0) / 12.0))
+        let d = Self::END + ahead;
+        libm::sqrtf(Self::INV_K + d * d * Self::INV_SXX)
     }
 }
 

@@ -100,13 +100,13 @@ pub struct Port<const TX: usize> {
     predictor: Predictor<PREDICT_K>,
     /// The sequence number of the last sample the predictor took.
     predictor_seq: Option<u32>,
-    /// The UART's speed, baud, and the sample period, µs.
+    /// The UART's speed, baud.
     baud: u32,
-    sample_us: u32,
-    /// [`Self::horizon_us`] and 1/sample period, worked out when the
-    /// settings or the timing change, not each sample.
-    horizon: Option<u16>,
+    /// 1 / the sample period, 1/µs.
     per_sample: f32,
+    /// [`Self::horizon_us`], worked out when the settings or the timing
+    /// change, not each sample.
+    horizon: Option<u16>,
     /// The rates of the last sample frame queued.
     last_rates: Option<[f32; 3]>,
 }
@@ -127,9 +127,8 @@ impl<const TX: usize> Port<TX> {
             predictor: Predictor::new(),
             predictor_seq: None,
             baud: super::BAUD,
-            sample_us: 1000,
-            horizon: None,
             per_sample: 1e-3,
+            horizon: None,
             last_rates: None,
         };
         p.retime();
@@ -146,16 +145,15 @@ impl<const TX: usize> Port<TX> {
     /// with (by default [`super::BAUD`] and 1 ms).
     pub fn set_timing(&mut self, baud: u32, sample_us: u32) {
         self.baud = baud.max(1);
-        self.sample_us = sample_us.max(1);
+        self.per_sample = 1.0 / sample_us.max(1) as f32;
         self.retime();
     }
 
     fn retime(&mut self) {
-        self.per_sample = 1.0 / self.sample_us.max(1) as f32;
         self.horizon = match self.settings.compensation {
             Compensation::Off => None,
             Compensation::ToFrame => {
-                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud.max(1));
+                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud);
                 Some((LOOP_US + wire).min(u16::MAX as u32) as u16)
             }
             Compensation::Horizon(h) => Some(h),
@@ -240,15 +238,18 @@ impl<const TX: usize> Port<TX> {
     ) {
         // Every sample goes to the predictor, sent or not; a missed sample
         // or an axis without a value starts its fit again.
-        let fused = out.fused.map(|f| f.map(|f| f.rate_dps));
         let follows = self
             .predictor_seq
             .is_none_or(|q| out.seq.wrapping_sub(q) == 1);
-        if !follows || fused.iter().any(|f| !f.is_some_and(f32::is_finite)) {
+        if !follows {
             self.predictor.clear();
         }
-        if let [Some(x), Some(y), Some(z)] = fused {
-            self.predictor.push([x, y, z]);
+        match out
+            .fused
+            .map(|f| f.map(|f| f.rate_dps).filter(|r| r.is_finite()))
+        {
+            [Some(x), Some(y), Some(z)] => self.predictor.push([x, y, z]),
+            _ => self.predictor.clear(),
         }
         self.predictor_seq = Some(out.seq);
         let div = u32::from(self.settings.divider.max(1));

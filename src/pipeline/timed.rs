@@ -118,8 +118,6 @@ pub struct TimedIcm<SPI, C> {
     /// The next samples need [`Self::stamp_offset`] found again.
     rebase: bool,
     spike: SpikeCheck,
-    /// A spike was left out in this read.
-    spiked: bool,
     /// What was counted.
     pub counters: TimingCounters,
 }
@@ -147,7 +145,6 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             stamp_offset: 0,
             rebase: false,
             spike: SpikeCheck::new(),
-            spiked: false,
             counters: TimingCounters::default(),
         }
     }
@@ -284,7 +281,8 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn read(&mut self) -> Result<Reading, ReadFault> {
         let mut fresh = false;
         let lost = self.clock.lost;
-        self.spiked = false;
+        // A spike was left out in this read.
+        let mut spiked = false;
         let lim = self.spike_lsb;
         loop {
             // Each sample goes to the aligner as it is parsed, on the
@@ -295,7 +293,6 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 g,
                 align,
                 spike,
-                spiked,
                 counters,
                 last_raw,
                 ..
@@ -306,7 +303,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 if spike.pass(x.raw, lim) {
                     align.push(x.stamp_us, x.raw);
                 } else {
-                    *spiked = true;
+                    spiked = true;
                     counters.spikes = counters.spikes.wrapping_add(1);
                 }
             });
@@ -337,7 +334,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 }
             }
         }
-        if self.spiked {
+        if spiked {
             // A sample no rate could have made: a faulty chip's, as a
             // garbled frame is (the pipeline flags it).
             return Err(ReadFault::BadResponse);
@@ -369,15 +366,11 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.dry = 0;
         }
         let at = self.at.ok_or(ReadFault::Late)?;
-        if self.rejoin > 0 || !tracking(&self.clock) {
-            self.counters.late = self.counters.late.wrapping_add(1);
-            self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
-            return Err(ReadFault::Acquiring);
-        }
-        // The instant on the chip's clock, on the driver's stamps, plus the
-        // path's delay (a time on the chip's clock): the samples that
-        // describe it.
-        let Some(chip) = self.clock.chip_instant(at) else {
+        // The instant on the chip's clock (`None` while the clock is not
+        // tracked), on the driver's stamps, plus the path's delay (a time on
+        // the chip's clock): the samples that describe it.
+        let chip = self.clock.chip_instant(at).filter(|_| self.rejoin == 0);
+        let Some(chip) = chip else {
             self.counters.late = self.counters.late.wrapping_add(1);
             self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
             return Err(ReadFault::Acquiring);

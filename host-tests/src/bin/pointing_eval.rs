@@ -37,7 +37,7 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use gyro_array::algo::pointing::{self, stats, Axis, ErrorStats, Loop, LoopParams};
+use gyro_array::algo::pointing::{self, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_array::emu::timing::{ClockParams, Tone, Vibration};
 use gyro_array::emu::{Fault, RateProfile};
@@ -275,43 +275,23 @@ fn through_loop(
     arrive_s: &[f64],
     feed: &Feed,
 ) -> [Vec<f64>; 3] {
-    let dt = lp.params().dt_s;
-    let mut st = [Axis::default(); 3];
-    let mut theta = [0.0f64; 3];
     let mut out: [Vec<f64>; 3] = Default::default();
-    let mut k = 0usize; // the newest sample arrived
-    let mut g = [0.0f64; 3];
-    // The controller's estimate of the gyro rate's change (for the lead):
-    // the difference of the last two samples received.
-    let mut dg = [0.0f64; 3];
-    let steps = feed.len() * SUB;
-    let mut last_rate = rate.map_or([0.0; 3], |r| r.at_f64(t0));
-    for j in 0..steps {
-        let t = t0 + j as f64 * dt;
-        while k < feed.len() && arrive_s[k] <= t {
-            if k > 0 {
-                dg = core::array::from_fn(|a| (feed[k][a] - g[a]) / 1e-3);
+    let mut motion = |t: f64| rate.map_or([0.0; 3], |r| r.at_f64(t));
+    lp.run_held(
+        rate.map(|_| &mut motion as &mut dyn FnMut(f64) -> [f64; 3]),
+        t0,
+        feed.len() * SUB,
+        arrive_s,
+        feed,
+        1e-3,
+        |j, t, e| {
+            if (j + 1) % SUB == 0 && t >= SKIP_S {
+                for a in 0..3 {
+                    out[a].push(e[a]);
+                }
             }
-            g = feed[k];
-            k += 1;
-        }
-        for a in 0..3 {
-            lp.step(&mut st[a], theta[a], g[a], dg[a]);
-        }
-        // θ_v by the trapezoid over the step.
-        if let Some(r) = rate {
-            let next = r.at_f64(t + dt);
-            for a in 0..3 {
-                theta[a] += 0.5 * (last_rate[a] + next[a]) * dt;
-            }
-            last_rate = next;
-        }
-        if (j + 1) % SUB == 0 && t >= SKIP_S {
-            for a in 0..3 {
-                out[a].push(st[a].error_deg);
-            }
-        }
-    }
+        },
+    );
     out
 }
 
