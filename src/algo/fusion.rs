@@ -552,18 +552,15 @@ impl<const N: usize> Fusion<N> {
         offered: u8,
     ) -> Result<Fused<N>, FuseError> {
         let offered = offered & full::<N>();
+        // Finite and within a physical range: a value of 10⁶ °/s is no rate
+        // (a garbled frame, a bad scale), and sums of a few near f32::MAX
+        // overflowed to ±inf (found by fuzzing). Branch-free: every gyro is
+        // usually offered.
         let mut valid = 0u8;
-        for i in 0..N {
-            if !has(offered, i) {
-                continue;
-            }
-            // Finite and within a physical range: a value of 10⁶ °/s is
-            // no rate (a garbled frame, a bad scale), and sums of a few
-            // near f32::MAX overflowed to ±inf (found by fuzzing).
-            if y[i].abs() <= RATE_LIMIT_DPS {
-                valid |= 1 << i;
-            }
+        for (i, v) in y.iter().enumerate() {
+            valid |= u8::from(v.abs() <= RATE_LIMIT_DPS) << i;
         }
+        let valid = valid & offered;
         let mut out = Fused {
             rate_dps: f32::NAN,
             weights: [0.0; N],

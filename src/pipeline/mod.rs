@@ -225,8 +225,17 @@ impl<const N: usize> Output<N> {
     /// 0 where the axis has no fused value.
     pub fn age_us(&self) -> [u16; 3] {
         let mut age = [0u16; 3];
+        // Every chip on one stated instant (the timed board): the weighted
+        // mean is that delay, and only a held output (all weights 0) is
+        // not.
+        let first = self.delay_us.first().copied().unwrap_or(0);
+        let uniform = self.delay_us.iter().all(|&d| d == first);
         for (a, f) in self.fused.iter().enumerate() {
             let Some(f) = f else { continue };
+            if uniform && !(f.fallback && f.weights.iter().all(|&w| w == 0.0)) {
+                age[a] = first.min(u32::from(u16::MAX)) as u16;
+                continue;
+            }
             // The weights sum to 1 (or are all 0: a held output, age 0).
             let mut d = 0.5f32;
             for (w, us) in f.weights.iter().zip(self.delay_us.iter()) {

@@ -259,9 +259,13 @@ impl SpikeCheck {
     /// Whether raw sample `x` is one the chip's filters could have made
     /// after the last one taken, `lim` LSB a step.
     fn pass(&mut self, x: [i16; 3], lim: u32) -> bool {
+        // |d| ≤ lim as one unsigned compare of d + lim against 2·lim, the
+        // three axes or'ed without branches (lim is a few thousand LSB).
         let near = |b: [i16; 3]| {
-            let d = |k: usize| (i32::from(x[k]) - i32::from(b[k])).unsigned_abs();
-            d(0).max(d(1)).max(d(2)) <= lim
+            let far = |k: usize| {
+                (i32::from(x[k]) - i32::from(b[k])).wrapping_add(lim as i32) as u32 > 2 * lim
+            };
+            !(far(0) | far(1) | far(2))
         };
         // Two in a row that agree: a new level, not a spike.
         if !self.has_last || near(self.last) || (self.has_pending && near(self.pending)) {
