@@ -30,6 +30,11 @@
 /// 95 °/s sway with scale errors in ±1 % (`fusion-eval`, class (f)).
 pub const WARM: u32 = 32;
 
+/// Samples the growing window restarts from when a chip comes back from
+/// a restart with its calibration kept ([`RelCal::resume`]): a time
+/// constant of 1 024 samples (1 s at 1 kHz), a quarter of the default 1/α.
+pub const RESUME_SAMPLES: u32 = 1024;
+
 /// The estimates are solved every `EVERY` updates (the moments every one).
 pub const EVERY: u32 = 32;
 
@@ -442,6 +447,29 @@ impl<const N: usize> RelCal<N> {
         );
         let m = self.mean_c[i];
         k * k * (self.var_c[i] + m * m) + 2.0 * k * b * m + b * b
+    }
+
+    /// Chip `i` is back from a restart: a chip's scale and bias are its
+    /// part's, not its configuration's, so a calibration inside the bounds
+    /// is kept and applied from the first sample; its moments learn on with
+    /// the growing window put back to [`RESUME_SAMPLES`], so that what a
+    /// power cycle moved (the turn-on bias repeatability) is relearnt in
+    /// about a second rather than the 1/α time constant. Started afresh
+    /// (from identity, [`WARM`] updates before it applies), the bias of a
+    /// chip back from a fault took some 10 s to come back and the fused
+    /// rate carried it meanwhile (`pointing-eval`, docs/pointing.md). A
+    /// calibration outside the bounds, or not yet applied, is no
+    /// calibration: the chip starts afresh ([`RelCal::reset`]).
+    pub fn resume(&mut self, i: usize) {
+        if i >= N {
+            return;
+        }
+        let bit = 1u8 << i;
+        if self.wild & bit != 0 || self.applied & bit == 0 {
+            self.reset(i);
+            return;
+        }
+        self.n[i] = self.n[i].min(RESUME_SAMPLES);
     }
 
     /// Forget chip `i` (after a restart): it is read as is until it has

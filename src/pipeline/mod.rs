@@ -580,11 +580,12 @@ impl<const N: usize> Pipeline<N> {
             Ok(Restart::Done) => {
                 c.restarted = c.restarted.saturating_add(1);
                 h.recovery = Recovery::Running;
-                // What the calibration learnt may come from the fault that
-                // made the chip restart (a corrupted range reads as a scale
-                // error): learn it again.
+                // The chip's calibration is its part's: kept, unless it is
+                // outside the bounds (`RelCal::resume`). Fusion trusted it
+                // only while it agreed with the others, so a fault that
+                // corrupted its range is not in it.
                 for cal in self.cal.iter_mut() {
-                    cal.reset(i);
+                    cal.resume(i);
                 }
                 // Configured and verified just now: it rejoins after a run
                 // as long as the stuck check needs, not recover_after.

@@ -53,9 +53,13 @@ struct Args {
     /// Draw the highway run (pointing error over time) into this folder.
     #[arg(long)]
     svg: Option<PathBuf>,
-    /// Board seed.
+    /// Noise seed (the chips' biases and clocks are fixed).
     #[arg(long, default_value_t = 7)]
     seed: u64,
+    /// Noise realisations the faults' ratio is pooled over (see
+    /// `pooled_fault_ratios`); 0 skips it.
+    #[arg(long, default_value_t = 16)]
+    realisations: u64,
     /// Write the 30 °/s highway run with faults as the board streams it
     /// (`highway.glk`, the link's bytes) with its true rate
     /// (`highway-truth.csv`) into this folder, for `gyro pointing
@@ -430,6 +434,81 @@ struct Comp {
     s_noise: [ErrorStats; 3],
 }
 
+/// The board's added pointing error (its shipped compensation: K =
+/// `PREDICT_K` to the frame's end, `to_frame` s ahead of the stated
+/// instant) on noise realisation `seed`, with and without the fault mix.
+fn board_adds(
+    lp: &Loop,
+    p: &Profile,
+    seed: u64,
+    ms: u32,
+    faulty: bool,
+    to_frame: f64,
+) -> [Vec<f64>; 3] {
+    let run = board_run(p, seed, ms, faulty);
+    let after_read_s = read_to_antenna_us() * 1e-6;
+    let t0 = run.now_s[0] - 1e-3;
+    let arrive: Vec<f64> = run.now_s.iter().map(|t| t + after_read_s).collect();
+    let ideal: Feed = arrive.iter().map(|&t| p.rate.at_f64(t)).collect();
+    let e_ideal = through_loop(lp, Some(&p.rate), t0, &arrive, &ideal);
+    let fed = predicted::<{ gyro_array::link::port::PREDICT_K }>(&run.fused, to_frame);
+    diff(
+        &through_loop(lp, Some(&p.rate), t0, &arrive, &fed),
+        &e_ideal,
+    )
+}
+
+/// The faults' ratio as an ensemble figure. One run's p99.9 of the
+/// pointing error is nearly its largest excursion: the error is the
+/// integrated noise, correlated over the tracking loop's ~0.3 s, so a
+/// scored run of 17 s holds some fifty independent excursions, and two
+/// fault-free runs on different noise differ by ×0.72–1.21. Pooling `r`
+/// realisations (the noise seeds `seed`, `seed + 1`, …: the board's
+/// biases and clocks are the same) puts √r more excursions under each
+/// p99.9. Per profile: the pooled p99.9 with faults over the pooled one
+/// without (worst axis), and beside it the yardstick, the same board
+/// fault-free on `r` further realisations over the first `r`.
+fn pooled_fault_ratios(
+    lp: &Loop,
+    seed: u64,
+    r: u64,
+    ms: u32,
+    to_frame: f64,
+) -> Vec<(&'static str, f64, f64)> {
+    profiles()
+        .into_iter()
+        .map(|p| {
+            let pooled = |seeds: std::ops::Range<u64>, faulty: bool| -> [ErrorStats; 3] {
+                // One thread a realisation (each run is independent).
+                let runs: Vec<[Vec<f64>; 3]> = std::thread::scope(|sc| {
+                    let hs: Vec<_> = seeds
+                        .map(|k| {
+                            let p = &p;
+                            sc.spawn(move || {
+                                board_adds(lp, p, seed.wrapping_add(k), ms, faulty, to_frame)
+                            })
+                        })
+                        .collect();
+                    hs.into_iter()
+                        .map(|h| h.join().expect("a realisation's run"))
+                        .collect()
+                });
+                let mut all: [Vec<f64>; 3] = Default::default();
+                for run in runs {
+                    for (a, e) in run.into_iter().enumerate() {
+                        all[a].extend(e);
+                    }
+                }
+                stats3(&all)
+            };
+            let clean = worst(&pooled(0..r, false));
+            let faulty = worst(&pooled(0..r, true));
+            let other = worst(&pooled(r..2 * r, false));
+            (p.name, faulty / clean.max(1e-12), other / clean.max(1e-12))
+        })
+        .collect()
+}
+
 fn main() {
     let args = Args::parse();
     let lp_params = LoopParams::VEHICLE;
@@ -753,11 +832,29 @@ fn main() {
                 worst(&c.af)
             ));
         }
-        if fault_ratio > 1.2 {
-            fails.push(format!(
-                "{}: with faults ×{fault_ratio:.2} its fault-free figure (target 1.2)",
-                c.profile
-            ));
+    }
+    if args.realisations > 0 {
+        let to_frame = DELAY_US as f64 * 1e-6
+            + f64::from(
+                gyro_array::link::port::Port::<64>::new(Default::default())
+                    .horizon_us()
+                    .unwrap_or(0),
+            ) * 1e-6;
+        let r = args.realisations;
+        println!(
+            "\nthe board with faults against fault-free, p99.9 pooled over {r} noise realisations (seeds {}-{}; the yardstick: fault-free on {r} more):",
+            args.seed,
+            args.seed + r - 1
+        );
+        for (name, ratio, other) in pooled_fault_ratios(&lp, args.seed, r, ms, to_frame) {
+            println!(
+                "  {name:<58} with faults ×{ratio:.3} (target 1.2; fault-free on other noise ×{other:.3})"
+            );
+            if ratio > 1.2 {
+                fails.push(format!(
+                    "{name}: with faults ×{ratio:.3} its fault-free figure, pooled over {r} realisations (target 1.2)"
+                ));
+            }
         }
     }
     if fails.is_empty() {
