@@ -40,6 +40,8 @@ fn noise(i: usize) -> NoiseParams {
 #[derive(Clone, Copy, PartialEq)]
 enum Event {
     Stuck(usize),
+    /// The chip's bias starts ramping at 0.1 °/s per second.
+    Drift(usize),
     Reset(usize),
     /// The loop stalls for this many ms (the bus advances, nothing is read).
     Stall(u32),
@@ -108,6 +110,7 @@ fn run_timed_with(
             }
             with_bus(smp.bus, |b| match *e {
                 Event::Stuck(i) => b.chips[i].set_fault(Fault::Stuck),
+                Event::Drift(i) => b.chips[i].set_fault(Fault::BiasDrift { dps_per_s: 0.1 }),
                 Event::Reset(i) => b.chips[i].power_cycle(),
                 Event::ClkInLost => b.clkin_hz = None,
                 Event::Stall(_) => {}
@@ -234,6 +237,24 @@ fn a_stuck_chip_is_flagged_through_the_timed_path() {
     let at = r.flagged_at[2].expect("stuck chip flagged");
     assert!((2000..2020).contains(&at), "flagged at {at}");
     assert_eq!(r.flags_seen[0] | r.flags_seen[1] | r.flags_seen[3], 0);
+}
+
+/// A chip failing slowly on the whole board (its bias ramping at 0.1 °/s
+/// per second under the 95 °/s sway): the calibration does not learn it
+/// away; the pipeline flags it drifting (`flag::CAL_DRIFT`, in every
+/// status frame) within 2 s of its error reaching 3σ of its noise (the
+/// aligned rate's σ is some 0.06 °/s: 0.18 °/s, 1.8 s after the drift
+/// starts), leaves it out to the end, and flags no other chip.
+#[test]
+fn a_drifting_chip_is_flagged_and_left_out() {
+    use gyro_array::pipeline::flag;
+    let r = run_timed(false, 12_000, &[(6000, Event::Drift(3))]);
+    let at = r.flagged_at[3].expect("drifting chip flagged");
+    assert!((6000..9800).contains(&at), "flagged at {at}");
+    assert_eq!(r.flags_seen[3] & flag::CAL_DRIFT, flag::CAL_DRIFT);
+    assert_eq!(r.last_out[3], Some(11_999), "left out to the end");
+    assert_eq!(r.flags_seen[0] | r.flags_seen[1] | r.flags_seen[2], 0);
+    println!("drifting chip flagged at {at} ms (drift from 6000 ms)");
 }
 
 #[test]

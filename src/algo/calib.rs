@@ -52,6 +52,50 @@ pub const LEARN_STRIDE: u32 = 2;
 /// made the loop's worst sample.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
+/// The drift watch (see [`RelCal::drifting`]): the weight per update of
+/// the fast mean of each chip's residual against its calibration, 1/64 (a
+/// time constant of 128 samples at [`LEARN_STRIDE`] 2).
+pub const LAG_ALPHA: f32 = 1.0 / 64.0;
+
+/// The weight per update of the residual's mean square (the watch's noise
+/// level), 1/1024 (about 2 s).
+pub const LAG_VAR_ALPHA: f32 = 1.0 / 1024.0;
+
+/// Standard deviations of the fast mean's own noise a lag must exceed.
+pub const LAG_SIGMAS: f32 = 6.0;
+
+/// The lag, °/s, that a part's bias moving as fast as it physically can
+/// leaves behind the calibration at a steady die temperature: the
+/// calibration follows a bias ramp of rate r at r/α = 4.1 s behind
+/// (α = 1/4096 a sample), and the ICM-42688-P's zero-rate output moves
+/// ±0.005 °/s/°C (datasheet, ZRO variation over temperature): at 1 °C/s, a
+/// fast warm-up, 0.02 °/s. The die temperature's own rate raises it
+/// ([`RelCal::set_drift_allowance`]).
+pub const LAG_FLOOR_DPS: f32 = 0.02;
+
+/// A bound on how fast a part's zero-rate output moves with its die
+/// temperature, °/s per °C: ten times the ICM-42688-P's typical ±0.005
+/// (datasheet, ZRO variation over temperature, for which no maximum is
+/// given), so that no part within its type is called drifting while its
+/// die warms; at a steady temperature only [`LAG_FLOOR_DPS`] is allowed.
+pub const ZRO_TEMPCO_BOUND_DPS_PER_C: f32 = 0.05;
+
+/// The lag ([`RelCal::set_drift_allowance`]) that two parts' biases moving
+/// apart as fast as [`ZRO_TEMPCO_BOUND_DPS_PER_C`] allows, with the die
+/// temperature changing at `temp_rate_c_per_s`, leave behind a calibration
+/// of `cfg`'s time constant at `sample_us`: 2 · bound · rate · τ.
+pub fn drift_allowance(cfg: &CalConfig, temp_rate_c_per_s: f32, sample_us: u32) -> f32 {
+    let tau_s = sample_us as f32 * 1e-6 / cfg.alpha.max(1e-6);
+    2.0 * ZRO_TEMPCO_BOUND_DPS_PER_C * temp_rate_c_per_s.abs() * tau_s
+}
+
+/// Updates in a row over the limit before a chip is drifting (0.5 s at
+/// stride 2): a scale that a turn reveals after a still start (its ridge
+/// held it at 1) leaves a residual of |s − 1|·|c| until the regression
+/// has it, some 0.3 s; a bias drifting at 0.1 °/s per second leaves a lag
+/// that only grows.
+pub const LAG_PERSIST: u16 = 256;
+
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
 use crate::algo::math::bound;
 
@@ -123,6 +167,16 @@ pub struct RelCal<const N: usize> {
     last_raw: [f32; N],
     /// Samples of the growing window: 1/α (bounded), as an integer.
     grow: u32,
+    /// Per chip, the fast mean of the residual y − (b + s·c) against the
+    /// calibration, °/s, and the residual's mean square, (°/s)².
+    lag: [f32; N],
+    lag_ms: [f32; N],
+    /// Per chip, updates in a row with the lag over its limit.
+    over: [u16; N],
+    /// Chips whose lag stayed over its limit (see [`RelCal::drifting`]).
+    drifting: u8,
+    /// The lag a part's bias may leave, °/s (see [`LAG_FLOOR_DPS`]).
+    allowance: f32,
 }
 
 impl<const N: usize> RelCal<N> {
@@ -151,6 +205,11 @@ impl<const N: usize> RelCal<N> {
             warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
+            lag: [0.0; N],
+            lag_ms: [0.0; N],
+            over: [0; N],
+            drifting: 0,
+            allowance: LAG_FLOOR_DPS,
         }
     }
 
@@ -221,7 +280,7 @@ impl<const N: usize> RelCal<N> {
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
         self.solved = false;
         let seen = self.correct(y);
-        let r = match fusion.fuse(st, &seen, offered) {
+        let r = match fusion.fuse(st, &seen, offered & !self.drifting) {
             Ok(r) => r,
             Err(e) => {
                 if learn_now {
@@ -304,11 +363,13 @@ impl<const N: usize> RelCal<N> {
         // Every update counts, learnt from or not: solves keep their
         // samples.
         self.tick = self.tick.wrapping_add(1);
-        let mask = used & ((1u16 << N) - 1) as u8;
+        // A drifting chip is a fault, not something to learn.
+        let mask = used & ((1u16 << N) - 1) as u8 & !self.drifting;
         if mask.count_ones() < 3 {
             return;
         }
         let c = median(y, mask);
+        self.watch(y, c, mask);
         // (Bounded: α = 0 must not count samples until n overflows.)
         let grow = self.grow;
         let step = stride as f32;
@@ -351,6 +412,77 @@ impl<const N: usize> RelCal<N> {
             // The readings the next solve compares with (kept only then).
             self.last_raw = *y;
         }
+    }
+
+    /// The drift watch, one update (see [`RelCal::drifting`]): every chip
+    /// with a correction applied that fusion used on this sample (a sample
+    /// it rejected, a spike, says nothing of the bias), and every drifting
+    /// one with a reading (watched against the calibration it had, which no
+    /// longer learns from it, until it is back). The noise level is the
+    /// residual's whole mean square on used samples: a chip that is only
+    /// noisier (spikes of either sign) raises its own bar, and a drift's
+    /// lag, in it too, lowers the watch's reach by at most √2 (the lag
+    /// must pass 6·√(α/2) = 0.53 of the residual's RMS). At most a
+    /// minority of the chips is drifting: the residuals are against their
+    /// median.
+    #[inline]
+    fn watch(&mut self, y: &[f32; N], c: f32, used: u8) {
+        let k2 = LAG_SIGMAS * LAG_SIGMAS * LAG_ALPHA * 0.5;
+        let allow = self.allowance;
+        let watched = self.applied & (used | self.drifting);
+        let most = self.applied.count_ones().div_ceil(2);
+        for i in 0..N {
+            let bit = 1u8 << i;
+            if watched & bit == 0 || !y[i].is_finite() {
+                continue;
+            }
+            let e = y[i] - (self.bias[i] + self.scale[i] * c);
+            let lag = self.lag[i] + LAG_ALPHA * (e - self.lag[i]);
+            self.lag[i] = lag;
+            // |lag| > allowance + K·σ_lag, σ_lag² = ms·α/2 (an exponential
+            // mean's variance), without a square root.
+            if used & bit != 0 {
+                self.lag_ms[i] += LAG_VAR_ALPHA * (e * e - self.lag_ms[i]);
+            }
+            let ex = lag.abs() - allow;
+            let over = ex > 0.0 && ex * ex > k2 * self.lag_ms[i];
+            if over {
+                self.over[i] = self.over[i].saturating_add(1);
+                if self.over[i] >= LAG_PERSIST && (self.drifting | bit).count_ones() < most {
+                    self.drifting |= bit;
+                }
+            } else {
+                self.over[i] = 0;
+                if ex <= 0.0 {
+                    // Back within what its part's bias can do.
+                    self.drifting &= !bit;
+                }
+            }
+        }
+    }
+
+    /// Chips whose residual against their calibration has stayed further
+    /// from zero than their part's bias can move it ([`LAG_FLOOR_DPS`],
+    /// raised by [`RelCal::set_drift_allowance`]) plus [`LAG_SIGMAS`] of its
+    /// own noise, for [`LAG_PERSIST`] updates: a chip failing slowly
+    /// (its bias drifting far faster than temperature moves a part's),
+    /// which the calibration would otherwise follow and fusion keep. Such
+    /// a chip is left out of fusion ([`RelCal::fuse`]) and of the
+    /// calibration's learning until its residual is back within the
+    /// allowance; the pipeline flags it (`pipeline::flag::CAL_DRIFT`).
+    pub fn drifting(&self) -> u8 {
+        self.drifting
+    }
+
+    /// The lag, °/s, a part's bias may leave behind the calibration now:
+    /// the caller's figure from the die temperature's rate (at least
+    /// [`LAG_FLOOR_DPS`]).
+    pub fn set_drift_allowance(&mut self, dps: f32) {
+        self.allowance = if dps > LAG_FLOOR_DPS {
+            dps
+        } else {
+            LAG_FLOOR_DPS
+        };
     }
 
     /// Solve for the estimates (see [`RelCal::estimate`]). A chip whose
@@ -459,13 +591,14 @@ impl<const N: usize> RelCal<N> {
     /// chip back from a fault took some 10 s to come back and the fused
     /// rate carried it meanwhile (`pointing-eval`, docs/pointing.md). A
     /// calibration outside the bounds, or not yet applied, is no
-    /// calibration: the chip starts afresh ([`RelCal::reset`]).
+    /// calibration, and a drifting chip's was following its fault: the chip
+    /// starts afresh ([`RelCal::reset`]).
     pub fn resume(&mut self, i: usize) {
         if i >= N {
             return;
         }
         let bit = 1u8 << i;
-        if self.wild & bit != 0 || self.applied & bit == 0 {
+        if (self.wild | self.drifting) & bit != 0 || self.applied & bit == 0 {
             self.reset(i);
             return;
         }
@@ -485,6 +618,8 @@ impl<const N: usize> RelCal<N> {
             self.applied &= !(1 << i);
             self.fresh &= !(1 << i);
             self.warming &= !(1 << i);
+            (self.lag[i], self.lag_ms[i], self.over[i]) = (0.0, 0.0, 0);
+            self.drifting &= !(1 << i);
         }
     }
 
@@ -689,5 +824,84 @@ mod tests {
             worst = worst.max(out_after.unwrap_or(99));
         }
         println!("stuck chip out after at most {worst} samples");
+    }
+
+    /// The drift watch on the pipeline's path (`fuse`, adaptive fusion),
+    /// four chips, `scale` errors, a true rate `w(k)` (1 kHz), and chip 2's
+    /// bias ramping at `drift` °/s per s from 5 s: the first sample from
+    /// which chip 2 is drifting to the end (none: never), and whether any
+    /// other chip ever was; the last fused weight of chip 2.
+    fn watch_run(
+        scale: [f32; 4],
+        drift: f32,
+        allowance: f32,
+        w: impl Fn(usize) -> f32,
+    ) -> (Option<usize>, bool, f32) {
+        use crate::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
+        let f = Fusion::<4>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+        let mut st = AxisState::<4>::default();
+        let mut cal = RelCal::<4>::new(CalConfig::default());
+        cal.set_drift_allowance(allowance);
+        let mut rng = Rng::new(21);
+        let (mut since, mut others, mut weight) = (None, false, 0.0);
+        for k in 0..15_000 {
+            let d = if k >= 5000 {
+                drift * (k - 5000) as f32 * 1e-3
+            } else {
+                0.0
+            };
+            let y = [0, 1, 2, 3].map(|i| {
+                let v = scale[i] * w(k) + 0.06 * rng.gaussian() + if i == 2 { d } else { 0.0 };
+                libm::roundf(v * 131.0) / 131.0
+            });
+            let r = cal.fuse(&f, &mut st, &y, 0b1111).unwrap();
+            weight = r.weights[2];
+            if cal.drifting() & 0b100 != 0 {
+                since.get_or_insert(k);
+            } else {
+                since = None;
+            }
+            others |= cal.drifting() & !0b100 != 0;
+        }
+        (since, others, weight)
+    }
+
+    /// A chip drifting at 0.1 °/s per second from 5 s (its 0.18 °/s, 3σ of
+    /// its noise, at 6.8 s) is called drifting within 2 s of reaching 3σ,
+    /// stays so, and leaves fusion; no other chip is, at rest or under a
+    /// sway with scale errors.
+    #[test]
+    fn a_drifting_chip_is_caught_and_left_out() {
+        let sway = |k: usize| 30.0 * libm::sinf(2.0 * core::f32::consts::PI * k as f32 * 1e-3);
+        for (scale, w) in [
+            ([1.0f32; 4], &(|_| 0.0f32) as &dyn Fn(usize) -> f32),
+            ([1.01, 0.99, 1.005, 0.985], &sway),
+        ] {
+            let (since, others, weight) = watch_run(scale, 0.1, LAG_FLOOR_DPS, w);
+            assert!(since.is_some_and(|k| k < 8800), "{since:?}");
+            println!("drifting from sample {since:?}");
+            assert!(!others);
+            assert_eq!(weight, 0.0);
+        }
+    }
+
+    /// No chip is called drifting when none drifts: a scale error of 2 %
+    /// that a 100 °/s turn reveals after 5 s on a still board (the ridge
+    /// held the scale at 1), and a chip drifting at 0.1 °/s per second while
+    /// the die temperature moves fast enough to allow it.
+    #[test]
+    fn a_revealed_scale_or_a_warming_die_is_no_drift() {
+        let turn = |k: usize| {
+            if k < 5000 {
+                0.0
+            } else {
+                100.0f32.min((k - 5000) as f32 * 0.2)
+            }
+        };
+        let (since, others, _) = watch_run([1.0, 1.02, 0.99, 0.98], 0.0, LAG_FLOOR_DPS, turn);
+        assert!(since.is_none() && !others, "{since:?} {others}");
+        let warm = drift_allowance(&CalConfig::default(), 2.0, 1000);
+        let (since, others, _) = watch_run([1.0; 4], 0.1, warm, |_| 0.0);
+        assert!(since.is_none() && !others, "{since:?} {others}");
     }
 }

@@ -145,6 +145,8 @@ pub struct Icm42688Model {
     rng: Rng,
     /// Fault being injected.
     pub fault: Fault,
+    /// What [`Fault::BiasDrift`] has added so far, °/s.
+    drift_dps: f32,
     /// The true rate at the last update (board frame).
     pub true_rate_dps: [f32; 3],
     /// Mounting, scale/misalignment and temperature terms.
@@ -165,6 +167,7 @@ impl Icm42688Model {
             profile,
             rng: Rng::new(seed),
             fault: Fault::None,
+            drift_dps: 0.0,
             true_rate_dps: [0.0; 3],
             mount: Mount::ALIGNED,
             timed: None,
@@ -421,9 +424,15 @@ impl Icm42688Model {
         let [hi, lo] = t.to_be_bytes();
         self.bank0[reg::TEMP_DATA1 as usize] = hi;
         self.bank0[reg::TEMP_DATA1 as usize + 1] = lo;
+        self.drift_dps = match self.fault {
+            Fault::BiasDrift { dps_per_s } => self.drift_dps + dps_per_s * dt_s,
+            _ => 0.0,
+        };
         let mut meas = [0.0f32; 3];
         for (i, m) in meas.iter_mut().enumerate() {
-            *m = self.noise[i].step(&self.params, &mut self.rng, chip[i], dt_s) + thermal[i];
+            *m = self.noise[i].step(&self.params, &mut self.rng, chip[i], dt_s)
+                + thermal[i]
+                + self.drift_dps;
         }
         let cfg = self.bank0[reg::GYRO_CONFIG0 as usize];
         let lsb = FullScale::from_bits(cfg >> 5).lsb_per_dps();

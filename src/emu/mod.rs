@@ -67,6 +67,14 @@ pub enum Fault {
     /// command. Clearing this fault powers it up in its reset state (a late
     /// power-up, or the end of a brown-out).
     PoweredOff,
+    /// The zero-rate output of every axis ramps at `dps_per_s` from the
+    /// moment the fault is set (a chip failing slowly, far faster than
+    /// temperature moves a part's bias); clearing the fault takes the ramp
+    /// away. ICM-42688-P only (the ADXRS453 reads as specified).
+    BiasDrift {
+        /// Ramp, °/s per second.
+        dps_per_s: f32,
+    },
 }
 
 /// A chip on the emulated bus. No heap here, so the variants are not boxed;

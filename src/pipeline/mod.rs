@@ -24,7 +24,7 @@ pub mod startup;
 pub mod timed;
 pub mod tracker;
 
-use crate::algo::calib::{CalConfig, RelCal};
+use crate::algo::calib::{drift_allowance, CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, FuseError, Fused, Fusion, Method};
 use crate::algo::mounting::{CalError, CalRecord, ChipCal};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart};
@@ -43,6 +43,11 @@ pub mod flag {
     pub const SATURATED: u8 = 1 << 3;
     /// Being restarted (not read until the restart is done).
     pub const RESTARTING: u8 = 1 << 4;
+    /// Its reading has moved away from its calibration faster than its
+    /// part's bias can (`algo::calib::RelCal::drifting`, on any axis): a
+    /// chip failing slowly. Read and watched, not fused, not learnt from;
+    /// cleared when it is back within its part's allowance.
+    pub const CAL_DRIFT: u8 = 1 << 5;
 }
 
 /// Pipeline settings.
@@ -277,8 +282,13 @@ pub struct Pipeline<const N: usize> {
     /// record was given.
     static_cal: [ChipCal; N],
     calibrated: bool,
-    /// Last die temperature per chip, °C (read while calibrated).
+    /// Last die temperature per chip, °C (read while calibrated), and the
+    /// sample it was read on.
     temps: [Option<f32>; N],
+    temp_seq: [u32; N],
+    /// The fastest die temperature change lately, °C/s (the calibration's
+    /// drift allowance follows it).
+    temp_rate: f32,
     seq: u32,
     overruns: u32,
     counters: [GyroCounters; N],
@@ -307,6 +317,8 @@ impl<const N: usize> Pipeline<N> {
             static_cal: [ChipCal::IDENTITY; N],
             calibrated: false,
             temps: [None; N],
+            temp_seq: [0; N],
+            temp_rate: 0.0,
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
@@ -501,7 +513,7 @@ impl<const N: usize> Pipeline<N> {
                 if i == temp {
                     out.busy = true;
                     if let Ok(t) = g.temperature_c() {
-                        self.temps[i] = Some(t);
+                        self.temp_change(i, t, seq);
                     }
                 }
             }
@@ -539,7 +551,46 @@ impl<const N: usize> Pipeline<N> {
             };
             out.busy |= self.cal[a].solved();
         }
+        let drifting = self.cal.iter().fold(0u8, |m, c| m | c.drifting());
+        for (i, h) in self.health.iter_mut().enumerate() {
+            let before = h.flags;
+            if drifting & (1 << i) != 0 {
+                h.flags |= flag::CAL_DRIFT;
+            } else {
+                h.flags &= !flag::CAL_DRIFT;
+            }
+            if h.flags != before {
+                out.health_changed |= 1 << i;
+            }
+        }
         out
+    }
+
+    /// A new die temperature `t` of gyro `i` on sample `seq`: kept for the
+    /// bias model, and its rate of change sets how far the calibration
+    /// lets a chip's bias move before it calls the chip drifting
+    /// (`algo::calib::drift_allowance`).
+    fn temp_change(&mut self, i: usize, t: f32, seq: u32) {
+        if let (Some(Some(t0)), Some(&s0)) = (self.temps.get(i), self.temp_seq.get(i)) {
+            let dt_s = seq.wrapping_sub(s0) as f32 * self.cfg.sample_us as f32 * 1e-6;
+            if dt_s > 0.0 {
+                // The fastest chip's rate, decaying by a quarter a reading.
+                let r = (t - t0).abs() / dt_s;
+                self.temp_rate = if r > 0.75 * self.temp_rate {
+                    r
+                } else {
+                    0.75 * self.temp_rate
+                };
+                let allow =
+                    drift_allowance(&CalConfig::default(), self.temp_rate, self.cfg.sample_us);
+                for c in self.cal.iter_mut() {
+                    c.set_drift_allowance(allow);
+                }
+            }
+        }
+        if let (Some(slot), Some(s)) = (self.temps.get_mut(i), self.temp_seq.get_mut(i)) {
+            (*slot, *s) = (Some(t), seq);
+        }
     }
 
     /// The online relative calibration of each axis (x, y, z).
@@ -661,7 +712,8 @@ impl<const N: usize> Pipeline<N> {
             0
         };
         if h.good_run >= h.need {
-            h.flags = 0;
+            // (The calibration's verdict is its own to clear.)
+            h.flags &= flag::CAL_DRIFT;
             h.need = self.cfg.recover_after;
         }
         if h.flags != 0 {

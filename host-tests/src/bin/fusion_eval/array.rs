@@ -5,7 +5,7 @@
 //! (real drivers over the emulated SPI bus, the start-up self-test, the
 //! pipeline with its online calibration).
 
-use gyro_array::algo::calib::{CalConfig, RelCal};
+use gyro_array::algo::calib::{drift_allowance, CalConfig, RelCal};
 use gyro_array::algo::fusion::AxisState;
 use gyro_array::checks::run_board_array_with;
 use gyro_array::emu::noise::{quantise, AxisNoise};
@@ -61,6 +61,18 @@ fn class_n<const N: usize>(
         }
         st[2].set_noise_priors(priors);
         let mut cal = RelCal::<N>::new(CalConfig::default());
+        // What the pipeline tells the calibration from the die temperature
+        // it reads: the ramp's rate (40 °C over the run).
+        let ramp_c_per_s = if temp_slope_pm > 0.0 {
+            40.0 / (SAMPLES as f32 / FS)
+        } else {
+            0.0
+        };
+        cal.set_drift_allowance(drift_allowance(
+            &CalConfig::default(),
+            ramp_c_per_s,
+            (1e6 / FS) as u32,
+        ));
         let mut sums = [0.0f64; 4];
         for k in 0..SAMPLES {
             let t = truth(k);
