@@ -24,7 +24,7 @@ pub mod startup;
 pub mod timed;
 pub mod tracker;
 
-use crate::algo::calib::{drift_allowance, CalConfig, RelCal};
+use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, FuseError, Fused, Fusion, Method};
 use crate::algo::mounting::{CalError, CalRecord, ChipCal};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart};
@@ -568,8 +568,8 @@ impl<const N: usize> Pipeline<N> {
 
     /// A new die temperature `t` of gyro `i` on sample `seq`: kept for the
     /// bias model, and its rate of change sets how far the calibration
-    /// lets a chip's bias move before it calls the chip drifting
-    /// (`algo::calib::drift_allowance`).
+    /// lets a chip's bias move before it calls the chip drifting, and how
+    /// fast it follows (`RelCal::set_temperature_rate`).
     fn temp_change(&mut self, i: usize, t: f32, seq: u32) {
         if let (Some(Some(t0)), Some(&s0)) = (self.temps.get(i), self.temp_seq.get(i)) {
             let dt_s = seq.wrapping_sub(s0) as f32 * self.cfg.sample_us as f32 * 1e-6;
@@ -581,10 +581,8 @@ impl<const N: usize> Pipeline<N> {
                 } else {
                     0.75 * self.temp_rate
                 };
-                let allow =
-                    drift_allowance(&CalConfig::default(), self.temp_rate, self.cfg.sample_us);
                 for c in self.cal.iter_mut() {
-                    c.set_drift_allowance(allow);
+                    c.set_temperature_rate(self.temp_rate, self.cfg.sample_us);
                 }
             }
         }

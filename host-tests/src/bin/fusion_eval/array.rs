@@ -5,7 +5,7 @@
 //! (real drivers over the emulated SPI bus, the start-up self-test, the
 //! pipeline with its online calibration).
 
-use gyro_array::algo::calib::{drift_allowance, CalConfig, RelCal};
+use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::AxisState;
 use gyro_array::checks::run_board_array_with;
 use gyro_array::emu::noise::{quantise, AxisNoise};
@@ -68,11 +68,7 @@ fn class_n<const N: usize>(
         } else {
             0.0
         };
-        cal.set_drift_allowance(drift_allowance(
-            &CalConfig::default(),
-            ramp_c_per_s,
-            (1e6 / FS) as u32,
-        ));
+        cal.set_temperature_rate(ramp_c_per_s, (1e6 / FS) as u32);
         let mut sums = [0.0f64; 4];
         for k in 0..SAMPLES {
             let t = truth(k);
