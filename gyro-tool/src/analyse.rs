@@ -9,7 +9,7 @@
 //! (fed its noise probe) are the noise; so is `gyro replay`'s probe over a
 //! raw-mode recording.
 
-use std::path::PathBuf;
+use std::path::Path;
 
 use gyro_array::algo::allan::AdevPoint;
 use gyro_array::link::msg::{Frame, Noise};
@@ -17,7 +17,7 @@ use gyro_array::link::msg::{Frame, Noise};
 use super::{read_recording, Res};
 use crate::dev::octave_oavar;
 
-pub fn run(file: &PathBuf) -> Res<bool> {
+pub fn run(file: &Path) -> Res<bool> {
     let (frames, dec) = read_recording(file)?;
     let mut tau0_s = None;
     let mut noise_tau = [1u16, 8, 64];

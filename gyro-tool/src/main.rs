@@ -21,17 +21,10 @@
 //! SRC is `serial:PATH[@BAUD]`, `tcp:HOST:PORT`, `unix:PATH`, `file:PATH`
 //! or `-`. Protocol: `docs/link.md`.
 
-mod analyse;
-mod dev;
-mod edf;
-mod fit;
-mod plot;
-mod pointing;
-mod replay;
-mod source;
-mod summary;
-mod surface;
-mod table;
+use gyro_tool::{
+    analyse, dev, edf, fit, plot, pointing, read_recording, replay, short, source, summary,
+    surface, table, Res,
+};
 
 use std::io::{Read, Write};
 use std::path::PathBuf;
@@ -40,7 +33,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Parser, Subcommand, ValueEnum};
 use gyro_array::link::msg::{Command, Compensation, Frame, FusionMethod, Mode, Op, Reject};
-use gyro_array::link::wire::{encode, Decoded, Decoder, FrameError, MAX_FRAME};
+use gyro_array::link::wire::{encode, Decoded, Decoder, MAX_FRAME};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use source::Source;
@@ -447,8 +440,6 @@ fn main() -> ExitCode {
     }
 }
 
-type Res<T> = Result<T, Box<dyn std::error::Error>>;
-
 /// Output formats of `gyro allan`.
 #[derive(Clone, Copy, ValueEnum)]
 enum OutFormat {
@@ -458,12 +449,6 @@ enum OutFormat {
     Csv,
     /// JSON: one object per column and deviation, with its points.
     Json,
-}
-
-/// `v` to 7 significant digits, then as short as it prints (a τ0 taken
-/// from a time column is 0.00999999999999 rather than 0.01).
-fn short(v: f64) -> f64 {
-    format!("{v:.6e}").parse().unwrap_or(v)
 }
 
 /// A sample period: a finite number of seconds in (0, 1e6].
@@ -953,16 +938,6 @@ fn allan(
     );
     Ok(true)
 }
-/// Every decoder result of a recording, and the decoder with its counts.
-type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
-
-/// Decode every frame of a recording.
-fn read_recording(file: &PathBuf) -> Res<Recording> {
-    let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
-    let mut dec = Decoder::<MAX_FRAME>::new();
-    let frames = bytes.iter().filter_map(|&b| dec.feed::<Frame>(b)).collect();
-    Ok((frames, dec))
-}
 
 /// `record` and `watch`.
 fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
@@ -1069,7 +1044,7 @@ fn stream(args: &LinkArgs, out: Option<PathBuf>) -> Res<bool> {
 }
 
 fn check(
-    file: &PathBuf,
+    file: &std::path::Path,
     (samples, min_samples): (Option<u64>, Option<u64>),
     crc: Option<u32>,
     acks: Option<Vec<AckKind>>,
@@ -1142,7 +1117,7 @@ fn lead(link_seq: u32, seq: u32, t_us: u64) -> Vec<String> {
     vec![link_seq.to_string(), seq.to_string(), t_us.to_string()]
 }
 
-fn decode(file: &PathBuf, what: What, out: Option<PathBuf>) -> Res<bool> {
+fn decode(file: &std::path::Path, what: What, out: Option<PathBuf>) -> Res<bool> {
     let (frames, dec) = read_recording(file)?;
     let sink: Box<dyn Write> = match &out {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),

@@ -327,7 +327,7 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
     Some(r)
 }
 
-pub fn run(file: &PathBuf, truth: Option<&PathBuf>, svg: Option<&PathBuf>) -> Res<bool> {
+pub fn run(file: &std::path::Path, truth: Option<&PathBuf>, svg: Option<&PathBuf>) -> Res<bool> {
     let (frames, _) = read_recording(file)?;
     let bodies: Vec<Frame> = frames.into_iter().flatten().map(|d| d.body).collect();
     let truth = truth.map(Series::from_csv).transpose()?;

@@ -1,0 +1,40 @@
+//! The host analysis behind `gyro` (and the Python package): Allan-family
+//! deviations with their confidence intervals, the IEEE 952 fit, the
+//! E-DAVAR surface, fusion replay, recordings and their summaries.
+
+pub mod analyse;
+pub mod dev;
+pub mod edf;
+pub mod fit;
+pub mod plot;
+pub mod pointing;
+pub mod replay;
+pub mod source;
+pub mod summary;
+pub mod surface;
+pub mod table;
+
+/// `v` to 7 significant digits, then as short as it prints (a τ0 taken
+/// from a time column is 0.00999999999999 rather than 0.01).
+pub fn short(v: f64) -> f64 {
+    format!("{v:.6e}").parse().unwrap_or(v)
+}
+
+use std::path::Path;
+
+use gyro_array::link::msg::Frame;
+use gyro_array::link::wire::{Decoded, Decoder, FrameError, MAX_FRAME};
+
+/// The tool's fallible result: every error is a message for the user.
+pub type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Every decoder result of a recording, and the decoder with its counts.
+pub type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
+
+/// Decode every frame of a recording.
+pub fn read_recording(file: &Path) -> Res<Recording> {
+    let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+    let mut dec = Decoder::<MAX_FRAME>::new();
+    let frames = bytes.iter().filter_map(|&b| dec.feed::<Frame>(b)).collect();
+    Ok((frames, dec))
+}
