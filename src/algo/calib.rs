@@ -52,14 +52,15 @@ pub const LEARN_STRIDE: u32 = 2;
 /// made the loop's worst sample.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
-/// The drift watch (see [`RelCal::drifting`]): the weight per update of
-/// the fast mean of each chip's residual against its calibration, 1/64 (a
-/// time constant of 128 samples at [`LEARN_STRIDE`] 2).
-pub const LAG_ALPHA: f32 = 1.0 / 64.0;
+/// The drift watch (see [`RelCal::drifting`]) sums each chip's residual
+/// over the [`EVERY`] updates between two of its checks; its lag is an
+/// exponential mean of those block means with weight 1/2 (a time constant
+/// of two blocks, 128 samples at [`LEARN_STRIDE`] 2).
+pub const LAG_BLOCK_WEIGHT: f32 = 0.5;
 
-/// The weight per update of the residual's mean square (the watch's noise
-/// level), 1/1024 (about 2 s).
-pub const LAG_VAR_ALPHA: f32 = 1.0 / 1024.0;
+/// The weight per block of the residual's mean square (the watch's noise
+/// level), 1/32 (about 2 s).
+pub const LAG_VAR_WEIGHT: f32 = 1.0 / 32.0;
 
 /// Standard deviations of the fast mean's own noise a lag must exceed.
 pub const LAG_SIGMAS: f32 = 6.0;
@@ -105,12 +106,12 @@ pub fn tracking(c_per_s: f32) -> f32 {
     }
 }
 
-/// Updates in a row over the limit before a chip is drifting (0.5 s at
-/// stride 2): a scale that a turn reveals after a still start (its ridge
-/// held it at 1) leaves a residual of |s − 1|·|c| until the regression
-/// has it, some 0.3 s; a bias drifting at 0.1 °/s per second leaves a lag
-/// that only grows.
-pub const LAG_PERSIST: u16 = 256;
+/// Blocks of [`EVERY`] updates in a row over the limit before a chip is
+/// drifting (0.5 s at stride 2): a scale that a turn reveals after a still
+/// start (its ridge held it at 1) leaves a residual of |s − 1|·|c| until
+/// the regression has it, some 0.3 s; a bias drifting at 0.1 °/s per second
+/// leaves a lag that only grows.
+pub const LAG_PERSIST: u16 = 8;
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
 use crate::algo::math::bound;
@@ -187,7 +188,13 @@ pub struct RelCal<const N: usize> {
     /// calibration, °/s, and the residual's mean square, (°/s)².
     lag: [f32; N],
     lag_ms: [f32; N],
-    /// Per chip, updates in a row with the lag over its limit.
+    /// Per chip, this block's sums of the residual and of its square (used
+    /// updates only), and their counts.
+    blk_sum: [f32; N],
+    blk_sq: [f32; N],
+    blk_n: [u8; N],
+    blk_sq_n: [u8; N],
+    /// Per chip, blocks in a row with the lag over its limit.
     over: [u16; N],
     /// Chips whose lag stayed over its limit (see [`RelCal::drifting`]).
     drifting: u8,
@@ -226,6 +233,10 @@ impl<const N: usize> RelCal<N> {
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
             lag: [0.0; N],
             lag_ms: [0.0; N],
+            blk_sum: [0.0; N],
+            blk_sq: [0.0; N],
+            blk_n: [0; N],
+            blk_sq_n: [0; N],
             over: [0; N],
             drifting: 0,
             allowance: LAG_FLOOR_DPS,
@@ -428,45 +439,74 @@ impl<const N: usize> RelCal<N> {
         if t.is_multiple_of(EVERY) || warm_turn {
             self.solved = true;
             self.solve(y, mask);
+        } else if t % EVERY == EVERY / 2 {
+            self.judge();
         } else if t.wrapping_add(1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).
             self.last_raw = *y;
         }
     }
 
-    /// The drift watch, one update (see [`RelCal::drifting`]): every chip
-    /// with a correction applied that fusion used on this sample (a sample
-    /// it rejected, a spike, says nothing of the bias), and every drifting
-    /// one with a reading (watched against the calibration it had, which no
-    /// longer learns from it, until it is back). The noise level is the
-    /// residual's whole mean square on used samples: a chip that is only
-    /// noisier (spikes of either sign) raises its own bar, and a drift's
-    /// lag, in it too, lowers the watch's reach by at most √2 (the lag
-    /// must pass 6·√(α/2) = 0.53 of the residual's RMS). At most a
-    /// minority of the chips is drifting: the residuals are against their
-    /// median.
+    /// The drift watch, one update (see [`RelCal::drifting`]): the residual
+    /// of every chip with a correction applied that fusion used on this
+    /// sample (a sample it rejected, a spike, says nothing of the bias),
+    /// and of every drifting one with a reading (watched against the
+    /// calibration it had, which no longer learns from it, until it is
+    /// back), summed into the block; the block is judged every [`EVERY`]
+    /// updates, half-way between two solves ([`RelCal::judge`]).
     #[inline]
     fn watch(&mut self, y: &[f32; N], c: f32, used: u8) {
-        let k2 = LAG_SIGMAS * LAG_SIGMAS * LAG_ALPHA * 0.5;
-        let allow = self.allowance;
         let watched = self.applied & (used | self.drifting);
-        let most = self.applied.count_ones().div_ceil(2);
         for i in 0..N {
             let bit = 1u8 << i;
             if watched & bit == 0 || !y[i].is_finite() {
                 continue;
             }
             let e = y[i] - (self.bias[i] + self.scale[i] * c);
-            let lag = self.lag[i] + LAG_ALPHA * (e - self.lag[i]);
-            self.lag[i] = lag;
-            // |lag| > allowance + K·σ_lag, σ_lag² = ms·α/2 (an exponential
-            // mean's variance), without a square root.
+            self.blk_sum[i] += e;
+            self.blk_n[i] = self.blk_n[i].saturating_add(1);
             if used & bit != 0 {
-                self.lag_ms[i] += LAG_VAR_ALPHA * (e * e - self.lag_ms[i]);
+                self.blk_sq[i] += e * e;
+                self.blk_sq_n[i] = self.blk_sq_n[i].saturating_add(1);
             }
+        }
+    }
+
+    /// One block of the drift watch: each chip's lag (the exponential mean
+    /// of its block means) against its limit, |lag| > allowance + K·σ_lag
+    /// with σ_lag² = ms / (3·block) (a block mean's variance, through an
+    /// exponential mean of weight 1/2), without a square root. The noise
+    /// level is the residual's whole mean square on used samples: a chip
+    /// that is only noisier (spikes of either sign) raises its own bar,
+    /// and a drift's lag, in it too, lowers the watch's reach by at most
+    /// √2. At most a minority of the chips is drifting: the residuals are
+    /// against their median.
+    #[cold]
+    #[inline(never)]
+    fn judge(&mut self) {
+        let allow = self.allowance;
+        let most = self.applied.count_ones().div_ceil(2);
+        for i in 0..N {
+            let bit = 1u8 << i;
+            let (n, nq) = (self.blk_n[i], self.blk_sq_n[i]);
+            let (sum, sq) = (self.blk_sum[i], self.blk_sq[i]);
+            (
+                self.blk_sum[i],
+                self.blk_sq[i],
+                self.blk_n[i],
+                self.blk_sq_n[i],
+            ) = (0.0, 0.0, 0, 0);
+            if n == 0 {
+                continue;
+            }
+            if nq > 0 {
+                self.lag_ms[i] += LAG_VAR_WEIGHT * (sq / f32::from(nq) - self.lag_ms[i]);
+            }
+            let lag = self.lag[i] + LAG_BLOCK_WEIGHT * (sum / f32::from(n) - self.lag[i]);
+            self.lag[i] = lag;
+            let k2 = LAG_SIGMAS * LAG_SIGMAS / (3.0 * f32::from(n));
             let ex = lag.abs() - allow;
-            let over = ex > 0.0 && ex * ex > k2 * self.lag_ms[i];
-            if over {
+            if ex > 0.0 && ex * ex > k2 * self.lag_ms[i] {
                 self.over[i] = self.over[i].saturating_add(1);
                 if self.over[i] >= LAG_PERSIST && (self.drifting | bit).count_ones() < most {
                     self.drifting |= bit;
@@ -648,6 +688,12 @@ impl<const N: usize> RelCal<N> {
             self.fresh &= !(1 << i);
             self.warming &= !(1 << i);
             (self.lag[i], self.lag_ms[i], self.over[i]) = (0.0, 0.0, 0);
+            (
+                self.blk_sum[i],
+                self.blk_sq[i],
+                self.blk_n[i],
+                self.blk_sq_n[i],
+            ) = (0.0, 0.0, 0, 0);
             self.drifting &= !(1 << i);
         }
     }
