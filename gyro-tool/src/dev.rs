@@ -154,6 +154,50 @@ pub fn deviation(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point, De
     deviation_checked(kind, x, tau0, m)
 }
 
+/// [`deviation`] at each of `factors`, the phase checked once (None where
+/// a factor has too few samples). OADEV at factors that are all powers of
+/// two comes from one sweep over the phase for every octave
+/// (`allan::oavar_octave_phase`: the same terms, summed in another order).
+pub fn deviations(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    factors: &[usize],
+) -> Result<Vec<Option<Point>>, DevError> {
+    check(x, tau0)?;
+    if kind == Kind::Oadev && factors.len() > 1 && factors.iter().all(|m| m.is_power_of_two()) {
+        let mut out = vec![allan::AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
+        let k = allan::oavar_octave_phase(x, tau0, &mut out);
+        let swept: Vec<&allan::AdevPoint> = out.iter().take(k).collect();
+        return Ok(factors
+            .iter()
+            .map(|&m| {
+                swept.iter().find(|p| p.m as usize == m).map(|p| Point {
+                    m,
+                    tau: m as f64 * tau0,
+                    // (The sweep's variance is of the phase as given,
+                    // per sample: τ0² times the rate's.)
+                    dev: p.adev() / tau0,
+                    terms: p.terms as usize,
+                    alpha: None,
+                    few_clusters: x.len() / m < MIN_CLUSTERS,
+                    edf: None,
+                    lo: None,
+                    hi: None,
+                })
+            })
+            .collect());
+    }
+    factors
+        .iter()
+        .map(|&m| match deviation_checked(kind, x, tau0, m) {
+            Ok(p) => Ok(Some(p)),
+            Err(DevError::TooShort) => Ok(None),
+            Err(e) => Err(e),
+        })
+        .collect()
+}
+
 /// Σ over i of (x[i + 2m] − 2x[i + m] + x[i])² for i in `from..to` by
 /// `stride`. Stride 1 (OADEV, TOTDEV) is the library's kernel
 /// (`gyro_array::algo::allan::second_diff_sum`), in its AVX2 build where
@@ -242,7 +286,9 @@ fn deviation_checked(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point
             // SP 1065 eq. 25: extend x by reflection about both ends,
             // x*(1 − j) = 2x(1) − x(1 + j), x*(N + j) = 2x(N) − x(N − j),
             // then sum the N − 2 second differences centred on 2..N−1.
-            if n < 3 || m > n - 2 {
+            // (Reflection reaches every m < n; the curves stop at
+            // `max_factor`, as Stable32 does.)
+            if n < 3 || m > n - 1 {
                 return Err(DevError::TooShort);
             }
             let at = |i: isize| -> f64 {
@@ -391,11 +437,31 @@ pub fn curve_with(
     (cf, chi2): (f64, crate::edf::Chi2),
     alphas: &mut Alphas,
 ) -> Result<Vec<Point>, DevError> {
+    curve_at(
+        kind,
+        x,
+        tau0,
+        &grid.factors(kind.max_factor(x.len())),
+        (cf, chi2),
+        alphas,
+    )
+}
+
+/// [`curve_with`] at the averaging factors `factors` (each must reach: a
+/// factor with too few samples is an error).
+pub fn curve_at(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    factors: &[usize],
+    (cf, chi2): (f64, crate::edf::Chi2),
+    alphas: &mut Alphas,
+) -> Result<Vec<Point>, DevError> {
     check(x, tau0)?;
     let mut last_alpha = None;
-    grid.factors(kind.max_factor(x.len()))
-        .into_iter()
-        .map(|m| {
+    factors
+        .iter()
+        .map(|&m| {
             deviation_checked(kind, x, tau0, m).map(|p| {
                 let alpha = *alphas.entry(m).or_insert_with(|| noise_alpha(x, m));
                 last_alpha = alpha.or(last_alpha);
@@ -671,5 +737,35 @@ mod tests {
         }
         assert_eq!(checked, 315);
         assert!(worst < 1e-9, "worst {worst:e}");
+    }
+
+    /// The batch (one check, OADEV's octaves in one sweep) gives what the
+    /// factor-by-factor [`deviation`] does: the same terms, the deviation
+    /// to 1e-12 relative; a factor out of reach is None.
+    #[test]
+    fn the_batch_is_the_single_factor_path() {
+        let x = phase_dat();
+        for kind in [Kind::Oadev, Kind::Adev, Kind::Totdev] {
+            for factors in [
+                vec![1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024],
+                vec![3, 7, 500],
+            ] {
+                let batch = deviations(kind, &x, 1.0, &factors).unwrap();
+                for (m, b) in factors.iter().zip(&batch) {
+                    match (deviation(kind, &x, 1.0, *m), b) {
+                        (Ok(p), Some(q)) => {
+                            assert_eq!(p.terms, q.terms, "{kind:?} {m}");
+                            assert!((p.dev - q.dev).abs() <= 1e-12 * p.dev, "{kind:?} {m}");
+                        }
+                        (Err(DevError::TooShort), None) => {}
+                        (p, q) => panic!("{kind:?} {m}: {p:?} {q:?}"),
+                    }
+                }
+            }
+        }
+        assert_eq!(
+            deviations(Kind::Oadev, &[0.0, f64::NAN], 1.0, &[1]),
+            Err(DevError::NonFinite(1))
+        );
     }
 }

@@ -2,9 +2,11 @@
 //!
 //! - `test`: host tests, then the on-target suite, the demo and the
 //!   fault-containment run in QEMU (each passes or fails by its semihosting
-//!   exit code), then the board firmware build. This is the project's one
-//!   test command.
+//!   exit code), then the board firmware build, then the Python package's
+//!   tests (`python`). This is the project's one test command.
 //! - `run`: the demo firmware in QEMU, logs decoded by defmt-print.
+//! - `python`: build the Python package (`python/`) into a fresh virtual
+//!   environment and run its tests against allantools.
 //! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`); the
 //!   board's loop also counted exactly from QEMU's execution trace.
 //! - `bench-loop`: that exact count alone (about two minutes).
@@ -584,6 +586,10 @@ fn main() {
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
             must(board_qemu(10), "board-f405 on QEMU netduinoplus2");
+            must(
+                python_package(),
+                "the Python package (python/) and its tests",
+            );
             println!("xtask: all checks passed");
         }
         "board-qemu" => {
@@ -602,6 +608,10 @@ fn main() {
             let ok = trace::loop_counts(&build_firmware("bench-trace", "qemu-bench"));
             must(ok, "bench, exact count of the board's loop");
         }
+        "python" => must(
+            python_package(),
+            "the Python package (python/) and its tests",
+        ),
         "bench-loop" => {
             ensure_tools();
             let ok = trace::loop_counts(&build_firmware("bench-trace", "qemu-bench"));
@@ -637,7 +647,7 @@ fn main() {
             println!("panic call sites from this crate, all ELFs: {ours_total}");
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|run|board-qemu|bench|bench-loop|size|panics|fuzz [SECONDS]>");
+            eprintln!("usage: cargo xtask <test|run|board-qemu|python|bench|bench-loop|size|panics|fuzz [SECONDS]>");
             exit(2);
         }
     }
@@ -652,6 +662,26 @@ const FUZZ_TARGETS: &[&str] = &[
 const CARGO_FUZZ: &str = "0.13.2";
 
 /// Replay fuzz/regressions/<target>/*, then fuzz each target for `secs`.
+/// The Python package: built from `python/` into a fresh virtual
+/// environment under `target/` (with its pinned test requirements from
+/// PyPI: pytest, allantools), then its tests. The Rust tests never need
+/// Python; this step does.
+fn python_package() -> bool {
+    let py = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+    let venv = root().join("target/python-venv");
+    let bin = venv.join("bin");
+    run(Command::new(&py).args(["-m", "venv", "--clear"]).arg(&venv))
+        && run(Command::new(bin.join("python")).args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "./python[test]",
+        ]))
+        && run(Command::new(bin.join("python")).args(["-m", "pytest", "-q", "python/tests"]))
+}
+
 fn fuzz(secs: u64) {
     let v = Command::new("cargo")
         .args(["install", "--list"])

@@ -1,0 +1,114 @@
+"""gyro_analysis against allantools (same arrays, 1e-9 relative, the same
+tau list and ns), against Stable32's tables for PHASE.DAT (the ones
+``cargo test -p gyro-tool`` checks), and every error path."""
+
+import pathlib
+
+import allantools
+import numpy as np
+import pytest
+
+import gyro_analysis as ga
+
+KINDS = ["adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev"]
+TAUS = [None, "octave", "decade", "all", [0.1, 0.25, 1.0, 3.3, 7.5, 40.0, 1e9]]
+STABLE32 = pathlib.Path(__file__).resolve().parents[2] / "gyro-tool" / "tests" / "stable32"
+
+
+def noise(kind, n, seed):
+    """White, flicker (1/f, by an FFT shaping) or random-walk frequency noise."""
+    rng = np.random.default_rng(seed)
+    w = rng.standard_normal(n)
+    if kind == "white":
+        return w
+    if kind == "random walk":
+        return np.cumsum(w) * 1e-2 + w
+    f = np.fft.rfftfreq(n)
+    f[0] = f[1]
+    return np.fft.irfft(np.fft.rfft(w) / np.sqrt(f), n)
+
+
+@pytest.mark.parametrize("shape", ["white", "flicker", "random walk"])
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("data_type", ["freq", "phase"])
+def test_equals_allantools(shape, kind, data_type):
+    y = noise(shape, 3000, seed=len(shape) + KINDS.index(kind))
+    for taus in TAUS:
+        want = getattr(allantools, kind)(y, rate=20.0, data_type=data_type, taus=taus)
+        got = getattr(ga, kind)(y, rate=20.0, data_type=data_type, taus=taus)
+        assert len(got[0]) == len(want[0]) > 0, (taus, len(got[0]), len(want[0]))
+        np.testing.assert_array_equal(got[3], want[3])
+        np.testing.assert_allclose(got[0], want[0], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(got[1], want[1], rtol=1e-9, atol=0)
+        np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
+
+
+def table(name):
+    """(AF, #, sigma) rows of a Stable32 table."""
+    rows = []
+    for line in (STABLE32 / name).read_text().splitlines():
+        f = line.split()
+        if len(f) >= 6 and f[0].isdigit():
+            rows.append((int(f[0]), int(f[2]), float(f[5])))
+    return rows
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_matches_stable32_on_phase_dat(kind):
+    lines = (STABLE32 / "PHASE.DAT").read_text().splitlines()
+    x = np.array([float(v) for v in lines if v.strip() and not v.startswith("#")])
+    assert len(x) == 1001
+    rows = table(f"phase_dat_{kind}.txt")
+    assert rows
+    taus, devs, _, ns = getattr(ga, kind)(x, rate=1.0, taus=[af for af, _, _ in rows])
+    got = dict(zip(taus.astype(int), zip(devs, ns)))
+    for af, terms, sigma in rows:
+        dev, n = got[af]
+        half = 0.5e-4 * 10 ** np.floor(np.log10(abs(sigma)))
+        assert abs(dev - sigma) <= half + 1e-7 * abs(sigma), (kind, af, dev, sigma)
+        assert n == terms, (kind, af, n, terms)
+
+
+def test_deviation_gives_edf_intervals_and_noise_type():
+    y = noise("white", 20000, seed=3)
+    d = ga.deviation(y, "oadev", rate=100.0, data_type="freq", taus="octave")
+    assert set(d) == {"taus", "devs", "lo", "hi", "edf", "alpha", "ns"}
+    want = allantools.oadev(y, rate=100.0, data_type="freq", taus=d["taus"])
+    np.testing.assert_allclose(d["devs"], want[1], rtol=1e-9)
+    ok = ~np.isnan(d["lo"])
+    assert ok[:8].all()
+    assert (d["lo"][ok] < d["devs"][ok]).all() and (d["devs"][ok] < d["hi"][ok]).all()
+    # White FM: alpha 0 where identified.
+    alpha = d["alpha"][~np.isnan(d["alpha"])]
+    assert len(alpha) > 5 and (alpha == 0).mean() > 0.8, alpha
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: ga.oadev([1.0, np.nan, 2.0, 3.0]), "sample 1 is not finite"),
+        (lambda: ga.oadev(np.zeros(10), rate=0.0), "tau0 must be a finite number"),
+        (lambda: ga.oadev(np.zeros(10), rate=-1.0), "tau0 must be a finite number"),
+        (lambda: ga.oadev(np.zeros(10), data_type="frequency"), "expected \"phase\" or \"freq\""),
+        (lambda: ga.oadev(np.zeros(10), taus="weekly"), "expected \"all\", \"octave\""),
+        (lambda: ga.oadev(np.zeros(10), taus=[1.0, np.inf]), "not a finite number of seconds"),
+        (lambda: ga.oadev(np.zeros((3, 4))), "one-dimensional"),
+        (lambda: ga.oadev([1.0]), "too few samples"),
+        (lambda: ga.deviation(np.zeros(100), kind="bdev"), "expected adev, oadev"),
+        (lambda: ga.deviation(np.zeros(100), confidence=1.5), "must lie in (0, 1)"),
+    ],
+)
+def test_errors_are_value_errors_with_the_tools_messages(call, message):
+    with pytest.raises(ValueError) as e:
+        call()
+    assert message in str(e.value)
+
+
+def test_long_inputs_and_lists():
+    # A list works as an array does; a long input runs (without the GIL).
+    y = noise("white", 200_000, seed=9)
+    a = ga.oadev(list(y[:1000]), rate=1.0, data_type="freq")
+    b = ga.oadev(y[:1000], rate=1.0, data_type="freq")
+    np.testing.assert_array_equal(a[1], b[1])
+    t, d, _, _ = ga.oadev(y, rate=1000.0, data_type="freq")
+    assert len(t) == 17 and np.all(np.isfinite(d))
