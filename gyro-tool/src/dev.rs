@@ -165,6 +165,21 @@ pub fn deviations(
     factors: &[usize],
 ) -> Result<Vec<Option<Point>>, DevError> {
     check(x, tau0)?;
+    deviations_of_finite(kind, x, tau0, factors)
+}
+
+/// [`deviations`] of phase the caller has made sure is finite (as one
+/// built by a running sum that ended finite), without the pass that
+/// checks it; a bad `tau0` is still an error.
+pub fn deviations_of_finite(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    factors: &[usize],
+) -> Result<Vec<Option<Point>>, DevError> {
+    if !(tau0.is_finite() && tau0 > 0.0) {
+        return Err(DevError::Tau0);
+    }
     if kind == Kind::Oadev && factors.len() > 1 && factors.iter().all(|m| m.is_power_of_two()) {
         let mut out = vec![allan::AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
         let k = allan::oavar_octave_phase(x, tau0, &mut out);

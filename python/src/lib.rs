@@ -40,29 +40,49 @@ fn kind_of(name: &str) -> PyResult<Kind> {
     })
 }
 
-/// The phase the deviations read. Frequency (rate) data becomes phase as
-/// allantools makes it: the mean taken out first (the deviations do not
-/// see a constant rate; its cumulative sum would cost digits), then the
-/// running sum times τ0 after a leading 0. A non-finite sample is an
-/// error, as in `gyro allan`.
+/// The phase the deviations read, checked finite. Frequency (rate) data
+/// becomes phase as allantools makes it: the mean taken out first (the
+/// deviations do not see a constant rate; its running sum would cost
+/// digits), then the running sum of the samples times τ0 after a leading
+/// 0 (allantools multiplies the sum by τ0 afterwards: the same to
+/// rounding). A
+/// non-finite sample is an error naming it, as in `gyro allan`. (For
+/// frequency data the finiteness comes from the sums: a NaN or infinite
+/// sample makes the total so, and only then is it looked for.)
 fn phase_of(data: &[f64], rate: f64, data_type: &str) -> PyResult<Vec<f64>> {
     if !(rate.is_finite() && rate > 0.0) {
         return Err(value_error(DevError::Tau0));
     }
-    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-        return Err(value_error(DevError::NonFinite(i)));
-    }
+    let bad = |data: &[f64]| {
+        let i = data.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        value_error(DevError::NonFinite(i))
+    };
     match data_type {
-        "phase" => Ok(data.to_vec()),
+        "phase" => {
+            if data.iter().any(|v| !v.is_finite()) {
+                return Err(bad(data));
+            }
+            Ok(data.to_vec())
+        }
         "freq" => {
             let tau0 = 1.0 / rate;
-            let mean = data.iter().sum::<f64>() / data.len().max(1) as f64;
+            let total = data.iter().sum::<f64>();
+            if !total.is_finite() {
+                return Err(bad(data));
+            }
+            let mean = total / data.len().max(1) as f64;
             let mut x = Vec::with_capacity(data.len() + 1);
             let mut acc = 0.0;
             x.push(0.0);
-            for &y in data {
-                acc += y - mean;
-                x.push(acc * tau0);
+            x.extend(data.iter().map(|&y| {
+                acc += (y - mean) * tau0;
+                acc
+            }));
+            // Once not finite a running sum stays so: its end says.
+            if !acc.is_finite() {
+                return Err(value_error(
+                    "the phase (the running sum of the rate times tau0) is not finite",
+                ));
             }
             Ok(x)
         }
@@ -155,7 +175,7 @@ fn deviation_arrays<'py>(
     };
     for chunk in ms.chunks(batch) {
         let points = py
-            .detach(|| dev::deviations(kind, &x, tau0, chunk))
+            .detach(|| dev::deviations_of_finite(kind, &x, tau0, chunk))
             .map_err(value_error)?;
         py.check_signals()?;
         for p in points.into_iter().flatten().filter(|p| p.terms > 1) {
