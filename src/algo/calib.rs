@@ -188,12 +188,11 @@ pub struct RelCal<const N: usize> {
     /// calibration, °/s, and the residual's mean square, (°/s)².
     lag: [f32; N],
     lag_ms: [f32; N],
-    /// Per chip, this block's sums of the residual and of its square (used
-    /// updates only), and their counts.
+    /// Per chip, this block's sums of the residual and of its square (the
+    /// square on learnt updates only), and their count.
     blk_sum: [f32; N],
     blk_sq: [f32; N],
     blk_n: [u8; N],
-    blk_sq_n: [u8; N],
     /// Per chip, blocks in a row with the lag over its limit.
     over: [u16; N],
     /// Chips whose lag stayed over its limit (see [`RelCal::drifting`]).
@@ -236,7 +235,6 @@ impl<const N: usize> RelCal<N> {
             blk_sum: [0.0; N],
             blk_sq: [0.0; N],
             blk_n: [0; N],
-            blk_sq_n: [0; N],
             over: [0; N],
             drifting: 0,
             allowance: LAG_FLOOR_DPS,
@@ -400,10 +398,13 @@ impl<const N: usize> RelCal<N> {
             return;
         }
         let c = median(y, mask);
-        self.watch(y, c, mask);
+        if self.drifting != 0 {
+            self.watch_drifting(y, c);
+        }
         // (Bounded: α = 0 must not count samples until n overflows.)
         let grow = self.grow;
         let step = stride as f32;
+        let fixed = self.cfg.alpha * self.track * step;
         for i in 0..N {
             if mask & (1 << i) == 0 {
                 continue;
@@ -421,12 +422,26 @@ impl<const N: usize> RelCal<N> {
             // rather than a time constant.
             let a = if self.n[i] < grow {
                 self.n[i] = self.n[i].saturating_add(stride);
-                (step / self.n[i] as f32).max(self.cfg.alpha * self.track * step)
+                // (A compare, not `max`: that is a library call here.)
+                let g = step / self.n[i] as f32;
+                if g > fixed {
+                    g
+                } else {
+                    fixed
+                }
             } else {
-                self.cfg.alpha * self.track * step
+                fixed
             };
             let dc = c - self.mean_c[i];
             let dy = y[i] - self.mean_y[i];
+            // The drift watch's residual against the calibration,
+            // y − (b + s·c) with b = ȳ − s·c̄ (see [`RelCal::judge`]).
+            if self.applied & (1 << i) != 0 {
+                let e = dy - self.scale[i] * dc;
+                self.blk_sum[i] += e;
+                self.blk_sq[i] += e * e;
+                self.blk_n[i] = self.blk_n[i].saturating_add(1);
+            }
             self.mean_c[i] += a * dc;
             self.mean_y[i] += a * dy;
             self.var_c[i] = (1.0 - a) * (self.var_c[i] + a * dc * dc);
@@ -447,28 +462,23 @@ impl<const N: usize> RelCal<N> {
         }
     }
 
-    /// The drift watch, one update (see [`RelCal::drifting`]): the residual
-    /// of every chip with a correction applied that fusion used on this
-    /// sample (a sample it rejected, a spike, says nothing of the bias),
-    /// and of every drifting one with a reading (watched against the
-    /// calibration it had, which no longer learns from it, until it is
-    /// back), summed into the block; the block is judged every [`EVERY`]
-    /// updates, half-way between two solves ([`RelCal::judge`]).
-    #[inline]
-    fn watch(&mut self, y: &[f32; N], c: f32, used: u8) {
-        let watched = self.applied & (used | self.drifting);
+    /// The drift watch's residual of the drifting chips with a reading, one
+    /// update: left out of learning, each is watched against the
+    /// calibration it had (b + s·c) until it is back. (The chips learnt
+    /// from have theirs summed in [`RelCal::learn`]'s loop, y − ȳ − s·(c − c̄),
+    /// against the calibration as its means stand: the same at a solve,
+    /// and the moments' own terms.) A sample fusion rejected (a spike) says
+    /// nothing of the bias and is not summed.
+    #[cold]
+    #[inline(never)]
+    fn watch_drifting(&mut self, y: &[f32; N], c: f32) {
         for i in 0..N {
-            let bit = 1u8 << i;
-            if watched & bit == 0 || !y[i].is_finite() {
+            if self.drifting & (1 << i) == 0 || !y[i].is_finite() {
                 continue;
             }
             let e = y[i] - (self.bias[i] + self.scale[i] * c);
             self.blk_sum[i] += e;
             self.blk_n[i] = self.blk_n[i].saturating_add(1);
-            if used & bit != 0 {
-                self.blk_sq[i] += e * e;
-                self.blk_sq_n[i] = self.blk_sq_n[i].saturating_add(1);
-            }
         }
     }
 
@@ -488,19 +498,16 @@ impl<const N: usize> RelCal<N> {
         let most = self.applied.count_ones().div_ceil(2);
         for i in 0..N {
             let bit = 1u8 << i;
-            let (n, nq) = (self.blk_n[i], self.blk_sq_n[i]);
+            let n = self.blk_n[i];
             let (sum, sq) = (self.blk_sum[i], self.blk_sq[i]);
-            (
-                self.blk_sum[i],
-                self.blk_sq[i],
-                self.blk_n[i],
-                self.blk_sq_n[i],
-            ) = (0.0, 0.0, 0, 0);
+            (self.blk_sum[i], self.blk_sq[i], self.blk_n[i]) = (0.0, 0.0, 0);
             if n == 0 {
                 continue;
             }
-            if nq > 0 {
-                self.lag_ms[i] += LAG_VAR_WEIGHT * (sq / f32::from(nq) - self.lag_ms[i]);
+            // (A drifting chip's updates sum no squares: its noise level
+            // stays what it was.)
+            if self.drifting & bit == 0 {
+                self.lag_ms[i] += LAG_VAR_WEIGHT * (sq / f32::from(n) - self.lag_ms[i]);
             }
             let lag = self.lag[i] + LAG_BLOCK_WEIGHT * (sum / f32::from(n) - self.lag[i]);
             self.lag[i] = lag;
@@ -688,12 +695,7 @@ impl<const N: usize> RelCal<N> {
             self.fresh &= !(1 << i);
             self.warming &= !(1 << i);
             (self.lag[i], self.lag_ms[i], self.over[i]) = (0.0, 0.0, 0);
-            (
-                self.blk_sum[i],
-                self.blk_sq[i],
-                self.blk_n[i],
-                self.blk_sq_n[i],
-            ) = (0.0, 0.0, 0, 0);
+            (self.blk_sum[i], self.blk_sq[i], self.blk_n[i]) = (0.0, 0.0, 0);
             self.drifting &= !(1 << i);
         }
     }

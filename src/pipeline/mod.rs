@@ -289,6 +289,8 @@ pub struct Pipeline<const N: usize> {
     /// The fastest die temperature change lately, °C/s (the calibration's
     /// drift allowance follows it).
     temp_rate: f32,
+    /// The chips flagged [`flag::CAL_DRIFT`].
+    drift_flagged: u8,
     seq: u32,
     overruns: u32,
     counters: [GyroCounters; N],
@@ -319,6 +321,7 @@ impl<const N: usize> Pipeline<N> {
             temps: [None; N],
             temp_seq: [0; N],
             temp_rate: 0.0,
+            drift_flagged: 0,
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
@@ -474,6 +477,25 @@ impl<const N: usize> Pipeline<N> {
                 temp = turn;
             }
         }
+        // The calibration's drift verdicts of the last sample (here, not
+        // after this sample's fusion, so that `out` is built where it is
+        // returned: flagged after it, the loop copied it, 64 instructions a
+        // sample on the Cortex-M4).
+        let drifting = self.cal.iter().fold(0u8, |m, c| m | c.drifting());
+        if drifting != self.drift_flagged {
+            self.drift_flagged = drifting;
+            for (i, h) in self.health.iter_mut().enumerate() {
+                let before = h.flags;
+                if drifting & (1 << i) != 0 {
+                    h.flags |= flag::CAL_DRIFT;
+                } else {
+                    h.flags &= !flag::CAL_DRIFT;
+                }
+                if h.flags != before {
+                    out.health_changed |= 1 << i;
+                }
+            }
+        }
         // Healthy chips finding their clocks again after a gap.
         let mut acquiring = 0u8;
         for (i, g) in gyros.iter_mut().enumerate() {
@@ -551,18 +573,6 @@ impl<const N: usize> Pipeline<N> {
             };
             out.busy |= self.cal[a].solved();
         }
-        let drifting = self.cal.iter().fold(0u8, |m, c| m | c.drifting());
-        for (i, h) in self.health.iter_mut().enumerate() {
-            let before = h.flags;
-            if drifting & (1 << i) != 0 {
-                h.flags |= flag::CAL_DRIFT;
-            } else {
-                h.flags &= !flag::CAL_DRIFT;
-            }
-            if h.flags != before {
-                out.health_changed |= 1 << i;
-            }
-        }
         out
     }
 
@@ -638,7 +648,7 @@ impl<const N: usize> Pipeline<N> {
                 }
                 // Configured and verified just now: it rejoins after a run
                 // as long as the stuck check needs, not recover_after.
-                h.flags = flag::READ_ERROR;
+                h.flags = flag::READ_ERROR | (h.flags & flag::CAL_DRIFT);
                 h.need = cfg.stuck_after;
                 h.good_run = 0;
                 h.bad_run = 0;
