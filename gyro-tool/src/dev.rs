@@ -71,6 +71,22 @@ pub enum Kind {
 }
 
 impl Kind {
+    /// Every deviation, in the order of the enum.
+    pub const ALL: [Kind; 7] = [
+        Kind::Adev,
+        Kind::Oadev,
+        Kind::Mdev,
+        Kind::Tdev,
+        Kind::Hdev,
+        Kind::Ohdev,
+        Kind::Totdev,
+    ];
+
+    /// The deviation of lower-case name `name` ([`Kind::name`]).
+    pub fn from_name(name: &str) -> Option<Kind> {
+        Kind::ALL.into_iter().find(|k| k.name() == name)
+    }
+
     /// Lower-case name.
     pub fn name(self) -> &'static str {
         match self {
@@ -729,15 +745,7 @@ mod tests {
             .skip(1)
         {
             let f: Vec<&str> = l.split(',').collect();
-            let kind = match f[0] {
-                "adev" => Kind::Adev,
-                "oadev" => Kind::Oadev,
-                "mdev" => Kind::Mdev,
-                "tdev" => Kind::Tdev,
-                "hdev" => Kind::Hdev,
-                "ohdev" => Kind::Ohdev,
-                _ => Kind::Totdev,
-            };
+            let kind = Kind::from_name(f[0]).unwrap();
             let (m, want, n): (usize, f64, usize) = (
                 f[1].parse().unwrap(),
                 f[2].parse().unwrap(),

@@ -24,19 +24,10 @@ fn value_error(e: impl std::fmt::Display) -> PyErr {
 }
 
 fn kind_of(name: &str) -> PyResult<Kind> {
-    Ok(match name {
-        "adev" => Kind::Adev,
-        "oadev" => Kind::Oadev,
-        "mdev" => Kind::Mdev,
-        "tdev" => Kind::Tdev,
-        "hdev" => Kind::Hdev,
-        "ohdev" => Kind::Ohdev,
-        "totdev" => Kind::Totdev,
-        _ => {
-            return Err(value_error(format!(
-                "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev or totdev"
-            )))
-        }
+    Kind::from_name(name).ok_or_else(|| {
+        value_error(format!(
+            "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev or totdev"
+        ))
     })
 }
 

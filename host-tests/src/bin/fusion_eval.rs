@@ -288,28 +288,45 @@ fn drift_class(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
                 r.push((s / (SAMPLES - start) as f64).sqrt());
             }
         }
-        let worst = times.iter().cloned().fold(0.0, f64::max);
         println!(
             "  drift {rate} deg/s per s (3 sigma = {:.3} deg/s):",
             3.0 * NoiseParams::ICM42688.white_sigma_dps(FS)
         );
-        let (tm, tsd) = mean_sd(&times);
-        println!(
-            "    time from 3 sigma to weight < 5 %: {tm:.3} +- {tsd:.3} s, worst {worst:.3} s"
-        );
-        for (n, r) in ["mean", "zhang", "adaptive"].iter().zip(&rms) {
-            let (m, sd) = mean_sd(r);
-            println!("    {n:<14} {m:>10.5} +- {sd:.5}");
-        }
-        out.push((
+        out.push(drift_report(
             format!("(g) drift {rate} deg/s per s"),
-            worst,
-            mean_sd(&rms[2]).0,
-            mean_sd(&rms[0]).0,
-            mean_sd(&rms[1]).0,
+            "weight < 5 %",
+            &times,
+            &rms,
+            "adaptive",
         ));
     }
     out
+}
+
+/// Print a drift class's times from 3σ to `event` (per seed; negative:
+/// before) and its RMS errors (mean, zhang, then `last`); (name, worst
+/// time, `last`'s RMS, mean's, zhang's).
+fn drift_report(
+    name: String,
+    event: &str,
+    times: &[f64],
+    rms: &[Vec<f64>],
+    last: &str,
+) -> (String, f64, f64, f64, f64) {
+    let worst = times.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let (tm, tsd) = mean_sd(times);
+    println!("    time from 3 sigma to {event}: {tm:.3} +- {tsd:.3} s, worst {worst:.3} s");
+    for (n, r) in ["mean", "zhang", last].iter().zip(rms) {
+        let (m, sd) = mean_sd(r);
+        println!("    {n:<14} {m:>10.5} +- {sd:.5}");
+    }
+    (
+        name,
+        worst,
+        mean_sd(&rms[2]).0,
+        mean_sd(&rms[0]).0,
+        mean_sd(&rms[1]).0,
+    )
 }
 
 /// Class (g) on the pipeline's default path (the online relative
@@ -382,23 +399,14 @@ fn drift_class_calibrated(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
                     r.push((s / (SAMPLES - start) as f64).sqrt());
                 }
             }
-            let worst = times.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-            let (tm, tsd) = mean_sd(&times);
             let to3 = 3.0 * NoiseParams::ICM42688.white_sigma_dps(FS) / rate;
             println!("  drift {rate} deg/s per s, {motion} (3 sigma {to3:.2} s after it starts):");
-            println!(
-                "    time from 3 sigma to flagged drifting: {tm:.3} +- {tsd:.3} s, worst {worst:.3} s"
-            );
-            for (n, r) in ["mean", "zhang", "default"].iter().zip(&rms) {
-                let (m, sd) = mean_sd(r);
-                println!("    {n:<14} {m:>10.5} +- {sd:.5}");
-            }
-            out.push((
+            out.push(drift_report(
                 format!("(g) drift {rate} deg/s per s, {motion}, default path"),
-                worst,
-                mean_sd(&rms[2]).0,
-                mean_sd(&rms[0]).0,
-                mean_sd(&rms[1]).0,
+                "flagged drifting",
+                &times,
+                &rms,
+                "default",
             ));
         }
     }

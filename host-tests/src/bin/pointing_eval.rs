@@ -434,6 +434,14 @@ struct Comp {
     s_noise: [ErrorStats; 3],
 }
 
+/// How far ahead of the stated instant the board predicts, s: to the
+/// frame's last byte as the link works it out (`Port::horizon_us`: the
+/// loop's budgeted time and the largest frame on the wire).
+fn board_horizon_s() -> f64 {
+    let port = gyro_array::link::port::Port::<64>::new(Default::default());
+    DELAY_US as f64 * 1e-6 + f64::from(port.horizon_us().unwrap_or(0)) * 1e-6
+}
+
 /// The board's added pointing error (its shipped compensation: K =
 /// `PREDICT_K` to the frame's end, `to_frame` s ahead of the stated
 /// instant) on noise realisation `seed`, with and without the fault mix.
@@ -647,12 +655,7 @@ fn main() {
         // The board's default: to the frame's last byte as the link works
         // it out (`Port::horizon_us`: the loop's budgeted time and the
         // largest frame on the wire).
-        let to_frame = DELAY_US as f64 * 1e-6
-            + f64::from(
-                gyro_array::link::port::Port::<64>::new(Default::default())
-                    .horizon_us()
-                    .unwrap_or(0),
-            ) * 1e-6;
+        let to_frame = board_horizon_s();
         let horizons = [
             ("to the frame's end (the board's)", to_frame),
             ("to the arrival", d_s),
@@ -834,12 +837,7 @@ fn main() {
         }
     }
     if args.realisations > 0 {
-        let to_frame = DELAY_US as f64 * 1e-6
-            + f64::from(
-                gyro_array::link::port::Port::<64>::new(Default::default())
-                    .horizon_us()
-                    .unwrap_or(0),
-            ) * 1e-6;
+        let to_frame = board_horizon_s();
         let r = args.realisations;
         println!(
             "\nthe board with faults against fault-free, p99.9 pooled over {r} noise realisations (seeds {}-{}; the yardstick: fault-free on {r} more):",
