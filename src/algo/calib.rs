@@ -87,7 +87,7 @@ pub const ZRO_TEMPCO_BOUND_DPS_PER_C: f32 = 0.05;
 /// time constant at `sample_us`: 2 · bound · rate · τ (τ = 1/α samples; a
 /// calibration [`tracking`] k times faster leaves 1/k of it).
 pub fn drift_allowance(cfg: &CalConfig, temp_rate_c_per_s: f32, sample_us: u32) -> f32 {
-    let tau_s = sample_us as f32 * 1e-6 / cfg.alpha.max(1e-6);
+    let tau_s = sample_us as f32 * 1e-6 / at_least(cfg.alpha, 1e-6);
     2.0 * ZRO_TEMPCO_BOUND_DPS_PER_C * temp_rate_c_per_s.abs() * tau_s
 }
 
@@ -114,7 +114,7 @@ pub fn tracking(c_per_s: f32) -> f32 {
 pub const LAG_PERSIST: u16 = 8;
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
-use crate::algo::math::bound;
+use crate::algo::math::{at_least, bound};
 
 /// Settings of [`RelCal`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -422,13 +422,7 @@ impl<const N: usize> RelCal<N> {
             // rather than a time constant.
             let a = if self.n[i] < grow {
                 self.n[i] = self.n[i].saturating_add(stride);
-                // (A compare, not `max`: that is a library call here.)
-                let g = step / self.n[i] as f32;
-                if g > fixed {
-                    g
-                } else {
-                    fixed
-                }
+                at_least(step / self.n[i] as f32, fixed)
             } else {
                 fixed
             };
@@ -530,8 +524,9 @@ impl<const N: usize> RelCal<N> {
 
     /// Chips whose residual against their calibration has stayed further
     /// from zero than their part's bias can move it ([`LAG_FLOOR_DPS`],
-    /// raised by [`RelCal::set_drift_allowance`]) plus [`LAG_SIGMAS`] of its
-    /// own noise, for [`LAG_PERSIST`] updates: a chip failing slowly
+    /// raised by [`RelCal::set_temperature_rate`]) plus [`LAG_SIGMAS`] of
+    /// its own noise, for [`LAG_PERSIST`] blocks of [`EVERY`] updates: a
+    /// chip failing slowly
     /// (its bias drifting far faster than temperature moves a part's),
     /// which the calibration would otherwise follow and fusion keep. Such
     /// a chip is left out of fusion ([`RelCal::fuse`]) and of the
@@ -554,11 +549,7 @@ impl<const N: usize> RelCal<N> {
     pub fn set_temperature_rate(&mut self, c_per_s: f32, sample_us: u32) {
         self.track = tracking(c_per_s);
         let dps = drift_allowance(&self.cfg, c_per_s, sample_us) / self.track;
-        self.allowance = if dps > LAG_FLOOR_DPS {
-            dps
-        } else {
-            LAG_FLOOR_DPS
-        };
+        self.allowance = at_least(dps, LAG_FLOOR_DPS);
     }
 
     /// Solve for the estimates (see [`RelCal::estimate`]). A chip whose

@@ -26,6 +26,7 @@ pub mod tracker;
 
 use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, FuseError, Fused, Fusion, Method};
+use crate::algo::math::at_least;
 use crate::algo::mounting::{CalError, CalRecord, ChipCal};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart};
 
@@ -586,11 +587,7 @@ impl<const N: usize> Pipeline<N> {
             if dt_s > 0.0 {
                 // The fastest chip's rate, decaying by a quarter a reading.
                 let r = (t - t0).abs() / dt_s;
-                self.temp_rate = if r > 0.75 * self.temp_rate {
-                    r
-                } else {
-                    0.75 * self.temp_rate
-                };
+                self.temp_rate = at_least(r, 0.75 * self.temp_rate);
                 for c in self.cal.iter_mut() {
                     c.set_temperature_rate(self.temp_rate, self.cfg.sample_us);
                 }

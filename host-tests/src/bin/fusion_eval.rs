@@ -230,62 +230,85 @@ fn scale_class(seed: u64) -> Vec<(String, f64, f64, f64)> {
     out
 }
 
+/// One seed of a drift class: four ICM-42688-P under a true rate of `amp`
+/// °/s at 1 Hz; from 5 s chip 2's bias ramps at `rate` °/s per s. `fuse`
+/// gives per sample the three methods' fused rates and whether the event
+/// watched for holds. Returns the time from the drift reaching 3σ of the
+/// chip's white noise to the start of the event's last run, s (negative:
+/// it began before; infinite: never), and the three methods' RMS errors
+/// from 5 s on.
+fn drift_seed(
+    rng_seed: u64,
+    rate: f32,
+    amp: f32,
+    mut fuse: impl FnMut(&[f32; 4]) -> ([f32; 3], bool),
+) -> (f64, [f64; 3]) {
+    let mut rng = Rng::new(rng_seed);
+    let params = [NoiseParams::ICM42688; 4];
+    let sigma = params[2].white_sigma_dps(FS);
+    let mut noise = [AxisNoise::default(); 4];
+    let mut sums = [0.0f64; 3];
+    let (mut reached, mut since) = (None, None::<usize>);
+    let start = 5 * FS as usize;
+    for k in 0..SAMPLES {
+        let t = amp * (2.0 * std::f32::consts::PI * k as f32 / FS).sin();
+        let drift = if k >= start {
+            rate * (k - start) as f32 / FS
+        } else {
+            0.0
+        };
+        if drift >= 3.0 * sigma && reached.is_none() {
+            reached = Some(k);
+        }
+        let y = [0, 1, 2, 3].map(|i| {
+            let v =
+                noise[i].step(&params[i], &mut rng, t, 1.0 / FS) + if i == 2 { drift } else { 0.0 };
+            quantise(v, LSB) as f32 / LSB
+        });
+        let (rates, event) = fuse(&y);
+        if k >= start {
+            for (s, r) in sums.iter_mut().zip(rates) {
+                *s += ((r - t) as f64).powi(2);
+            }
+            if event {
+                since.get_or_insert(k);
+            } else {
+                since = None;
+            }
+        }
+    }
+    let time = match (reached, since) {
+        (Some(r), Some(l)) => (l as f64 - r as f64) / FS as f64,
+        _ => f64::INFINITY,
+    };
+    (time, sums.map(|s| (s / (SAMPLES - start) as f64).sqrt()))
+}
+
 /// Class (g), issue 9: slow bias drift on one chip. Four chips at rest;
 /// from 5 s chip 2's bias ramps at `rate` °/s per s. For each of 10 seeds:
 /// the time from the drift reaching 3σ of the chip's white noise until
-/// adaptive gives it under 5 % of the weight (and keeps it there), and
-/// the RMS error of mean, zhang and adaptive from 5 s on. Returns (name,
-/// worst time in s, adaptive, mean, zhang).
+/// adaptive gives it under 5 % of the weight (and keeps it there; 0 if it
+/// already had), and the RMS error of mean, zhang and adaptive from 5 s
+/// on. Returns (name, worst time in s, adaptive, mean, zhang).
 fn drift_class(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
     let mut out = Vec::new();
     println!("\n(g) slow bias drift on chip 2 from 5 s, 10 seeds x {SAMPLES} samples");
     for rate in [0.02f32, 0.2] {
         let (mut times, mut rms) = (Vec::new(), vec![Vec::new(); 3]);
         for s in 0..10u64 {
-            let mut rng = Rng::new(seed * 1000 + 700 + s);
-            let params = [NoiseParams::ICM42688; 4];
-            let sigma = params[2].white_sigma_dps(FS);
-            let mut noise = [AxisNoise::default(); 4];
             let fusers = mean_zhang_adaptive::<4>();
-            let mut states = vec![AxisState::<4>::default(); fusers.len()];
-            let mut sums = [0.0f64; 3];
-            let (mut reached, mut low_since) = (None, None::<usize>);
-            let start = 5 * FS as usize;
-            for k in 0..SAMPLES {
-                let drift = if k >= start {
-                    rate * (k - start) as f32 / FS
-                } else {
-                    0.0
-                };
-                if drift >= 3.0 * sigma && reached.is_none() {
-                    reached = Some(k);
-                }
-                let y = [0, 1, 2, 3].map(|i| {
-                    let v = noise[i].step(&params[i], &mut rng, 0.0, 1.0 / FS)
-                        + if i == 2 { drift } else { 0.0 };
-                    quantise(v, LSB) as f32 / LSB
+            let mut states = [AxisState::<4>::default(); 3];
+            let (t, r) = drift_seed(seed * 1000 + 700 + s, rate, 0.0, |y| {
+                let rs: [_; 3] = core::array::from_fn(|j| {
+                    fusers[j]
+                        .fuse(&mut states[j], y, 0b1111)
+                        .expect("valid input")
                 });
-                for (j, f) in fusers.iter().enumerate() {
-                    let r = f.fuse(&mut states[j], &y, 0b1111).expect("valid input");
-                    if k >= start {
-                        sums[j] += (r.rate_dps as f64).powi(2);
-                    }
-                    if j == 2 && reached.is_some() {
-                        if r.weights[2] < 0.05 {
-                            low_since.get_or_insert(k);
-                        } else {
-                            low_since = None;
-                        }
-                    }
-                }
-            }
-            let t = match (reached, low_since) {
-                (Some(r), Some(l)) => (l.saturating_sub(r)) as f64 / FS as f64,
-                _ => f64::INFINITY,
-            };
-            times.push(t);
-            for (r, s) in rms.iter_mut().zip(sums) {
-                r.push((s / (SAMPLES - start) as f64).sqrt());
+                (rs.map(|r| r.rate_dps), rs[2].weights[2] < 0.05)
+            });
+            times.push(t.max(0.0));
+            for (v, x) in rms.iter_mut().zip(r) {
+                v.push(x);
             }
         }
         println!(
@@ -345,58 +368,21 @@ fn drift_class_calibrated(seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
         for rate in [0.02f32, 0.1, 0.2] {
             let (mut times, mut rms) = (Vec::new(), vec![Vec::new(); 3]);
             for s in 0..10u64 {
-                let mut rng = Rng::new(seed * 1000 + 900 + s);
-                let params = [NoiseParams::ICM42688; 4];
-                let sigma = params[2].white_sigma_dps(FS);
-                let mut noise = [AxisNoise::default(); 4];
                 let [mean, zhang, adaptive] = mean_zhang_adaptive::<4>();
                 let mut states = [AxisState::<4>::default(); 3];
                 let mut cal = RelCal::<4>::new(CalConfig::default());
-                let mut sums = [0.0f64; 3];
-                let (mut reached, mut flagged) = (None, None::<usize>);
-                let start = 5 * FS as usize;
-                for k in 0..SAMPLES {
-                    let t = amp * (2.0 * std::f32::consts::PI * k as f32 / FS).sin();
-                    let drift = if k >= start {
-                        rate * (k - start) as f32 / FS
-                    } else {
-                        0.0
-                    };
-                    if drift >= 3.0 * sigma && reached.is_none() {
-                        reached = Some(k);
-                    }
-                    let y = [0, 1, 2, 3].map(|i| {
-                        let v = noise[i].step(&params[i], &mut rng, t, 1.0 / FS)
-                            + if i == 2 { drift } else { 0.0 };
-                        quantise(v, LSB) as f32 / LSB
-                    });
+                let (t, r) = drift_seed(seed * 1000 + 900 + s, rate, amp, |y| {
                     let rs = [
-                        mean.fuse(&mut states[0], &y, 0b1111),
-                        zhang.fuse(&mut states[1], &y, 0b1111),
-                        cal.fuse(&adaptive, &mut states[2], &y, 0b1111),
-                    ];
-                    for (j, r) in rs.iter().enumerate() {
-                        let r = r.as_ref().expect("valid input");
-                        if k >= start {
-                            sums[j] += ((r.rate_dps - t) as f64).powi(2);
-                        }
-                    }
-                    if k >= start {
-                        if cal.drifting() & (1 << 2) != 0 {
-                            flagged.get_or_insert(k);
-                        } else {
-                            flagged = None;
-                        }
-                    }
-                }
-                // (Negative: flagged before its error reached 3σ.)
-                let t = match (reached, flagged) {
-                    (Some(r), Some(l)) => (l as f64 - r as f64) / FS as f64,
-                    _ => f64::INFINITY,
-                };
+                        mean.fuse(&mut states[0], y, 0b1111),
+                        zhang.fuse(&mut states[1], y, 0b1111),
+                        cal.fuse(&adaptive, &mut states[2], y, 0b1111),
+                    ]
+                    .map(|r| r.expect("valid input").rate_dps);
+                    (rs, cal.drifting() & (1 << 2) != 0)
+                });
                 times.push(t);
-                for (r, s) in rms.iter_mut().zip(sums) {
-                    r.push((s / (SAMPLES - start) as f64).sqrt());
+                for (v, x) in rms.iter_mut().zip(r) {
+                    v.push(x);
                 }
             }
             let to3 = 3.0 * NoiseParams::ICM42688.white_sigma_dps(FS) / rate;
