@@ -71,20 +71,10 @@ pub enum Kind {
 }
 
 impl Kind {
-    /// Every deviation, in the order of the enum.
-    pub const ALL: [Kind; 7] = [
-        Kind::Adev,
-        Kind::Oadev,
-        Kind::Mdev,
-        Kind::Tdev,
-        Kind::Hdev,
-        Kind::Ohdev,
-        Kind::Totdev,
-    ];
-
-    /// The deviation of lower-case name `name` ([`Kind::name`]).
+    /// The deviation of lower-case name `name` ([`Kind::name`], the
+    /// command line's value).
     pub fn from_name(name: &str) -> Option<Kind> {
-        Kind::ALL.into_iter().find(|k| k.name() == name)
+        <Kind as clap::ValueEnum>::from_str(name, false).ok()
     }
 
     /// Lower-case name.
@@ -136,6 +126,24 @@ pub struct Point {
     pub hi: Option<f64>,
 }
 
+impl Point {
+    /// The point at factor `m` of `n` phase points, before the noise type,
+    /// EDF and interval are known.
+    fn bare(m: usize, tau0: f64, dev: f64, terms: usize, n: usize) -> Self {
+        Point {
+            m,
+            tau: m as f64 * tau0,
+            dev,
+            terms,
+            alpha: None,
+            few_clusters: n / m < MIN_CLUSTERS,
+            edf: None,
+            lo: None,
+            hi: None,
+        }
+    }
+}
+
 /// See [`Point::few_clusters`].
 pub const MIN_CLUSTERS: usize = 16;
 
@@ -153,12 +161,18 @@ pub fn phase_from_rate(rate: &[f64], tau0: f64) -> Result<Vec<f64>, DevError> {
 }
 
 fn check(x: &[f64], tau0: f64) -> Result<(), DevError> {
-    if !(tau0.is_finite() && tau0 > 0.0) {
-        return Err(DevError::Tau0);
-    }
+    check_tau0(tau0)?;
     match x.iter().position(|v| !v.is_finite()) {
         Some(i) => Err(DevError::NonFinite(i)),
         None => Ok(()),
+    }
+}
+
+fn check_tau0(tau0: f64) -> Result<(), DevError> {
+    if tau0.is_finite() && tau0 > 0.0 {
+        Ok(())
+    } else {
+        Err(DevError::Tau0)
     }
 }
 
@@ -193,9 +207,7 @@ pub fn deviations_of_finite(
     tau0: f64,
     factors: &[usize],
 ) -> Result<Vec<Option<Point>>, DevError> {
-    if !(tau0.is_finite() && tau0 > 0.0) {
-        return Err(DevError::Tau0);
-    }
+    check_tau0(tau0)?;
     if kind == Kind::Oadev && factors.len() > 1 && factors.iter().all(|m| m.is_power_of_two()) {
         let mut out = vec![allan::AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
         let k = allan::oavar_octave_phase(x, tau0, &mut out);
@@ -203,19 +215,12 @@ pub fn deviations_of_finite(
         return Ok(factors
             .iter()
             .map(|&m| {
-                swept.iter().find(|p| p.m as usize == m).map(|p| Point {
-                    m,
-                    tau: m as f64 * tau0,
-                    // (The sweep's variance is of the phase as given,
-                    // per sample: τ0² times the rate's.)
-                    dev: p.adev() / tau0,
-                    terms: p.terms as usize,
-                    alpha: None,
-                    few_clusters: x.len() / m < MIN_CLUSTERS,
-                    edf: None,
-                    lo: None,
-                    hi: None,
-                })
+                // (The sweep's variance is of the phase as given, per
+                // sample: τ0² times the rate's.)
+                swept
+                    .iter()
+                    .find(|p| p.m as usize == m)
+                    .map(|p| Point::bare(m, tau0, p.adev() / tau0, p.terms as usize, x.len()))
             })
             .collect());
     }
@@ -349,17 +354,7 @@ fn deviation_checked(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point
             (s / (2.0 * tau * tau * (n - 2) as f64), n - 2)
         }
     };
-    Ok(Point {
-        m,
-        tau,
-        dev: var.sqrt(),
-        terms,
-        alpha: None,
-        few_clusters: n / m < MIN_CLUSTERS,
-        edf: None,
-        lo: None,
-        hi: None,
-    })
+    Ok(Point::bare(m, tau0, var.sqrt(), terms, n))
 }
 
 /// Which averaging factors.
