@@ -453,7 +453,12 @@ fn board_adds(
     faulty: bool,
     to_frame: f64,
 ) -> [Vec<f64>; 3] {
-    let run = board_run(p, seed, ms, faulty);
+    adds_of(lp, p, &board_run(p, seed, ms, faulty), to_frame)
+}
+
+/// What the board adds to the ideal gyro's pointing error in `run`, with
+/// its shipped compensation (`to_frame` s ahead of the stated instant).
+fn adds_of(lp: &Loop, p: &Profile, run: &Stream, to_frame: f64) -> [Vec<f64>; 3] {
     let after_read_s = read_to_antenna_us() * 1e-6;
     let t0 = run.now_s[0] - 1e-3;
     let arrive: Vec<f64> = run.now_s.iter().map(|t| t + after_read_s).collect();
@@ -700,17 +705,7 @@ fn main() {
                 });
             }
         }
-        {
-            let k3 = |f: &Feed| predicted::<{ gyro_array::link::port::PREDICT_K }>(f, to_frame);
-            let other_arrive: Vec<f64> = other.now_s.iter().map(|t| t + after_read_s).collect();
-            let other_ideal: Feed = other_arrive.iter().map(|&t| p.rate.at_f64(t)).collect();
-            let e_other_ideal = through_loop(&lp, Some(&p.rate), t0, &other_arrive, &other_ideal);
-            let a_other = stats3(&diff(
-                &through_loop(&lp, Some(&p.rate), t0, &other_arrive, &k3(&other.fused)),
-                &e_other_ideal,
-            ));
-            yardstick.push((p.name, a_other));
-        }
+        yardstick.push((p.name, stats3(&adds_of(&lp, &p, &other, to_frame))));
         if let (Some(dir), true) = (&args.write, p.name.starts_with("highway: 30")) {
             let _ = std::fs::create_dir_all(dir);
             let mut w = Wire::default();
