@@ -11,7 +11,7 @@ use std::cell::RefCell;
 
 use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
@@ -92,17 +92,11 @@ pub fn run(
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let cfg = Config {
-        odr: Odr::Hz2000,
-        filter: Filter::BOARD_2K,
-        clock: if timing.clkin {
-            ClockInput::ClkIn
-        } else {
-            ClockInput::Internal
-        },
-        sampling: Sampling::Fifo,
-        ..Config::default()
-    };
+    let cfg = Config::board_fifo(if timing.clkin {
+        ClockInput::ClkIn
+    } else {
+        ClockInput::Internal
+    });
     let Ok(mut pipe) = Pipeline::<N>::new(
         PipelineConfig::default(),
         Method::Adaptive(AdaptiveConfig::default()),

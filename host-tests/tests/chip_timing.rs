@@ -332,7 +332,6 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
     // stamps, their rates within 0.025 °/s, 3 LSB at ±250 °/s (measured:
     // 2 LSB; the filters' phase beyond their DC delay at 12 Hz, and their
     // gain droop, are a few mdeg/s).
-    use gyro_array::drivers::icm42688::Odr;
     use gyro_array::emu::PathModel;
     for (amp, hz) in [(95.0, 2.0), (20.0, 12.0)] {
         let profile = RateProfile {
@@ -341,10 +340,7 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
             sine_hz: hz,
             sine_start_s: 0.0,
         };
-        let cfg = Config {
-            odr: Odr::Hz2000,
-            ..fifo_config(Filter::BOARD_2K, ClockInput::Internal)
-        };
+        let cfg = Config::board_fifo(ClockInput::Internal);
         let runs = [PathModel::Filters, PathModel::Delay].map(|path| {
             let t = ChipTiming {
                 path,

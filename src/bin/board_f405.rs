@@ -57,7 +57,7 @@ use gyro_array::board::f405::{self, ClockSource, CycleDelay, RxQueue};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{idle, persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
 use gyro_array::link::port::Port;
@@ -350,17 +350,11 @@ fn main() -> ! {
     // sampling: FIFO at 2 kHz, each sample's INT1 captured, on CLKIN where
     // the board drives it (`docs/timing.md`). A chip that failed before is
     // set up too, so its restarts bring it back to this configuration.
-    let cfg = Config {
-        odr: Odr::Hz2000,
-        filter: Filter::BOARD_2K,
-        clock: if clkin.is_some() {
-            ClockInput::ClkIn
-        } else {
-            ClockInput::Internal
-        },
-        sampling: Sampling::Fifo,
-        ..Config::default()
-    };
+    let cfg = Config::board_fifo(if clkin.is_some() {
+        ClockInput::ClkIn
+    } else {
+        ClockInput::Internal
+    });
     for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
         if let Err(e) = g.init(&mut delay, cfg) {
             if failed & (1 << i) == 0 {

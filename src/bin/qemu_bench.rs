@@ -81,7 +81,7 @@ fn main() -> ! {
 fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
     use core::cell::RefCell;
     use embedded_hal_bus::spi::RefCellDevice;
-    use gyro_array::drivers::icm42688::{Config, Filter, Icm42688, Odr, Sampling};
+    use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::{
         with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Icm42688Model,
@@ -102,12 +102,7 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
         let mut g = Icm42688::new(dev);
         let cfg = if timed {
-            Config {
-                odr: Odr::Hz2000,
-                filter: Filter::BOARD_2K,
-                sampling: Sampling::Fifo,
-                ..Config::default()
-            }
+            Config::board_fifo(ClockInput::Internal)
         } else {
             Config::default()
         };
@@ -785,7 +780,7 @@ fn bench_timed_loop_on(
     use core::cell::RefCell;
     use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-    use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Icm42688, Odr, Sampling};
+    use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::timing::ClockParams;
     use gyro_array::emu::{
@@ -816,17 +811,11 @@ fn bench_timed_loop_on(
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let cfg = Config {
-        odr: Odr::Hz2000,
-        filter: Filter::BOARD_2K,
-        clock: if clkin {
-            ClockInput::ClkIn
-        } else {
-            ClockInput::Internal
-        },
-        sampling: Sampling::Fifo,
-        ..Config::default()
-    };
+    let cfg = Config::board_fifo(if clkin {
+        ClockInput::ClkIn
+    } else {
+        ClockInput::Internal
+    });
     let Ok(mut pipe) = Pipeline::<4>::new(
         PipelineConfig::default(),
         Method::Adaptive(AdaptiveConfig::default()),

@@ -336,11 +336,13 @@ impl Filter {
     /// [`Config::default`]): ArduPilot's, the least aliasing of the flight
     /// stacks' at that rate (`timing-eval`).
     pub const BOARD: Self = Self::ARDUPILOT;
-    /// This board's for FIFO sampling at 2 kHz, averaged in pairs to the
-    /// 1 kHz output: AAF at 585 Hz, UI filter of 3rd order at ODR/5
-    /// (400 Hz). It aliases less than ArduPilot's and PX4's at every
-    /// out-of-band tone measured, with less delay (`timing-eval`).
-    pub const BOARD_2K: Self = Self {
+    /// This board's for FIFO sampling at [`BOARD_FIFO_ODR`], averaged in
+    /// pairs to the 1 kHz output: AAF at 585 Hz, UI filter of 3rd order at
+    /// ODR/5 (400 Hz). It aliases less than ArduPilot's and PX4's at every
+    /// out-of-band tone measured, with less delay (`timing-eval`; its
+    /// `--search` weighs every setting the driver can write at 2, 4 and
+    /// 8 kHz, `docs/timing.md`).
+    pub const BOARD_FIFO: Self = Self {
         aaf_delt: 13,
         ui_order: 3,
         ui_bw: 2,
@@ -559,7 +561,23 @@ impl Default for Config {
     }
 }
 
+/// The ODR the board samples its ICM-42688-Ps at through their FIFOs:
+/// two samples a millisecond (see [`Filter::BOARD_FIFO`]).
+pub const BOARD_FIFO_ODR: Odr = Odr::Hz2000;
+
 impl Config {
+    /// The board's FIFO sampling ([`BOARD_FIFO_ODR`] through
+    /// [`Filter::BOARD_FIFO`]) on clock `clock`.
+    pub const fn board_fifo(clock: ClockInput) -> Self {
+        Self {
+            full_scale: FullScale::Dps250,
+            odr: BOARD_FIFO_ODR,
+            filter: Filter::BOARD_FIFO,
+            clock,
+            sampling: Sampling::Fifo,
+        }
+    }
+
     /// The delay a polled read of this configuration carries, µs: the
     /// filters' group delay and half a sample period.
     pub fn polled_delay_us(&self) -> u32 {

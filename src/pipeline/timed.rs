@@ -67,12 +67,25 @@ pub struct TimingCounters {
 pub const SPIKE_DPS: f32 = 25.0;
 
 /// How far behind its read the board states each sample's instant, µs,
-/// for its chips at 2 kHz through `Filter::BOARD_2K`: the path's group
-/// delay (1 181), the moving mean's half-span (250) and one sample period
-/// for the newest mean to exist, for a chip 1 % slow (a PLL's limit),
-/// rounded up to 10 µs (`timing-eval` works it out from the filters and
-/// prints the budget).
+/// for its chips' FIFO sampling (`Config::board_fifo`, 2 kHz through
+/// `Filter::BOARD_FIFO`): [`stated_delay_us`], 1 181 µs of path, 250 of
+/// the mean of two's half-span and a 500 µs sample period, for a chip 1 %
+/// slow.
 pub const BOARD_DELAY_US: u32 = 1950;
+
+/// How far behind its read an instant can be stated for chips sampling
+/// through `cfg`'s FIFO, µs: the path's group delay, the moving mean's
+/// half-span and one sample period for the newest mean to exist, for a
+/// chip 1 % slow (a PLL's limit), rounded up to 10 µs. A chip fallen back
+/// to its RC oscillator, up to 8 % slow, is late for part of its samples
+/// and left out of those (`timing-eval` prints the budget).
+pub fn stated_delay_us(cfg: &Config) -> u32 {
+    let hz = cfg.odr.hz();
+    let n = libm::roundf(hz / 1000.0).max(1.0);
+    let period = 1e6 / hz;
+    let d = 1.01 * (cfg.filter.group_delay_us(cfg.odr) + (n - 1.0) / 2.0 * period + period);
+    (libm::ceilf(d / 10.0) * 10.0) as u32
+}
 
 /// Reads without a sample after which a chip on CLKIN is taken to have lost
 /// it (at 2 kHz, 20 reads without one of 40 expected samples) and is moved
@@ -539,5 +552,12 @@ mod tests {
         );
         assert!(new.read().is_ok());
         assert_eq!(new.delay_us(), 1200);
+    }
+
+    #[test]
+    fn the_board_states_the_delay_its_sampling_needs() {
+        for clock in [ClockInput::Internal, ClockInput::ClkIn] {
+            assert_eq!(stated_delay_us(&Config::board_fifo(clock)), BOARD_DELAY_US);
+        }
     }
 }

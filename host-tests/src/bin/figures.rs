@@ -733,7 +733,7 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
 type Curve<'a> = (&'a str, Vec<(f64, f64)>, RGBColor);
 
 fn timing(out: &Path, seed: u64) -> Result<(), Err> {
-    use gyro_array::drivers::icm42688::{Filter, Odr};
+    use gyro_array::drivers::icm42688::{Filter, BOARD_FIFO_ODR};
     use gyro_array::emu::timing::Vibration;
     use host_tests::timed_array::{self, Clocks};
     let profile = RateProfile {
@@ -746,9 +746,9 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
         timed_array::run(timed_array::Run {
             profile,
             clocks,
-            odr: Odr::Hz2000,
-            filter: Filter::BOARD_2K,
-            delay_us: 1950,
+            odr: BOARD_FIFO_ODR,
+            filter: Filter::BOARD_FIFO,
+            delay_us: gyro_array::pipeline::timed::BOARD_DELAY_US,
             ms: 4000,
             seed,
             restart_at_ms: None,

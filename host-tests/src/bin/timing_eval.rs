@@ -12,9 +12,12 @@
 //! a phase-dependent size). The last lines compare the board's setting
 //! with the better of PX4's and ArduPilot's, per tone.
 //!
-//! `cargo run --profile host -p host-tests --bin timing-eval`
+//! `cargo run --profile host -p host-tests --bin timing-eval` (`--fusion`:
+//! the fusion table alone; `--fusion-4k`: on the fastest 4 kHz setting;
+//! `--search MS`: every setting within MS to the wire, against the
+//! aliasing target)
 
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling};
+use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR};
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile};
 use host_tests::single_chip::{chip, run, Reads};
@@ -41,6 +44,19 @@ impl Setting {
         }
     }
 }
+
+/// The fastest setting at 4 kHz that aliases no more than PX4's and
+/// ArduPilot's (`--search`): the one that meets the delay target
+/// (`--fusion-4k` runs the fusion table on it).
+const FAST_4K: Setting = Setting {
+    name: "4 kHz, AAF 394 Hz, UI 2nd ODR/8, mean of 4",
+    odr: Odr::Hz4000,
+    filter: Filter {
+        aaf_delt: 9,
+        ui_order: 2,
+        ui_bw: 3,
+    },
+};
 
 const TONES_HZ: [f64; 4] = [600.0, 950.0, 1100.0, 3000.0];
 const TONE_DPS: f32 = 20.0;
@@ -130,16 +146,14 @@ fn delay(s: &Setting) -> f64 {
     best + (s.per_ms() - 1) as f64 / (2.0 * s.odr.hz() as f64)
 }
 
-/// The array's output delay for chips at `odr` through `filter`: the path's
-/// group delay, the moving mean's half-span, and one sample period for the
-/// newest mean to exist, all for a chip 1 % slow (a PLL's limit), rounded
-/// up to 10 µs. A chip fallen back to its RC oscillator, up to 8 % slow, is
-/// late for part of its samples and left out of those.
+/// The array's output delay for chips at `odr` through `filter`: the
+/// board's own figure for that sampling (`pipeline::timed::stated_delay_us`).
 fn array_delay_us(odr: Odr, filter: Filter) -> u32 {
-    let n = (odr.hz() / 1000.0).round().max(1.0);
-    let period = 1e6 / odr.hz();
-    let d = 1.01 * (filter.group_delay_us(odr) + (n - 1.0) / 2.0 * period + period);
-    ((d / 10.0).ceil() * 10.0) as u32
+    gyro_array::pipeline::timed::stated_delay_us(&Config {
+        odr,
+        filter,
+        ..Config::board_fifo(ClockInput::Internal)
+    })
 }
 
 use host_tests::latency::{sample_frame_bytes, wire_us, LOOP_US};
@@ -154,13 +168,12 @@ fn to_wire_ms(delay_us: f64, frame_bytes: usize) -> f64 {
 /// Fused error against the truth at the stated instant, over motion
 /// classes and clocks, against the same array as today's lockstep
 /// sampler; and the lag that best aligns the fused rate with the truth.
-fn fusion_table(seconds: u32) -> usize {
-    let odr = Odr::Hz2000;
-    let filter = Filter::BOARD_2K;
+fn fusion_table(seconds: u32, odr: Odr, filter: Filter) -> usize {
     let delay_us = array_delay_us(odr, filter);
     println!();
     println!(
-        "fusion at the stated instant (board: 2 kHz FIFO, {} µs path delay, output {} µs behind the read), {seconds} s per class",
+        "fusion at the stated instant ({} Hz FIFO, {} µs path delay, output {} µs behind the read), {seconds} s per class",
+        odr.hz(),
         filter.group_delay_us(odr).round(),
         delay_us
     );
@@ -344,14 +357,120 @@ fn budget(s: &Setting, frame: usize) {
     );
 }
 
+/// Every setting the driver can write at 2, 4 and 8 kHz (the AAF's
+/// bandwidths it has coefficients for, the UI filter's orders and
+/// bandwidths) whose delay to the wire would meet `wire_ms`, each checked
+/// for aliasing against the better of PX4's and ArduPilot's at every
+/// tone: the bound on the delay that the aliasing target leaves. Prints
+/// how many meet the delay, how many of those alias no more, and the
+/// fastest that does.
+fn search(wire_ms: f64) {
+    let refs = [
+        Setting {
+            name: "ArduPilot",
+            odr: Odr::Hz1000,
+            filter: Filter::ARDUPILOT,
+        },
+        Setting {
+            name: "PX4",
+            odr: Odr::Hz8000,
+            filter: Filter::PX4,
+        },
+    ];
+    let limit: Vec<f64> = TONES_HZ
+        .iter()
+        .map(|f| alias(&refs[0], *f).min(alias(&refs[1], *f)).max(1e-3))
+        .collect();
+    let frame = sample_frame_bytes();
+    let mut cands = Vec::new();
+    for odr in [Odr::Hz2000, Odr::Hz4000, Odr::Hz8000] {
+        for delt in
+            (1..=63u8).filter(|d| gyro_array::drivers::icm42688::aaf_coefficients(*d).is_some())
+        {
+            for ui_order in 1..=3u8 {
+                for ui_bw in 0..=7u8 {
+                    let filter = Filter {
+                        aaf_delt: delt,
+                        ui_order,
+                        ui_bw,
+                    };
+                    let w = to_wire_ms(array_delay_us(odr, filter) as f64, frame);
+                    if w <= wire_ms {
+                        cands.push((
+                            w,
+                            Setting {
+                                name: "",
+                                odr,
+                                filter,
+                            },
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    // The binding tones first (the ones that fold next to the output's
+    // 1 kHz); a setting is out at the first tone it aliases more on.
+    let order = [2usize, 1, 0, 3];
+    let passes = |s: &Setting| order.iter().all(|&k| alias(s, TONES_HZ[k]) <= limit[k]);
+    let ok: Vec<bool> = std::thread::scope(|sc| {
+        let half = cands.len() / 2;
+        let (a, b) = cands.split_at(half);
+        let ha = sc.spawn(|| a.iter().map(|c| passes(&c.1)).collect::<Vec<_>>());
+        let hb = sc.spawn(|| b.iter().map(|c| passes(&c.1)).collect::<Vec<_>>());
+        let mut v = ha.join().unwrap_or_default();
+        v.extend(hb.join().unwrap_or_default());
+        v
+    });
+    let good: Vec<_> = cands
+        .iter()
+        .zip(&ok)
+        .filter(|(_, k)| **k)
+        .map(|(c, _)| c)
+        .collect();
+    println!(
+        "search: {} settings at 2, 4 and 8 kHz reach the wire within {wire_ms:.3} ms; {} of them alias no more than the better of PX4 and ArduPilot at every tone (limits {})",
+        cands.len(),
+        good.len(),
+        limit.iter().map(|v| format!("{v:.5}")).collect::<Vec<_>>().join(" / ")
+    );
+    let mut good = good;
+    good.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // The fastest at each rate: what the delay costs in FIFO samples a read.
+    let fastest =
+        [Odr::Hz2000, Odr::Hz4000, Odr::Hz8000].map(|odr| good.iter().find(|(_, s)| s.odr == odr));
+    for (w, s) in fastest.iter().flatten() {
+        println!(
+            "  {:.0} Hz, AAF {:.0} Hz (DELT {}), UI order {} code {}: {w:.3} ms to the wire",
+            s.odr.hz(),
+            gyro_array::drivers::icm42688::aaf_hz(s.filter.aaf_delt),
+            s.filter.aaf_delt,
+            s.filter.ui_order,
+            s.filter.ui_bw
+        );
+    }
+}
+
 fn main() {
     let seconds = std::env::args()
         .skip_while(|a| a != "--seconds")
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(10);
+    if let Some(ms) = std::env::args()
+        .skip_while(|a| a != "--search")
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+    {
+        search(ms);
+        return;
+    }
     if std::env::args().any(|a| a == "--fusion") {
-        fusion_table(seconds);
+        fusion_table(seconds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+        return;
+    }
+    if std::env::args().any(|a| a == "--fusion-4k") {
+        fusion_table(seconds, FAST_4K.odr, FAST_4K.filter);
         return;
     }
     let settings = [
@@ -374,19 +493,11 @@ fn main() {
                 ui_bw: 1,
             },
         },
-        Setting {
-            name: "4 kHz, AAF 997 Hz, UI 3rd ODR/10, mean of 4",
-            odr: Odr::Hz4000,
-            filter: Filter {
-                aaf_delt: 21,
-                ui_order: 3,
-                ui_bw: 4,
-            },
-        },
+        FAST_4K,
         Setting {
             name: "board: 2 kHz, AAF 585 Hz, UI 3rd ODR/5, mean of 2",
-            odr: Odr::Hz2000,
-            filter: Filter::BOARD_2K,
+            odr: BOARD_FIFO_ODR,
+            filter: Filter::BOARD_FIFO,
         },
     ];
     let frame = sample_frame_bytes();
@@ -441,5 +552,5 @@ fn main() {
         table[1].0 * 1e3
     );
     budget(&settings[settings.len() - 1], frame);
-    fusion_table(seconds);
+    fusion_table(seconds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
 }
