@@ -239,6 +239,12 @@ impl Odr {
             Self::Hz500 => 500.0,
         }
     }
+
+    /// Samples per millisecond, the board's output period (at least 1):
+    /// the samples each output's moving mean spans.
+    pub fn per_ms(self) -> usize {
+        (libm::roundf(self.hz() / 1000.0) as usize).max(1)
+    }
 }
 
 /// Driver errors, generic over the SPI error.
@@ -1395,7 +1401,7 @@ impl Config {
     /// Packets the first burst of [`Icm42688::read_fifo`] makes room for:
     /// one per millisecond of the ODR (the board reads every millisecond).
     pub fn per_read(&self) -> usize {
-        (libm::roundf(self.odr.hz() / 1000.0) as usize).clamp(1, MAX_PER_READ)
+        self.odr.per_ms().min(MAX_PER_READ)
     }
 
     /// Write `i` of the checked writes a restart makes, in order, as

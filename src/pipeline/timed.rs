@@ -80,9 +80,8 @@ pub const BOARD_DELAY_US: u32 = 1950;
 /// to its RC oscillator, up to 8 % slow, is late for part of its samples
 /// and left out of those (`timing-eval` prints the budget).
 pub fn stated_delay_us(cfg: &Config) -> u32 {
-    let hz = cfg.odr.hz();
-    let n = libm::roundf(hz / 1000.0).max(1.0);
-    let period = 1e6 / hz;
+    let n = cfg.odr.per_ms() as f32;
+    let period = 1e6 / cfg.odr.hz();
     let d = 1.01 * (cfg.filter.group_delay_us(cfg.odr) + (n - 1.0) / 2.0 * period + period);
     (libm::ceilf(d / 10.0) * 10.0) as u32
 }
@@ -140,12 +139,11 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// `cfg`, and the capture of its INT1.
     pub fn new(g: Icm42688<SPI>, capture: C) -> Self {
         let cfg = g.config();
-        let per_ms = libm::roundf(cfg.odr.hz() / 1000.0).max(1.0);
         Self {
             g,
             capture,
             clock: ChipClock::new(),
-            align: Aligner::new(per_ms as u8),
+            align: Aligner::new(cfg.odr.per_ms() as u8),
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
             period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
             dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
