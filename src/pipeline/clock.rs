@@ -244,9 +244,29 @@ impl ChipClock {
         if self.state != ClockState::Tracking {
             return None;
         }
-        let d = stamp.wrapping_sub(self.anchor_stamp) as i32 as f32;
-        let off = self.anchor_frac + self.ratio * d;
-        Some(self.anchor_us.wrapping_add(floor_i32(off) as u32))
+        Some(self.project((self.anchor_stamp, self.anchor_us), self.anchor_frac, stamp))
+    }
+
+    /// Where the capture of the sample stamped `stamp` is expected, board
+    /// µs: from the last observation that jumped while the tracker waits
+    /// out a possible rate step (the anchor's prediction drifts by the
+    /// step times the time since it, up to 80 µs a read after an 8 %
+    /// step; the last jump's, by one read's worth), else [`Self::board_us`].
+    pub fn expected_us(&self, stamp: u32) -> Option<u32> {
+        match self.jumps_in_row.checked_sub(1) {
+            Some(k) if self.state == ClockState::Tracking => {
+                Some(self.project(self.jumped[k as usize], 0.5, stamp))
+            }
+            _ => self.board_us(stamp),
+        }
+    }
+
+    /// Chip stamp `stamp` on the board's clock from the point (stamp,
+    /// capture µs) `from`, whose capture lies `frac` µs into its
+    /// microsecond, at the tracked ratio.
+    fn project(&self, from: (u32, u32), frac: f32, stamp: u32) -> u32 {
+        let d = stamp.wrapping_sub(from.0) as i32 as f32;
+        from.1.wrapping_add(floor_i32(frac + self.ratio * d) as u32)
     }
 
     /// The chip stamp of board time `board_us`, or `None` before the
@@ -391,6 +411,34 @@ mod tests {
         assert!((c.ratio() - 1.07).abs() < 1e-3, "{}", c.ratio());
         let got = c.board_us(299_000).unwrap();
         assert!(got.abs_diff(b) <= 2, "{got} vs {b}");
+    }
+
+    #[test]
+    fn while_a_rate_step_is_waited_out_captures_are_expected_from_the_last_jump() {
+        // The PLL gives way to an RC oscillator 8 % slow: each read's
+        // capture then lands 80 µs further from the anchor's prediction,
+        // past half a 4 kHz period (125 µs) by the second jump; from the
+        // last jump it stays within one read's step.
+        let mut c = ChipClock::new();
+        let mut b = 0u32;
+        for k in 0..200u32 {
+            b += 1000;
+            c.observe(k * 1000, b);
+        }
+        for k in 200..202u32 {
+            b += 1080;
+            let s = k * 1000;
+            let expected = c.expected_us(s).unwrap();
+            assert!(expected.abs_diff(b) <= 81, "read {k}: {expected} vs {b}");
+            c.observe(s, b);
+        }
+        let s = 202_000;
+        b += 1080;
+        let anchored = c.board_us(s).unwrap();
+        assert!(b.abs_diff(anchored) > 125, "{anchored} vs {b}");
+        assert!(c.expected_us(s).unwrap().abs_diff(b) <= 81);
+        c.observe(s, b);
+        assert_eq!(c.lost, 0);
     }
 
     #[test]

@@ -232,7 +232,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         // The capture is of the newest sample read, or of one that came
         // after the FIFO's count was latched: the tracked clock tells.
         let mut stamp = newest.wrapping_add(self.stamp_offset);
-        if let Some(p) = self.clock.board_us(stamp) {
+        if let Some(p) = self.clock.expected_us(stamp) {
             let ahead = c.wrapping_sub(p) as i32;
             if ahead > (self.period_us / 2) as i32 {
                 stamp = stamp.wrapping_add(self.period_us);
