@@ -160,7 +160,8 @@ pub fn phase_from_rate(rate: &[f64], tau0: f64) -> Result<Vec<f64>, DevError> {
     Ok(x)
 }
 
-fn check(x: &[f64], tau0: f64) -> Result<(), DevError> {
+/// `tau0` a finite positive period and every sample of `x` finite.
+pub fn check(x: &[f64], tau0: f64) -> Result<(), DevError> {
     check_tau0(tau0)?;
     match x.iter().position(|v| !v.is_finite()) {
         Some(i) => Err(DevError::NonFinite(i)),

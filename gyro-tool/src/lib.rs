@@ -28,6 +28,22 @@ use gyro_array::link::wire::{Decoded, Decoder, FrameError, MAX_FRAME};
 /// The tool's fallible result: every error is a message for the user.
 pub type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
+/// A long computation was asked to stop (its stop flag was set) and gave
+/// up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stopped;
+
+impl std::fmt::Display for Stopped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("stopped")
+    }
+}
+
+impl std::error::Error for Stopped {}
+
+/// Samples between two looks at a stop flag: some milliseconds of work.
+pub const STOP_EVERY: usize = 1 << 16;
+
 /// Every decoder result of a recording, and the decoder with its counts.
 pub type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
 

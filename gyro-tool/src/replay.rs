@@ -19,6 +19,7 @@
 //! out (grey).
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
@@ -45,11 +46,24 @@ pub struct Replay {
 
 /// Fuse `chips` (one rate series each, same length, ≤ [`MAX_CHIPS`]).
 pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
+    replay_until(chips, &AtomicBool::new(false))
+}
+
+/// [`replay`], given up with [`crate::Stopped`] soon after `stop` is set
+/// (the Python package's Ctrl-C).
+pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
     let k = chips.len();
     if !(2..=MAX_CHIPS).contains(&k) {
         return Err(format!("a replay needs 2 to {MAX_CHIPS} chip columns, got {k}").into());
     }
     let n = chips[0].len();
+    if let Some(c) = chips.iter().position(|c| c.len() != n) {
+        return Err(format!(
+            "chip column {c} has {} samples, column 0 has {n}: a replay needs them equal",
+            chips[c].len()
+        )
+        .into());
+    }
     let fusion = Fusion::<MAX_CHIPS>::new(Method::Adaptive(AdaptiveConfig::default()))
         .map_err(|e| format!("fusion: {e:?}"))?;
     let mut st = AxisState::<MAX_CHIPS>::default();
@@ -62,6 +76,9 @@ pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
         used: vec![0; k],
     };
     for i in 0..n {
+        if i % crate::STOP_EVERY == 0 && stop.load(Ordering::Relaxed) {
+            return Err(crate::Stopped.into());
+        }
         let mut y = [f32::NAN; MAX_CHIPS];
         let mut offered = 0u8;
         for (c, col) in chips.iter().enumerate() {

@@ -8,6 +8,7 @@
 //! the result so that it can be judged against the data's).
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use gyro_array::algo::allan::stream::SAMPLE_MAX;
 use gyro_array::algo::davar::{Davar, DavarConfig};
@@ -44,6 +45,7 @@ fn run<const CAP: usize, const FRAMES: usize, const T: usize>(
     lambda2: u16,
     lsb: f64,
     tau0: f64,
+    stop: &AtomicBool,
 ) -> Res<Vec<Row>> {
     let mut d = Box::new(
         Davar::<CAP, FRAMES, T, 0>::new(DavarConfig::segmented(lambda2 / 2, lambda2))
@@ -51,6 +53,9 @@ fn run<const CAP: usize, const FRAMES: usize, const T: usize>(
     );
     let mut rows = Vec::new();
     for (i, &x) in w.iter().enumerate() {
+        if i % crate::STOP_EVERY == 0 && stop.load(Ordering::Relaxed) {
+            return Err(crate::Stopped.into());
+        }
         let r = d.push(x).map_err(|e| format!("sample {i}: {e:?}"))?;
         if r.is_some() {
             if let Some(s) = d.estimate() {
@@ -83,12 +88,24 @@ pub fn step_for(rate: &[f64]) -> f64 {
 
 /// The surface of `rate` (sampled every `tau0` s).
 pub fn surface(rate: &[f64], tau0: f64, l2: Lambda2) -> Res<(Vec<Row>, f64, u16)> {
+    surface_until(rate, tau0, l2, &AtomicBool::new(false))
+}
+
+/// [`surface`], given up with [`crate::Stopped`] soon after `stop` is
+/// set (the Python package's Ctrl-C).
+pub fn surface_until(
+    rate: &[f64],
+    tau0: f64,
+    l2: Lambda2,
+    stop: &AtomicBool,
+) -> Res<(Vec<Row>, f64, u16)> {
+    crate::dev::check(rate, tau0)?;
     let lsb = step_for(rate);
     let w: Vec<i32> = rate.iter().map(|r| (r / lsb).round() as i32).collect();
     let (rows, lambda2) = match l2 {
-        Lambda2::L256 => (run::<256, 11, 7>(&w, 256, lsb, tau0)?, 256),
-        Lambda2::L1024 => (run::<1024, 35, 9>(&w, 1024, lsb, tau0)?, 1024),
-        Lambda2::L4096 => (run::<4096, 131, 11>(&w, 4096, lsb, tau0)?, 4096),
+        Lambda2::L256 => (run::<256, 11, 7>(&w, 256, lsb, tau0, stop)?, 256),
+        Lambda2::L1024 => (run::<1024, 35, 9>(&w, 1024, lsb, tau0, stop)?, 1024),
+        Lambda2::L4096 => (run::<4096, 131, 11>(&w, 4096, lsb, tau0, stop)?, 4096),
     };
     Ok((rows, lsb, lambda2))
 }

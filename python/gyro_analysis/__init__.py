@@ -23,13 +23,47 @@ Differences from allantools:
 
 What allantools lacks is in :func:`deviation`: each point's Greenhall EDF,
 its confidence interval and the lag-1 noise type.
+
+The rest of the ``gyro`` tool's analysis, on the same code:
+
+- :func:`noise_fit` and :func:`kalibr_yaml`: the IEEE 952 noise model
+  (quantisation, angle random walk, bias instability, rate random walk, rate
+  ramp) with standard errors and visibility, and Kalibr's ``imu.yaml`` text;
+- :func:`davar_surface`: the board's E-DAVAR (segmented window) over a rate
+  series, the t-tau-sigma surface as numpy arrays;
+- :func:`replay`: the board's fusion (online relative calibration, adaptive
+  weights) over a multi-gyro array;
+- :func:`read_recording` and :func:`recording_dataframe`: a board recording
+  (``gyro record``'s ``.glk`` file) as numpy arrays or a pandas DataFrame,
+  with the link's counts and errors.
+
+The long ones (E-DAVAR, replay) run without the GIL and stop on Ctrl-C
+(``KeyboardInterrupt``).
 """
 
 import numpy as _np
 
 from . import _native
 
-__all__ = ["adev", "oadev", "mdev", "tdev", "hdev", "ohdev", "totdev", "deviation"]
+__all__ = [
+    "adev",
+    "oadev",
+    "mdev",
+    "tdev",
+    "hdev",
+    "ohdev",
+    "totdev",
+    "deviation",
+    "noise_fit",
+    "kalibr_yaml",
+    "davar_surface",
+    "replay",
+    "read_recording",
+    "recording_dataframe",
+]
+
+#: The IEEE 952 terms, in the order :func:`noise_fit` gives them.
+TERMS = ("Q", "N", "B", "K", "R")
 
 
 def _series(data):
@@ -110,3 +144,197 @@ def deviation(data, kind="oadev", rate=1.0, data_type="phase", taus=None, confid
     """
     cols = _native.deviation(_series(data), kind, float(rate), data_type, _taus(taus), float(confidence))
     return dict(zip(["taus", "devs", "lo", "hi", "edf", "alpha", "ns"], cols))
+
+
+def noise_fit(data, rate=1.0, data_type="freq"):
+    """The IEEE Std 952 gyro noise model fitted to the data's Allan variance.
+
+    sigma^2(tau) = 3 Q^2 / tau^2 + N^2 / tau + (2 ln 2 / pi) B^2 + K^2 tau / 3
+    + R^2 tau^2 / 2, fitted by weighted least squares (each point weighted by
+    its EDF, non-negative terms, iteratively reweighted) to the overlapping
+    Allan deviation at 8 tau per decade, as ``gyro allan --fit``.
+
+    Parameters
+    ----------
+    data : array_like, 1-D
+        Rate samples (``data_type="freq"``, the default) or phase (angle).
+    rate : float
+        Sample rate, Hz.
+    data_type : {"freq", "phase"}
+
+    Returns
+    -------
+    dict
+        ``terms`` ("Q", "N", "B", "K", "R"); ``value`` and ``sd`` (numpy,
+        in the data's rate unit: Q in unit*s, N in unit*sqrt(s), B in unit,
+        K in unit/sqrt(s), R in unit/s; 0 and NaN for a term the fit leaves
+        out); ``tangent`` (the IEEE 952 tangent reading of each term, an upper
+        bound); ``visible`` (the term carries at least half the fitted
+        variance somewhere and is over twice its sd); ``points`` (Allan
+        points fitted). For degrees per second, N * 60 is deg/sqrt(h) and
+        B * 3600 deg/h.
+
+    Raises
+    ------
+    ValueError
+        Too few samples for two points of 8 clusters, a sample that is not
+        finite, a non-positive rate.
+    """
+    value, sd, tangent, visible, points = _native.noise_fit(_series(data), float(rate), data_type)
+    return {
+        "terms": TERMS,
+        "value": value,
+        "sd": sd,
+        "tangent": tangent,
+        "visible": list(visible),
+        "points": points,
+    }
+
+
+def kalibr_yaml(data, rate=1.0, data_type="freq", topic="/imu0"):
+    """Kalibr's ``imu.yaml`` text for the gyro terms of :func:`noise_fit`.
+
+    ``gyroscope_noise_density`` (N, rad/s/sqrt(Hz)) and
+    ``gyroscope_random_walk`` (K, rad/s^2/sqrt(Hz)) from a rate in deg/s,
+    as ``gyro allan --kalibr`` writes them; the accelerometer fields are not
+    measured here and are left out, with a comment saying so.
+    """
+    return _native.kalibr_yaml(_series(data), float(rate), data_type, str(topic))
+
+
+def davar_surface(data, rate=1.0, lambda2=1024):
+    """The board's E-DAVAR over one rate series, as ``gyro davar``.
+
+    The segmented window (lambda1 = lambda2 / 2) publishes one estimate per
+    32-sample hop; each describes the time ``t`` and its window
+    ``[start, end)``. The rates are quantised as the board's tracker does,
+    with the smallest power-of-two step ``lsb`` that keeps them in range (it
+    adds lsb^2 / 6 to sigma^2(tau0)).
+
+    Parameters
+    ----------
+    data : array_like, 1-D
+        Rate samples, finite.
+    rate : float
+        Sample rate, Hz.
+    lambda2 : {256, 1024, 4096}
+        The longest window, samples.
+
+    Returns
+    -------
+    dict
+        ``t``, ``start``, ``end`` (s from the first sample, one per
+        estimate), ``taus`` (s, octaves from 1 / rate), ``adev`` (estimates x
+        taus, in the rate's unit) and ``lsb``.
+
+    Raises
+    ------
+    ValueError
+        Fewer samples than one window and hop, a sample that is not finite,
+        another lambda2.
+    KeyboardInterrupt
+        On Ctrl-C (the computation runs without the GIL).
+    """
+    t, start, end, taus, adev, lsb = _native.davar_surface(_series(data), float(rate), int(lambda2))
+    return {"t": t, "start": start, "end": end, "taus": taus, "adev": adev, "lsb": lsb}
+
+
+def replay(chips):
+    """The board's fusion over several gyros measuring one axis, as ``gyro replay``.
+
+    Each sample is fused as the firmware fuses an axis: the online relative
+    calibration takes each chip's scale and bias out, then the adaptive
+    fusion (median gate, frozen-chip check, inverse-variance weights learnt
+    online) weighs them. The noise probe is noise with the fused rate's
+    variance and none of the motion.
+
+    Parameters
+    ----------
+    chips : array_like, 2-D, samples x chips (2 to 8 chips)
+        Rates; NaN where a chip did not answer.
+
+    Returns
+    -------
+    dict
+        ``fused`` (NaN where no fused value), ``weights`` (samples x chips, 0
+        where a chip was left out), ``probe`` (NaN where fewer than two chips
+        were fused), ``offered`` and ``used`` (per chip, samples it answered
+        and samples fusion used it).
+
+    Raises
+    ------
+    ValueError
+        Not 2-D, fewer than 2 or more than 8 chips.
+    KeyboardInterrupt
+        On Ctrl-C.
+    """
+    a = _np.ascontiguousarray(chips, dtype=_np.float64)
+    if a.ndim != 2:
+        raise ValueError(f"chips must be two-dimensional (samples x chips), not of shape {a.shape}")
+    fused, weights, probe, offered, used = _native.replay(a)
+    return {
+        "fused": fused,
+        "weights": weights,
+        "probe": probe,
+        "offered": _np.asarray(offered),
+        "used": _np.asarray(used),
+    }
+
+
+def read_recording(path):
+    """A board recording (``gyro record``'s ``.glk`` file) as numpy arrays.
+
+    Every frame is decoded as ``gyro check`` and ``gyro decode`` decode it:
+    COBS, the CRC and the protocol version checked; a damaged frame is
+    counted and skipped, never guessed at.
+
+    Returns
+    -------
+    dict
+        ``samples``: per sample frame ``seq``, ``t_us`` (when it was queued,
+        board us), ``age_us`` (n x 3: how long before ``t_us`` the rate was
+        the true rate), ``predicted_us`` (NaN where the rates are measured,
+        not predicted), ``rate_dps`` (n x 3, NaN where the axis is not
+        valid), ``valid``, ``degraded``, ``used`` (n x 3 gyro masks),
+        ``health`` (n x gyros), ``link_seq``. ``noise``: the E-DAVAR
+        estimates the frames carried (``frame_seq``, ``axis``, ``seq`` it
+        describes, window ``len``, ``bridged``, ``sigma_dps`` at the three
+        ``noise_tau``). ``raw``: raw frames (``seq``, ``t_us``, ``rate_dps``
+        n x gyros x 3). ``tau0_s`` and ``noise_tau`` from the first status
+        frame (NaN and the board's defaults without one). ``counts``: the
+        decoder's (``frames``, ``corrupt``, ``too_long``, ``version``,
+        ``malformed``, ``bytes_dropped``), ``status_frames``,
+        ``ack_frames``, ``samples_missing`` and ``link_frames_missing`` (gaps
+        in the sequence numbers) and ``partial_bytes_at_end``.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    return _native.read_recording(str(path))
+
+
+def recording_dataframe(path_or_recording):
+    """The sample frames of a recording as a pandas DataFrame, indexed by ``seq``.
+
+    Columns: ``t_us``, ``age_x_us`` ... ``age_z_us``, ``predicted_us``,
+    ``x_dps``, ``y_dps``, ``z_dps``, ``valid``, ``degraded``, ``used_x`` ...
+    ``used_z``. Needs pandas (``ImportError`` otherwise); takes a path or what
+    :func:`read_recording` returned.
+    """
+    import pandas as pd
+
+    rec = path_or_recording if isinstance(path_or_recording, dict) else read_recording(path_or_recording)
+    s = rec["samples"]
+    cols = {"t_us": s["t_us"]}
+    for a, name in enumerate("xyz"):
+        cols[f"age_{name}_us"] = s["age_us"][:, a]
+    cols["predicted_us"] = s["predicted_us"]
+    for a, name in enumerate("xyz"):
+        cols[f"{name}_dps"] = s["rate_dps"][:, a]
+    cols["valid"] = s["valid"]
+    cols["degraded"] = s["degraded"]
+    for a, name in enumerate("xyz"):
+        cols[f"used_{name}"] = s["used"][:, a]
+    return pd.DataFrame(cols, index=pd.Index(s["seq"], name="seq"))

@@ -4,12 +4,18 @@
 //! tool's own messages. The Python-facing names, docstrings and stubs are
 //! in `gyro_analysis/__init__.py` and `__init__.pyi`.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::time::Duration;
+
+use gyro_array::link::msg::Frame;
 use gyro_tool::dev::{self, Alphas, DevError, Kind};
 use gyro_tool::edf::{Chi2, ONE_SIGMA};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
-use pyo3::exceptions::PyValueError;
+use gyro_tool::{fit, replay as tool_replay, surface};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyString;
+use pyo3::types::{PyDict, PyString};
 
 /// Four float arrays, as allantools returns them.
 type Arrays4<'py> = (
@@ -258,6 +264,421 @@ fn deviation<'py>(
     ])
 }
 
+/// `work` on a thread of its own, without the GIL; every 50 ms this
+/// thread looks for Ctrl-C, and on one sets the stop flag `work` watches
+/// (`gyro_tool::STOP_EVERY` samples apart), waits for it to give up and
+/// raises KeyboardInterrupt.
+fn until_interrupted<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(&AtomicBool) -> T + Send,
+) -> PyResult<T> {
+    let stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel();
+    std::thread::scope(|s| {
+        let flag = &stop;
+        s.spawn(move || {
+            let _ = tx.send(work(flag));
+        });
+        let mut rx = rx;
+        loop {
+            // (The receiver goes to the GIL-free side and back: it may be
+            // sent between threads, not shared.)
+            let got;
+            (got, rx) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
+            match got {
+                Ok(v) => return Ok(v),
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err(
+                        "the analysis thread ended without a result",
+                    ))
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    if let Err(e) = py.check_signals() {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
+                    }
+                }
+            }
+        }
+    })
+}
+
+/// The IEEE 952 fit of the data's overlapping Allan deviation at 8 τ per
+/// decade, as `gyro allan --fit` makes it: (value, sd, tangent, visible,
+/// points), each of the first four over Q, N, B, K, R.
+#[pyfunction]
+#[pyo3(signature = (data, rate = 1.0, data_type = "freq"))]
+#[allow(clippy::type_complexity)]
+fn noise_fit<'py>(
+    py: Python<'py>,
+    data: PyReadonlyArray1<'py, f64>,
+    rate: f64,
+    data_type: &str,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Vec<bool>,
+    usize,
+)> {
+    let t = terms_of(py, data, rate, data_type)?;
+    Ok((
+        t.value.to_vec().into_pyarray(py),
+        t.sd.to_vec().into_pyarray(py),
+        t.tangent.to_vec().into_pyarray(py),
+        t.visible.to_vec(),
+        t.points,
+    ))
+}
+
+fn terms_of(
+    py: Python<'_>,
+    data: PyReadonlyArray1<'_, f64>,
+    rate: f64,
+    data_type: &str,
+) -> PyResult<fit::Terms> {
+    let x = phase_of(data.as_slice()?, rate, data_type)?;
+    let tau0 = 1.0 / rate;
+    let t = py
+        .detach(|| {
+            dev::curve(Kind::Oadev, &x, tau0, dev::Grid::PerDecade(8))
+                .map(|c| fit::fit(&c, x.len()))
+        })
+        .map_err(value_error)?;
+    t.ok_or_else(|| {
+        value_error(format!(
+            "too few points with {} clusters to fit",
+            fit::MIN_CLUSTERS
+        ))
+    })
+}
+
+/// Kalibr's `imu.yaml` for the gyro terms of the data's fit, as `gyro
+/// allan --kalibr` writes it.
+#[pyfunction]
+#[pyo3(signature = (data, rate = 1.0, data_type = "freq", topic = "/imu0"))]
+fn kalibr_yaml(
+    py: Python<'_>,
+    data: PyReadonlyArray1<'_, f64>,
+    rate: f64,
+    data_type: &str,
+    topic: &str,
+) -> PyResult<String> {
+    let t = terms_of(py, data, rate, data_type)?;
+    Ok(fit::kalibr_yaml(&t, gyro_tool::short(rate), topic))
+}
+
+/// The tool's error, as it crosses back from the analysis thread: None
+/// for a computation stopped by its flag, else the tool's message.
+fn sendable(e: Box<dyn std::error::Error>) -> Option<String> {
+    (!e.is::<gyro_tool::Stopped>()).then(|| e.to_string())
+}
+
+/// A stopped computation is KeyboardInterrupt (Ctrl-C is what stops
+/// one); every other error a ValueError with the tool's message.
+fn tool_error(e: Option<String>) -> PyErr {
+    match e {
+        None => pyo3::exceptions::PyKeyboardInterrupt::new_err("stopped"),
+        Some(m) => value_error(m),
+    }
+}
+
+/// The board's E-DAVAR surface of one rate series, as `gyro davar` makes
+/// it: (t, start, end, taus, adev (estimates × τ), lsb).
+#[pyfunction]
+#[pyo3(signature = (data, rate = 1.0, lambda2 = 1024))]
+#[allow(clippy::type_complexity)]
+fn davar_surface<'py>(
+    py: Python<'py>,
+    data: PyReadonlyArray1<'py, f64>,
+    rate: f64,
+    lambda2: u32,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    f64,
+)> {
+    let l2 = match lambda2 {
+        256 => surface::Lambda2::L256,
+        1024 => surface::Lambda2::L1024,
+        4096 => surface::Lambda2::L4096,
+        _ => {
+            return Err(value_error(format!(
+                "lambda2 {lambda2}: expected 256, 1024 or 4096"
+            )))
+        }
+    };
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(value_error(DevError::Tau0));
+    }
+    let tau0 = 1.0 / rate;
+    let y = data.as_slice()?;
+    let (rows, lsb, l2n) = until_interrupted(py, |stop| {
+        surface::surface_until(y, tau0, l2, stop).map_err(sendable)
+    })?
+    .map_err(tool_error)?;
+    if rows.is_empty() {
+        return Err(value_error(format!(
+            "too few samples: the E-DAVAR publishes once its span of lambda2 = {l2n} samples and one hop have filled, got {}",
+            y.len()
+        )));
+    }
+    let taus: Vec<f64> = (0..rows[0].adev.len())
+        .map(|j| tau0 * f64::from(1u32 << j))
+        .collect();
+    let flat: Vec<f64> = rows.iter().flat_map(|r| r.adev.iter().copied()).collect();
+    let adev = flat.into_pyarray(py).reshape([rows.len(), taus.len()])?;
+    let col =
+        |f: fn(&surface::Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>().into_pyarray(py);
+    Ok((
+        col(|r| r.t_s),
+        col(|r| r.start_s),
+        col(|r| r.end_s),
+        taus.into_pyarray(py),
+        adev,
+        lsb,
+    ))
+}
+
+/// The board's fusion over `chips` (samples × chips, NaN where a chip did
+/// not answer), as `gyro replay` runs it: (fused, weights (samples ×
+/// chips), probe, offered, used).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn replay<'py>(
+    py: Python<'py>,
+    chips: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Vec<usize>,
+    Vec<usize>,
+)> {
+    let a = chips.as_array();
+    let (n, k) = a.dim();
+    let cols: Vec<Vec<f64>> = (0..k).map(|c| a.column(c).to_vec()).collect();
+    let r = until_interrupted(py, |stop| {
+        tool_replay::replay_until(&cols, stop).map_err(sendable)
+    })?
+    .map_err(tool_error)?;
+    let w: Vec<f64> = r
+        .weights
+        .iter()
+        .flat_map(|w| w[..k].iter().map(|&v| f64::from(v)))
+        .collect();
+    Ok((
+        r.fused.into_pyarray(py),
+        w.into_pyarray(py).reshape([n, k])?,
+        r.probe.into_pyarray(py),
+        r.offered,
+        r.used,
+    ))
+}
+
+/// A board recording (`gyro record`'s file) decoded: a dict of numpy
+/// arrays for the sample frames, the E-DAVAR estimates they carry and the
+/// raw frames, the first status frame's sample period and τ, and the
+/// decoder's and sequence counts.
+#[pyfunction]
+fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let (frames, dec) = py
+        .detach(|| gyro_tool::read_recording(&path).map_err(|e| e.to_string()))
+        .map_err(PyOSError::new_err)?;
+    let mut s = SampleCols::default();
+    let mut nz = NoiseCols::default();
+    let mut raw = RawCols::default();
+    let (mut status, mut acks) = (0usize, 0usize);
+    let mut tau0_s = f64::NAN;
+    let mut noise_tau = [1u16, 8, 64];
+    let mut gyros = 0usize;
+    let (mut seq_gaps, mut link_gaps) = (0u64, 0u64);
+    let (mut last_seq, mut last_link): (Option<u32>, Option<u32>) = (None, None);
+    for d in frames.iter().flatten() {
+        if let Some(l) = last_link {
+            link_gaps += u64::from(d.link_seq.wrapping_sub(l).saturating_sub(1));
+        }
+        last_link = Some(d.link_seq);
+        match &d.body {
+            Frame::Sample(f) => {
+                if let Some(l) = last_seq {
+                    seq_gaps += u64::from(f.seq.wrapping_sub(l).saturating_sub(1));
+                }
+                last_seq = Some(f.seq);
+                s.push(d.link_seq, f);
+                if let Some(n) = &f.noise {
+                    nz.push(f.seq, n);
+                }
+                gyros = gyros.max(f.health.len());
+            }
+            Frame::Raw(r) => raw.push(r),
+            Frame::Status(st) => {
+                if status == 0 {
+                    tau0_s = f64::from(st.sample_us) * 1e-6 * f64::from(st.settings.divider.max(1));
+                    noise_tau = st.noise_tau;
+                }
+                status += 1;
+            }
+            Frame::Ack(_) => acks += 1,
+        }
+    }
+    let stats = dec.stats();
+    let out = PyDict::new(py);
+    out.set_item("samples", s.into_dict(py, gyros)?)?;
+    out.set_item("noise", nz.into_dict(py)?)?;
+    out.set_item("raw", raw.into_dict(py)?)?;
+    out.set_item("tau0_s", tau0_s)?;
+    out.set_item("noise_tau", noise_tau.to_vec())?;
+    let counts = PyDict::new(py);
+    counts.set_item("frames", stats.frames)?;
+    counts.set_item("corrupt", stats.corrupt)?;
+    counts.set_item("too_long", stats.too_long)?;
+    counts.set_item("version", stats.version)?;
+    counts.set_item("malformed", stats.malformed)?;
+    counts.set_item("bytes_dropped", stats.bytes_dropped)?;
+    counts.set_item("status_frames", status)?;
+    counts.set_item("ack_frames", acks)?;
+    counts.set_item("samples_missing", seq_gaps)?;
+    counts.set_item("link_frames_missing", link_gaps)?;
+    counts.set_item("partial_bytes_at_end", dec.pending())?;
+    out.set_item("counts", counts)?;
+    Ok(out)
+}
+
+/// The sample frames' fields as columns.
+#[derive(Default)]
+struct SampleCols {
+    link_seq: Vec<u32>,
+    seq: Vec<u32>,
+    t_us: Vec<u64>,
+    age_us: Vec<u16>,
+    predicted_us: Vec<f64>,
+    rate_dps: Vec<f64>,
+    valid: Vec<u8>,
+    degraded: Vec<u8>,
+    used: Vec<u8>,
+    health: Vec<Vec<u8>>,
+}
+
+impl SampleCols {
+    fn push(&mut self, link_seq: u32, f: &gyro_array::link::msg::Sample) {
+        self.link_seq.push(link_seq);
+        self.seq.push(f.seq);
+        self.t_us.push(f.t_us);
+        self.age_us.extend(f.age_us);
+        self.predicted_us
+            .push(f.predicted_us.map_or(f64::NAN, f64::from));
+        // A rate the frame marks not valid is NaN, whatever its bytes.
+        self.rate_dps.extend((0..3).map(|a| {
+            if f.valid & (1 << a) != 0 {
+                f64::from(f.rate_dps[a])
+            } else {
+                f64::NAN
+            }
+        }));
+        self.valid.push(f.valid);
+        self.degraded.push(f.degraded);
+        self.used.extend(f.used);
+        self.health.push(f.health.to_vec());
+    }
+
+    fn into_dict(self, py: Python<'_>, gyros: usize) -> PyResult<Bound<'_, PyDict>> {
+        let n = self.seq.len();
+        let d = PyDict::new(py);
+        d.set_item("link_seq", self.link_seq.into_pyarray(py))?;
+        d.set_item("seq", self.seq.into_pyarray(py))?;
+        d.set_item("t_us", self.t_us.into_pyarray(py))?;
+        d.set_item("age_us", self.age_us.into_pyarray(py).reshape([n, 3])?)?;
+        d.set_item("predicted_us", self.predicted_us.into_pyarray(py))?;
+        d.set_item("rate_dps", self.rate_dps.into_pyarray(py).reshape([n, 3])?)?;
+        d.set_item("valid", self.valid.into_pyarray(py))?;
+        d.set_item("degraded", self.degraded.into_pyarray(py))?;
+        d.set_item("used", self.used.into_pyarray(py).reshape([n, 3])?)?;
+        // Health per gyro; 0xFF where a frame names fewer gyros.
+        let h: Vec<u8> = self
+            .health
+            .iter()
+            .flat_map(|v| (0..gyros).map(|g| v.get(g).copied().unwrap_or(0xFF)))
+            .collect();
+        d.set_item("health", h.into_pyarray(py).reshape([n, gyros])?)?;
+        Ok(d)
+    }
+}
+
+/// The E-DAVAR estimates the sample frames carried.
+#[derive(Default)]
+struct NoiseCols {
+    frame_seq: Vec<u32>,
+    axis: Vec<u8>,
+    seq: Vec<u32>,
+    len: Vec<u16>,
+    bridged: Vec<u8>,
+    sigma_dps: Vec<f64>,
+}
+
+impl NoiseCols {
+    fn push(&mut self, frame_seq: u32, n: &gyro_array::link::msg::Noise) {
+        self.frame_seq.push(frame_seq);
+        self.axis.push(n.axis);
+        self.seq.push(n.seq);
+        self.len.push(n.len);
+        self.bridged.push(n.bridged);
+        self.sigma_dps.extend(n.sigma_dps.map(f64::from));
+    }
+
+    fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+        let n = self.seq.len();
+        let d = PyDict::new(py);
+        d.set_item("frame_seq", self.frame_seq.into_pyarray(py))?;
+        d.set_item("axis", self.axis.into_pyarray(py))?;
+        d.set_item("seq", self.seq.into_pyarray(py))?;
+        d.set_item("len", self.len.into_pyarray(py))?;
+        d.set_item("bridged", self.bridged.into_pyarray(py))?;
+        d.set_item(
+            "sigma_dps",
+            self.sigma_dps.into_pyarray(py).reshape([n, 3])?,
+        )?;
+        Ok(d)
+    }
+}
+
+/// The raw frames (every gyro's reading), padded with NaN to the most
+/// gyros a frame names.
+#[derive(Default)]
+struct RawCols {
+    seq: Vec<u32>,
+    t_us: Vec<u64>,
+    rows: Vec<Vec<[f32; 3]>>,
+}
+
+impl RawCols {
+    fn push(&mut self, r: &gyro_array::link::msg::Raw) {
+        self.seq.push(r.seq);
+        self.t_us.push(r.t_us);
+        self.rows.push(r.rate_dps.to_vec());
+    }
+
+    fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+        let n = self.seq.len();
+        let g = self.rows.iter().map(Vec::len).max().unwrap_or(0);
+        let flat: Vec<f64> = self
+            .rows
+            .iter()
+            .flat_map(|v| {
+                (0..g).flat_map(move |i| v.get(i).map_or([f64::NAN; 3], |r| r.map(f64::from)))
+            })
+            .collect();
+        let d = PyDict::new(py);
+        d.set_item("seq", self.seq.into_pyarray(py))?;
+        d.set_item("t_us", self.t_us.into_pyarray(py))?;
+        d.set_item("rate_dps", flat.into_pyarray(py).reshape([n, g, 3])?)?;
+        Ok(d)
+    }
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(adev, m)?)?;
@@ -268,5 +689,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ohdev, m)?)?;
     m.add_function(wrap_pyfunction!(totdev, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
+    m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;
+    m.add_function(wrap_pyfunction!(davar_surface, m)?)?;
+    m.add_function(wrap_pyfunction!(replay, m)?)?;
+    m.add_function(wrap_pyfunction!(read_recording, m)?)?;
     Ok(())
 }
