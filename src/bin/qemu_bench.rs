@@ -652,6 +652,16 @@ fn bench_loop(
     bench_loop_on(t, ipt, faults, profile, 3, plan, all)
 }
 
+/// Whether the loop scenario described by `faults` ("faults X: ...") is
+/// among those named at build time in `BENCH_SCENARIOS` (letters, e.g.
+/// `KL`); all when it is unset. Lets one scenario be counted alone.
+fn selected(faults: &str) -> bool {
+    match (option_env!("BENCH_SCENARIOS"), faults.as_bytes().get(7)) {
+        (Some(set), Some(c)) => set.as_bytes().contains(c),
+        _ => true,
+    }
+}
+
 /// [`bench_loop`] on the emulated board of `seed` moving as `profile`.
 #[inline(never)]
 #[allow(unsafe_code)]
@@ -664,6 +674,9 @@ fn bench_loop_on(
     plan: &[(u32, usize, gyro_array::emu::Fault)],
     all: bool,
 ) -> bool {
+    if !selected(faults) {
+        return true;
+    }
     use core::cell::RefCell;
     use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::AdaptiveConfig;
@@ -777,6 +790,9 @@ fn bench_timed_loop_on(
     pll: [f64; 4],
     plan: &[(u32, usize, gyro_array::emu::Fault)],
 ) -> bool {
+    if !selected(faults) {
+        return true;
+    }
     use core::cell::RefCell;
     use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
