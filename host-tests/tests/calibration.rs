@@ -1,4 +1,4 @@
-//! The static calibration (issue 9, item 1): the procedure recovers the
+//! The static calibration: the procedure recovers the
 //! emulated board's constants, the record survives storage, and a board
 //! whose chips are mounted every which way fuses as well as an aligned one
 //! once calibrated, through a temperature ramp.

@@ -1,4 +1,4 @@
-//! Start-up on a moving vehicle (issue 9, item 3): 40 boards, each booting
+//! Start-up on a moving vehicle: 40 boards, each booting
 //! while it sways at a random 0–20 °/s per axis and 0.2–5 Hz, through the
 //! ICM-42688-P array self-test (20 samples per phase, as the board runs
 //! it). No healthy chip may fail; a chip with a dead self-test must.

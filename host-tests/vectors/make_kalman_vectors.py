@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference vectors for the Kalman filter core (issue 14, item 1).
+"""Reference vectors for the Kalman filter core (seed 001).
 
 Regenerate (Python 3 with `pip install numpy filterpy==2.0.0`):
 

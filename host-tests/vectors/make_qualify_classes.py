@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference vectors for issue 15: EMD and BayesShrink on signal classes
+"""Reference vectors for the noise qualification: EMD and BayesShrink on signal classes
 beyond the committed vectors (chirp, tones, noise, random walk, quantised
 AR(1) counts with plateaus, a still gyro's counts, a zero-padded record).
 

@@ -1,4 +1,4 @@
-//! Online relative calibration of an array axis (issue 9, item 2).
+//! Online relative calibration of an array axis.
 //!
 //! MEMS gyros differ in scale factor by up to a few per cent. On a board
 //! turning at 100 °/s, 1 % is 1 °/s of disagreement between chips, ten times

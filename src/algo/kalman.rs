@@ -2,7 +2,7 @@
 //! f32 or f64): predict, and an update in Joseph form, which keeps P
 //! symmetric and positive semidefinite whatever the gain's rounding. Every
 //! step checks what it is given and what it produces, and fails with a
-//! typed [`KfError`] instead of spreading NaN (issue 14, item 1). Checked
+//! typed [`KfError`] instead of spreading NaN. Checked
 //! against filterpy's `KalmanFilter` (`host-tests/vectors/kalman.in`, made
 //! by `make_kalman_vectors.py`).
 

@@ -369,7 +369,7 @@ pub enum ChipWeights {
     Covariance,
 }
 
-/// Seed 001 on the board (issue 14, item 4): each chip of an axis is a
+/// Seed 001 on the board: each chip of an axis is a
 /// local Kalman filter of [rate, its bias] (rate: a random walk as fast as
 /// the platform can turn; bias: a slow random walk), measured by the
 /// chip's reading with its noise prior; the local rates are fused by

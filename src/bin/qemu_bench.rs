@@ -1229,7 +1229,7 @@ fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
 
     // The static calibration in front (`Pipeline::board_rates`: each chip's
     // 3×3 matrix, bias and bias-temperature slope), timed alone and then
-    // with the rest: issue 9's "calibration + online calibration + fusion".
+    // with the rest: calibration, online calibration and fusion.
     use gyro_array::algo::mounting::ChipCal;
     let cal_of = |i: usize| ChipCal {
         m: [

@@ -1,4 +1,4 @@
-//! E-DAVAR evaluation over scenario classes (issue 12) and the paper's
+//! E-DAVAR evaluation over scenario classes and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
 //! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--csv PATH] [--other-lambdas]`
@@ -20,8 +20,8 @@
 //! (0.996 and 1.000 of it over 2000 and 8000 samples): there no window
 //! within λ1…λ2 beats λ2 by the 8 % the target asks. Two soft-placement
 //! rows (f64, not shipped: [`soft_average`]) average the windows of every
-//! single-change model by its posterior odds instead of choosing one. Targets
-//! (issue 12): default ≤ 0.92 × the best fixed window on every step, ramp
+//! single-change model by its posterior odds instead of choosing one. Targets:
+//! default ≤ 0.92 × the best fixed window on every step, ramp
 //! and repeated-step class, ≤ 1.00 × on every stationary class, ≤ 0.70 × on
 //! the paper's experiment, and the window shortened on ≤ 5 % of the hops on
 //! stationary input. The RMS carries its seed-to-seed sd; the ratio's sd is
@@ -514,7 +514,7 @@ fn mean_sd(v: &[f64]) -> (f64, f64) {
     (m, s)
 }
 
-/// E-DAVAR over the scenario classes of issue 12 and the paper's experiment.
+/// E-DAVAR over the scenario classes and the paper's experiment.
 #[derive(clap::Parser)]
 #[command(name = "davar-eval")]
 struct Args {

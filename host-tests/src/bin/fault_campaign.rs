@@ -628,7 +628,7 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
     bad
 }
 
-/// Randomised fault injection on the emulated board (issue 10).
+/// Randomised fault injection on the emulated board.
 #[derive(clap::Parser)]
 #[command(name = "fault-campaign")]
 struct Args {

@@ -18,7 +18,7 @@ use gyro_array::emu::{NoiseParams, Rng};
 #[path = "fusion_eval/array.rs"]
 mod array;
 
-/// Fusion evaluation over the scenario classes of issues 4 and 9.
+/// Fusion evaluation over its scenario classes (a)–(m).
 #[derive(Parser)]
 #[command(name = "fusion-eval")]
 struct Cli {
@@ -168,7 +168,7 @@ fn report<const K: usize>(name: &str, labels: [&str; K], res: &[Vec<f64>]) -> [f
     out
 }
 
-/// Class (f), issue 9: a 95 °/s, 2 Hz sway with per-chip scale errors
+/// Class (f): a 95 °/s, 2 Hz sway with per-chip scale errors
 /// (drawn in ±1 %, and the worst pattern +1/−1/+1/−1 %), 10 seeds × 20 000
 /// samples each. Prints mean ± sd of the RMS error of the oracle (true
 /// noise, blind to scale errors), the mean, zhang, adaptive, and adaptive
@@ -284,7 +284,7 @@ fn drift_seed(
     (time, sums.map(|s| (s / (SAMPLES - start) as f64).sqrt()))
 }
 
-/// Class (g), issue 9: slow bias drift on one chip. Four chips at rest;
+/// Class (g): slow bias drift on one chip. Four chips at rest;
 /// from 5 s chip 2's bias ramps at `rate` °/s per s. For each of 10 seeds:
 /// the time from the drift reaching 3σ of the chip's white noise until
 /// adaptive gives it under 5 % of the weight (and keeps it there; 0 if it
@@ -453,7 +453,7 @@ fn class4(
     report(name, ["oracle", "mean", "zhang", "adaptive+cal"], &res)
 }
 
-/// Class (i), issue 9: spikes, small (3σ ≈ 0.27 °/s) and large (20 °/s),
+/// Class (i): spikes, small (3σ ≈ 0.27 °/s) and large (20 °/s),
 /// on one chip and on two (independent, and simultaneous), at 2 % of
 /// samples each, at rest and under a 50 °/s 1 Hz sway; and class (j),
 /// large motion: sines to 100 °/s at 10 Hz and a vehicle turn (ramp to
@@ -516,7 +516,7 @@ fn more_classes(seed: u64) -> Vec<(String, [f64; 4], bool)> {
     out
 }
 
-/// Class (h), issue 9: two chips of different noise (an ICM-42688-P and
+/// Class (h): two chips of different noise (an ICM-42688-P and
 /// an ADXRS453-like part, σ 5× larger), 10 seeds. Residuals cannot tell two
 /// chips apart, so adaptive without priors is the mean; with noise priors
 /// (the datasheet σ, or the start-up noise test's) it follows the oracle.

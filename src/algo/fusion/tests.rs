@@ -342,7 +342,7 @@ fn running_normaliser_settings_are_checked() {
     }
 }
 
-/// Issue 9: a stuck chip among N = 2…8 quantised healthy chips (131 LSB/°/s,
+/// A stuck chip among N = 2…8 quantised healthy chips (131 LSB/°/s,
 /// σ = 0.09 °/s: a healthy chip repeats its value on about 2.4 % of samples)
 /// is out of adaptive fusion within 5 samples of sticking and never back
 /// while stuck, over 20 000 samples.

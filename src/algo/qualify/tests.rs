@@ -482,7 +482,7 @@ fn pipelines_run_and_refuse_bad_settings() {
     assert!((mid - 5.12).abs() < 0.2, "{mid}");
 }
 
-/// Issue 15's sweep: every public qualify function, fed NaN, ±inf, empty
+/// The error-path sweep: every public qualify function, fed NaN, ±inf, empty
 /// and too-short input and buffers shorter than documented, returns a
 /// typed error or finite output, and never panics. Each case names the
 /// error it must give (`tested` counts the cases, so none is skipped).
@@ -710,7 +710,7 @@ fn corr(a: &[f64], b: &[f64]) -> f64 {
     sab / (saa * sbb).sqrt()
 }
 
-/// Issue 15: EMD against PyEMD 1.10 on a chirp, tones, white noise, a
+/// EMD against PyEMD 1.10 on a chirp, tones, white noise, a
 /// random walk, quantised AR(1) counts and an integer staircase (plateaus
 /// of 2–7 samples): the same number of rows, and every row correlated
 /// ≥ 0.999 with PyEMD's.
@@ -770,7 +770,7 @@ fn emd_matches_pyemd_on_every_signal_class() {
     println!("smallest correlation: {worst:.6}");
 }
 
-/// Issue 15: BayesShrink against scikit-image on a still gyro's integer
+/// BayesShrink against scikit-image on a still gyro's integer
 /// counts and on a record zero-padded to a power of two (exact zeros in the
 /// finest band), db4 and db5, 5 levels: within 1e-6 of the peak.
 #[test]

@@ -1,4 +1,4 @@
-//! Issue 9's remaining `fusion-eval` classes: heterogeneous arrays of
+//! The array classes of `fusion-eval`: heterogeneous arrays of
 //! N = 2…8 chips, common-mode vibration and temperature ramps (all on the
 //! algorithms, as the other classes), then faults present at power-up, two
 //! of five chips faulty and motion during boot on the whole emulated board
@@ -371,7 +371,7 @@ fn stuck_n<const N: usize>(seed: u64) -> (usize, usize, u32) {
     (N, worst, back)
 }
 
-/// Seed 001 on the array (issue 14, item 4): each chip a local Kalman
+/// Seed 001 on the array: each chip a local Kalman
 /// filter of rate and bias, fused by the seed's entropy weights or by
 /// covariance weights, with the fused rate fed back (`algo::mixture::
 /// ChipFilters`), next to the mean, the oracle and the default path; four
