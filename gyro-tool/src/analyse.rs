@@ -29,9 +29,7 @@ pub fn run(file: &Path) -> Res<bool> {
     for d in frames.iter().flatten() {
         match &d.body {
             Frame::Status(s) => {
-                tau0_s.get_or_insert(
-                    f64::from(s.sample_us) * 1e-6 * f64::from(s.settings.divider.max(1)),
-                );
+                tau0_s.get_or_insert(crate::summary::tau0_s(s));
                 noise_tau = s.noise_tau;
             }
             Frame::Sample(s) => {

@@ -7,6 +7,12 @@ use gyro_array::link::wire::{DecodeStats, Decoded, FrameError};
 
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
+/// The sample period of the frames a status describes, s (the board's
+/// sample period times its output divider).
+pub fn tau0_s(s: &Status) -> f64 {
+    f64::from(s.sample_us) * 1e-6 * f64::from(s.settings.divider.max(1))
+}
+
 /// Running summary of decoded frames.
 pub struct Summary {
     pub samples: u64,

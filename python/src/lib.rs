@@ -411,9 +411,6 @@ fn davar_surface<'py>(
             )))
         }
     };
-    if !(rate.is_finite() && rate > 0.0) {
-        return Err(value_error(DevError::Tau0));
-    }
     let tau0 = 1.0 / rate;
     let y = data.as_slice()?;
     let (rows, lsb, l2n) = until_interrupted(py, |stop| {
@@ -491,23 +488,16 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let mut s = SampleCols::default();
     let mut nz = NoiseCols::default();
     let mut raw = RawCols::default();
-    let (mut status, mut acks) = (0usize, 0usize);
-    let mut tau0_s = f64::NAN;
-    let mut noise_tau = [1u16, 8, 64];
+    // The counts as `gyro check` makes them (gaps by the divider, a board
+    // reset's link restart counted, not read as frames lost).
+    let mut sum = gyro_tool::summary::Summary::default();
+    let mut first_status = None;
     let mut gyros = 0usize;
-    let (mut seq_gaps, mut link_gaps) = (0u64, 0u64);
-    let (mut last_seq, mut last_link): (Option<u32>, Option<u32>) = (None, None);
-    for d in frames.iter().flatten() {
-        if let Some(l) = last_link {
-            link_gaps += u64::from(d.link_seq.wrapping_sub(l).saturating_sub(1));
-        }
-        last_link = Some(d.link_seq);
+    for r in &frames {
+        sum.add(r);
+        let Ok(d) = r else { continue };
         match &d.body {
             Frame::Sample(f) => {
-                if let Some(l) = last_seq {
-                    seq_gaps += u64::from(f.seq.wrapping_sub(l).saturating_sub(1));
-                }
-                last_seq = Some(f.seq);
                 s.push(d.link_seq, f);
                 if let Some(n) = &f.noise {
                     nz.push(f.seq, n);
@@ -516,15 +506,12 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
             }
             Frame::Raw(r) => raw.push(r),
             Frame::Status(st) => {
-                if status == 0 {
-                    tau0_s = f64::from(st.sample_us) * 1e-6 * f64::from(st.settings.divider.max(1));
-                    noise_tau = st.noise_tau;
-                }
-                status += 1;
+                first_status.get_or_insert_with(|| (gyro_tool::summary::tau0_s(st), st.noise_tau));
             }
-            Frame::Ack(_) => acks += 1,
+            Frame::Ack(_) => {}
         }
     }
+    let (tau0_s, noise_tau) = first_status.unwrap_or((f64::NAN, [1, 8, 64]));
     let stats = dec.stats();
     let out = PyDict::new(py);
     out.set_item("samples", s.into_dict(py, gyros)?)?;
@@ -539,10 +526,12 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     counts.set_item("version", stats.version)?;
     counts.set_item("malformed", stats.malformed)?;
     counts.set_item("bytes_dropped", stats.bytes_dropped)?;
-    counts.set_item("status_frames", status)?;
-    counts.set_item("ack_frames", acks)?;
-    counts.set_item("samples_missing", seq_gaps)?;
-    counts.set_item("link_frames_missing", link_gaps)?;
+    counts.set_item("status_frames", sum.statuses)?;
+    counts.set_item("ack_frames", sum.acks.len())?;
+    counts.set_item("sample_gaps", sum.sample_gaps)?;
+    counts.set_item("samples_missing", sum.samples_missing)?;
+    counts.set_item("link_frames_missing", sum.link_missing)?;
+    counts.set_item("link_restarts", sum.link_restarts)?;
     counts.set_item("partial_bytes_at_end", dec.pending())?;
     out.set_item("counts", counts)?;
     Ok(out)
