@@ -304,8 +304,9 @@ def read_recording(path):
         frame (NaN and the board's defaults without one). ``counts``: the
         decoder's (``frames``, ``corrupt``, ``too_long``, ``version``,
         ``malformed``, ``bytes_dropped``), ``status_frames``,
-        ``ack_frames``, ``samples_missing`` and ``link_frames_missing`` (gaps
-        in the sequence numbers) and ``partial_bytes_at_end``.
+        ``ack_frames``, ``sample_gaps``, ``samples_missing``,
+        ``link_frames_missing`` and ``link_restarts`` (the sequence numbers,
+        counted as ``gyro check`` counts them) and ``partial_bytes_at_end``.
 
     Raises
     ------
