@@ -272,6 +272,10 @@ pub enum Error<E> {
     InvalidArgument,
     /// FIFO_FULL was set: samples were lost. The FIFO has been flushed.
     FifoOverflow,
+    /// INT_STATUS said FIFO_FULL beside a count no full FIFO has (a
+    /// garbled status byte, this one). The FIFO is left as it is: its
+    /// packets are read next time.
+    FifoBadStatus(u8),
     /// A FIFO packet's header is not a gyro packet's (`0x68` in its top six
     /// bits): the stream is out of step. The FIFO has been flushed.
     FifoBadHeader(u8),
@@ -297,6 +301,7 @@ impl<E> Error<E> {
             Error::SelfTestFailed(a) => Error::SelfTestFailed(a),
             Error::InvalidArgument => Error::InvalidArgument,
             Error::FifoOverflow => Error::FifoOverflow,
+            Error::FifoBadStatus(s) => Error::FifoBadStatus(s),
             Error::FifoBadHeader(h) => Error::FifoBadHeader(h),
             Error::FifoShort => Error::FifoShort,
             Error::NotFifo => Error::NotFifo,
@@ -702,6 +707,9 @@ pub struct FifoRead {
 
 /// FIFO packet size, bytes (packet 3).
 pub const FIFO_PACKET: usize = 16;
+/// Packets a full FIFO holds: 2 KiB (datasheet 6.1) of 16-byte packets;
+/// the count is in records.
+pub const FIFO_RECORDS: usize = 2048 / FIFO_PACKET;
 /// Most packets one burst of [`Icm42688::read_fifo`] reads.
 pub const MAX_PER_READ: usize = 4;
 /// The header of a packet 3 with accel and gyro slots and an ODR
@@ -939,7 +947,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     /// the rest when the count says more came (a fast chip clock, a late
     /// read). Each header is checked;
     /// FIFO_FULL, a bad header or a short FIFO flush it and return a typed
-    /// error, so the next read starts on a packet boundary and the caller
+    /// error (FIFO_FULL beside a count no full FIFO has is a garbled status
+    /// and flushes nothing), so the next read starts on a packet boundary and the caller
     /// counts the gap (the samples handed over before the bad packet are
     /// the caller's to drop). Timestamps are extended from 16 bits by their
     /// difference from the last (reads must come within 65 ms).
@@ -968,11 +977,18 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             self.reset_seen = false;
             return Err(Error::ChipReset);
         }
+        let count = u16::from_be_bytes([count_h, count_l]) as usize;
         if status & bits::FIFO_FULL != 0 {
+            // Stop-on-full keeps a full FIFO full until it is read, and
+            // this driver is its only reader: FIFO_FULL beside a count
+            // under half of it is a bit error in the status, not lost
+            // samples, and flushing would lose the packets it holds.
+            if count < FIFO_RECORDS / 2 {
+                return Err(Error::FifoBadStatus(status));
+            }
             self.flush_fifo()?;
             return Err(Error::FifoOverflow);
         }
-        let count = u16::from_be_bytes([count_h, count_l]) as usize;
         let want = count.min(max);
         let mut read = FifoRead {
             status,
@@ -1852,6 +1868,29 @@ mod tests {
         assert_eq!(g.read_fifo(&mut out), Err(Error::FifoShort));
         assert_eq!(g.read_fifo(&mut out), Err(Error::ChipReset));
         assert_eq!(g.read_fifo(&mut out), Err(Error::ChipReset));
+        spi.done();
+    }
+
+    #[test]
+    fn fifo_full_beside_a_count_no_full_fifo_has_is_a_bad_status_and_flushes_nothing() {
+        let mut s = Vec::new();
+        // FIFO_FULL (and data-ready) beside one record: a garbled status;
+        // no flush, so the same packet is there for the next read.
+        s.extend(head(0x0A, 1, &packet([4, 5, 6], 100)));
+        s.extend(head(0x08, 1, &packet([4, 5, 6], 100)));
+        // Half the FIFO or more beside FIFO_FULL: a real overflow.
+        s.extend(head(0x0A, FIFO_RECORDS as u16 / 2, &packet([0; 3], 0)));
+        s.extend(wr(0x4B, 0x02));
+        s.extend(rd(0x2D, &[0x00]));
+        let (mut spi, mut g) = fifo_driver(&s);
+        let mut out = [FifoSample {
+            raw: [0; 3],
+            stamp_us: 0,
+        }; 2];
+        assert_eq!(g.read_fifo(&mut out), Err(Error::FifoBadStatus(0x0A)));
+        let r = g.read_fifo(&mut out).unwrap();
+        assert_eq!((r.samples, out[0].raw), (1, [4, 5, 6]));
+        assert_eq!(g.read_fifo(&mut out), Err(Error::FifoOverflow));
         spi.done();
     }
 

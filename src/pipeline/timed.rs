@@ -343,7 +343,9 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 Err(Error::Spi(_)) => return Err(ReadFault::Bus),
                 Err(_) => {
                     // A bad header or a short FIFO: the stream was out of
-                    // step (flushed); the samples around it are gone.
+                    // step (flushed); the samples around it are gone. A
+                    // garbled status is the chip's own read error too (a
+                    // shared stall is FIFO_FULL with a full count, above).
                     self.gap();
                     return Err(ReadFault::BadResponse);
                 }
