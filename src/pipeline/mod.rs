@@ -99,6 +99,15 @@ pub const RESTART_EVERY: u32 = 4;
 /// See [`RESTART_EVERY`].
 pub const RESTART_AT: u32 = 1;
 
+/// Samples from boot during which a healthy gyro that has not read yet
+/// and is still finding its clock (`ReadFault::Acquiring`) keeps fusion
+/// from a pair or a single chip, as one that lost its clock after good
+/// reads does. The timed chips' clock trackers start from two captures
+/// 20 ms apart, so at boot they all acquire within some 20 samples; the
+/// bound keeps a chip that never acquires from holding the others back
+/// for good.
+pub const ACQUIRE_AT_BOOT: u32 = 100;
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
@@ -516,9 +525,14 @@ impl<const N: usize> Pipeline<N> {
                 };
                 // (Good before, so the gap is a shared one: a chip whose
                 // own errors keep breaking its stream does not hold the
-                // others back.)
+                // others back. At boot every chip acquires at once and the
+                // first ready may be one frozen from power-up that the
+                // stuck check cannot know yet: until it has read, and for
+                // at most `ACQUIRE_AT_BOOT` samples, a chip still finding
+                // its clock holds the others back too.)
                 let h = &self.health[i];
-                if matches!(r, Err(ReadFault::Acquiring)) && h.flags == 0 && h.good_run > 0 {
+                let waited = h.good_run > 0 || self.counters[i].reads == 0 && seq < ACQUIRE_AT_BOOT;
+                if matches!(r, Err(ReadFault::Acquiring)) && h.flags == 0 && waited {
                     acquiring |= 1 << i;
                 }
                 if let Some(axes) = self.account(i, r) {
