@@ -12,9 +12,9 @@
 //! CLKIN (pin 9) at 32 kHz; each chip's INT1 pulses at every sample into
 //! TIM5 CH1–4 (PA0–PA3), captured against TIM5's µs count, the board's
 //! clock for the instants it states. After their self-tests (data
-//! registers) the chips sample into their FIFOs at 2 kHz on CLKIN; each is
+//! registers) the chips sample into their FIFOs at 4 kHz on CLKIN; each is
 //! read through `TimedIcm` (its clock tracked from the captures, its
-//! samples brought to one instant 1 950 µs behind the read), and one that
+//! samples brought to one instant 1 670 µs behind the read), and one that
 //! loses CLKIN moves to its own clock, tracked. The status frames carry
 //! each chip's clock and its error. The ADXRS453's reading is older than
 //! that instant (3.9 ms): read and watched, not fused (`AtInstant`).
@@ -347,7 +347,7 @@ fn main() -> ! {
     }
 
     // The chips from their self-tests (data registers) to the board's
-    // sampling: FIFO at 2 kHz, each sample's INT1 captured, on CLKIN where
+    // sampling: FIFO at 4 kHz, each sample's INT1 captured, on CLKIN where
     // the board drives it (`docs/timing.md`). A chip that failed before is
     // set up too, so its restarts bring it back to this configuration.
     let cfg = Config::board_fifo(if clkin.is_some() {

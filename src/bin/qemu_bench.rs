@@ -74,7 +74,7 @@ fn main() -> ! {
 
 /// One ICM-42688-P's read, on the emulated bus with the bus's own time
 /// metered out: polled (the data registers, as the board's loop reads
-/// them today) against the timed path (`TimedIcm`: the FIFO at 2 kHz, two
+/// them today) against the timed path (`TimedIcm`: the FIFO at 4 kHz, four
 /// samples a read, the INT1 capture, the clock tracker, the moving mean
 /// and the interpolation to the stated instant). The chip keeps its own
 /// time on a clock 0.3 % fast, so reads find one, two or three samples.
@@ -124,8 +124,9 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         for n in 0..READS + 100 {
             with_bus(&bus, |b| b.advance(1e-3));
             let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-            let at = ((now_us - 1950.0) as u32).wrapping_mul(16);
-            timed_g.set_instant(at, 1950);
+            let delay = gyro_array::pipeline::timed::BOARD_DELAY_US;
+            let at = ((now_us - delay as f64) as u32).wrapping_mul(16);
+            timed_g.set_instant(at, delay);
             let m0 = meter();
             let t0 = t.now();
             let r = if fifo_only {
@@ -158,9 +159,9 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         defmt::info!(
             "one ICM-42688-P read, {=str}: mean {=f32} worst {=f32} instructions (bus time out), {=u32} of {=u32} reads with a rate",
             if fifo_only {
-                "the FIFO read alone (2 kHz)"
+                "the FIFO read alone (4 kHz)"
             } else if timed {
-                "timed (FIFO 2 kHz, capture, tracker, aligner)"
+                "timed (FIFO 4 kHz, capture, tracker, aligner)"
             } else {
                 "polled (data registers)"
             },
@@ -537,7 +538,7 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
     ok &= bench_timed_loop_on(
         t,
         ipt,
-        "faults K: four ICM-42688-P on their own clocks (PLLs +0.8 %, -1 %, +0.3 %, one on its RC oscillator at -7 %), FIFO at 2 kHz, swaying 95 deg/s at 2 Hz; gyro 2 stuck 1.5-2.5 s, gyro 1 powered off 4.5-4.6 s, gyro 3 spiking 50 deg/s on 5 % of samples 6.0-7.0 s",
+        "faults K: four ICM-42688-P on their own clocks (PLLs +0.8 %, -1 %, +0.3 %, one on its RC oscillator at -7 %), FIFO at 4 kHz, swaying 95 deg/s at 2 Hz; gyro 2 stuck 1.5-2.5 s, gyro 1 powered off 4.5-4.6 s, gyro 3 spiking 50 deg/s on 5 % of samples 6.0-7.0 s",
         RateProfile {
             base_dps: [0.0, 10.0, -20.0],
             sine_dps: [95.0, 60.0, 40.0],
@@ -561,7 +562,7 @@ fn bench_loops(t: &Ticks, ipt: f32) -> bool {
     ok &= bench_timed_loop_on(
         t,
         ipt,
-        "faults L: four ICM-42688-P on the board's 32 kHz CLKIN, FIFO at 2 kHz, swaying 130 deg/s at 1 Hz on x (crossing 100 deg/s) over a 30 deg/s turn on z; gyro 0 powered off 2.00-2.05 s (back at a new phase), gyro 1 bit errors 3.0-3.5 s, gyro 3 stuck 5.0-5.5 s, gyro 2 saturated 6.0-6.2 s",
+        "faults L: four ICM-42688-P on the board's 32 kHz CLKIN, FIFO at 4 kHz, swaying 130 deg/s at 1 Hz on x (crossing 100 deg/s) over a 30 deg/s turn on z; gyro 0 powered off 2.00-2.05 s (back at a new phase), gyro 1 bit errors 3.0-3.5 s, gyro 3 stuck 5.0-5.5 s, gyro 2 saturated 6.0-6.2 s",
         RateProfile {
             base_dps: [0.0, -5.0, 30.0],
             sine_dps: [130.0, 40.0, 20.0],
@@ -771,9 +772,9 @@ fn bench_loop_on(
 
 /// The whole loop as the board runs it on chips that keep their own
 /// time: four ICM-42688-P (`clkin`: on the board's 32 kHz CLKIN; else on
-/// their own PLLs, `pll` off) read through their FIFOs at 2 kHz by
+/// their own PLLs, `pll` off) read through their FIFOs at 4 kHz by
 /// [`TimedIcm`] (INT1 captures, clock tracker, aligner), each sample at
-/// one stated instant 1 950 µs behind the read, fused on 3 axes, the
+/// one stated instant 1 670 µs behind the read, fused on 3 axes, the
 /// E-DAVARs and the link as in [`bench_loop_on`]. The chips' paths are
 /// the delay model (`emu::PathModel::Delay`: the 32 kHz filters are too
 /// slow for QEMU). The ADXRS453 is not read: at the array's instant its

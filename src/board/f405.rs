@@ -197,7 +197,7 @@ impl embedded_hal_nb::serial::Read<u8> for RxQueue {
 
 /// The ICM-42688-Ps' CLKIN (their pin 9, set to CLKIN through
 /// INTF_CONFIG5): TIM3 channel 1 on PC6 (AF2), at half duty. 32 kHz is in
-/// the 31–50 kHz RTC-mode range, gives the chips' 2 kHz ODR as CLKIN / 16,
+/// the 31–50 kHz RTC-mode range, gives the chips' 4 kHz ODR as CLKIN / 8,
 /// and both of the board's APB1 timer clocks divide to it exactly
 /// (84 MHz / 2 625 with the PLL, 16 MHz / 500 on the internal oscillator
 /// alone).

@@ -22,10 +22,10 @@ use super::clock::{ChipClock, ClockState, Instant16, Q};
 use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, MAX_PER_READ};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
-/// Samples kept per chip: 8 ms at 2 kHz, room for an instant up to 7 ms
+/// Samples kept per chip: 8 ms at 4 kHz, room for an instant up to 7 ms
 /// behind the newest sample (the ADXRS453's filter delay, for comparison,
 /// is 2.9 ms). A power of two, so the ring's index is a mask.
-pub const ALIGN_CAP: usize = 16;
+pub const ALIGN_CAP: usize = 32;
 
 /// What the timing layer counted for one chip.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -53,11 +53,12 @@ pub struct TimingCounters {
     pub spikes: u32,
 }
 
-/// A step between two of a chip's samples (0.5 ms apart at 2 kHz) larger
+/// A step between two of a chip's samples (0.25 ms apart at 4 kHz) larger
 /// than this, °/s, on any axis, is no rate the chip's filters can pass:
-/// a vehicle's motion (1 200 °/s² at 95 °/s and 2 Hz) moves 0.6 °/s in
-/// 0.5 ms, white noise some 0.1, and a 20 °/s vibration tone at 600 Hz
-/// (the worst the AAF and UI filter let through) some 7. A spike left in
+/// a vehicle's motion (1 200 °/s² at 95 °/s and 2 Hz) moves 0.3 °/s in
+/// 0.25 ms, white noise some 0.1, and a 20 °/s vibration tone at 600 Hz
+/// (the worst the AAF and UI filter let through, some 4.5 °/s of it) some
+/// 4 (some 7 at 2 kHz with 0.5 ms between samples). A spike left in
 /// would be smeared by the moving mean and the interpolation over two or
 /// three outputs of a few °/s each, inside the fusion's gate: the timed
 /// fault campaign (seed 9209, 200 °/s spikes on 5 % of samples) saw the
@@ -67,11 +68,11 @@ pub struct TimingCounters {
 pub const SPIKE_DPS: f32 = 25.0;
 
 /// How far behind its read the board states each sample's instant, µs,
-/// for its chips' FIFO sampling (`Config::board_fifo`, 2 kHz through
-/// `Filter::BOARD_FIFO`): [`stated_delay_us`], 1 181 µs of path, 250 of
-/// the mean of two's half-span and a 500 µs sample period, for a chip 1 %
-/// slow.
-pub const BOARD_DELAY_US: u32 = 1950;
+/// for its chips' FIFO sampling (`Config::board_fifo`, 4 kHz through
+/// `Filter::BOARD_FIFO`): [`stated_delay_us`], 1 021 µs of path, 375 of
+/// the mean of four's half-span and a 250 µs sample period, for a chip
+/// 1 % slow.
+pub const BOARD_DELAY_US: u32 = 1670;
 
 /// How far behind its read an instant can be stated for chips sampling
 /// through `cfg`'s FIFO, µs: the path's group delay, the moving mean's
@@ -87,7 +88,7 @@ pub fn stated_delay_us(cfg: &Config) -> u32 {
 }
 
 /// Reads without a sample after which a chip on CLKIN is taken to have lost
-/// it (at 2 kHz, 20 reads without one of 40 expected samples) and is moved
+/// it (at 4 kHz, 20 reads without one of 80 expected samples) and is moved
 /// to its own clock: the chip's grid stops without CLKIN (see
 /// `emu::timing`), and its own PLL keeps it sampling.
 pub const CLKIN_LOST_READS: u16 = 20;
@@ -96,8 +97,8 @@ pub const CLKIN_LOST_READS: u16 = 20;
 /// of step) before a chip answers again. Time alone would bring the chips
 /// that shared a gap back one by one, a read apart as their phases fall,
 /// and for a read two of four could be fused, one of them perhaps faulty;
-/// a count of reads brings them back together (4 reads hold 8 samples at
-/// 2 kHz, more than the stated instant needs).
+/// a count of reads brings them back together (4 reads hold 16 samples at
+/// 4 kHz, more than the stated instant needs).
 pub const REJOIN_READS: u8 = 4;
 
 /// An ICM-42688-P on the board's clock.

@@ -799,6 +799,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
                 PathElement::new([(x, y), (x + 20, y)], PALETTE[i].stroke_width(2))
             });
     }
+    let stated = gyro_array::pipeline::timed::BOARD_DELAY_US as f64;
     let on: Vec<(f64, f64)> = clkin
         .newest_behind_us
         .iter()
@@ -812,10 +813,10 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(2)));
     chart
         .draw_series(LineSeries::new(
-            [(0.0, 1950.0), (400.0, 1950.0)],
+            [(0.0, stated), (400.0, stated)],
             RED.stroke_width(1),
         ))?
-        .label("the stated instant (1 950 µs)")
+        .label(format!("the stated instant ({stated} µs)"))
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
     legend(&mut chart, SeriesLabelPosition::LowerRight)?;
     // (b) fused error RMS against the truth at shifted instants.

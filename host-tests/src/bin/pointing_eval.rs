@@ -16,7 +16,7 @@
 //!
 //! The board is the timed one (`host_tests::timed_board`): four chips on
 //! their own clocks through the real drivers, `TimedIcm` and the pipeline.
-//! Each frame describes its stated instant (1 950 µs behind the read) and
+//! Each frame describes its stated instant (`timed::BOARD_DELAY_US` behind the read) and
 //! reaches the antenna `latency::read_to_antenna_us` after the read; the
 //! positioner holds it until the next.
 //!
