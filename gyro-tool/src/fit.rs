@@ -151,6 +151,43 @@ fn best_subset(rows: &[([f64; 5], f64, f64)]) -> Option<(Solved, u8)> {
     best
 }
 
+/// Why [`fit_phase`] has no fit.
+#[derive(Debug)]
+pub enum FitError {
+    /// The OADEV curve could not be made (too short, not finite, …).
+    Curve(crate::dev::DevError),
+    /// Fewer than two of the curve's points average enough clusters.
+    TooFewPoints,
+}
+
+impl core::fmt::Display for FitError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            FitError::Curve(e) => e.fmt(f),
+            FitError::TooFewPoints => write!(
+                f,
+                "too few points of at least {FIT_CLUSTERS} clusters to fit (two needed)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}
+
+/// The model fitted to phase `x` (τ0 `tau0`) as `gyro allan --fit` and
+/// the Python package's `noise_fit` do it: on its OADEV at 8 points a
+/// decade.
+pub fn fit_phase(x: &[f64], tau0: f64) -> Result<Terms, FitError> {
+    let c = crate::dev::curve(
+        crate::dev::Kind::Oadev,
+        x,
+        tau0,
+        crate::dev::Grid::PerDecade(8),
+    )
+    .map_err(FitError::Curve)?;
+    fit(&c, x.len()).ok_or(FitError::TooFewPoints)
+}
+
 /// Fit the model to an overlapping Allan deviation curve of `n` phase
 /// points (rate samples + 1). None if fewer than two usable points.
 ///

@@ -756,13 +756,12 @@ fn allan(
     let mut fits = Vec::new();
     if want_fit || kalibr.is_some() {
         for (name, x) in s.names.iter().zip(&phases) {
-            let c = dev::curve(dev::Kind::Oadev, x, s.tau0, dev::Grid::PerDecade(8))?;
-            match fit::fit(&c, x.len()) {
-                Some(t) => fits.push((name.clone(), t)),
-                None => eprintln!(
-                    "gyro: {name}: too few points with {} clusters to fit",
-                    fit::MIN_CLUSTERS
-                ),
+            match fit::fit_phase(x, s.tau0) {
+                Ok(t) => fits.push((name.clone(), t)),
+                Err(fit::FitError::TooFewPoints) => {
+                    eprintln!("gyro: {name}: {}", fit::FitError::TooFewPoints)
+                }
+                Err(e) => return Err(e.into()),
             }
         }
     }

@@ -339,18 +339,7 @@ fn terms_of(
 ) -> PyResult<fit::Terms> {
     let x = phase_of(data.as_slice()?, rate, data_type)?;
     let tau0 = 1.0 / rate;
-    let t = py
-        .detach(|| {
-            dev::curve(Kind::Oadev, &x, tau0, dev::Grid::PerDecade(8))
-                .map(|c| fit::fit(&c, x.len()))
-        })
-        .map_err(value_error)?;
-    t.ok_or_else(|| {
-        value_error(format!(
-            "too few points with {} clusters to fit",
-            fit::MIN_CLUSTERS
-        ))
-    })
+    py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)
 }
 
 /// Kalibr's `imu.yaml` for the gyro terms of the data's fit, as `gyro
