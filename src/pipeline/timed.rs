@@ -456,7 +456,7 @@ pub fn tracking(c: &ChipClock) -> bool {
 /// longer has nothing for the instant and answers [`ReadFault::Late`]
 /// (neither fused nor a fault) after its read, so its health is still
 /// watched: the ADXRS453, whose 2.9 ms filter and one-frame-late response
-/// make 3.9 ms, on the board's 1.95 ms instant. (Reading the ADXRS453 at
+/// make 3.9 ms, on the board's 1.67 ms instant. (Reading the ADXRS453 at
 /// the instant would need its rate predicted 2 ms forward, its noise
 /// doubled: `docs/timing.md`.)
 pub struct AtInstant<G> {
