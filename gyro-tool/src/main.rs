@@ -758,9 +758,7 @@ fn allan(
         for (name, x) in s.names.iter().zip(&phases) {
             match fit::fit_phase(x, s.tau0) {
                 Ok(t) => fits.push((name.clone(), t)),
-                Err(fit::FitError::TooFewPoints) => {
-                    eprintln!("gyro: {name}: {}", fit::FitError::TooFewPoints)
-                }
+                Err(e @ fit::FitError::TooFewPoints) => eprintln!("gyro: {name}: {e}"),
                 Err(e) => return Err(e.into()),
             }
         }

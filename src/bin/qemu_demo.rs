@@ -56,10 +56,10 @@ use gyro_array::emu::{
     EmuDelay, Fault, PathModel, RateProfile, TempProfile,
 };
 use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
-use gyro_array::link::port::Port;
+use gyro_array::link::port::{timed_clock, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -203,12 +203,7 @@ fn main() -> ! {
     let clocks = |t: [&TimedIcm<_, _>; 4]| {
         let mut c = [(LinkClock::Polled, 0i32); 5];
         for (slot, t) in c.iter_mut().zip(t) {
-            let ppm = if timed::tracking(t.clock()) {
-                t.clock().error_ppm() as i32
-            } else {
-                0
-            };
-            *slot = (LinkClock::Own, ppm);
+            *slot = timed_clock(t);
         }
         c
     };

@@ -950,8 +950,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     /// read). Each header is checked;
     /// FIFO_FULL, a bad header or a short FIFO flush it and return a typed
     /// error (FIFO_FULL beside a count no full FIFO has is a garbled status
-    /// and flushes nothing), so the next read starts on a packet boundary and the caller
-    /// counts the gap (the samples handed over before the bad packet are
+    /// and flushes nothing), so the next read starts on a packet boundary
+    /// and the caller counts the gap (the samples handed over before the bad packet are
     /// the caller's to drop). Timestamps are extended from 16 bits by their
     /// difference from the last (reads must come within 65 ms).
     pub fn read_fifo_with(

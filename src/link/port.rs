@@ -71,6 +71,26 @@ pub const SAMPLE_FRAME_MAX: u32 = 80;
 /// 10 600, 63 µs).
 pub const LOOP_US: u32 = 60;
 
+/// What a status frame says of a timed chip's clock ([`Port::status`]'s
+/// `clocks`): its source, and its error in ppm once the tracker follows it
+/// (0 before).
+pub fn timed_clock<SPI, C>(t: &crate::pipeline::timed::TimedIcm<SPI, C>) -> (ClockSource, i32)
+where
+    SPI: embedded_hal::spi::SpiDevice,
+    C: crate::drivers::SampleCapture,
+{
+    let src = match t.clock_input() {
+        crate::drivers::icm42688::ClockInput::ClkIn => ClockSource::ClkIn,
+        crate::drivers::icm42688::ClockInput::Internal => ClockSource::Own,
+    };
+    let ppm = if crate::pipeline::timed::tracking(t.clock()) {
+        t.clock().error_ppm() as i32
+    } else {
+        0
+    };
+    (src, ppm)
+}
+
 impl FusionMethod {
     /// The fusion method with its default settings.
     pub fn method(self) -> Method {
