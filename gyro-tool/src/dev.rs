@@ -211,7 +211,7 @@ pub fn deviations_of_finite(
     check_tau0(tau0)?;
     if kind == Kind::Oadev && factors.len() > 1 && factors.iter().all(|m| m.is_power_of_two()) {
         let mut out = vec![allan::AdevPoint::from_sum(1, tau0, 0.0, 1, 1); 64];
-        let k = allan::oavar_octave_phase(x, tau0, &mut out);
+        let k = octave_sweep(x, tau0, &mut out);
         let swept: Vec<&allan::AdevPoint> = out.iter().take(k).collect();
         return Ok(factors
             .iter()
@@ -233,6 +233,18 @@ pub fn deviations_of_finite(
             Err(e) => Err(e),
         })
         .collect()
+}
+
+/// The octave sweep (`allan::oavar_octave_phase`), in its AVX2 build where
+/// the CPU has AVX2 (the same bits).
+fn octave_sweep(x: &[f64], tau0: f64, out: &mut [allan::AdevPoint]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above), the only
+        // requirement of the AVX2 build.
+        return unsafe { allan::oavar_octave_phase_avx2(x, tau0, out) };
+    }
+    allan::oavar_octave_phase(x, tau0, out)
 }
 
 /// Σ over i of (x[i + 2m] − 2x[i + m] + x[i])² for i in `from..to` by

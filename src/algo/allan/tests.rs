@@ -341,6 +341,19 @@ fn avx2_build_gives_the_same_bits() {
         let fast = unsafe { second_diff_sum_avx2(&phase, m, from, to) };
         assert_eq!(plain.to_bits(), fast.to_bits(), "m={m}");
     }
+    // The octave sweep: both of its groups of τ (2¹⁴ > 20 011 / 2 holds
+    // octaves 0..=13, the near group 0..10).
+    let (mut plain, mut fast) = ([AdevPoint::default(); 24], [AdevPoint::default(); 24]);
+    let k = oavar_octave_phase(&phase, 0.01, &mut plain);
+    // SAFETY: as above.
+    assert_eq!(
+        unsafe { oavar_octave_phase_avx2(&phase, 0.01, &mut fast) },
+        k
+    );
+    assert!(k > 10);
+    for (p, f) in plain.iter().zip(&fast).take(k) {
+        assert_eq!(p.avar.to_bits(), f.avar.to_bits(), "m={}", p.m);
+    }
     // Out of range: nothing, in both builds.
     assert_eq!(second_diff_sum(&phase, 20_000, 0, 10), 0.0);
     // SAFETY: as above.

@@ -256,6 +256,7 @@ fn parse(
     let mut phase: Option<usize> = None;
     // The current sample's firmware instructions by function id.
     let mut by_fn: Vec<u64> = Vec::new();
+    let only_phase = only_phase();
     for line in r.split(b'\n') {
         let Ok(line) = line else { break };
         if line.starts_with(b"IN:") {
@@ -368,6 +369,11 @@ fn parse(
                 if p == 0 {
                     s.bus += b.emu;
                 }
+                // `XTASK_TRACE_PHASE=0|1|2`: the breakdown by function of one
+                // phase alone (read + fuse, E-DAVAR, link).
+                if only_phase.is_some_and(|q| q != p) {
+                    continue;
+                }
                 let lines = std::env::var_os("XTASK_TRACE_LINES").is_some();
                 let charged: Vec<(u32, u64)> = b
                     .by_fn
@@ -425,6 +431,12 @@ fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
         }
     }
     by_fn.iter_mut().for_each(|n| *n = 0);
+}
+
+fn only_phase() -> Option<usize> {
+    std::env::var("XTASK_TRACE_PHASE")
+        .ok()
+        .and_then(|v| v.parse().ok())
 }
 
 /// Print one scenario's mean and worst sample, and the worst sample's
@@ -488,6 +500,8 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .iter()
         .take(if std::env::var_os("XTASK_TRACE_LINES").is_some() {
             400
+        } else if only_phase().is_some() {
+            40
         } else {
             16
         })
