@@ -77,6 +77,9 @@ const STRONG: f32 = 3.0;
 /// A change gaining less than GRADUAL·β may be read as gradual
 /// ([`Davar::segment_window`]).
 const GRADUAL: f32 = 2.0;
+/// t's segment is a stair of a ramp, not the level of a step, where its
+/// energies' slope has z² above this (and runs with the change).
+const SLOPE_Z2: f32 = 9.0;
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 16;
@@ -1545,8 +1548,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // symmetric about it, which a linear change leaves unbiased. (Each
         // side tests one change, so the sample's cost stays bounded.)
         let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
+        let seg_slope = slope_z2(px, nu, (b(s), b(s + 1)));
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
+            // t's own segment rising (or falling) toward or away from the
+            // change as the change goes: a ramp cut into stairs, whose
+            // stairs are not flat.
+            if let Some((z2, up)) = seg_slope {
+                if z2 > SLOPE_Z2 && up == (mean(i) > mean(i - 1)) {
+                    return true;
+                }
+            }
             // (At the board's λ1 = λ2/2 only a change alone in the span
             // passes.)
             if r - l < 2 * min_frames {
@@ -1800,6 +1812,27 @@ fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 
     let sxx = n * (n * n - 1.0) / 12.0;
     let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
     (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+}
+
+/// The slope of the frames' energies over l..r, squared, over its own
+/// variance under the scaled-χ²_ν model at their mean (a z²), and whether
+/// it rises. None where fewer than 4 frames or a mean not positive.
+fn slope_z2(px: &[f32], nu: f32, (l, r): (usize, usize)) -> Option<(f32, bool)> {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    if r < l + 4 {
+        return None;
+    }
+    let n = (r - l) as f32;
+    let s = p(r) - p(l);
+    let m = s / n;
+    if !(m > 0.0) {
+        return None;
+    }
+    // Σ (f − centre)·x_f from the prefix sums, as in `line_over_step`.
+    let sp: f32 = px.get(l + 1..=r).unwrap_or(&[]).iter().sum();
+    let sfc = n * p(r) - sp - 0.5 * (n - 1.0) * s;
+    let sxx = n * (n * n - 1.0) / 12.0;
+    Some((sfc * sfc / sxx * nu / (2.0 * m * m), sfc > 0.0))
 }
 
 /// Cost of a blurred step over the span's frames l..r (same scale as
