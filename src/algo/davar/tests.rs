@@ -725,3 +725,52 @@ fn line_over_step_matches_an_f64_reference() {
         f32::NEG_INFINITY
     );
 }
+
+/// `slope_z2` against an f64 reference from the definition: the
+/// least-squares slope of the frame energies over l..r, squared, over its
+/// variance 2m²/(ν·Σ(f − f̄)²) at their mean m; and its sign. Spans up to
+/// 128 frames, anywhere in the prefix sums, slopes of either sign.
+#[test]
+fn slope_z2_matches_an_f64_reference() {
+    let mut rng = Rng::new(9);
+    let mut worst = 0.0f64;
+    for case in 0..300 {
+        let k = 8 + case % 121;
+        let (l, r) = (case % 5, k);
+        let slope = 0.5 * rng.gaussian() as f64 / k as f64;
+        let x: Vec<f64> = (0..k)
+            .map(|f| {
+                let mu = 6e5 * (1.0 + slope * f as f64).max(0.2);
+                let chi: f64 = (0..22).map(|_| (rng.gaussian() as f64).powi(2)).sum();
+                mu * chi / 22.0
+            })
+            .collect();
+        let mut px = vec![0.0f32];
+        for &v in &x {
+            px.push(px.last().unwrap() + v as f32);
+        }
+        let nu = 21.6f32;
+        let y = &x[l..r];
+        let n = y.len() as f64;
+        let m = y.iter().sum::<f64>() / n;
+        let fm = (n - 1.0) / 2.0;
+        let sxy: f64 = y
+            .iter()
+            .enumerate()
+            .map(|(f, &v)| (f as f64 - fm) * v)
+            .sum();
+        let sxx: f64 = (0..y.len()).map(|f| (f as f64 - fm).powi(2)).sum();
+        let want = (sxy / sxx).powi(2) / (2.0 * m * m / (nu as f64 * sxx));
+        let (got, up) = slope_z2(&px, nu, (l, r)).expect("applies");
+        // (A z² near 0 may carry either sign.)
+        if want > 1.0 {
+            assert_eq!(up, sxy > 0.0, "case {case}");
+        }
+        worst = worst.max((got as f64 - want).abs() / want.max(1.0));
+    }
+    eprintln!("slope_z2: worst error {worst:.2e}");
+    assert!(worst < 1e-3, "{worst}");
+    // Where it does not apply: under 4 frames, a mean not positive.
+    assert_eq!(slope_z2(&[0.0, 1.0, 2.0, 3.0, 4.0], 21.6, (1, 4)), None);
+    assert_eq!(slope_z2(&[0.0; 6], 21.6, (0, 5)), None);
+}
