@@ -50,53 +50,18 @@ impl fmt::Display for DevError {
 
 impl std::error::Error for DevError {}
 
-/// The deviations.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Kind {
-    /// Allan, non-overlapping.
-    Adev,
-    /// Overlapping Allan.
-    Oadev,
-    /// Modified Allan.
-    Mdev,
-    /// Time deviation, τ/√3 · MDEV (in the phase's unit).
-    Tdev,
-    /// Hadamard, non-overlapping.
-    Hdev,
-    /// Overlapping Hadamard.
-    Ohdev,
-    /// Total (reflected extension of the phase).
-    Totdev,
-}
+pub use crate::kind::Kind;
 
-impl Kind {
-    /// The deviation of lower-case name `name` ([`Kind::name`], the
-    /// command line's value).
-    pub fn from_name(name: &str) -> Option<Kind> {
-        <Kind as clap::ValueEnum>::from_str(name, false).ok()
-    }
-
-    /// Lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Kind::Adev => "adev",
-            Kind::Oadev => "oadev",
-            Kind::Mdev => "mdev",
-            Kind::Tdev => "tdev",
-            Kind::Hdev => "hdev",
-            Kind::Ohdev => "ohdev",
-            Kind::Totdev => "totdev",
-        }
-    }
-
-    /// Largest averaging factor with at least one term for `n` phase
-    /// points.
-    pub fn max_factor(self, n: usize) -> usize {
-        match self {
-            Kind::Adev | Kind::Oadev | Kind::Totdev => n.saturating_sub(1) / 2,
-            Kind::Mdev | Kind::Tdev | Kind::Hdev | Kind::Ohdev => n.saturating_sub(1) / 3,
-        }
+/// A sample period given on a command line (`gyro allan --tau0`,
+/// `allan-report`): a finite number of seconds in (0, 1e6].
+pub fn tau0_arg(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 && v <= 1e6 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: the sample period must be in (0, 1e6] s"))
     }
 }
 

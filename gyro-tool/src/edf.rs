@@ -18,7 +18,7 @@
 //! (`tests/vectors/greenhall.csv`, made by `tests/make_greenhall_vectors.py`),
 //! and against the interval columns of Stable32's tables for PHASE.DAT.
 
-use crate::dev::Kind;
+use crate::kind::Kind;
 use gyro_array::algo::stats::chi2_quantile;
 
 /// Stable32's confidence factor: ±1σ of a normal distribution.

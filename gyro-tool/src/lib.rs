@@ -6,6 +6,7 @@ pub mod analyse;
 pub mod dev;
 pub mod edf;
 pub mod fit;
+pub mod kind;
 pub mod plot;
 pub mod pointing;
 pub mod replay;

@@ -239,7 +239,7 @@ struct LogArgs {
     #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
     time: Option<String>,
     /// Sample period, s (finite, in (0, 1e6]).
-    #[arg(long, value_parser = tau0_arg)]
+    #[arg(long, value_parser = dev::tau0_arg)]
     tau0: Option<f64>,
     /// Unit of the rate columns.
     #[arg(long, value_enum, default_value = "dps")]
@@ -449,18 +449,6 @@ enum OutFormat {
     Csv,
     /// JSON: one object per column and deviation, with its points.
     Json,
-}
-
-/// A sample period: a finite number of seconds in (0, 1e6].
-fn tau0_arg(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
-    if v.is_finite() && v > 0.0 && v <= 1e6 {
-        Ok(v)
-    } else {
-        Err(format!("{s}: the sample period must be in (0, 1e6] s"))
-    }
 }
 
 /// `gyro emulate`: a log of an emulated chip at rest.

@@ -24,6 +24,7 @@ use super::wire::{
 };
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::algo::predict::Predictor;
+use crate::pipeline::tracker::LinkNoise;
 use crate::pipeline::{Output, Pipeline};
 
 /// Where the E-DAVAR estimates come from (the pipeline's noise tracker).
@@ -42,6 +43,26 @@ impl NoiseSource for () {
     }
     fn noise(&self, _: usize) -> Option<Noise> {
         None
+    }
+}
+
+/// The pipeline's noise tracker, each axis's newest estimate as a frame's
+/// noise record.
+impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
+    for LinkNoise<'_, CAP, FRAMES, T>
+{
+    fn described(&self, axis: usize) -> Option<u32> {
+        LinkNoise::described(self, axis)
+    }
+
+    fn noise(&self, axis: usize) -> Option<Noise> {
+        self.newest(axis).map(|n| Noise {
+            axis: axis as u8,
+            seq: n.seq,
+            len: n.len,
+            bridged: n.bridged,
+            sigma_dps: n.sigma_dps,
+        })
     }
 }
 

@@ -10,8 +10,6 @@ use super::Output;
 use crate::algo::allan::stream::quantise;
 use crate::algo::davar::{Davar, DavarConfig, DavarError, DavarStep, SEG};
 use crate::algo::math::sqrtf;
-use crate::link::msg::Noise;
-use crate::link::port::NoiseSource;
 
 /// Input resolution of the tracker, °/s: ±2048 °/s fits the |w| < 2²⁰
 /// integer range, and the step adds (LSB²/12) ≈ 3e-7 (°/s)² of white
@@ -295,27 +293,41 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     }
 }
 
-/// The tracker as the output link reads it ([`NoiseTracker::at_taus`]).
+/// The tracker as the output link reads it ([`NoiseTracker::at_taus`];
+/// `link::port` makes its frames' noise record of it).
 pub struct LinkNoise<'a, const CAP: usize, const FRAMES: usize, const T: usize> {
     tracker: &'a NoiseTracker<CAP, FRAMES, T>,
     taus: [usize; 3],
 }
 
-impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
-    for LinkNoise<'_, CAP, FRAMES, T>
-{
-    fn described(&self, axis: usize) -> Option<u32> {
+/// An axis's newest estimate, as the link sends it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisNoise {
+    /// Sequence number of the sample it describes.
+    pub seq: u32,
+    /// Window length, samples.
+    pub len: u16,
+    /// Missing samples of the window bridged by holding the one before.
+    pub bridged: u8,
+    /// σ at the view's three τ, °/s (NaN where out of range).
+    pub sigma_dps: [f32; 3],
+}
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize> LinkNoise<'_, CAP, FRAMES, T> {
+    /// Sequence number of the sample the axis's newest estimate describes
+    /// (cheap: the link asks every sample).
+    pub fn described(&self, axis: usize) -> Option<u32> {
         let (t, _) = self.tracker.axes.get(axis)?.estimate_window()?;
         let origin = (*self.tracker.origin.get(axis)?)?;
         Some(origin.wrapping_add(t as u32))
     }
 
-    fn noise(&self, axis: usize) -> Option<Noise> {
+    /// The axis's newest estimate.
+    pub fn newest(&self, axis: usize) -> Option<AxisNoise> {
         let d = self.tracker.axes.get(axis)?;
         let (t, len) = d.estimate_window()?;
         let origin = (*self.tracker.origin.get(axis)?)?;
-        Some(Noise {
-            axis: axis as u8,
+        Some(AxisNoise {
             seq: origin.wrapping_add(t as u32),
             len,
             bridged: self.tracker.bridged_in(axis, origin, d.estimate_span()?),
@@ -436,7 +448,7 @@ mod tests {
                 .filter(|&&s| s.wrapping_sub(start) < len)
                 .count();
             assert_eq!(usize::from(y.bridged), want, "estimate for seq {}", y.seq);
-            let link = t.at_taus([0, 4, 8]).noise(1).unwrap();
+            let link = t.at_taus([0, 4, 8]).newest(1).unwrap();
             assert_eq!((link.seq, link.bridged), (y.seq, y.bridged));
             assert_eq!(t.estimate(0).map(|x| x.bridged), Some(0));
             checked += 1;

@@ -15,18 +15,6 @@ use gyro_array::algo::allan::{edf, local_slope, noise_terms, oavar_octave, AdevP
 use gyro_array::emu::noise::AxisNoise;
 use gyro_array::emu::{NoiseParams, Rng};
 
-/// The sample period: a finite number of seconds in (0, 1e6].
-fn tau0_arg(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
-    if v.is_finite() && v > 0.0 && v <= 1e6 {
-        Ok(v)
-    } else {
-        Err(format!("{s}: the sample period must be in (0, 1e6] s"))
-    }
-}
-
 /// Allan deviation report of a rate log.
 #[derive(clap::Parser)]
 #[command(name = "allan-report")]
@@ -35,7 +23,7 @@ struct Cli {
     #[arg(required_unless_present = "demo", requires = "tau0")]
     file: Option<String>,
     /// Sample period, seconds.
-    #[arg(value_parser = tau0_arg, requires = "file")]
+    #[arg(value_parser = gyro_tool::dev::tau0_arg, requires = "file")]
     tau0: Option<f64>,
     /// Report on the emulated ICM-42688-P instead of a file.
     #[arg(long, conflicts_with_all = ["file", "tau0"])]
