@@ -68,59 +68,48 @@ fn edf_oadev(n: usize, m: usize) -> f64 {
 type Solved = ([f64; 5], [[f64; 5]; 5], f64);
 
 fn solve(rows: &[([f64; 5], f64, f64)], mask: u8) -> Option<Solved> {
-    let idx: Vec<usize> = (0..5).filter(|i| mask & (1 << i) != 0).collect();
-    let k = idx.len();
-    let mut a = vec![vec![0.0; k]; k];
-    let mut b = vec![0.0; k];
+    use nalgebra::{Matrix5, Vector5};
+    let on = |i: usize| mask & (1 << i) != 0;
+    let (mut a, mut b) = (Matrix5::<f64>::zeros(), Vector5::<f64>::zeros());
     for (x, y, w) in rows {
-        for (r, &i) in idx.iter().enumerate() {
-            b[r] += w * x[i] * y;
-            for (c, &j) in idx.iter().enumerate() {
-                a[r][c] += w * x[i] * x[j];
+        for i in (0..5).filter(|&i| on(i)) {
+            b[i] += w * x[i] * y;
+            for j in (0..5).filter(|&j| on(j)) {
+                a[(i, j)] += w * x[i] * x[j];
             }
         }
     }
-    // Scale to unit diagonal (the basis spans many decades), then invert.
-    let d: Vec<f64> = (0..k).map(|i| a[i][i].sqrt()).collect();
-    if d.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-        return None;
-    }
-    let mut m = vec![vec![0.0; 2 * k]; k];
-    for r in 0..k {
-        for c in 0..k {
-            m[r][c] = a[r][c] / (d[r] * d[c]);
-        }
-        m[r][k + r] = 1.0;
-    }
-    for c in 0..k {
-        let p = (c..k).max_by(|&x, &y| m[x][c].abs().total_cmp(&m[y][c].abs()))?;
-        if m[p][c].abs() < 1e-13 {
+    // Scaled to unit diagonal (the basis spans many decades), the terms
+    // left out as identity rows, then a Cholesky factor: the normal matrix
+    // is symmetric and, unless the subset is degenerate, positive definite.
+    let mut d = Vector5::<f64>::repeat(1.0);
+    for i in (0..5).filter(|&i| on(i)) {
+        d[i] = a[(i, i)].sqrt();
+        if !(d[i].is_finite() && d[i] > 0.0) {
             return None;
         }
-        m.swap(c, p);
-        let piv = m[c][c];
-        for v in m[c].iter_mut() {
-            *v /= piv;
-        }
-        for r in 0..k {
-            if r != c {
-                let f = m[r][c];
-                let row = m[c].clone();
-                for (v, q) in m[r].iter_mut().zip(row) {
-                    *v -= f * q;
-                }
-            }
+    }
+    let mut m = Matrix5::<f64>::identity();
+    for i in (0..5).filter(|&i| on(i)) {
+        for j in (0..5).filter(|&j| on(j)) {
+            m[(i, j)] = a[(i, j)] / (d[i] * d[j]);
         }
     }
+    let chol = nalgebra::Cholesky::new(m)?;
+    // A pivot this small: the terms are collinear over these τ.
+    if chol.l_dirty().diagonal().iter().any(|&l| l * l < 1e-13) {
+        return None;
+    }
+    let scaled = chol.inverse();
     let mut inv = [[0.0; 5]; 5];
     let mut sol = [0.0; 5];
-    for (r, &i) in idx.iter().enumerate() {
-        for (c, &j) in idx.iter().enumerate() {
-            inv[i][j] = m[r][k + c] / (d[r] * d[c]);
+    for i in (0..5).filter(|&i| on(i)) {
+        for j in (0..5).filter(|&j| on(j)) {
+            inv[i][j] = scaled[(i, j)] / (d[i] * d[j]);
         }
     }
-    for &i in &idx {
-        sol[i] = idx.iter().zip(&b).map(|(&j, bj)| inv[i][j] * bj).sum();
+    for i in (0..5).filter(|&i| on(i)) {
+        sol[i] = (0..5).filter(|&j| on(j)).map(|j| inv[i][j] * b[j]).sum();
     }
     let rss = rows
         .iter()
