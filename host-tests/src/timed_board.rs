@@ -18,7 +18,7 @@ use gyro_array::emu::{
     timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault,
     RateProfile,
 };
-use gyro_array::pipeline::timed::TimedIcm;
+use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
 
 /// Chips.
@@ -134,7 +134,7 @@ pub fn run(
         with_bus(&bus, |b| b.advance(1e-3));
         let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
         let stated_us = now_us - DELAY_US as f64;
-        let at = (stated_us as u64 as u32).wrapping_mul(16);
+        let at = timed::array_instant(now_us as u64 as u32, DELAY_US);
         for ti in t.iter_mut() {
             ti.set_instant(at, DELAY_US);
         }

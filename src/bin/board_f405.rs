@@ -64,7 +64,7 @@ use gyro_array::link::port::{timed_clock, Port};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -362,6 +362,12 @@ fn main() -> ! {
             }
             pipe.mark_init_failed(i);
         }
+    }
+    // One start for all: a chip set up first samples through the others'
+    // set-up (46 ms each, the driver's reset and start-up waits), some 550
+    // records at 4 kHz against its FIFO's 128, and would start on an
+    // overflow.
+    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
         let _ = g.flush_fifo();
     }
     let (mut t0, mut t1, mut t2, mut t3) = (
@@ -422,10 +428,7 @@ fn main() -> ! {
         }
         // One instant for the array, a fixed delay behind the read, on
         // TIM5's µs (the captures' clock), in 1/16 µs.
-        let at = captures
-            .micros()
-            .wrapping_sub(BOARD_DELAY_US)
-            .wrapping_mul(16);
+        let at = timed::array_instant(captures.micros(), BOARD_DELAY_US);
         for t in [&mut t0, &mut t1, &mut t2, &mut t3] {
             t.set_instant(at, BOARD_DELAY_US);
         }

@@ -59,7 +59,7 @@ use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
 use gyro_array::link::port::{timed_clock, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
@@ -306,9 +306,7 @@ fn main() -> ! {
         // captures' µs clock (the bus's here, TIM5's on the board), in
         // 1/16 µs.
         let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-        let at = (now_us as u64 as u32)
-            .wrapping_sub(BOARD_DELAY_US)
-            .wrapping_mul(16);
+        let at = timed::array_instant(now_us as u64 as u32, BOARD_DELAY_US);
         for t in [&mut g0, &mut g1, &mut g2, &mut g3] {
             t.set_instant(at, BOARD_DELAY_US);
         }

@@ -135,6 +135,13 @@ pub struct TimedIcm<SPI, C> {
     pub counters: TimingCounters,
 }
 
+/// The instant an array's reads are for (board clock, 1/16 µs, as
+/// [`TimedIcm::set_instant`] takes it): `behind_us` before `now_us`, the
+/// captures' µs count at the read. One for every chip of the array.
+pub fn array_instant(now_us: u32, behind_us: u32) -> Instant16 {
+    now_us.wrapping_sub(behind_us).wrapping_mul(16)
+}
+
 impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// Wrap a driver set up (or to be restarted) with FIFO sampling
     /// `cfg`, and the capture of its INT1.
