@@ -660,6 +660,23 @@ fn a_ramp_keeps_windows_centred() {
     assert!(fast < 0.65, "ramp over 500: {fast}");
 }
 
+/// `k` frame energies, each a χ²₂₂ / 22 times 6e5 · `level(f)` (at least
+/// 0.2), and their f32 prefix sums as the segmentation keeps them.
+fn chi2_frames(rng: &mut Rng, k: usize, level: impl Fn(usize) -> f64) -> (Vec<f64>, Vec<f32>) {
+    let x: Vec<f64> = (0..k)
+        .map(|f| {
+            let mu = 6e5 * level(f).max(0.2);
+            let chi: f64 = (0..22).map(|_| (rng.gaussian() as f64).powi(2)).sum();
+            mu * chi / 22.0
+        })
+        .collect();
+    let mut px = vec![0.0f32];
+    for &v in &x {
+        px.push(px.last().unwrap() + v as f32);
+    }
+    (x, px)
+}
+
 /// `line_over_step` against an f64 reference written from the definition:
 /// the least-squares line through the frame energies and the two segment
 /// means, their explained sums of squares about the pooled mean, scaled by
@@ -677,17 +694,9 @@ fn line_over_step_matches_an_f64_reference() {
             0.5 * rng.gaussian() as f64 / k as f64,
             (rng.gaussian() as f64).abs(),
         );
-        let x: Vec<f64> = (0..k)
-            .map(|f| {
-                let mu = 6e5 * (1.0 + slope * f as f64 + if f >= c { jump } else { 0.0 }).max(0.2);
-                let chi: f64 = (0..22).map(|_| (rng.gaussian() as f64).powi(2)).sum();
-                mu * chi / 22.0
-            })
-            .collect();
-        let mut px = vec![0.0f32];
-        for &v in &x {
-            px.push(px.last().unwrap() + v as f32);
-        }
+        let (x, px) = chi2_frames(&mut rng, k, |f| {
+            1.0 + slope * f as f64 + if f >= c { jump } else { 0.0 }
+        });
         let nu = 21.6f32;
         // Reference over frames l..r.
         let y = &x[l..r];
@@ -738,17 +747,7 @@ fn slope_z2_matches_an_f64_reference() {
         let k = 8 + case % 121;
         let (l, r) = (case % 5, k);
         let slope = 0.5 * rng.gaussian() as f64 / k as f64;
-        let x: Vec<f64> = (0..k)
-            .map(|f| {
-                let mu = 6e5 * (1.0 + slope * f as f64).max(0.2);
-                let chi: f64 = (0..22).map(|_| (rng.gaussian() as f64).powi(2)).sum();
-                mu * chi / 22.0
-            })
-            .collect();
-        let mut px = vec![0.0f32];
-        for &v in &x {
-            px.push(px.last().unwrap() + v as f32);
-        }
+        let (x, px) = chi2_frames(&mut rng, k, |f| 1.0 + slope * f as f64);
         let nu = 21.6f32;
         let y = &x[l..r];
         let n = y.len() as f64;
