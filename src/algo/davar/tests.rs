@@ -677,6 +677,19 @@ fn chi2_frames(rng: &mut Rng, k: usize, level: impl Fn(usize) -> f64) -> (Vec<f6
     (x, px)
 }
 
+/// The mean of `y`, Σ (f − f̄)·y_f and Σ (f − f̄)², in f64.
+fn line_sums(y: &[f64]) -> (f64, f64, f64) {
+    let n = y.len() as f64;
+    let fm = (n - 1.0) / 2.0;
+    let sxy = y
+        .iter()
+        .enumerate()
+        .map(|(f, &v)| (f as f64 - fm) * v)
+        .sum();
+    let sxx = (0..y.len()).map(|f| (f as f64 - fm).powi(2)).sum();
+    (y.iter().sum::<f64>() / n, sxy, sxx)
+}
+
 /// `line_over_step` against an f64 reference written from the definition:
 /// the least-squares line through the frame energies and the two segment
 /// means, their explained sums of squares about the pooled mean, scaled by
@@ -700,15 +713,7 @@ fn line_over_step_matches_an_f64_reference() {
         let nu = 21.6f32;
         // Reference over frames l..r.
         let y = &x[l..r];
-        let n = y.len() as f64;
-        let m = y.iter().sum::<f64>() / n;
-        let fm = (n - 1.0) / 2.0;
-        let sxy: f64 = y
-            .iter()
-            .enumerate()
-            .map(|(f, &v)| (f as f64 - fm) * v)
-            .sum();
-        let sxx: f64 = (0..y.len()).map(|f| (f as f64 - fm).powi(2)).sum();
+        let (m, sxy, sxx) = line_sums(y);
         let ss_line = sxy * sxy / sxx;
         let (a, b) = y.split_at(c - l);
         let (ma, mb) = (
@@ -750,15 +755,7 @@ fn slope_z2_matches_an_f64_reference() {
         let (x, px) = chi2_frames(&mut rng, k, |f| 1.0 + slope * f as f64);
         let nu = 21.6f32;
         let y = &x[l..r];
-        let n = y.len() as f64;
-        let m = y.iter().sum::<f64>() / n;
-        let fm = (n - 1.0) / 2.0;
-        let sxy: f64 = y
-            .iter()
-            .enumerate()
-            .map(|(f, &v)| (f as f64 - fm) * v)
-            .sum();
-        let sxx: f64 = (0..y.len()).map(|f| (f as f64 - fm).powi(2)).sum();
+        let (m, sxy, sxx) = line_sums(y);
         let want = (sxy / sxx).powi(2) / (2.0 * m * m / (nu as f64 * sxx));
         let (got, up) = slope_z2(&px, nu, (l, r)).expect("applies");
         // (A z² near 0 may carry either sign.)
