@@ -374,19 +374,8 @@ impl OctaveSums {
         self.add_range_inline(phase, from, to);
     }
 
-    /// [`OctaveSums::add_range`] compiled for AVX2 (see
-    /// [`oavar_phase_avx2`]): the same additions in the same order, so the
-    /// same bits.
-    ///
-    /// # Safety
-    ///
-    /// Call it only on a CPU with AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub fn add_range_avx2(&mut self, phase: &[f64], from: usize, to: usize) {
-        self.add_range_inline(phase, from, to);
-    }
-
+    /// [`OctaveSums::add_range`], inlined into its caller's build (the
+    /// AVX2 one of [`oavar_octave_phase_avx2`]).
     #[inline(always)]
     fn add_range_inline(&mut self, phase: &[f64], from: usize, to: usize) {
         if phase.len() != self.phase_len {
