@@ -1548,7 +1548,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // symmetric about it, which a linear change leaves unbiased. (Each
         // side tests one change, so the sample's cost stays bounded.)
         let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
-        let seg_slope = slope_z2(px, nu, (b(s), b(s + 1)));
+        // (Asked only of a change next to t's segment.)
+        let seg_slope = if nb > 1 {
+            slope_z2(px, nu, (b(s), b(s + 1)))
+        } else {
+            None
+        };
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
             // t's own segment rising (or falling) toward or away from the
@@ -1791,11 +1796,34 @@ fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 
         return f32::NEG_INFINITY;
     }
     let (n, n1, n2) = ((r - l) as f32, (c - l) as f32, (r - c) as f32);
-    let s = p(r) - p(l);
-    let m = s / n;
+    let (m, sfc, sxx) = line_sums(px, l, r);
     if !(m > 0.5) {
         return f32::NEG_INFINITY;
     }
+    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
+    (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+}
+
+/// The slope of the frames' energies over l..r, squared, over its own
+/// variance under the scaled-χ²_ν model at their mean (a z²), and whether
+/// it rises. None where fewer than 4 frames or a mean not positive.
+fn slope_z2(px: &[f32], nu: f32, (l, r): (usize, usize)) -> Option<(f32, bool)> {
+    if r < l + 4 {
+        return None;
+    }
+    let (m, sfc, sxx) = line_sums(px, l, r);
+    if !(m > 0.0) {
+        return None;
+    }
+    Some((sfc * sfc / sxx * nu / (2.0 * m * m), sfc > 0.0))
+}
+
+/// Over the frames l..r (r > l) of the prefix sums `px`: their mean
+/// energy, Σ (f − f̄)·x_f and Σ (f − f̄)², the sums of a least-squares line.
+fn line_sums(px: &[f32], l: usize, r: usize) -> (f32, f32, f32) {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    let n = (r - l) as f32;
+    let s = p(r) - p(l);
     // Σ (f − l)·x_f = n·P(r) − Σ_{j = l+1..=r} P(j) (P the prefix sums;
     // P(l) cancels), then about the centre l + (n − 1)/2.
     // (Four running sums: fewer instructions than one at λ2 = 4096.)
@@ -1809,30 +1837,7 @@ fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 
     }
     let sp = (acc[0] + acc[1]) + (acc[2] + acc[3]) + quads.remainder().iter().sum::<f32>();
     let sfc = n * p(r) - sp - 0.5 * (n - 1.0) * s;
-    let sxx = n * (n * n - 1.0) / 12.0;
-    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
-    (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
-}
-
-/// The slope of the frames' energies over l..r, squared, over its own
-/// variance under the scaled-χ²_ν model at their mean (a z²), and whether
-/// it rises. None where fewer than 4 frames or a mean not positive.
-fn slope_z2(px: &[f32], nu: f32, (l, r): (usize, usize)) -> Option<(f32, bool)> {
-    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-    if r < l + 4 {
-        return None;
-    }
-    let n = (r - l) as f32;
-    let s = p(r) - p(l);
-    let m = s / n;
-    if !(m > 0.0) {
-        return None;
-    }
-    // Σ (f − centre)·x_f from the prefix sums, as in `line_over_step`.
-    let sp: f32 = px.get(l + 1..=r).unwrap_or(&[]).iter().sum();
-    let sfc = n * p(r) - sp - 0.5 * (n - 1.0) * s;
-    let sxx = n * (n * n - 1.0) / 12.0;
-    Some((sfc * sfc / sxx * nu / (2.0 * m * m), sfc > 0.0))
+    (s / n, sfc, n * (n * n - 1.0) / 12.0)
 }
 
 /// Cost of a blurred step over the span's frames l..r (same scale as
