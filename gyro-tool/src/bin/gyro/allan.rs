@@ -1,0 +1,363 @@
+//! `gyro allan`: Allan-family deviations of a rate log, their confidence
+//! intervals, the IEEE 952 fit and a Kalibr `imu.yaml`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::ValueEnum;
+use gyro_tool::{dev, edf, fit, plot, short, table, Res};
+use indicatif::ProgressBar;
+
+use crate::log_args::LogArgs;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    log: LogArgs,
+    /// Columns to analyse (repeat; default: every column but the time
+    /// column).
+    #[arg(long = "column", short = 'c')]
+    columns: Vec<String>,
+    /// Deviations, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "oadev")]
+    dev: Vec<dev::Kind>,
+    /// Averaging factors: all, octave, decade or per-decade=N.
+    #[arg(long, default_value = "octave")]
+    grid: dev::Grid,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "table")]
+    format: OutFormat,
+    /// Write here instead of standard output.
+    #[arg(short, long)]
+    out: Option<PathBuf>,
+    /// Also fit the IEEE 952 noise model (Q, N, B, K, R with standard
+    /// errors, next to the tangent readings) to each column's OADEV.
+    #[arg(long)]
+    fit: bool,
+    /// Write a Kalibr imu.yaml (gyroscope_noise_density,
+    /// gyroscope_random_walk) from the first column's fit.
+    #[arg(long)]
+    kalibr: Option<PathBuf>,
+    /// Draw the curves (and the fits) as SVG.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Confidence of the intervals (default 1σ, 0.6827: Stable32's
+    /// "0.683").
+    #[arg(long, default_value_t = edf::ONE_SIGMA, value_parser = confidence_arg)]
+    confidence: f64,
+    /// χ² quantiles of the intervals: exact, or as Stable32 computes
+    /// them (an approximation beyond EDF 100, to reproduce its tables).
+    #[arg(long, value_enum, default_value = "exact")]
+    chi2: edf::Chi2,
+}
+
+/// Run it.
+pub fn run(a: Args) -> Res<bool> {
+    let Args {
+        log,
+        columns,
+        dev,
+        grid,
+        format,
+        out,
+        fit,
+        kalibr,
+        svg,
+        confidence,
+        chi2,
+    } = a;
+    allan(
+        &log.file,
+        &columns,
+        log.time.as_deref(),
+        log.tau0,
+        (log.unit, log.lsb_per_dps),
+        &dev,
+        grid,
+        format,
+        out,
+        (fit, kalibr, svg),
+        (confidence, chi2),
+    )
+}
+
+fn confidence_arg(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!("{s}: the confidence must be a number in (0, 1)")),
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum OutFormat {
+    /// Aligned text.
+    Table,
+    /// CSV: column, deviation, m, tau_s, value, terms.
+    Csv,
+    /// JSON: one object per column and deviation, with its points.
+    Json,
+}
+
+/// Peak resident memory of this process, MiB (Linux; None elsewhere).
+fn peak_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: f64 = s
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()?;
+    Some(kb / 1024.0)
+}
+
+/// One curve of `gyro allan`'s JSON output.
+#[derive(serde::Serialize)]
+struct CurveOut<'a> {
+    column: &'a str,
+    deviation: dev::Kind,
+    unit: &'static str,
+    tau0_s: f64,
+    samples: usize,
+    points: Vec<dev::Point>,
+}
+
+/// `gyro allan`: read, compute every deviation of every column, write.
+#[allow(clippy::too_many_arguments)]
+fn allan(
+    file: &std::path::Path,
+    columns: &[String],
+    time: Option<&str>,
+    tau0: Option<f64>,
+    (unit, lsb): (table::Unit, Option<f64>),
+    kinds: &[dev::Kind],
+    grid: dev::Grid,
+    format: OutFormat,
+    out: Option<PathBuf>,
+    (want_fit, kalibr, svg): (bool, Option<PathBuf>, Option<PathBuf>),
+    (cf, chi2): (f64, edf::Chi2),
+) -> Res<bool> {
+    let started = Instant::now();
+    let s = table::read(file, columns, time, tau0, unit, lsb)?;
+    let read_s = started.elapsed().as_secs_f64();
+    for (line, step) in &s.gaps {
+        eprintln!(
+            "gyro: {}:{line}: gap of {step} s ({:.1} samples)",
+            file.display(),
+            step / s.tau0
+        );
+    }
+    let total = (s.rates.len() * kinds.len()) as u64;
+    let bar = if s.rates.first().map_or(0, Vec::len) >= 1_000_000 {
+        ProgressBar::new(total)
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut curves = Vec::new();
+    // Each column's phase, once: the curves and the fit both read it.
+    let phases = s
+        .rates
+        .iter()
+        .map(|rate| dev::phase_from_rate(rate, s.tau0))
+        .collect::<Result<Vec<_>, _>>()?;
+    for ((name, rate), x) in s.names.iter().zip(&s.rates).zip(&phases) {
+        let mut alphas = dev::Alphas::new();
+        for &k in kinds {
+            let points = dev::curve_with(k, x, s.tau0, grid, (cf, chi2), &mut alphas)?;
+            curves.push(CurveOut {
+                column: name,
+                deviation: k,
+                // TDEV is in the phase's unit (°); the others in °/s.
+                unit: if k == dev::Kind::Tdev { "deg" } else { "deg/s" },
+                tau0_s: s.tau0,
+                samples: rate.len(),
+                points,
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    // The noise model per column, on its OADEV at 8 points per decade.
+    let mut fits = Vec::new();
+    if want_fit || kalibr.is_some() {
+        for (name, x) in s.names.iter().zip(&phases) {
+            match fit::fit_phase(x, s.tau0) {
+                Ok(t) => fits.push((name.clone(), t)),
+                Err(e @ fit::FitError::TooFewPoints) => eprintln!("gyro: {name}: {e}"),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    if let Some(path) = &kalibr {
+        let Some((_, t)) = fits.first() else {
+            return Err("no fit for a Kalibr file".into());
+        };
+        std::fs::write(path, fit::kalibr_yaml(t, short(1.0 / s.tau0), "/imu0"))?;
+    }
+    if let Some(path) = &svg {
+        let cs: Vec<plot::Curve> = curves
+            .iter()
+            .map(|c| plot::Curve {
+                // TDEV is a time (angle) deviation: its unit is on its label.
+                label: if c.deviation == dev::Kind::Tdev {
+                    format!("{} TDEV (deg, not deg/s)", c.column)
+                } else {
+                    format!("{} {}", c.column, c.deviation.name().to_uppercase())
+                },
+                points: &c.points,
+            })
+            .collect();
+        let title = format!(
+            "{}: {} samples at τ0 = {} s",
+            file.file_name()
+                .map_or("log".into(), |f| f.to_string_lossy()),
+            s.rates.first().map_or(0, Vec::len),
+            short(s.tau0)
+        );
+        plot::draw(path, &title, "°/s", &cs, &fits)?;
+    }
+    let mut w: Box<dyn Write> = match &out {
+        Some(p) => Box::new(std::io::BufWriter::new(std::fs::File::create(p)?)),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    match format {
+        OutFormat::Json => {
+            #[derive(serde::Serialize)]
+            struct FitOut<'a> {
+                column: &'a str,
+                /// Q deg, N deg/s*sqrt(s), B deg/s, K deg/s/sqrt(s), R deg/s^2.
+                terms: &'a fit::Terms,
+            }
+            #[derive(serde::Serialize)]
+            struct Out<'a> {
+                curves: &'a [CurveOut<'a>],
+                fits: Vec<FitOut<'a>>,
+            }
+            let fits = fits
+                .iter()
+                .map(|(c, t)| FitOut {
+                    column: c,
+                    terms: t,
+                })
+                .collect();
+            serde_json::to_writer_pretty(
+                &mut w,
+                &Out {
+                    curves: &curves,
+                    fits,
+                },
+            )?;
+            writeln!(w)?;
+        }
+        OutFormat::Csv => {
+            let mut c = csv::Writer::from_writer(w);
+            c.write_record([
+                "column",
+                "deviation",
+                "m",
+                "tau_s",
+                "value",
+                "unit",
+                "terms",
+                "alpha",
+                "few_clusters",
+                "edf",
+                "lo",
+                "hi",
+            ])?;
+            for cv in &curves {
+                for p in &cv.points {
+                    c.write_record([
+                        cv.column.to_string(),
+                        cv.deviation.name().to_string(),
+                        p.m.to_string(),
+                        format!("{:e}", p.tau),
+                        format!("{:e}", p.dev),
+                        cv.unit.to_string(),
+                        p.terms.to_string(),
+                        p.alpha.map_or(String::new(), |a| a.to_string()),
+                        p.few_clusters.to_string(),
+                        p.edf.map_or(String::new(), |e| format!("{e:e}")),
+                        p.lo.map_or(String::new(), |v| format!("{v:e}")),
+                        p.hi.map_or(String::new(), |v| format!("{v:e}")),
+                    ])?;
+                }
+            }
+            c.flush()?;
+        }
+        OutFormat::Table => {
+            for cv in &curves {
+                writeln!(
+                    w,
+                    "{} {} ({}), {} samples at tau0 = {} s",
+                    cv.column,
+                    cv.deviation.name().to_uppercase(),
+                    cv.unit,
+                    cv.samples,
+                    short(cv.tau0_s)
+                )?;
+                writeln!(
+                    w,
+                    "{:>10} {:>14} {:>14} {:>14} {:>14} {:>12} {:>9} {:>6}",
+                    "m", "tau (s)", "min", "deviation", "max", "edf", "terms", "alpha"
+                )?;
+                let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.6e}"));
+                for p in &cv.points {
+                    writeln!(
+                        w,
+                        "{:>10} {:>14.6e} {:>14} {:>14.6e} {:>14} {:>12} {:>9} {:>6}{}",
+                        p.m,
+                        p.tau,
+                        opt(p.lo),
+                        p.dev,
+                        opt(p.hi),
+                        p.edf.map_or("-".to_string(), |e| format!("{e:.4}")),
+                        p.terms,
+                        p.alpha.map_or("-".to_string(), |a| a.to_string()),
+                        if p.few_clusters { "  few clusters" } else { "" }
+                    )?;
+                }
+            }
+            // The terms in the units gyro datasheets use.
+            let units = [
+                ("Q", 1.0, "deg"),
+                ("N", 60.0, "deg/sqrt(h)"),
+                ("B", 3600.0, "deg/h"),
+                ("K", 3600.0 * 60.0, "deg/h/sqrt(h)"),
+                ("R", 3600.0 * 3600.0, "deg/h^2"),
+            ];
+            for (name, t) in &fits {
+                writeln!(
+                    w,
+                    "{name}: IEEE 952 model, weighted least squares over {} OADEV points",
+                    t.points
+                )?;
+                writeln!(
+                    w,
+                    "{:>4} {:>14} {:>12} {:>16}  unit",
+                    "term", "fit", "+- sd", "IEEE 952 tangent"
+                )?;
+                for (i, (n, k, u)) in units.iter().enumerate() {
+                    writeln!(
+                        w,
+                        "{n:>4} {:>14.6e} {:>12.3e} {:>16.6e}  {u}{}",
+                        t.value[i] * k,
+                        t.sd[i] * k,
+                        t.tangent[i] * k,
+                        if t.visible[i] { "  visible" } else { "" }
+                    )?;
+                }
+            }
+        }
+    }
+    // What the run cost: the check of a long log's handling.
+    eprintln!(
+        "gyro: {} samples x {} columns: read in {read_s:.1} s, analysed in {:.1} s in all; peak memory {}",
+        s.rates.first().map_or(0, Vec::len),
+        s.rates.len(),
+        started.elapsed().as_secs_f64(),
+        peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+    );
+    Ok(true)
+}

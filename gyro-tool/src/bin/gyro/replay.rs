@@ -1,0 +1,143 @@
+//! `gyro replay`: the board's fusion over a multi-gyro rate log.
+
+use std::path::PathBuf;
+
+use gyro_tool::{replay, short, Res};
+
+use crate::log_args::LogArgs;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    log: LogArgs,
+    /// The chips' columns (default: every column but the time column
+    /// and --truth).
+    #[arg(long = "column", short = 'c')]
+    columns: Vec<String>,
+    /// A reference rate column, if the log has one: errors are printed
+    /// against it.
+    #[arg(long)]
+    truth: Option<String>,
+    /// The picture.
+    #[arg(long)]
+    svg: PathBuf,
+    /// Also the fused rate and each chip's weight per sample, as CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+}
+
+/// Run it.
+pub fn run(a: Args) -> Res<bool> {
+    let Args {
+        log,
+        columns,
+        truth,
+        svg,
+        csv,
+    } = a;
+    replay_log(&log, &columns, truth.as_deref(), &svg, csv.as_deref())
+}
+
+/// `gyro replay`: the board's fusion over a multi-gyro log.
+fn replay_log(
+    log: &LogArgs,
+    columns: &[String],
+    truth: Option<&str>,
+    svg: &std::path::Path,
+    csv_out: Option<&std::path::Path>,
+) -> Res<bool> {
+    let mut s = log.read(columns, true)?;
+    // The reference: out of the chips' columns if it is among them (no -c
+    // given), else read on its own.
+    let truth_col = match truth {
+        Some(t) => Some(match s.names.iter().position(|n| n == t) {
+            Some(i) => {
+                s.names.remove(i);
+                s.rates.remove(i)
+            }
+            None => log.read(&[t.to_string()], false)?.rates.remove(0),
+        }),
+        None => None,
+    };
+    let r = replay::replay(&s.rates)?;
+    let n = r.fused.len();
+    let valid = r.fused.iter().filter(|v| v.is_finite()).count();
+    println!(
+        "{} chips, {n} samples at tau0 = {} s: fused on {valid} samples",
+        s.rates.len(),
+        short(s.tau0)
+    );
+    for (c, name) in s.names.iter().enumerate() {
+        let err = truth_col.as_ref().map(|t| {
+            let e: Vec<f64> = (0..n)
+                .filter(|&i| r.weights[i][c] > 0.0)
+                .map(|i| s.rates[c][i] - t[i])
+                .collect();
+            (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
+        });
+        println!(
+            "  {name}: answered {} samples, in the fusion {}{}",
+            r.offered[c],
+            r.used[c],
+            err.map_or(String::new(), |e| format!(", error RMS while in {e:.4}"))
+        );
+    }
+    if let Some(t) = &truth_col {
+        let e: Vec<f64> = (0..n)
+            .filter(|&i| r.fused[i].is_finite())
+            .map(|i| r.fused[i] - t[i])
+            .collect();
+        let rms = (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt();
+        let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        println!("  fused: error RMS {rms:.4}, max {max:.4}");
+    }
+    // The fused gyro's noise, free of the motion: the probe's Allan
+    // deviation (and, with a reference, the fused error's beside it).
+    let (len, probe) = replay::longest_run_adev(&r.probe, s.tau0);
+    if probe.is_empty() {
+        println!("  noise probe: fewer than 16 contiguous samples with two chips fused");
+    } else {
+        let oracle = truth_col.as_ref().map(|t| {
+            let e: Vec<f64> = r.fused.iter().zip(t).map(|(f, t)| f - t).collect();
+            replay::longest_run_adev(&e, s.tau0).1
+        });
+        println!(
+            "  noise probe (the fused noise without the motion), Allan deviation over {len} contiguous samples:"
+        );
+        println!(
+            "  {:>12} {:>14}{}",
+            "tau_s",
+            "probe",
+            if oracle.is_some() {
+                "   fused error (from the reference)"
+            } else {
+                ""
+            }
+        );
+        for (j, (tau, sd)) in probe.iter().enumerate() {
+            let o = oracle
+                .as_ref()
+                .and_then(|o| o.get(j))
+                .map_or(String::new(), |(_, o)| format!(" {o:>14.6e}"));
+            println!("  {tau:>12.4} {sd:>14.6e}{o}");
+        }
+    }
+    if let Some(p) = csv_out {
+        let mut w = csv::Writer::from_path(p)?;
+        let mut head = vec!["t_s".to_string(), "fused".into(), "noise_probe".into()];
+        head.extend(s.names.iter().map(|n| format!("w_{n}")));
+        w.write_record(&head)?;
+        for i in 0..n {
+            let mut rec = vec![
+                short(i as f64 * s.tau0).to_string(),
+                r.fused[i].to_string(),
+                r.probe[i].to_string(),
+            ];
+            rec.extend((0..s.names.len()).map(|c| r.weights[i][c].to_string()));
+            w.write_record(&rec)?;
+        }
+        w.flush()?;
+    }
+    replay::draw(svg, &log.name(), &s.names, &s.rates, &r, s.tau0)?;
+    Ok(true)
+}
