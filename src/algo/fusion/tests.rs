@@ -1,4 +1,7 @@
 //! Robustness and property tests of the fusion stage.
+use super::adaptive::{adaptive_active, HUBER_C2, HUBER_KAPPA};
+use super::frozen::frozen_check;
+use super::gate::consensus_gate;
 use super::*;
 use crate::emu::Rng;
 

@@ -1,0 +1,513 @@
+//! The adaptive method (ours, the default): per-gyro noise variances from
+//! leave-one-out residuals, inverse-variance weights, and the dispatch
+//! that runs each set of three or more gyros with a constant mask.
+
+use super::frozen::frozen_check;
+use super::gate::{first_gate, first_gate_any, regate, warm_up_gate, Gate};
+use super::{full, has, mean_of, put, weighted, AdaptiveConfig, AxisState, Fused};
+use crate::algo::math::at_least;
+
+/// The adaptive method over `valid`, into `out`; false if nothing fused.
+pub(super) fn adaptive<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> bool {
+    if valid == 0 {
+        return false;
+    }
+    // Sets of three or more gyros run with a constant mask when N ≤ 5 (16
+    // sets for the board's five, 5 for four, 1 for three), and all gyros
+    // do for larger N. With the mask a constant, every phase's mask tests
+    // fold away and its lane loops shrink to the gyros in the set. Before,
+    // only all gyros and (N = 5) all but the last had that, and after a
+    // chip failed every axis ran the general mask: three of five cost
+    // 3 101 instructions per 3-axis sample on the Cortex-M4, against 1 991
+    // for the constant four of five (`cargo xtask bench`). Sets of one or
+    // two have no gate and take the general path. Same arithmetic in the
+    // same order either way.
+    // With fewer than five gyros, all of them (the usual case) is inlined
+    // here: out of line, the call cost 60 more per 3-axis sample with N = 4,
+    // over the default path's 2 500. With five, inlining it made the other
+    // sets' calls dearer (four of five 2 011 -> 2 687).
+    if N < 5 && valid == full::<N>() {
+        adaptive_const(c, st, y, full::<N>(), out)
+    } else {
+        adaptive_dispatch(c, st, y, valid, out)
+    }
+}
+
+/// [`adaptive`] for the sets not inlined there: the jump table.
+#[inline(never)]
+pub(super) fn adaptive_dispatch<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> bool {
+    macro_rules! dispatch {
+        ($($m:literal)*) => {
+            match valid {
+                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_set::<N, $m>(c, st, y, out), )*
+                _ if N > 5 && valid == full::<N>() => adaptive_set::<N, 0>(c, st, y, out),
+                _ => adaptive_general(c, st, y, valid, out),
+            }
+        };
+    }
+    dispatch!(7 11 13 14 15 19 21 22 23 25 26 27 28 29 30 31)
+}
+
+/// [`adaptive`] with the constant set `M` valid (0: all N gyros): one copy
+/// per set, its phases inlined with the mask folded in.
+#[inline(never)]
+pub(super) fn adaptive_set<const N: usize, const M: u8>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    out: &mut Fused<N>,
+) -> bool {
+    adaptive_const(c, st, y, if M == 0 { full::<N>() } else { M }, out)
+}
+
+/// [`adaptive`] with the set `m` valid, inlined for a constant `m`.
+#[inline(always)]
+pub(super) fn adaptive_const<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    m: u8,
+    out: &mut Fused<N>,
+) -> bool {
+    let active = frozen_check(c, st, y, m);
+    if active == m {
+        put(
+            adaptive_active(c, st, y, m, m, m, (true, true), None, out),
+            out,
+        )
+    } else if active != 0 {
+        // A frozen chip votes but is not fused: the gate is over the
+        // voters, the constant `m`, so it is taken here, folded, and passed
+        // on (with the general mask it cost 270 more per 3-axis sample in
+        // the 12 samples after a chip sticks).
+        let all_warm = active & !st.warm == 0;
+        let v = floored(st, c);
+        let g = first_gate(c, y, &v, m, m.count_ones(), all_warm);
+        adaptive_frozen(c, st, y, m, active, Some((g, v)), out)
+    } else {
+        adaptive_frozen(c, st, y, m, active, None, out)
+    }
+}
+
+/// Each gyro's noise variance, floored: the weights' and the gate's.
+#[inline(always)]
+pub(super) fn floored<const N: usize>(st: &AxisState<N>, c: &AdaptiveConfig) -> [f32; N] {
+    let mut v = [0.0f32; N];
+    for i in 0..N {
+        v[i] = at_least(st.var[i], c.var_floor);
+    }
+    v
+}
+
+/// [`adaptive`] for any set.
+#[inline(never)]
+pub(super) fn adaptive_general<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    out: &mut Fused<N>,
+) -> bool {
+    let active = frozen_check(c, st, y, valid);
+    adaptive_frozen(c, st, y, valid, active, None, out)
+}
+
+/// The rest of [`adaptive`] once the frozen check has left `active` of
+/// `valid`. Frozen candidates are not fused but still vote in the median
+/// gate: a healthy chip that repeats a quantised value four times (it
+/// happens) must not leave a faulty one ungated for want of a quorum
+/// (fault campaign, seed 7 783 687: three gyros on x, one rescaled, one
+/// repeating; the rescaled one was fused). A chip that sticks is frozen
+/// here for the 12 samples until the pipeline flags it stuck, on every
+/// axis: the gyros left to fuse run with a constant mask too (the gate,
+/// over the voters, with the general one), which took 1 750 instructions
+/// off each of those samples.
+#[inline(never)]
+pub(super) fn adaptive_frozen<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    active: u8,
+    gate: Option<(Gate, [f32; N])>,
+    out: &mut Fused<N>,
+) -> bool {
+    if active == 0 {
+        out.rejected |= valid;
+        return false;
+    }
+    macro_rules! dispatch {
+        ($($m:literal)*) => {
+            match active {
+                $( $m if N <= 5 && ($m as u32) >> N == 0 => adaptive_fused_set::<N, $m>(c, st, y, valid, gate, out), )*
+                _ => put(adaptive_active(c, st, y, valid, active, valid, (false, false), gate, out), out),
+            }
+        };
+    }
+    // (Pairs among the first four too: two ICM-42688-Ps left on x or y
+    // while two others that stuck together are not yet flagged. Through
+    // the general path those samples cost 300 more, and made the loop's
+    // worst sample in `cargo xtask bench-loop`'s scenario F.)
+    dispatch!(3 5 6 9 10 12 7 11 13 14 15 19 21 22 23 25 26 27 28 29 30)
+}
+
+/// [`adaptive_frozen`] fusing the constant set `M` of `valid`.
+#[inline(never)]
+pub(super) fn adaptive_fused_set<const N: usize, const M: u8>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    gate: Option<(Gate, [f32; N])>,
+    out: &mut Fused<N>,
+) -> bool {
+    put(
+        adaptive_active(c, st, y, valid, M, valid, (false, true), gate, out),
+        out,
+    )
+}
+
+/// Weights, median gate, noise update and the fused value over `active`;
+/// the gate's median and quorum are over `voters` (⊇ `active`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn adaptive_active<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    valid: u8,
+    active: u8,
+    voters: u8,
+    (fast_gate, fast_fuse): (bool, bool),
+    gate: Option<(Gate, [f32; N])>,
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    let n = voters.count_ones();
+    // Current weights: inverse variance once warmed up, equal before.
+    let all_warm = active & !st.warm == 0;
+    let v = match gate {
+        Some((_, v)) => v,
+        None => floored(st, c),
+    };
+    let mut w = [0.0f32; N];
+    for i in 0..N {
+        let wi = if all_warm { 1.0 / v[i] } else { 1.0 };
+        w[i] = if has(active, i) { wi } else { 0.0 };
+    }
+    // Median gate (needs 3 gyros to tell which one is off): the residual
+    // y_i − median has variance about σ_i² + (typical σ²)/(n − 1). With
+    // `fast_gate`, the voters are `active` and it is a constant; `gate`,
+    // the caller took it.
+    let (med, offm, v_med) = match gate {
+        Some((g, _)) => g,
+        None if fast_gate => first_gate(c, y, &v, active, n, all_warm),
+        None => first_gate_any(c, y, &v, voters, n, all_warm),
+    };
+    let k2 = c.gate_k * c.gate_k;
+    let mut good = active;
+    let mut warm_cap = f32::INFINITY;
+    if n >= 3 && all_warm {
+        good = active & !offm;
+        // Voters that agree with the median: the fused ones and any frozen
+        // candidate (a healthy chip repeating a value still vouches).
+        let mut support = voters & !offm;
+        // Fewer than two agree, or two or more fused gyros out (one AND
+        // each, no popcount): rare, out of line.
+        let out_active = active & offm;
+        if support & support.wrapping_sub(1) == 0 || out_active & out_active.wrapping_sub(1) != 0 {
+            let split;
+            (good, split) = regate(y, &v, &w, active, good, med, k2, v_med);
+            support = good | (voters & !active & !offm);
+            if split {
+                // No majority agrees (two chips against two): nothing
+                // tells which pair is right. Hold the last output, flagged
+                // as degraded, rather than follow either pair (the pair
+                // that is wrong together also looks quieter to the noise
+                // model, and was followed).
+                out.fallback = true;
+                out.rejected |= valid & !good;
+                // No gyro is used (weights 0): nothing learns from a
+                // sample nobody can vouch for (the online calibration
+                // learns from the gyros fusion used).
+                let held = st.last_out;
+                if held.is_finite() {
+                    return Some((held, [0.0; N]));
+                }
+            }
+        }
+        if good == 0 || support & support.wrapping_sub(1) == 0 {
+            // Still fewer than two: everybody disagrees, nothing to single
+            // out; fall back.
+            good = active;
+            out.fallback = true;
+        }
+    } else if n >= 3 {
+        (good, warm_cap) = warm_up_gate(c, y, voters, med);
+        good &= active;
+        if good & good.wrapping_sub(1) == 0 {
+            good = active;
+            out.fallback = true;
+        }
+    }
+    out.rejected |= valid & !good;
+    // With `fast_fuse`, `active` is the caller's constant set: inlined for
+    // it when the gate kept every gyro, out of line otherwise (N ≥ 5).
+    let warm = (all_warm, warm_cap);
+    let one_out = (active & !good).is_power_of_two();
+    let r = if fast_fuse && good == active {
+        update_and_fuse(c, st, y, active, active, warm, med, &v, &w, out)
+    } else if N < 5 && fast_fuse {
+        // A gyro gated out of a constant set, with fewer than five: inlined
+        // too (a call cost 47 more per 3-axis sample with N = 4, where the
+        // bench's spiking gyro is gated out of 5 % of the axes).
+        update_and_fuse(c, st, y, active, good, warm, med, &v, &w, out)
+    } else if fast_fuse && N == 5 && one_out && active == 31 {
+        // One gyro gated out of the board's healthy sets (all five on z,
+        // the four ICM-42688-Ps on x and y), out of line: a chip that
+        // glitches on all three axes at once cost 740 more per 3-axis
+        // sample through the general path.
+        without_one::<N, 31>(c, st, y, good, warm, med, &v, &w, out)
+    } else if fast_fuse && N == 5 && one_out && active == 15 {
+        without_one::<N, 15>(c, st, y, good, warm, med, &v, &w, out)
+    } else {
+        update_and_fuse_general(c, st, y, active, good, warm, med, &v, &w, out)
+    };
+    // Warming up (the first samples after power-up or a rejoin), the
+    // output is the median of the voters: equal weights over what a rough
+    // MAD gate let through can still carry a second faulty chip (fault
+    // campaign, seed 7 780 514: one chip stuck, one garbling bytes, and
+    // the noisy ADXRS453 widening the MAD). The noise model still learns
+    // from the gated set; the weights reported are its equal weights.
+    let r = if !all_warm && n >= 3 {
+        r.map(|(_, wts)| (med, wts))
+    } else {
+        r
+    };
+    if let Some((x, _)) = r {
+        st.last_out = x;
+    }
+    r
+}
+
+/// [`update_and_fuse`] over the constant set `M` with one gyro, `M` less
+/// `good`, gated out: one copy per gyro, `good` a constant too.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+pub(super) fn without_one<const N: usize, const M: u8>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    good: u8,
+    warm: (bool, f32),
+    med: f32,
+    v: &[f32; N],
+    w: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    macro_rules! without {
+        ($($b:literal)*) => {
+            match M & !good {
+                $( $b if M & $b != 0 => update_and_fuse(c, st, y, M, M & !$b, warm, med, v, w, out), )*
+                _ => update_and_fuse(c, st, y, M, good, warm, med, v, w, out),
+            }
+        };
+    }
+    without!(1 2 4 8 16)
+}
+
+/// [`update_and_fuse`] for any sets, out of line.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+pub(super) fn update_and_fuse_general<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    active: u8,
+    good: u8,
+    warm: (bool, f32),
+    med: f32,
+    v: &[f32; N],
+    w: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    update_and_fuse(c, st, y, active, good, warm, med, v, w, out)
+}
+
+/// Noise update and inverse-variance fusion over `good` (⊆ `active`).
+///
+/// Each gyro is compared with the weighted mean of the *other* good gyros,
+/// x₋ᵢ, whose variance V₋ᵢ = 1/Σ_{j≠i} w_j is known from the current
+/// estimates, so E[(y_i − x₋ᵢ)²] − V₋ᵢ = σ_i². Sums are taken about the
+/// median to keep precision at high rates.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn update_and_fuse<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    active: u8,
+    good: u8,
+    (all_warm, warm_cap): (bool, f32),
+    med: f32,
+    v: &[f32; N],
+    w: &[f32; N],
+    out: &mut Fused<N>,
+) -> Option<(f32, [f32; N])> {
+    let (mut sw, mut swy) = (0.0f32, 0.0f32);
+    for i in 0..N {
+        let on = has(good, i);
+        sw += if on { w[i] } else { 0.0 };
+        swy += if on { w[i] * (y[i] - med) } else { 0.0 };
+    }
+    // Exactly two good gyros with priors for both: the variance of their
+    // difference is shared in proportion to the priors.
+    let rest = good & good.wrapping_sub(1);
+    let pair_prior = if rest != 0 && rest & rest.wrapping_sub(1) == 0 {
+        pair_prior_sum(&st.prior, good)
+    } else {
+        0.0
+    };
+    // At least two good gyros (one AND, no popcount).
+    if good & good.wrapping_sub(1) != 0 {
+        for i in 0..N {
+            let inside = has(good, i);
+            let wo = if inside { sw - w[i] } else { sw };
+            let wyo = if inside {
+                swy - w[i] * (y[i] - med)
+            } else {
+                swy
+            };
+            if !has(active, i) || !(wo > 0.0) {
+                continue;
+            }
+            let was_warm = has(st.warm, i);
+            // A warm chip the gate left out this sample teaches its noise
+            // estimate nothing: its error is an outlier's, and the
+            // estimate is what the gate judges it by. Capped by Huber
+            // instead, 20 °/s spikes on 2 % of a chip's samples raised its
+            // variance 11 % and cost its clean samples a tenth of their
+            // weight (0.5 % of the RMS error, worse than zhang). A chip
+            // whose noise really grows still teaches it through the
+            // samples inside the gate (Huber below), and one the gate
+            // always leaves out is out of the fusion anyway.
+            if was_warm && !inside {
+                continue;
+            }
+            let e = (y[i] - med) - wyo / wo;
+            let v_others = if all_warm { 1.0 / wo } else { 0.0 };
+            let mut e2 = e * e;
+            // Warming up, one sample adds at most the warm-up gate's limit
+            // squared: a chip that spikes from power-up does not start with
+            // its spikes in its variance, and one that is plainly wrong
+            // still warms up (with a large variance) instead of holding the
+            // axis in warm-up.
+            if !was_warm && e2 > warm_cap {
+                e2 = warm_cap;
+            }
+            // Huber's scale estimate once warm: e² capped at c²·(its expected
+            // value) with c = 2, times κ = 1/E[min(z², 4)] = 1.0864 so that
+            // Gaussian noise is estimated without bias. With the cap at the
+            // gate (c = 5), outliers at more than 1/(κc²) ≈ 4 % of samples
+            // (a chip spiking at 5 %) made the estimate grow without bound
+            // until the spikes fitted inside the gate (fault campaign, seed
+            // 7 783 523); with c = 2 it stays bounded up to 23 %.
+            if was_warm {
+                let cap = HUBER_C2 * (v[i] + v_others);
+                e2 = if e2 > cap { cap } else { e2 } * HUBER_KAPPA;
+            }
+            // Plain average until `warmup` updates, then the EWMA; the count
+            // stops once warm (it is only needed until then).
+            let a = if was_warm {
+                c.alpha
+            } else {
+                st.n_upd[i] += 1;
+                st.warm |= ((st.n_upd[i] >= c.warmup) as u8) << i;
+                1.0 / st.n_upd[i] as f32
+            };
+            if pair_prior > 0.0 && has(good, i) {
+                // Two chips: the power of their difference is learnt once
+                // (on the lower index), and each chip's variance is its
+                // prior's share of the part the priors explain plus half of
+                // any excess. What the priors do not explain (scale errors
+                // under motion, a drift) cannot be pinned on either chip,
+                // and scale errors that are alike in size are best averaged
+                // equally: split in proportion to the priors instead, it
+                // left the pair 1.08× the mean on a 30 °/s sway with scale
+                // errors in ±1 % (`fusion-eval` class (k), seed 2).
+                if i as u32 == good.trailing_zeros() {
+                    if st.pair != good {
+                        st.pair = good;
+                        st.pair_power = pair_var_sum(&st.var, good);
+                    }
+                    st.pair_power += a * (e2 - st.pair_power);
+                }
+                // (Only the excess beyond PAIR_SLACK × the priors' sum is
+                // split equally: the learnt power itself fluctuates by
+                // ~6 % (χ²₁ through an EWMA of 1/256), and splitting those
+                // fluctuations equally gave a 5× noisier chip 1/20 of the
+                // weight instead of 1/26.)
+                let (p, knee) = (st.pair_power, PAIR_SLACK * pair_prior);
+                st.var[i] = st.prior[i] * (p.min(knee) / pair_prior) + 0.5 * (p - knee).max(0.0);
+                continue;
+            }
+            st.var[i] += a * (e2 - v_others - st.var[i]);
+        }
+    }
+    if pair_prior == 0.0 {
+        st.pair = 0;
+    }
+    // Inverse-variance weights over the good set.
+    weighted(y, w, good).or_else(|| {
+        out.fallback = true;
+        Some(mean_of(y, good))
+    })
+}
+
+/// Sum of the priors of the two gyros in `good`, or 0 unless both have one.
+pub(super) fn pair_prior_sum<const N: usize>(prior: &[f32; N], good: u8) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..N {
+        if has(good, i) {
+            if !(prior[i] > 0.0) {
+                return 0.0;
+            }
+            sum += prior[i];
+        }
+    }
+    sum
+}
+
+/// With two gyros, the power of their difference up to this multiple of
+/// the priors' sum is shared in the priors' proportion (4 standard
+/// deviations of its EWMA estimate); only what exceeds it is split equally.
+pub(super) const PAIR_SLACK: f32 = 1.25;
+
+/// Sum of the noise variances of the gyros in `good`.
+pub(super) fn pair_var_sum<const N: usize>(var: &[f32; N], good: u8) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..N {
+        if has(good, i) {
+            sum += var[i];
+        }
+    }
+    sum
+}
+
+/// Huber's c² for the noise update (c = 2).
+pub(super) const HUBER_C2: f32 = 4.0;
+
+/// 1 / E[min(z², c²)] for z ~ N(0, 1) and c = 2: 1 / (P(|z| < 2) − 4φ(2)
+/// + 4·P(|z| > 2)) = 1 / 0.920 537 (checked by `huber_kappa_is_the_gaussian_consistency_factor`).
+pub(super) const HUBER_KAPPA: f32 = 1.086_322_5;
