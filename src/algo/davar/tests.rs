@@ -1,3 +1,6 @@
+use super::refine::{line_over_step, slope_z2};
+use super::segment::ln_floored;
+use super::sums::{carry_free, i64_to_f32, u128_to_f32};
 use super::*;
 use crate::algo::allan::{fill_phase, oavar_phase};
 use crate::emu::Rng;
@@ -416,7 +419,7 @@ fn published_match_batch<const CAP: usize, const FRAMES: usize, const T: usize>(
 fn carry_free_blocks_hold_the_largest_terms() {
     // The bound: up to τ = 256, not 512 (where the same test, forced
     // carry-free, loses 2⁶⁴ from blocks and fails).
-    assert!(super::carry_free(256) && !super::carry_free(512));
+    assert!(carry_free(256) && !carry_free(512));
     let w: Vec<i32> = (0..5000)
         .map(|i| {
             if (i / 256) % 2 == 0 {
@@ -596,7 +599,6 @@ fn avar_in_f32_is_within_two_ulp_of_f64() {
 /// the ends of the range.
 #[test]
 fn u128_to_f32_is_as_f32() {
-    use super::u128_to_f32;
     let mut x = 0x9E37_79B9_7F4A_7C15_F39C_C060_5CED_C835u128;
     let check = |v: u128| assert_eq!(u128_to_f32(v).to_bits(), (v as f32).to_bits(), "{v:#x}");
     for e in 0..128u32 {

@@ -1,0 +1,706 @@
+//! Dynamic Allan variance (DAVAR, Galleani–Tavella, SEEDS.md §0.2) and its
+//! adaptive window (E-DAVAR, seed 000), streaming in fixed memory with a
+//! bounded cost for every single sample.
+//!
+//! # Time grid and cost
+//! The window moves in whole frames of [`SEG`] = 32 samples: every 32
+//! samples (one *hop*) a window is placed and one estimate is published,
+//! carrying the time `t` it describes and its edges. Between hops nothing
+//! new is known about the window length (the paper's rule also changes L
+//! once per STFT hop), and at λ ≥ 256 a 32-sample step of the centre is
+//! below the estimate's own resolution.
+//!
+//! Each arriving sample completes one Allan term per τ (the one that ends
+//! there); its square is added, exactly, to the sum of the 32-term *block*
+//! its start belongs to. A window [s, e) with frame-aligned edges is then
+//! whole blocks plus one block prefix per τ (kept as the prefix's terms
+//! arrive), so placing a window anywhere in the span costs T × (blocks)
+//! integer additions, however far its edges jump. The worst sample is the
+//! hop's, and it is bounded: there is no catch-up when the window flips
+//! around a change or first fills (the old sliding design cost up to
+//! 500 000 instructions there).
+//!
+//! Sums are exact integers: |w| < 2²⁰ and m ≤ 2¹⁰ give |d| < 2³¹, d² < 2⁶²,
+//! so one term fits a u64, a 32-term block a u64 plus a 3-bit carry, and a
+//! window sum a u128. Nothing is subtracted, so nothing can drift.
+//!
+//! # Placements
+//! - [`Placement::Centred`] (the paper, eq. 1–4): the window is centred on
+//!   t, its length L moves by ΔL per hop by the entropy rule of eq. 4.
+//!   Entropies ([`EntropyKind`]): `Spectral` (faithful, eq. 1–3, over the
+//!   STFT bins 1..=15 of the window, normalised by ln 15) or `Temporal`
+//!   (ours: over the frames' energies; score = deficit D = ln K − E).
+//! - [`Placement::Segmented`] (ours, the default): the λ2 span around t is
+//!   segmented by optimal partitioning (penalised likelihood, dynamic
+//!   programming) of the frames' τ0 energies (the per-block sums of squared
+//!   first differences, whose mean is 62·σ²(τ0) in any noise type) under a
+//!   scaled-χ²_ν model, and the window is the segment that holds t, widened
+//!   to λ1 where it is shorter. Several changes per span are found; ν is
+//!   measured from the data (see [`Davar::nu`]), so coloured noise does not
+//!   raise false alarms the way a white-noise threshold does. The
+//!   partitioning runs one row per sample after it starts, and the hop's
+//!   own work is spread too: the hop notes the new span, the last span's
+//!   window is placed `PLACE_AT` = 17 samples later, its window sums are
+//!   computed over the next three samples (a third of the τ each) and
+//!   published on the last, and the new segmentation starts on the one
+//!   after, so these estimates come one hop and 20 samples later (at
+//!   λ2 = 1024 the worst sample went from 6 920 to 3 880 instructions
+//!   with one publication sample, and to 2 066 with three).
+//!
+//! # Reading of the paper (SEEDS.md seed 000)
+//! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
+//!   window around t (Fig. 2 reacts ~300 s early, which only a centred
+//!   window does). Streaming, this means a latency of about λ2/2.
+//! - λ1, λ2 are rounded to whole frames: λ2 down (the memory bound), λ1 up
+//!   (the shortest window), but never above λ2's rounding.
+//! - Eq. 4's step: [`StepMode`]. Thresholds: [`Threshold`].
+//!
+//! # Files
+//! This one holds the estimator ([`Davar`]), its per-sample schedule
+//! ([`Davar::push`]) and what it publishes; `settings` the knobs; `sums`
+//! the exact streaming sums; `segment` the optimal partitioning of the
+//! span; `refine` the change points' refinement and the step-or-gradual
+//! tests; `place` the window's placement (segmented or centred); `publish`
+//! the window's sums and the estimate.
+
+mod place;
+mod publish;
+mod refine;
+mod segment;
+mod settings;
+mod sums;
+
+pub use settings::*;
+
+use place::stale;
+use segment::ln_fast;
+
+use crate::algo::allan::stream::SAMPLE_MAX;
+use crate::algo::allan::AllanError;
+
+/// Frame (block, STFT hop) length, samples.
+pub const SEG: usize = 32;
+
+/// Frequency bins used per STFT frame (1..=15).
+pub const BINS: usize = SEG / 2 - 1;
+
+/// A change bounds a window only if one of the LAG segmentations before put
+/// one at the same place (± one frame), or it is strong: a step stays where
+/// it is, while a one-off false alarm does not come back. (Requiring the
+/// same place exactly 4 hops earlier, which also filtered the changes a
+/// variance ramp produces, moving with the span, missed weak steps: the
+/// ramps are now told apart by a line, in `segment_window`.)
+const LAG: usize = 2;
+
+/// A change whose likelihood gain exceeds STRONG × β bounds a window
+/// without waiting for confirmation.
+const STRONG: f32 = 3.0;
+
+/// A change gaining less than GRADUAL·β may be read as gradual
+/// ([`Davar::segment_window`]).
+const GRADUAL: f32 = 2.0;
+
+/// t's segment is a stair of a ramp, not the level of a step, where its
+/// energies' slope has z² above this (and runs with the change).
+const SLOPE_Z2: f32 = 9.0;
+
+/// Most cells of the segmentation (frames are grouped beyond this, so a
+/// hop's work does not grow with λ2).
+const CELLS: usize = 16;
+
+/// Segmented placement: samples after the hop at which the last span's
+/// window is placed, then published, then the next span's segmentation
+/// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
+/// and the last segmentation's rows (which run on the samples after its
+/// start: CELLS of them, from START_AT + 1 around to the next hop's
+/// sample 4). The changes are refined to the frame on the
+/// `REFINE_PARTS` samples before (from `REFINE_AT`, a share of them on
+/// each): with many changes found (a chip gated in and out of a fused
+/// axis) refining and placing together cost 1 100 instructions more than
+/// with none, on one sample of the board's loop, which then went over its
+/// 10 000; in two parts, one of them still left 17 to spare.
+const PLACE_AT: usize = 17;
+
+/// The sample of the hop that learns the noise's tails (~630
+/// instructions), once the span has filled: after the τ terms (T ≤ 11)
+/// and before the refinement, where no segmentation row runs. (Spread over
+/// four samples it cost 30 a sample more in all, and moving it to samples
+/// 8–11 moved the board's three-axis peak, not lowered it.)
+const TAILS_AT: usize = 12;
+
+const REFINE_PARTS: usize = 4;
+
+const REFINE_AT: usize = PLACE_AT - REFINE_PARTS;
+
+const PUBLISH_AT: usize = PLACE_AT + 1;
+
+/// Samples the publication's window sums are spread over.
+const PUB_PARTS: usize = 3;
+
+const START_AT: usize = PUBLISH_AT + PUB_PARTS;
+
+/// Memory of the lag-correlation estimates, frames.
+const RHO_FRAMES: f32 = 32.0;
+
+/// Memory of the fourth-moment estimates, frames: the tails of a sensor's
+/// noise change slowly, and their estimates are noisier than ρ's (ν from
+/// them has sd ≈ 3 % over 512 frames on white noise).
+const QUAD_FRAMES: f32 = 512.0;
+
+/// Frames before the fourth moments are used at all.
+const QUAD_MIN: u32 = 32;
+
+/// ν falls to the fourth-moment value only where that lies this far below
+/// the Gaussian one (as ν_4 / [`TAIL_GATE`], so it moves continuously):
+/// its noise then never moves a Gaussian signal's ν, while heavy tails or
+/// sub-LSB rounding (ν_4 at half ν_G or less) get theirs.
+const TAIL_GATE: f32 = 0.85;
+
+/// Prior for ν before enough frames are seen: 32 first differences of white
+/// noise (lag-1 correlation −½ gives ν = 32²/(32 + 62/4) ≈ 21.6).
+const NU_WHITE: f32 = 21.6;
+
+/// One published row of the t–τ–σ surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DavarStep<const T: usize> {
+    /// Sample index of the time this estimate describes.
+    pub t: u64,
+    /// Window [start, end) in sample indices; `t` lies inside it.
+    pub start: u64,
+    /// End of the window (exclusive).
+    pub end: u64,
+    /// Window length, samples.
+    pub len: u16,
+    /// Score of the last hop: entropy E or deficit D (Centred), or the
+    /// likelihood ratio ν·LR of the best split of the span (Segmented).
+    /// Always finite (0 before a score exists).
+    pub score: f32,
+    /// Threshold the score was compared with.
+    pub threshold: f32,
+    /// Allan variance at τ = 2ʲ·τ0 in (sample unit)²; multiply by lsb².
+    pub avar: [f32; T],
+}
+
+/// Exact window sums of one published hop.
+#[derive(Clone, Copy, Debug)]
+struct Published<const T: usize> {
+    t: u64,
+    start: u64,
+    end: u64,
+    acc: [u128; T],
+}
+
+/// Fixed-capacity DAVAR / E-DAVAR for one axis: `CAP` (power of two ≥ λ2)
+/// samples of ring, `FRAMES` (≥ CAP/32 + 3) blocks, `T` octave τ, and
+/// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
+/// needs them; 0 is enough for the segmented one).
+/// RAM ≈ 4·CAP + FRAMES·(17·T + 8) + 68·STFT bytes.
+#[derive(Clone, Debug)]
+pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize = FRAMES>
+{
+    cfg: DavarConfig,
+    ring: [i32; CAP],
+    n: u64,
+    /// Sample of the 32-sample hop on which the hop's work is done (1..=31).
+    hop_phase: u8,
+    /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
+    /// is not a power of two is a library call on the Cortex-M4).
+    cur_slot: usize,
+    /// Per τ, the next term to add to the blocks, and the sums of the term
+    /// before it: b = Σ w[k..k+m), a = Σ w[k+m..k+2m).
+    next: [u64; T],
+    a: [i32; T],
+    b: [i32; T],
+    /// Per τ, the sums of its first term (b over samples 0..m, a over
+    /// m..2m), kept as the samples arrive from a running sum read at
+    /// each power of two, so that the first term is not summed from
+    /// scratch: 2m samples on one sample of the loop (some 7 000
+    /// instructions for τ = 1024 after a restart; `cargo xtask
+    /// bench-loop`'s scenario E made its worst sample with τ = 256).
+    first_a: [i32; T],
+    first_b: [i32; T],
+    /// Σ of the samples so far (wrapping: a difference of two of them is
+    /// exact), while the first terms are being gathered.
+    prefix: i32,
+    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
+    /// and the prefix a window ending in this block needs.
+    lo: [[u64; FRAMES]; T],
+    /// τ0 block sums as f32, once complete (the segmentation's input).
+    x0: [f32; FRAMES],
+    /// Per block, the stamp (first frame, as u16) of the last
+    /// segmentation that put a change at it (`marks`), or within a frame of
+    /// it (`marks_near`); a stale stamp from the time the block completed
+    /// otherwise ([`stale`]). Whether one of the last [`LAG`]
+    /// segmentations had a change within a frame of c is then one read:
+    /// a list per segmentation, walked beside each change, cost ~700
+    /// instructions on one sample with fifteen changes (`cargo xtask
+    /// bench-loop`, scenario I, after two stuck chips came back).
+    marks: [u16; FRAMES],
+    marks_near: [u16; FRAMES],
+    /// Prefix sums of x0 over the span being segmented.
+    px: [f32; FRAMES],
+    hi: [[u8; FRAMES]; T],
+    pre: [[u64; FRAMES]; T],
+    /// STFT power of bins 1..=15 per frame, its energy and e·ln e
+    /// (Centred windows only).
+    frames: [[f32; BINS]; STFT],
+    energy: [f32; STFT],
+    eloge: [f32; STFT],
+    /// Frames in the span (λ2 rounded down) and the shortest window.
+    span: usize,
+    min_frames: usize,
+    /// Centred: current length in samples (eq. 4 state).
+    len: u16,
+    score: f32,
+    threshold: f32,
+    /// Σd², Σd·d₋₁, Σd·d₋₂ of the τ0 differences d over the current frame
+    /// (exact), the last two d, and the running lag-1, lag-2 correlations.
+    lag: [i64; 3],
+    dprev: [i32; 2],
+    rho: [f32; 2],
+    /// The τ0 terms (d) of the last frame, for [`Davar::learn_tails`].
+    tail_terms: Option<(u64, u64)>,
+    /// Running (over [`QUAD_FRAMES`]) covariances of q at lags 0, 1, 2 and
+    /// σ⁴ (the mean q·q₊₃), each frame's in its own scale (the ratios taken
+    /// in `nu` weigh frames by σ⁴), and the frames seen.
+    cov_q: [f32; 4],
+    quad_frames: u32,
+    /// Threshold per frame count (Centred: K frames in the window;
+    /// Segmented: a segment of K frames).
+    thresholds: [f32; FRAMES],
+    last: Option<Published<T>>,
+    /// The last published window's first block, and per τ the end of its
+    /// whole blocks and their sum (for the next window's update).
+    win_f0: Option<u64>,
+    win_q: [u64; T],
+    win_sum: [u128; T],
+    /// Centred: the window placed at the last hop (span's first frame and
+    /// window frames), published at the next.
+    pending: Option<(u64, usize, usize)>,
+    /// ln n for n = 0..FRAMES (ln 0 unused).
+    ln_n: [f32; FRAMES],
+    dp: Segmentation,
+}
+
+/// Optimal partitioning of one span (Segmented placement), computed one
+/// row per sample over the hop after the span completed.
+#[derive(Clone, Debug)]
+struct Segmentation {
+    /// First frame of the span being segmented, if any.
+    first: Option<u64>,
+    /// First frame of the span to segment next (noted at the hop, started
+    /// [`START_AT`] samples later).
+    next_first: Option<u64>,
+    /// The window placed at [`PLACE_AT`] (span's first frame, window
+    /// frames), published at [`PUBLISH_AT`].
+    placed: Option<(u64, usize, usize)>,
+    /// The segment bounds being refined from [`REFINE_AT`] (span's first
+    /// frame, bounds, their count less one, the next change to refine).
+    refined: Option<(u64, [u16; CELLS + 1], usize, usize)>,
+    /// Frames per cell and cells.
+    group: usize,
+    cells: usize,
+    /// Prefix sums of the cells' τ0 energies.
+    sum: [f32; CELLS + 1],
+    /// Optimal cost of cells 0..j and the start of its last segment.
+    cost: [f32; CELLS + 1],
+    arg: [u8; CELLS + 1],
+    /// Next row to compute (1..=cells; cells + 1 when done).
+    row: usize,
+    nu: f32,
+    beta: f32,
+    /// Stamps of the last [`LAG`] segmentations (their first frames, as
+    /// u16; the first `recent_len` of them valid, the next written at
+    /// `recent_at`): their changes are the blocks whose `marks` carry one
+    /// of them.
+    recent: [u16; LAG],
+    recent_len: u8,
+    recent_at: usize,
+}
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
+    Davar<CAP, FRAMES, T, STFT>
+{
+    /// Check the settings against the capacities.
+    pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
+        let (l1, l2) = (cfg.lambda1 as usize, cfg.lambda2 as usize);
+        if l1 > l2 || !(l1..=l2).contains(&(cfg.l_init as usize)) || l2 < 2 * SEG {
+            return Err(DavarError::Lambda);
+        }
+        // Windows are published one hop after their span (the terms and the
+        // segmentation are computed meanwhile), and the blocks that left
+        // since the last window are subtracted from its sums: two more
+        // blocks than the span.
+        // (FRAMES < 2¹⁵ keeps the blocks' change stamps apart: [`stale`].)
+        if !CAP.is_power_of_two() || l2 > CAP || FRAMES < CAP / SEG + 3 || FRAMES >= 1 << 15 {
+            return Err(DavarError::Capacity);
+        }
+        let span = l2 / SEG;
+        let min_frames = l1.div_ceil(SEG).min(span);
+        // Terms are added once per hop, so the ring must still hold the
+        // oldest sample of a term 2^T + 32 samples back.
+        if T == 0 || T > 11 || (1usize << T) > min_frames * SEG || (1usize << T) + SEG + 1 > CAP {
+            return Err(DavarError::Capacity);
+        }
+        let centred_adaptive = cfg.placement == Placement::Centred && min_frames < span;
+        if centred_adaptive && (cfg.delta_l == 0 || cfg.delta_l % 2 == 1) {
+            return Err(DavarError::DeltaL);
+        }
+        if centred_adaptive && STFT < FRAMES {
+            return Err(DavarError::Capacity);
+        }
+        match cfg.threshold {
+            Threshold::Fixed(v) if !v.is_finite() => return Err(DavarError::Threshold),
+            Threshold::Auto { p_fa } if !(p_fa > 0.0 && p_fa < 1.0) => {
+                return Err(DavarError::Threshold)
+            }
+            _ => {}
+        }
+        let mut d = Self {
+            cfg,
+            ring: [0; CAP],
+            n: 0,
+            hop_phase: 1,
+            cur_slot: 0,
+            next: [0; T],
+            a: [0; T],
+            b: [0; T],
+            first_a: [0; T],
+            first_b: [0; T],
+            prefix: 0,
+            lo: [[0; FRAMES]; T],
+            x0: [0.0; FRAMES],
+            marks: [stale(0); FRAMES],
+            marks_near: [stale(0); FRAMES],
+            px: [0.0; FRAMES],
+            hi: [[0; FRAMES]; T],
+            pre: [[0; FRAMES]; T],
+            frames: [[0.0; BINS]; STFT],
+            energy: [0.0; STFT],
+            eloge: [0.0; STFT],
+            span,
+            min_frames,
+            len: cfg.l_init,
+            score: 0.0,
+            threshold: 0.0,
+            lag: [0; 3],
+            dprev: [0; 2],
+            rho: [-0.5, 0.0],
+            tail_terms: None,
+            cov_q: [0.0; 4],
+            quad_frames: 0,
+            thresholds: [0.0; FRAMES],
+            last: None,
+            win_f0: None,
+            win_q: [0; T],
+            win_sum: [0; T],
+            pending: None,
+            ln_n: [0.0; FRAMES],
+            dp: Segmentation {
+                first: None,
+                next_first: None,
+                placed: None,
+                refined: None,
+                group: span.div_ceil(CELLS).max(1),
+                cells: span.div_ceil(span.div_ceil(CELLS).max(1)),
+                sum: [0.0; CELLS + 1],
+                cost: [0.0; CELLS + 1],
+                arg: [0; CELLS + 1],
+                row: 0,
+                nu: NU_WHITE,
+                beta: 0.0,
+                recent: [0; LAG],
+                recent_len: 0,
+                recent_at: 0,
+            },
+        };
+        for (i, v) in d.ln_n.iter_mut().enumerate().skip(1) {
+            *v = ln_fast(i as f32);
+        }
+        // Soft-float χ² quantiles, once: only the frame counts that can
+        // occur are tabulated.
+        let lo = match cfg.placement {
+            Placement::Centred => min_frames.saturating_sub(1),
+            Placement::Segmented => 2,
+        };
+        for k in lo..=span {
+            let q = d.quantile_for(k);
+            if let Some(t) = d.thresholds.get_mut(k) {
+                *t = q;
+            }
+        }
+        d.threshold = d.threshold_for(span);
+        Ok(d)
+    }
+
+    /// Forget every sample (after a gap in the input), keeping the settings
+    /// and the tabulated thresholds.
+    pub fn reset(&mut self) {
+        self.n = 0;
+        self.cur_slot = 0;
+        self.next = [0; T];
+        self.a = [0; T];
+        self.b = [0; T];
+        self.prefix = 0;
+        self.len = self.cfg.l_init;
+        self.score = 0.0;
+        self.threshold = self.threshold_for(self.span);
+        self.lag = [0; 3];
+        self.dprev = [0; 2];
+        self.rho = [-0.5, 0.0];
+        self.tail_terms = None;
+        self.cov_q = [0.0; 4];
+        self.quad_frames = 0;
+        self.last = None;
+        self.win_f0 = None;
+        self.pending = None;
+        self.dp.first = None;
+        self.dp.next_first = None;
+        self.dp.placed = None;
+        self.dp.refined = None;
+        self.dp.row = 0;
+        // (The valid stamps are the first `recent_len`: start at 0.)
+        (self.dp.recent_len, self.dp.recent_at) = (0, 0);
+        // (Every block a later segmentation reads completes after this and
+        // is made stale then; cleared here all the same.)
+        self.marks = [stale(0); FRAMES];
+        self.marks_near = [stale(0); FRAMES];
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DavarConfig {
+        &self.cfg
+    }
+
+    /// Length of the window last published (samples), or of the span
+    /// before the first one.
+    pub fn len(&self) -> u16 {
+        self.last
+            .map_or((self.span * SEG) as u16, |p| (p.end - p.start) as u16)
+    }
+
+    /// Always false: a window is never empty (for clippy's `len` rule).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Samples between an estimate's time and the sample that published it
+    /// (the price of a window around t): λ2/2 and one hop, the time the
+    /// terms and the segmentation take to compute (segmented: and the
+    /// samples by which its publication follows the hop, up to the last
+    /// of its `PUB_PARTS`).
+    pub fn latency(&self) -> u64 {
+        let publish = match self.cfg.placement {
+            Placement::Segmented => (START_AT - 1) as u64,
+            Placement::Centred => 0,
+        };
+        (SEG * self.span).div_ceil(2) as u64 + self.hop_phase as u64 + SEG as u64 + publish
+    }
+
+    /// Do the hop's work `phase` samples (1..=31, clamped) after each frame
+    /// boundary instead of 1: several E-DAVARs fed the same samples (the
+    /// three fused axes) then do their heaviest samples at different
+    /// times. Estimates come `phase − 1` samples later. Set before the
+    /// first sample.
+    pub fn with_hop_phase(mut self, phase: u8) -> Self {
+        self.set_hop_phase(phase);
+        self
+    }
+
+    /// [`Davar::with_hop_phase`] in place.
+    pub fn set_hop_phase(&mut self, phase: u8) {
+        self.hop_phase = phase.clamp(1, SEG as u8 - 1);
+    }
+
+    /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
+    /// 32 first differences d: for Gaussian d, ν = 2E\[x\]²/Var x =
+    /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
+    /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
+    /// change, however frequent, does not bias them. White noise: ρ₁ = −½,
+    /// ν = 21.6 (the prior); random walk: ρ = 0, ν = 32; quantisation of
+    /// an angle (blue rate noise): ρ₁ = −⅔, ρ₂ = ⅙, ν ≈ 16.7.
+    ///
+    /// That form holds for Gaussian d only. In general Var x =
+    /// Σ_h (32 − |h|)·Cov(q, q₊ₕ) over the squares q = d², which
+    /// `learn_tails` measures (lags 0–2, σ⁴ from lag 3), and
+    /// ν₄ = 2·32²σ⁴/Var x. Heavy tails (Student's t with 5 dof: ν₄ ≈ 12)
+    /// or rounding below half an LSB (σ = 0.3 LSB: ν₄ ≈ 6) make it far
+    /// smaller, and a threshold set with the Gaussian ν then sees changes
+    /// everywhere (9.7 % and 36 % of windows shortened on stationary
+    /// input). ν is the smaller of the two, ν₄ taken as ν₄/0.85
+    /// (`TAIL_GATE`): ν₄ is the noisier, and on Gaussian frames it then
+    /// never moves ν.
+    pub fn nu(&self) -> f32 {
+        let [r1, r2] = self.rho;
+        let s = SEG as f32;
+        let gauss = s * s / (s + 2.0 * (s - 1.0) * r1 * r1 + 2.0 * (s - 2.0) * r2 * r2);
+        let [c0, c1, c2, sig4] = self.cov_q;
+        let var = s * c0 + 2.0 * (s - 1.0) * c1 + 2.0 * (s - 2.0) * c2;
+        if self.quad_frames < QUAD_MIN || !(var > 0.0) || !(sig4 > 0.0) {
+            return gauss;
+        }
+        gauss.min(2.0 * s * s * sig4 / var / TAIL_GATE)
+    }
+
+    /// Add one sample (integer, |w| < 2²⁰; quantise rates with
+    /// [`crate::algo::allan::stream::quantise`]). Once per hop, from the
+    /// moment the span is full, a new estimate is published and its time t
+    /// returned ([`Davar::estimate`] gives it). A refused sample leaves the
+    /// state unchanged.
+    pub fn push(&mut self, w: i32) -> Result<Option<u64>, AllanError> {
+        if !(-SAMPLE_MAX..=SAMPLE_MAX).contains(&w) {
+            return Err(AllanError::SampleRange);
+        }
+        let n = self.n;
+        self.ring[n as usize & (CAP - 1)] = w;
+        self.n = n + 1;
+        if n >> T == 0 {
+            self.gather_first_terms(w);
+        }
+        let n = self.n;
+        if n.is_multiple_of(SEG as u64) {
+            self.cur_slot = Self::next(self.cur_slot);
+        }
+        let centred_adaptive =
+            self.cfg.placement == Placement::Centred && self.min_frames < self.span;
+        // The work of a hop is spread over its 32 samples (1 is the hop):
+        // phase 0 the STFT of the finished frame (centred windows), phase
+        // 1 + j the new Allan terms of τ = 2ʲ (τ0 at the hop, the others on
+        // the next samples), every other sample one row of the
+        // segmentation.
+        let phase = (n % SEG as u64) as usize;
+        let hop_phase = self.hop_phase as usize;
+        // Samples since the hop: the terms of τ = 2ʲ come j samples after it.
+        let rel = (phase + SEG - hop_phase) % SEG;
+        if phase == 0 && centred_adaptive {
+            self.store_frame();
+        }
+        if (1..T).contains(&rel) {
+            self.add_terms(rel);
+        }
+        if rel == TAILS_AT {
+            self.learn_tails();
+        }
+        if rel != 0 {
+            let segmented = self.cfg.placement == Placement::Segmented;
+            if segmented && (REFINE_AT..PLACE_AT).contains(&rel) {
+                self.refine_part(rel - REFINE_AT);
+            } else if segmented && rel == PLACE_AT {
+                // The last segmentation's window (its rows finished long
+                // ago; `while` only guards the invariant).
+                if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
+                    while self.dp.row <= self.dp.cells {
+                        self.dp_row();
+                    }
+                    let (lo, hi) = self.segment_window(prev);
+                    self.dp.placed = Some((prev, lo, hi));
+                }
+            } else if segmented && (PUBLISH_AT..START_AT).contains(&rel) {
+                // The window sums, a third of the τ on each of three
+                // samples; the estimate is out on the last.
+                let part = rel - PUBLISH_AT;
+                let taus = T * part / PUB_PARTS..T * (part + 1) / PUB_PARTS;
+                if let Some((prev, lo, hi)) = self.dp.placed {
+                    let (t, f0, f1) = self.placed_window(prev, lo, hi);
+                    self.window_sums(f0, f1, taus);
+                    if part + 1 == PUB_PARTS {
+                        self.dp.placed = None;
+                        return Ok(Some(self.finish_publish(t, f0, f1)));
+                    }
+                }
+            } else if segmented && rel == START_AT {
+                if let Some(first) = self.dp.next_first.take() {
+                    self.dp_start(first);
+                }
+            } else if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
+                self.dp_row();
+            }
+            return Ok(None);
+        }
+        // The hop, at least one sample after a frame boundary: the τ0
+        // terms of the last frame end on its first sample.
+        self.add_terms(0);
+        if n < (self.span * SEG + hop_phase) as u64 {
+            // (The tails are learnt once the span has filled: during the
+            // fill their samples would meet the first, from-scratch terms
+            // of the long τ.)
+            self.tail_terms = None;
+            return Ok(None);
+        }
+        let c = n / SEG as u64; // frames 0..c are complete
+        self.learn_nu();
+        let first = c - self.span as u64;
+        let done = match self.cfg.placement {
+            // The window placed at the last hop is published now: by then
+            // the terms of every τ up to its end have been added.
+            Placement::Centred => {
+                let done = self
+                    .pending
+                    .map(|(prev, lo, hi)| self.publish_placed(prev, lo, hi));
+                let (lo, hi) = self.centred(first, centred_adaptive);
+                self.pending = Some((first, lo, hi));
+                done
+            }
+            Placement::Segmented => {
+                // The hop only notes the new span: the last span's window
+                // is placed and published PUBLISH_AT samples later and the
+                // new segmentation starts on the sample after, so no
+                // sample carries all three (5 650 instructions on one
+                // sample at λ2 = 1024 when they did).
+                self.dp.next_first = Some(first);
+                None
+            }
+        };
+        Ok(done)
+    }
+
+    /// The last sample pushed, if any since the start or a reset.
+    pub fn last_sample(&self) -> Option<i32> {
+        let n = self.n.checked_sub(1)?;
+        self.ring.get(n as usize & (CAP - 1)).copied()
+    }
+
+    /// The last published row of the t–τ–σ surface; `None` until the span
+    /// has filled. The u128 → float conversions happen here, on demand.
+    pub fn estimate(&self) -> Option<DavarStep<T>> {
+        let p = self.last.as_ref()?;
+        let len = p.end - p.start;
+        let mut avar = [0.0f32; T];
+        for (j, v) in avar.iter_mut().enumerate() {
+            *v = Self::avar_of(p, j);
+        }
+        Some(DavarStep {
+            t: p.t,
+            start: p.start,
+            end: p.end,
+            len: len as u16,
+            score: self.score,
+            threshold: self.threshold,
+            avar,
+        })
+    }
+
+    /// The last estimate's time `t` and window length: what
+    /// [`Davar::estimate`] reports, without converting its sums (some 300
+    /// instructions per τ on a Cortex-M4).
+    pub fn estimate_window(&self) -> Option<(u64, u16)> {
+        self.last.map(|p| (p.t, (p.end - p.start) as u16))
+    }
+
+    /// The last estimate's window [start, end), in sample indices.
+    pub fn estimate_span(&self) -> Option<(u64, u64)> {
+        self.last.map(|p| (p.start, p.end))
+    }
+
+    /// One τ (2ʲ samples) of [`Davar::estimate`]: `None` before the first
+    /// estimate or for j ≥ T.
+    pub fn estimate_avar(&self, j: usize) -> Option<f32> {
+        // By reference: a copy of the published row (its u128 sums) cost
+        // some 170 instructions a call on the Cortex-M4.
+        let p = self.last.as_ref()?;
+        (j < T).then(|| Self::avar_of(p, j))
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,184 @@
+//! Refinement of the segmentation's change points, and the tests that
+//! tell a step from a gradual change (a line over the step, t's own
+//! slope).
+
+use super::segment::seg_cost;
+use super::{Davar, CELLS, LAG, REFINE_PARTS};
+use crate::algo::math::at_least;
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
+    Davar<CAP, FRAMES, T, STFT>
+{
+    /// Part `part` (of [`REFINE_PARTS`]) of the refinement: its share of
+    /// the changes, in order. Out of line: inlined in `push`, it cost every
+    /// sample 33 instructions.
+    #[inline(never)]
+    pub(super) fn refine_part(&mut self, part: usize) {
+        let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) else {
+            return;
+        };
+        while self.dp.row <= self.dp.cells {
+            self.dp_row();
+        }
+        let (mut bounds, nb, next) = self.refining(prev);
+        let to = (1 + nb.saturating_sub(1) * (part + 1) / REFINE_PARTS)
+            .min(nb)
+            .max(next);
+        self.refine(&mut bounds, nb, next..to);
+        self.dp.refined = Some((prev, bounds, nb, to));
+    }
+    /// The refinement of the span at `first` so far (bounds, their count
+    /// less one, the next change to refine), or its start.
+    pub(super) fn refining(&self, first: u64) -> ([u16; CELLS + 1], usize, usize) {
+        match self.dp.refined {
+            Some((f, b, nb, next)) if f == first => (b, nb, next),
+            _ => {
+                let (b, nb) = self.backtrack();
+                (b, nb, 1)
+            }
+        }
+    }
+    /// Refine changes `which` (in order) of `bounds` (nb segments) to the
+    /// frame: the cells group g frames, and each change moves to the best
+    /// split of its two segments within ± (g − 1) frames (every frame for
+    /// g < 4; else, near a change the last segmentation placed, that frame
+    /// and the two beside it, and otherwise every other frame and then the
+    /// two beside the best).
+    #[inline(never)]
+    pub(super) fn refine(
+        &self,
+        bounds: &mut [u16; CELLS + 1],
+        nb: usize,
+        which: core::ops::Range<usize>,
+    ) {
+        let g = self.dp.group.max(1);
+        if g <= 1 {
+            return;
+        }
+        // Over the span's frame prefix sums (from `dp_start`).
+        let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
+        let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
+        let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
+        // The changes the last segmentation placed: the span's blocks
+        // that carry its stamp.
+        let first = self.dp.first.unwrap_or(0);
+        let last =
+            (self.dp.recent_len > 0).then(|| self.dp.recent[(self.dp.recent_at + LAG - 1) % LAG]);
+        let s0 = self.slot_of(first).min(FRAMES - 1);
+        let marks = &self.marks;
+        let placed_last =
+            |q: usize| last.is_some_and(|l| marks.get(Self::ahead(s0, q)) == Some(&l));
+        for i in which.start.max(1)..which.end.min(nb) {
+            let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
+            let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));
+            let split = |q: usize| (cost(l, q) + cost(q, r), q);
+            let keep = |best: (f32, usize), q: usize| {
+                let v = split(q);
+                if v.0 < best.0 {
+                    v
+                } else {
+                    best
+                }
+            };
+            // The best of `best` and the frames on either side of it.
+            let beside = |best: (f32, usize)| {
+                [best.1.wrapping_sub(1), best.1 + 1]
+                    .into_iter()
+                    .filter(|q| (lo..hi).contains(q))
+                    .fold(best, keep)
+            };
+            let near = || (lo..hi).find(|&q| placed_last(q));
+            let best = if g < 4 {
+                (lo..hi).filter(|&q| q != c).fold(split(c), keep)
+            } else if let Some(p) = near() {
+                // The last segmentation refined a change within reach: a
+                // step's split moves little from one hop to the next, so
+                // look there and beside it (3 costs for 2g − 1).
+                beside(split(p))
+            } else {
+                // Every other frame from c, then the two beside the best:
+                // g + 1 costs for 2g − 1 (λ2 ≥ 2048 only; the split's cost
+                // is smooth at that scale).
+                beside(
+                    (lo..hi)
+                        .filter(|&q| q != c && q.abs_diff(c) % 2 == 0)
+                        .fold(split(c), keep),
+                )
+            };
+            if let Some(b) = bounds.get_mut(i) {
+                *b = best.1 as u16;
+            }
+        }
+    }
+}
+
+/// How much better one line explains the frame energies of l..r than the
+/// step at c does, in cost units: (SS_line − SS_step)·ν/(2m²), the sums of
+/// squares the least-squares line and the two segment means explain,
+/// scaled by the variance 2m²/ν of a frame energy at the pooled mean m.
+/// That is the second-order form of the difference of their Gamma
+/// deviances, from the prefix sums alone: r − l additions and no
+/// logarithm, so the board's placement sample can afford it. −∞ where it
+/// does not apply.
+pub(super) fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    if c <= l || r <= c || r < l + 3 {
+        return f32::NEG_INFINITY;
+    }
+    let (n, n1, n2) = ((r - l) as f32, (c - l) as f32, (r - c) as f32);
+    let (m, sfc, sxx) = line_sums(px, l, r);
+    if !(m > 0.5) {
+        return f32::NEG_INFINITY;
+    }
+    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
+    (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+}
+
+/// The slope of the frames' energies over l..r, squared, over its own
+/// variance under the scaled-χ²_ν model at their mean (a z²), and whether
+/// it rises. None where fewer than 4 frames or a mean not positive.
+pub(super) fn slope_z2(px: &[f32], nu: f32, (l, r): (usize, usize)) -> Option<(f32, bool)> {
+    if r < l + 4 {
+        return None;
+    }
+    let (m, sfc, sxx) = line_sums(px, l, r);
+    if !(m > 0.0) {
+        return None;
+    }
+    Some((sfc * sfc / sxx * nu / (2.0 * m * m), sfc > 0.0))
+}
+
+/// Over the frames l..r (r > l) of the prefix sums `px`: their mean
+/// energy, Σ (f − f̄)·x_f and Σ (f − f̄)², the sums of a least-squares line.
+pub(super) fn line_sums(px: &[f32], l: usize, r: usize) -> (f32, f32, f32) {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    let n = (r - l) as f32;
+    let s = p(r) - p(l);
+    // Σ (f − l)·x_f = n·P(r) − Σ_{j = l+1..=r} P(j) (P the prefix sums;
+    // P(l) cancels), then about the centre l + (n − 1)/2.
+    // (Four running sums: fewer instructions than one at λ2 = 4096.)
+    let w = px.get(l + 1..=r).unwrap_or(&[]);
+    let mut quads = w.chunks_exact(4);
+    let mut acc = [0.0f32; 4];
+    for q in &mut quads {
+        for (a, &v) in acc.iter_mut().zip(q) {
+            *a += v;
+        }
+    }
+    let sp = (acc[0] + acc[1]) + (acc[2] + acc[3]) + quads.remainder().iter().sum::<f32>();
+    let sfc = n * p(r) - sp - 0.5 * (n - 1.0) * s;
+    (s / n, sfc, n * (n * n - 1.0) / 12.0)
+}
+
+/// |ln(a/b)| without a logarithm: max(a, b)/min(a, b) orders the same way.
+pub(super) fn ratio_gap(a: f32, b: f32) -> f32 {
+    let (a, b) = (
+        at_least(a, f32::MIN_POSITIVE),
+        at_least(b, f32::MIN_POSITIVE),
+    );
+    if a > b {
+        a / b
+    } else {
+        b / a
+    }
+}

@@ -1,0 +1,378 @@
+//! The streaming sums: each sample completes one Allan term per τ, whose
+//! square is added, exactly, to its 32-term block; a window is whole
+//! blocks plus one block prefix per τ.
+
+use super::place::stale;
+use super::{Davar, SEG};
+use crate::algo::allan::stream::SAMPLE_MAX;
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
+    Davar<CAP, FRAMES, T, STFT>
+{
+    #[inline(always)]
+    pub(super) fn w(&self, i: u64) -> i32 {
+        self.ring[i as usize & (CAP - 1)]
+    }
+    #[inline(always)]
+    pub(super) fn slot(block: u64) -> usize {
+        (block % FRAMES as u64) as usize
+    }
+    /// Slot of block n/32 − back (back < FRAMES).
+    #[inline(always)]
+    pub(super) fn back_slot(&self, back: usize) -> usize {
+        if self.cur_slot >= back {
+            self.cur_slot - back
+        } else {
+            self.cur_slot + FRAMES - back
+        }
+    }
+    /// Slot of an older block f (within FRAMES of the newest).
+    #[inline(always)]
+    pub(super) fn slot_of(&self, f: u64) -> usize {
+        self.back_slot((self.n / SEG as u64 - f) as usize)
+    }
+    /// The slot `c` blocks after slot `s0` (c < FRAMES: one wrap at most).
+    #[inline(always)]
+    pub(super) fn ahead(s0: usize, c: usize) -> usize {
+        let s = s0 + c;
+        if s >= FRAMES {
+            s - FRAMES
+        } else {
+            s
+        }
+    }
+    /// The next slot after `s`.
+    #[inline(always)]
+    pub(super) fn next(s: usize) -> usize {
+        if s + 1 == FRAMES {
+            0
+        } else {
+            s + 1
+        }
+    }
+    /// After sample `w` (the `n`th, from 1): at n = 2ʲ the first term's b
+    /// of τ = 2ʲ is the running sum, and a of τ = 2ʲ⁻¹ the sum since
+    /// n = 2ʲ⁻¹. Runs for the first 2^T samples after a start.
+    #[inline]
+    pub(super) fn gather_first_terms(&mut self, w: i32) {
+        self.prefix = self.prefix.wrapping_add(w);
+        let n = self.n;
+        if n.is_power_of_two() {
+            let i = n.trailing_zeros() as usize;
+            if let Some(b) = self.first_b.get_mut(i) {
+                *b = self.prefix;
+            }
+            if let Some(j) = i.checked_sub(1) {
+                if let (Some(a), Some(&b)) = (self.first_a.get_mut(j), self.first_b.get(j)) {
+                    *a = self.prefix.wrapping_sub(b);
+                }
+            }
+        }
+    }
+    /// Add every Allan term completed since the last hop to its block, per
+    /// τ in one tight loop (sliding sums in registers): ~10 instructions a
+    /// term, where doing it sample by sample cost ~60 (state reloads).
+    /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
+    /// to add and `a`, `b` hold the sums of the term before it.
+    pub(super) fn add_terms(&mut self, j: usize) {
+        let n = self.n;
+        if j >= T {
+            return;
+        }
+        {
+            let m = 1u64 << j;
+            if n < 2 * m {
+                return;
+            }
+            let last = n - 2 * m; // newest complete term
+            let mut k = self.next[j];
+            if k > last {
+                return;
+            }
+            let (mu, m2) = (m as usize, 2 * m as usize);
+            let (mut a, mut b) = (self.a[j], self.b[j]);
+            let first_k = k;
+            let pre_off = (SEG - m2 % SEG) % SEG;
+            while k <= last {
+                let block = k / SEG as u64;
+                let off = (k % SEG as u64) as usize;
+                let end = last.min(block * SEG as u64 + SEG as u64 - 1);
+                // (Slots are < FRAMES by construction; the `min` lets the
+                // compiler see it, so no index here can panic.)
+                let slot = self.slot_of(block).min(FRAMES - 1);
+                let (mut lo, mut hi) = if off == 0 {
+                    (0u64, 0u8)
+                } else {
+                    (self.lo[j][slot], self.hi[j][slot])
+                };
+                let mut from = k;
+                if k == 0 {
+                    // First term: its sums, gathered as the samples came.
+                    (a, b) = (self.first_a[j], self.first_b[j]);
+                    (lo, hi) = add_sq(lo, hi, a - b);
+                    if pre_off == 0 {
+                        self.pre[j][slot] = lo;
+                    }
+                    from = 1;
+                }
+                // Terms from..=end, the prefix recorded on the way.
+                let pre_k = block * SEG as u64 + pre_off as u64;
+                if from <= end {
+                    let i = (from as usize).wrapping_sub(1);
+                    let slide = if carry_free(mu) {
+                        Self::slide::<false>
+                    } else {
+                        Self::slide::<true>
+                    };
+                    if (from..=end).contains(&pre_k) {
+                        let n1 = (pre_k - from) as usize + 1;
+                        let i2;
+                        (i2, a, b, lo, hi) = slide(&self.ring, i, n1, mu, a, b, lo, hi);
+                        self.pre[j][slot] = lo;
+                        (_, a, b, lo, hi) =
+                            slide(&self.ring, i2, (end - pre_k) as usize, mu, a, b, lo, hi);
+                    } else {
+                        (_, a, b, lo, hi) =
+                            slide(&self.ring, i, (end - from) as usize + 1, mu, a, b, lo, hi);
+                    }
+                }
+                self.lo[j][slot] = lo;
+                self.hi[j][slot] = hi;
+                if j == 0 && end % SEG as u64 == SEG as u64 - 1 {
+                    self.x0[slot] = u64_to_f32(lo);
+                    self.marks[slot] = stale(block);
+                    self.marks_near[slot] = stale(block);
+                }
+                k = end + 1;
+            }
+            self.next[j] = k;
+            (self.a[j], self.b[j]) = (a, b);
+            if j == 0 {
+                // τ0 lag sums for ν: d = w[i + 1] − w[i] (|d| < 2²¹, so the
+                // products fit).
+                let mask = CAP - 1;
+                let ([mut s0, mut s1, mut s2], [mut p1, mut p2]) = (self.lag, self.dprev);
+                for i in first_k as usize..=last as usize {
+                    let d = self.ring[(i + 1) & mask] - self.ring[i & mask];
+                    s0 += d as i64 * d as i64;
+                    s1 += d as i64 * p1 as i64;
+                    s2 += d as i64 * p2 as i64;
+                    (p1, p2) = (d, p1);
+                }
+                (self.lag, self.dprev) = ([s0, s1, s2], [p1, p2]);
+                // The tails take the last whole frame's terms, whatever
+                // the hop's phase (so that staggered axes learn the same).
+                let end = (last + 1) / SEG as u64 * SEG as u64;
+                self.tail_terms = end.checked_sub(SEG as u64).map(|f| (f, end - 1));
+            }
+        }
+    }
+    /// `count` terms of τ = m: slide the sums from the term starting at
+    /// i + 1 − 1 = i to the next (samples i, i + m, i + 2m), add each d².
+    /// The per-term hot loop: everything in registers.
+    ///
+    /// Without `CARRY` the squares are summed in the u64 alone: the caller
+    /// has checked that a whole 32-term block cannot overflow it (see
+    /// [`carry_free`]), and the carry test per term (two more adds and a
+    /// spilled register) goes.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(super) fn slide<const CARRY: bool>(
+        ring: &[i32; CAP],
+        mut i: usize,
+        count: usize,
+        m: usize,
+        mut a: i32,
+        mut b: i32,
+        mut lo: u64,
+        mut hi: u8,
+    ) -> (usize, i32, i32, u64, u8) {
+        let mask = CAP - 1;
+        let mut left = count;
+        // In runs where none of the three samples wraps around the ring:
+        // plain slices, so the loop walks three pointers (about 12
+        // instructions a term on the Cortex-M4 instead of 22 with a mask
+        // per read).
+        while left > 0 {
+            let (i0, i1, i2) = (
+                i & mask,
+                i.wrapping_add(m) & mask,
+                i.wrapping_add(2 * m) & mask,
+            );
+            let run = left.min(CAP - i0).min(CAP - i1).min(CAP - i2);
+            let s0 = ring.get(i0..i0 + run).unwrap_or(&[]);
+            let s1 = ring.get(i1..i1 + run).unwrap_or(&[]);
+            let s2 = ring.get(i2..i2 + run).unwrap_or(&[]);
+            for ((x0, x1), x2) in s0.iter().zip(s1).zip(s2) {
+                b += x1 - x0;
+                a += x2 - x1;
+                if CARRY {
+                    (lo, hi) = add_sq(lo, hi, a - b);
+                } else {
+                    let d = (a - b) as i64;
+                    lo = lo.wrapping_add((d * d) as u64);
+                }
+            }
+            i = i.wrapping_add(run);
+            left -= run;
+        }
+        (i, a, b, lo, hi)
+    }
+    /// Slot of block `b`, from f0's slot `s_f0` (blocks within FRAMES of
+    /// f0 either way).
+    pub(super) fn slot_near(f0: u64, s_f0: usize, b: u64) -> usize {
+        if b >= f0 {
+            let d = (b - f0) as usize; // < FRAMES: b is in or next to the window
+            if s_f0 + d >= FRAMES {
+                s_f0 + d - FRAMES
+            } else {
+                s_f0 + d
+            }
+        } else {
+            let d = (f0 - b) as usize;
+            if s_f0 >= d {
+                s_f0 - d
+            } else {
+                s_f0 + FRAMES - d
+            }
+        }
+    }
+    /// The whole-block sums of window [f0, f1) for the τ in `taus`, kept in
+    /// `win_q`/`win_sum`; the board spreads the τ over `PUB_PARTS` samples. Until
+    /// [`Self::finish_publish`] the last window (`win_f0`) stays the base
+    /// of the update, for every τ alike.
+    pub(super) fn window_sums(&mut self, f0: u64, f1: u64, taus: core::ops::Range<usize>) {
+        let e = f1 * SEG as u64;
+        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
+        let slot = |b: u64| Self::slot_near(f0, s_f0, b);
+        let old_f0 = self.win_f0;
+        for j in taus.start..taus.end.min(T) {
+            let m = 1u64 << j;
+            // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
+            let q = (e - 2 * m) / SEG as u64;
+            // The whole blocks: from the last window's by the blocks that
+            // entered and left (exact integers, so nothing drifts), or
+            // from scratch when that is shorter.
+            let full = match old_f0 {
+                Some(of0) if f0.abs_diff(of0) + q.abs_diff(self.win_q[j]) < q - f0 => {
+                    let (oq, mut v) = (self.win_q[j], self.win_sum[j]);
+                    if q > oq {
+                        v += self.block_sum(j, slot(oq), q - oq);
+                    } else {
+                        v -= self.block_sum(j, slot(q), oq - q);
+                    }
+                    if f0 > of0 {
+                        v -= self.block_sum(j, slot(of0), f0 - of0);
+                    } else {
+                        v += self.block_sum(j, s_f0, of0 - f0);
+                    }
+                    v
+                }
+                _ => self.block_sum(j, s_f0, q - f0),
+            };
+            self.win_q[j] = q;
+            self.win_sum[j] = full;
+        }
+    }
+    /// Σ of `count` blocks of τ j from slot `s0` on, exactly. They wrap at
+    /// most once: two contiguous runs. Low words with their carries
+    /// counted, high parts apart: 32-bit-friendly sums, no u128 add per
+    /// block.
+    pub(super) fn block_sum(&self, j: usize, s0: usize, count: u64) -> u128 {
+        let (Some(lo_j), Some(hi_j)) = (self.lo.get(j), self.hi.get(j)) else {
+            return 0;
+        };
+        let count = (count as usize).min(FRAMES);
+        let s0 = s0.min(FRAMES - 1);
+        let first_run = count.min(FRAMES - s0);
+        let run = |r: core::ops::Range<usize>| {
+            lo_j.get(r.clone())
+                .unwrap_or(&[])
+                .iter()
+                .zip(hi_j.get(r).unwrap_or(&[]))
+        };
+        let (mut lo, mut hi) = (0u64, 0u32);
+        // Two plain loops rather than a chained iterator (whose every step
+        // asks which half it is in). Where the blocks carry nothing
+        // ([`carry_free`]) their high parts are 0 and are not read.
+        let free = carry_free(1 << j);
+        for r in [s0..s0 + first_run, 0..count - first_run] {
+            if free {
+                for l in lo_j.get(r).unwrap_or(&[]) {
+                    let (v, c) = lo.overflowing_add(*l);
+                    lo = v;
+                    hi += c as u32;
+                }
+            } else {
+                for (l, h) in run(r) {
+                    let (v, c) = lo.overflowing_add(*l);
+                    lo = v;
+                    hi += c as u32 + *h as u32;
+                }
+            }
+        }
+        ((hi as u128) << 64) | lo as u128
+    }
+}
+
+/// u64 → f32 as two 32-bit conversions (a u64 conversion is a library
+/// call on the Cortex-M4). Rounds twice, so it can differ from `as f32` in
+/// the last bit; the same on every target.
+#[inline(always)]
+pub(super) fn u64_to_f32(x: u64) -> f32 {
+    (x >> 32) as u32 as f32 * 4_294_967_296.0 + x as u32 as f32
+}
+
+/// i64 → f32 as a signed high half and a signed low half (an i64
+/// conversion is a library call on the Cortex-M4): exact rounding for
+/// |v| < 2³¹, where the high half is 0, and two roundings above. (The lag
+/// sums were once split as a signed high and an *unsigned* low half: a
+/// small negative sum then became −2³² + (2³² − |v|) with the low half
+/// rounded to a multiple of 256 first, so every |v| < 128 read as 0 and a
+/// white signal of a few LSB looked uncorrelated, ν 32 for 21.6.)
+#[inline(always)]
+pub(super) fn i64_to_f32(v: i64) -> f32 {
+    let hi = v.wrapping_add(1 << 31) >> 32;
+    let lo = v.wrapping_sub(hi << 32) as i32;
+    hi as i32 as f32 * 4_294_967_296.0 + lo as f32
+}
+
+/// u128 → f32, correctly rounded: equal to `as f32`, which is a library
+/// call on the Cortex-M4 (≈ 65 instructions), with one 32-bit hardware
+/// conversion instead. The top 32 significant bits, with a sticky bit for
+/// any below them, round to 24 as the whole number does (the rounding
+/// bit is bit 7); scaling by 2ˢ is exact. Checked against `as f32` by
+/// `u128_to_f32_is_as_f32`.
+#[inline(always)]
+pub(crate) fn u128_to_f32(x: u128) -> f32 {
+    let (hi, lo) = ((x >> 64) as u64, x as u64);
+    if hi == 0 {
+        if lo >> 32 == 0 {
+            return lo as u32 as f32;
+        }
+        let s = 32 - lo.leading_zeros();
+        let top = (lo >> s) as u32 | u32::from(lo << (64 - s) != 0);
+        return top as f32 * f32::from_bits((127 + s) << 23);
+    }
+    let s = 96 - x.leading_zeros();
+    let top = (x >> s) as u32 | u32::from(x << (128 - s) != 0);
+    top as f32 * f32::from_bits((127 + s) << 23)
+}
+
+/// Whether a whole block of τ = m terms sums in a u64 without a carry:
+/// |d| ≤ 2m·[`SAMPLE_MAX`], so 32 terms stay below 32·(2m·S)². True up to
+/// m = 256 (τ up to 2⁸ samples: the board's tracker and the default
+/// configurations); beyond, the carry byte is kept term by term.
+#[inline(always)]
+pub(super) const fn carry_free(m: usize) -> bool {
+    let bound = 2 * m as u128 * SAMPLE_MAX as u128;
+    SEG as u128 * bound * bound <= u64::MAX as u128
+}
+
+/// lo + hi·2⁶⁴ += d², exactly (a 32-term block of d² < 2⁶² needs 3 carry
+/// bits at most).
+#[inline(always)]
+pub(super) fn add_sq(lo: u64, hi: u8, d: i32) -> (u64, u8) {
+    let (v, c) = lo.overflowing_add((d as i64 * d as i64) as u64);
+    (v, hi + c as u8)
+}
