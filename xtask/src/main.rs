@@ -23,7 +23,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{exit, Command, Stdio};
 
-#[path = "xtask/trace.rs"]
 mod trace;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
