@@ -110,6 +110,61 @@ pub fn surface_until(
     Ok((rows, lsb, lambda2))
 }
 
+/// The t–τ–σ surface of `rows` as a heatmap on `area`: log10 σ(τ) over
+/// (t, τ), each hop a column of cells, τ labelled in the rows' time unit
+/// `t_unit` (`tau0` one step of it). Shared by `gyro davar` and the figures.
+pub fn heatmap(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    title: &str,
+    unit: &str,
+    rows: &[Row],
+    span: core::ops::Range<f64>,
+    (tau0, t_unit): (f64, &str),
+) -> Res<()> {
+    let taus = rows.first().map_or(0, |r| r.adev.len());
+    let cells: Vec<(f64, f64, usize, f64)> = rows
+        .windows(2)
+        .flat_map(|p| {
+            let (a, b) = (&p[0], &p[1]);
+            (0..taus).map(move |j| (a.t_s, b.t_s, j, a.adev[j].max(1e-300).log10()))
+        })
+        .collect();
+    let (vlo, vhi) = cells.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+        (lo.min(c.3), hi.max(c.3))
+    });
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!(
+                "{title}: E-DAVAR σ(τ) from {:.3e} (dark) to {:.3e} {unit} (yellow), log colour",
+                10f64.powf(vlo),
+                10f64.powf(vhi)
+            ),
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(70)
+        .build_cartesian_2d(span, -0.5f64..taus as f64 - 0.5)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .y_desc(format!("τ ({t_unit})"))
+        .y_labels(taus)
+        .y_label_formatter(&|v| {
+            let j = v.round().clamp(0.0, 30.0) as i32;
+            format!("{}", crate::short(tau0 * 2f64.powi(j)))
+        })
+        .x_label_formatter(&|v| format!("{}", crate::short(*v)))
+        .draw()?;
+    chart.draw_series(cells.iter().map(|&(x0, x1, j, v)| {
+        Rectangle::new(
+            [(x0, j as f64 - 0.5), (x1, j as f64 + 0.5)],
+            ViridisRGB::get_color_normalized(v, vlo, vhi.max(vlo + 1e-12)).filled(),
+        )
+    }))?;
+    Ok(())
+}
+
 /// Draw the surface, σ(τ0) and the windows of `rows` into `path`.
 pub fn draw(
     path: &Path,
@@ -122,53 +177,13 @@ pub fn draw(
     let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
         return Err("no estimate: the log is shorter than one window and a hop".into());
     };
-    let taus = first.adev.len();
     let span = first.start_s.min(0.0)..last.end_s;
     let root = SVGBackend::new(path, (1000, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, rest) = root.split_vertically(380);
     let (mid, bot) = rest.split_vertically(280);
 
-    // The surface: log10 σ(τ) over (t, τ), each hop a column of cells.
-    let cells: Vec<(f64, f64, usize, f64)> = rows
-        .windows(2)
-        .flat_map(|p| {
-            let (a, b) = (&p[0], &p[1]);
-            (0..taus).map(move |j| (a.t_s, b.t_s, j, a.adev[j].max(1e-300).log10()))
-        })
-        .collect();
-    let (vlo, vhi) = cells.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
-        (lo.min(c.3), hi.max(c.3))
-    });
-    let mut chart = ChartBuilder::on(&top)
-        .caption(
-            format!(
-                "{title}: E-DAVAR σ(τ) from {:.3e} (dark) to {:.3e} {unit} (yellow), log colour",
-                10f64.powf(vlo),
-                10f64.powf(vhi)
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(span.clone(), -0.5f64..taus as f64 - 0.5)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .y_desc("τ (s)")
-        .y_labels(taus)
-        .y_label_formatter(&|v| {
-            let j = v.round().clamp(0.0, 30.0) as i32;
-            format!("{:.3}", tau0 * 2f64.powi(j))
-        })
-        .draw()?;
-    chart.draw_series(cells.iter().map(|&(x0, x1, j, v)| {
-        Rectangle::new(
-            [(x0, j as f64 - 0.5), (x1, j as f64 + 0.5)],
-            ViridisRGB::get_color_normalized(v, vlo, vhi.max(vlo + 1e-12)).filled(),
-        )
-    }))?;
+    heatmap(&top, title, unit, rows, span.clone(), (tau0, "s"))?;
 
     // σ(τ0) and σ at the longest τ over time.
     let s0: Vec<(f64, f64)> = rows.iter().map(|r| (r.t_s, r.adev[0])).collect();

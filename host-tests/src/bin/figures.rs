@@ -33,6 +33,7 @@ use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use gyro_array::checks::run_board_array_from;
 use gyro_array::emu::noise::{quantise, AxisNoise};
 use gyro_array::emu::{with_bus, Fault, NoiseParams, RateProfile, Rng};
+use gyro_tool::surface;
 use host_tests::motion::{self, Run};
 use plotters::prelude::*;
 
@@ -284,47 +285,28 @@ fn edavar(out: &Path, seed: u64) -> Result<(), Err> {
     let (top, rest) = root.split_vertically(380);
     let (mid, bot) = rest.split_vertically(300);
 
-    // The surface: log10 σ(τ) over (t, τ), each hop a column of cells.
-    let cells: Vec<(f64, f64, usize, f64)> = seg
-        .windows(2)
-        .flat_map(|p| {
-            let (a, b) = (p[0], p[1]);
-            (0..8).map(move |j| {
-                let s = (a.avar[j].max(1e-12) as f64 * LSB * LSB).sqrt();
-                (a.t as f64, b.t as f64, j, s.log10())
-            })
+    // The surface, drawn as `gyro davar` draws it (τ and t in samples).
+    let rows: Vec<surface::Row> = seg
+        .iter()
+        .map(|e| surface::Row {
+            t_s: e.t as f64,
+            start_s: e.start as f64,
+            end_s: e.end as f64,
+            adev: e
+                .avar
+                .iter()
+                .map(|&v| (v.max(0.0) as f64).sqrt() * LSB)
+                .collect(),
         })
         .collect();
-    let (vlo, vhi) = cells.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
-        (lo.min(c.3), hi.max(c.3))
-    });
-    let mut chart = ChartBuilder::on(&top)
-        .caption(
-            format!(
-                "E-DAVAR surface, σ(τ) from {:.2} (dark) to {:.2} (yellow), log scale: noise ×4 at 3000, ramp back 6000–10000",
-                10f64.powf(vlo),
-                10f64.powf(vhi)
-            ),
-            ("sans-serif", 17),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0f64..N as f64, -0.5f64..7.5)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .y_desc("τ (samples)")
-        .y_labels(8)
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{}", 1u32 << (v.round().clamp(0.0, 7.0) as u32)))
-        .draw()?;
-    chart.draw_series(cells.iter().map(|&(x0, x1, j, v)| {
-        Rectangle::new(
-            [(x0, j as f64 - 0.5), (x1, j as f64 + 0.5)],
-            ViridisRGB::get_color_normalized(v, vlo, vhi).filled(),
-        )
-    }))?;
+    surface::heatmap(
+        &top,
+        "noise ×4 at 3000, ramp back 6000–10000",
+        "°/s",
+        &rows,
+        0f64..N as f64,
+        (1.0, "samples"),
+    )?;
 
     // σ²(τ0): estimate against truth and the fixed windows.
     let mut chart = ChartBuilder::on(&mid)
