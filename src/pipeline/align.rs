@@ -53,6 +53,10 @@ pub struct Aligner<const CAP: usize> {
 /// samples.
 type Mean = (u32, [i32; 3]);
 
+/// A moving mean's window: the wrapping sum of its stamps and the sum of
+/// its raw samples.
+type Window = (u32, [i32; 3]);
+
 impl<const CAP: usize> Aligner<CAP> {
     /// An aligner over moving means of `n` samples (1 for none; at most
     /// [`MAX_MEAN`], and fewer than `CAP`).
@@ -111,29 +115,51 @@ impl<const CAP: usize> Aligner<CAP> {
         }
     }
 
-    /// The moving mean ending at sample `k` (0 the oldest held; `k ≥ n − 1`):
-    /// at the mean of its stamps (from the newest, so a wrap between them
-    /// does no harm; their distances are a few ms), as the sum of its raw
-    /// samples (exact in integers).
-    fn mean(&self, k: usize) -> Mean {
-        let n = self.n;
+    /// The window of the moving mean ending at sample `k` (0 the oldest
+    /// held; `k ≥ n − 1`): the wrapping sum of its stamps and the sum of its
+    /// raw samples (exact in integers).
+    fn window(&self, k: usize) -> Window {
         let at = |i: usize| self.ring[(self.head + i) % CAP];
-        let (t, mut sum) = {
-            let (t, r) = at(k);
-            (t, r.map(i32::from))
-        };
-        let mut behind = 0u32;
-        for i in 1..n {
+        let (mut stamps, mut sum) = (0u32, [0i32; 3]);
+        for i in 0..self.n {
             let (ti, ri) = at(k - i);
-            behind = behind.wrapping_add(t.wrapping_sub(ti));
+            stamps = stamps.wrapping_add(ti);
             for a in 0..3 {
                 sum[a] += i32::from(ri[a]);
             }
         }
-        let mean_t = t
-            .wrapping_mul(16)
-            .wrapping_sub(behind.wrapping_mul(16) / n as u32);
-        (mean_t, sum)
+        (stamps, sum)
+    }
+
+    /// The window ending at sample `k − 1` from the one ending at `k`: one
+    /// sample out, one in (the walk back through the means costs a
+    /// subtraction and an addition a step, not a sum of `n`).
+    fn slide_back(&self, k: usize, (stamps, sum): Window) -> Window {
+        let at = |i: usize| self.ring[(self.head + i) % CAP];
+        let ((t_out, r_out), (t_in, r_in)) = (at(k), at(k - self.n));
+        let mut s = sum;
+        for a in 0..3 {
+            s[a] += i32::from(r_in[a]) - i32::from(r_out[a]);
+        }
+        (stamps.wrapping_sub(t_out).wrapping_add(t_in), s)
+    }
+
+    /// The moving mean ending at sample `k`, from its window: at the mean
+    /// of its stamps, taken from the newest (`n·t − Σtᵢ` wraps to the small
+    /// true distance whatever the stamps' own wrap; their distances are a
+    /// few ms), as the sum of its raw samples.
+    fn mean_of(&self, k: usize, (stamps, sum): Window) -> Mean {
+        let n = self.n as u32;
+        let t = self.ring[(self.head + k) % CAP].0;
+        let behind = t.wrapping_mul(n).wrapping_sub(stamps);
+        (
+            t.wrapping_mul(16).wrapping_sub(behind.wrapping_mul(16) / n),
+            sum,
+        )
+    }
+
+    fn mean(&self, k: usize) -> Mean {
+        self.mean_of(k, self.window(k))
     }
 
     /// The newest mean's instant, 1/16 chip µs.
@@ -150,12 +176,14 @@ impl<const CAP: usize> Aligner<CAP> {
         }
         let k = dps_per_lsb / n as f32;
         let dps = |s: [i32; 3]| s.map(|v| v as f32 * k);
-        let mut later = self.mean(self.len - 1);
+        let mut win = self.window(self.len - 1);
+        let mut later = self.mean_of(self.len - 1, win);
         if since(t, later.0) > 0 {
             return Aligned::Late;
         }
         for j in (n - 1..self.len - 1).rev() {
-            let earlier = self.mean(j);
+            win = self.slide_back(j + 1, win);
+            let earlier = self.mean_of(j, win);
             let span = since(later.0, earlier.0);
             let into = since(t, earlier.0);
             if into >= 0 && span > 0 {
