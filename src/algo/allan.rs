@@ -602,8 +602,7 @@ pub fn noise_terms(points: &[AdevPoint], out: &mut [Option<NoiseTerm>; 5]) {
 pub fn local_slope(points: &[AdevPoint], i: usize) -> Option<f64> {
     let a = i.saturating_sub(1);
     let b = i.saturating_add(1).min(points.len().checked_sub(1)?);
-    // i past the end (a ≥ b) has no neighbours (an index out of bounds
-    // before, found by fuzzing).
+    // i past the end (a ≥ b) has no neighbours (fuzzing reaches it).
     if a >= b {
         return None;
     }

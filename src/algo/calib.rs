@@ -48,8 +48,8 @@ pub const LEARN_STRIDE: u32 = 2;
 /// where the E-DAVARs, whose frames are on the same 32-sample grid
 /// (`pipeline::tracker`), cost least (1 558, 1 540 and 1 662 instructions
 /// for the three axes against up to 2 630; `cargo xtask bench`'s whole
-/// loop). Before, z's solve fell on the tracker's segmentation start and
-/// made the loop's worst sample.
+/// loop); a solve on the tracker's segmentation start makes the loop's
+/// worst sample.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
 /// The drift watch (see [`RelCal::drifting`]) sums each chip's residual

@@ -36,9 +36,8 @@ pub fn bound(v: f32, lo: f32, hi: f32) -> f32 {
 ///
 /// The FPU is told by the hard-float ABI (`eabihf`: every such ARM target
 /// has VFP, and VSQRT.F32 is in every VFP). A `target_feature = "vfp2"`
-/// test, used before, is never true on stable Rust (ARM's features are not
-/// reported to `cfg`), so the board ran libm's software square root: no
-/// `vsqrt` was in the firmware.
+/// test is never true on stable Rust (ARM's features are not reported to
+/// `cfg`), and would leave the board on libm's software square root.
 #[inline(always)]
 pub fn sqrtf(x: f32) -> f32 {
     #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]

@@ -300,7 +300,7 @@ mod tests {
 
     /// Where SH > 0 the entropy weights favour the smaller σ, but far less
     /// than inverse variance: σ of 1 m and 2 m get 0.75/0.25 (entropy)
-    /// against 0.8/0.2 (1/σ²) — the structural reason the quick
+    /// against 0.8/0.2 (1/σ²) — the structural reason a quick
     /// simulation found entropy weighting never better than covariance
     /// weighting when the covariances are consistent.
     #[test]

@@ -172,7 +172,7 @@ fn ramp_class(len: usize, l1: u16, l2: u16) -> Class {
     }
 }
 
-/// Ramps and steps at other λ than the classes (`--other-lambdas`).
+/// Ramps and steps at other λ than the standard classes (`--other-lambdas`).
 fn other_lambdas() -> Vec<Class> {
     let mut v = Vec::new();
     for &(len, l1, l2) in &[
@@ -429,7 +429,7 @@ fn oracle_centred(like: &Run, w: &[i32], truth: &[f64], l1: u16, l2: u16) -> Run
 /// penalty β. A weak step then moves the estimate part of the way instead
 /// of all or nothing; the price is that stationary noise always moves it
 /// a little. What it reaches shows where the detection limit leaves a
-/// window chooser (docs/evaluation.md).
+/// window chooser (docs/davar.md).
 fn soft_average(like: &Run, w: &[i32], l1: u16, l2: u16, scale: f64) -> Run {
     let k = l2 as usize / SEG; // span, frames
     let k = k / 2 * 2;
@@ -526,7 +526,7 @@ struct Args {
     #[arg(long)]
     csv: Option<String>,
     /// Run the classes at other λ instead (ramps and steps at the board's
-    /// 512/1024, at 256/512 and 256/1024): a check away from the issue's
+    /// 512/1024, at 256/512 and 256/1024): a check away from the standard
     /// own classes.
     #[arg(long)]
     other_lambdas: bool,

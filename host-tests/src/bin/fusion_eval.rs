@@ -1,4 +1,4 @@
-//! Fusion evaluation harness (issue: gyro-array fusion, seed 004).
+//! Fusion evaluation harness (seed 004 and ours).
 //!
 //! `cargo run -p host-tests --profile host --bin fusion-eval -- [SEED]`
 //! (a SEED that is not an unsigned integer is an error, not the default)

@@ -44,8 +44,8 @@
 //!   computed over the next three samples (a third of the τ each) and
 //!   published on the last, and the new segmentation starts on the one
 //!   after, so these estimates come one hop and 20 samples later (at
-//!   λ2 = 1024 the worst sample went from 6 920 to 3 880 instructions
-//!   with one publication sample, and to 2 066 with three).
+//!   λ2 = 1024 a worst sample of about 2 000 instructions, against some
+//!   6 900 with the hop's work on one sample).
 //!
 //! # Reading of the paper (SEEDS.md seed 000)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a

@@ -21,17 +21,14 @@ pub(super) fn adaptive<const N: usize>(
     // Sets of three or more gyros run with a constant mask when N ≤ 5 (16
     // sets for the board's five, 5 for four, 1 for three), and all gyros
     // do for larger N. With the mask a constant, every phase's mask tests
-    // fold away and its lane loops shrink to the gyros in the set. Before,
-    // only all gyros and (N = 5) all but the last had that, and after a
-    // chip failed every axis ran the general mask: three of five cost
-    // 3 101 instructions per 3-axis sample on the Cortex-M4, against 1 991
-    // for the constant four of five (`cargo xtask bench`). Sets of one or
-    // two have no gate and take the general path. Same arithmetic in the
-    // same order either way.
+    // fold away and its lane loops shrink to the gyros in the set: after a
+    // chip fails, the loop costs what it did before (through the general
+    // mask, three of five cost some 1.5× the constant four of five). Sets
+    // of one or two have no gate and take the general path. Same
+    // arithmetic in the same order either way.
     // With fewer than five gyros, all of them (the usual case) is inlined
-    // here: out of line, the call cost 60 more per 3-axis sample with N = 4,
-    // over the default path's 2 500. With five, inlining it made the other
-    // sets' calls dearer (four of five 2 011 -> 2 687).
+    // here, which saves the call; with five, inlining it makes the other
+    // sets' calls dearer.
     if N < 5 && valid == full::<N>() {
         adaptive_const(c, st, y, full::<N>(), out)
     } else {
@@ -128,12 +125,12 @@ pub(super) fn adaptive_general<const N: usize>(
 /// `valid`. Frozen candidates are not fused but still vote in the median
 /// gate: a healthy chip that repeats a quantised value four times (it
 /// happens) must not leave a faulty one ungated for want of a quorum
-/// (fault campaign, seed 7 783 687: three gyros on x, one rescaled, one
-/// repeating; the rescaled one was fused). A chip that sticks is frozen
-/// here for the 12 samples until the pipeline flags it stuck, on every
-/// axis: the gyros left to fuse run with a constant mask too (the gate,
-/// over the voters, with the general one), which took 1 750 instructions
-/// off each of those samples.
+/// (three gyros on x, one rescaled, one repeating: without its vote the
+/// rescaled one is fused). A chip that sticks is frozen here for the 12
+/// samples until the pipeline flags it stuck, on every axis: the gyros
+/// left to fuse run with a constant mask too (the gate, over the voters,
+/// with the general one), or each of those samples costs some 1 750
+/// instructions more.
 #[inline(never)]
 pub(super) fn adaptive_frozen<const N: usize>(
     c: &AdaptiveConfig,
@@ -286,9 +283,9 @@ pub(super) fn adaptive_active<const N: usize>(
     };
     // Warming up (the first samples after power-up or a rejoin), the
     // output is the median of the voters: equal weights over what a rough
-    // MAD gate let through can still carry a second faulty chip (fault
-    // campaign, seed 7 780 514: one chip stuck, one garbling bytes, and
-    // the noisy ADXRS453 widening the MAD). The noise model still learns
+    // MAD gate let through can still carry a second faulty chip (one chip
+    // stuck, one garbling bytes, and the noisy ADXRS453 widening the MAD).
+    // The noise model still learns
     // from the gated set; the weights reported are its equal weights.
     let r = if !all_warm && n >= 3 {
         r.map(|(_, wts)| (med, wts))
@@ -420,9 +417,9 @@ pub(super) fn update_and_fuse<const N: usize>(
             // value) with c = 2, times κ = 1/E[min(z², 4)] = 1.0864 so that
             // Gaussian noise is estimated without bias. With the cap at the
             // gate (c = 5), outliers at more than 1/(κc²) ≈ 4 % of samples
-            // (a chip spiking at 5 %) made the estimate grow without bound
-            // until the spikes fitted inside the gate (fault campaign, seed
-            // 7 783 523); with c = 2 it stays bounded up to 23 %.
+            // (a chip spiking at 5 %) would make the estimate grow without
+            // bound until the spikes fitted inside the gate; with c = 2 it
+            // stays bounded up to 23 %.
             if was_warm {
                 let cap = HUBER_C2 * (v[i] + v_others);
                 e2 = if e2 > cap { cap } else { e2 } * HUBER_KAPPA;

@@ -80,7 +80,7 @@ pub(super) fn regate<const N: usize>(
 /// sits between the middle two, and when two chips agree by chance with a
 /// faulty one (a bit error that moved a chip by 1 °/s, beside a noisy but
 /// honest ADXRS453) the gate can keep the wrong pair and reject the quiet
-/// majority: the fault campaign's last two failures in 10 000 runs. So
+/// majority (the fault campaign finds such cases in 10 000 runs). So
 /// take every active gyro's value in turn as the reference, gate the
 /// others about it as about the median (residual variance vᵢ + v_med: a
 /// reference's own variance must not widen the gate, or a chip the noise
@@ -104,8 +104,8 @@ pub(super) fn consensus_gate<const N: usize>(
     // Each gyro's gate (its residual variance times k²), then, for every
     // pair once, whether each is within the other's: the same sets as
     // gating all gyros about each reference in turn, with half the
-    // squares. It was 800 instructions a 3-axis sample at the whole loop's
-    // worst sample (fault scenario D: two chips spiking on one axis).
+    // squares (this runs on the loop's worst samples: two chips spiking on
+    // one axis).
     let mut lim = [0.0f32; N];
     for i in 0..N {
         lim[i] = k2 * (v[i] + v_med);

@@ -81,9 +81,9 @@ pub(super) fn one_middle(m: u8) -> bool {
 
 /// The median for the adaptive gate: with an odd count the middle value;
 /// with an even count the inverse-variance weighted mean of the middle two
-/// (the plain mean of them let a noisy but honest gyro, an ADXRS453 among
-/// ICM-42688-Ps, drag the reference off every quiet gyro once a third one
-/// was wild: the fault campaign's last failures). Same sorting as
+/// (with the plain mean of them a noisy but honest gyro, an ADXRS453 among
+/// ICM-42688-Ps, drags the reference off every quiet gyro once a third one
+/// is wild). Same sorting as
 /// [`median`], with each gyro's index in the key's three low bits, so the
 /// middle two are known; the values returned are the exact inputs.
 #[inline(always)]
