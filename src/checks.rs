@@ -20,8 +20,8 @@ use crate::drivers::adxrs453::{self, Adxrs453};
 use crate::drivers::icm42688::{self, Config, Icm42688};
 use crate::drivers::Gyro;
 use crate::emu::{
-    board_array, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model, Mount,
-    NoiseParams, RateProfile, Rng,
+    board_array, board_drivers, Adxrs453Model, BoardDrivers, Chip, CsLine, EmuBus, EmuCs, EmuDelay,
+    Fault, Icm42688Model, Mount, NoiseParams, RateProfile, Rng,
 };
 use crate::pipeline::startup::start_array;
 use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
@@ -381,15 +381,10 @@ pub fn run_array_from_seq(
     }
     let bus = RefCell::new(EmuBus::new(chips, &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let dev = |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
-    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (dev(0), dev(1), dev(2), dev(3), dev(4));
-    let (mut g0, mut g1, mut g2, mut g3) = (
-        Icm42688::new(d0),
-        Icm42688::new(d1),
-        Icm42688::new(d2),
-        Icm42688::new(d3),
-    );
-    let mut g4 = Adxrs453::new(d4, 2);
+    let BoardDrivers {
+        icm: [mut g0, mut g1, mut g2, mut g3],
+        adx: mut g4,
+    } = board_drivers(&bus, &cs);
     let mut pipe = Pipeline::<5>::new(
         PipelineConfig::default(),
         Method::Adaptive(AdaptiveConfig::default()),

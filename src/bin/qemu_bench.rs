@@ -679,12 +679,11 @@ fn bench_loop_on(
         return true;
     }
     use core::cell::RefCell;
-    use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::AdaptiveConfig;
-    use gyro_array::drivers::adxrs453::Adxrs453;
-    use gyro_array::drivers::icm42688::Icm42688;
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{board_array, with_bus, CsLine, EmuBus, EmuCs, EmuDelay};
+    use gyro_array::emu::{
+        board_array, board_drivers, with_bus, BoardDrivers, CsLine, EmuBus, EmuDelay,
+    };
     use gyro_array::pipeline::startup::start_array;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
@@ -693,15 +692,10 @@ fn bench_loop_on(
     let bus = RefCell::new(EmuBus::new(board_array(profile, seed), &cs));
     let dt = 1e-3;
     let mut delay = EmuDelay::new(&bus, dt);
-    let dev =
-        |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i])).unwrap_or_else(|_| exit(false));
-    let (mut g0, mut g1, mut g2, mut g3) = (
-        Icm42688::new(dev(0)),
-        Icm42688::new(dev(1)),
-        Icm42688::new(dev(2)),
-        Icm42688::new(dev(3)),
-    );
-    let mut g4 = Adxrs453::new(dev(4), 2);
+    let BoardDrivers {
+        icm: [mut g0, mut g1, mut g2, mut g3],
+        adx: mut g4,
+    } = board_drivers(&bus, &cs);
     let Ok(mut pipe) = Pipeline::<5>::new(
         PipelineConfig::default(),
         gyro_array::algo::fusion::Method::Adaptive(AdaptiveConfig::default()),

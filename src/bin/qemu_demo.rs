@@ -39,7 +39,6 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
-use embedded_hal_bus::spi::RefCellDevice;
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::mounting::CalRecord;
@@ -47,13 +46,12 @@ use gyro_array::algo::qualify::QualifyError;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
 use gyro_array::board::{idle, stack};
-use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
+use gyro_array::drivers::icm42688::{ClockInput, Config};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::ClockParams;
 use gyro_array::emu::{
-    board_array, mounted_board, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs,
-    EmuDelay, Fault, PathModel, RateProfile, TempProfile,
+    board_array, board_drivers, mounted_board, with_bus, BoardDrivers, Chip, ChipTiming, CsLine,
+    EmuBus, EmuCapture, EmuDelay, Fault, PathModel, RateProfile, TempProfile,
 };
 use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
 use gyro_array::link::port::{timed_clock, Port};
@@ -125,13 +123,10 @@ fn main() -> ! {
     let dt = 1.0 / FS_HZ as f32;
     let mut delay = EmuDelay::new(&bus, dt);
 
-    let dev =
-        |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i])).unwrap_or_else(|_| exit(false));
-    let mut g0 = Icm42688::new(dev(0));
-    let mut g1 = Icm42688::new(dev(1));
-    let mut g2 = Icm42688::new(dev(2));
-    let mut g3 = Icm42688::new(dev(3));
-    let mut g4 = Adxrs453::new(dev(4), 2);
+    let BoardDrivers {
+        icm: [mut g0, mut g1, mut g2, mut g3],
+        adx: mut g4,
+    } = board_drivers(&bus, &cs);
 
     let mut pipe: Pipeline<5> = Pipeline::new(
         PipelineConfig::default(),
