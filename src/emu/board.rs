@@ -27,10 +27,10 @@ pub fn board_drivers<'a, 'c>(
     bus: &'a RefCell<EmuBus<'c, 5>>,
     cs: &'c [CsLine; 5],
 ) -> BoardDrivers<'a, 'c> {
-    let dev = |i: usize| match RefCellDevice::new_no_delay(bus, EmuCs(&cs[i])) {
-        Ok(d) => d,
-        // An emulated chip-select cannot fail (its error is `Infallible`).
-        Err(e) => match e {},
+    // An emulated chip-select cannot fail (its error is `Infallible`).
+    let dev = |i: usize| {
+        let Ok(d) = RefCellDevice::new_no_delay(bus, EmuCs(&cs[i]));
+        d
     };
     BoardDrivers {
         icm: [0, 1, 2, 3].map(|i| Icm42688::new(dev(i))),

@@ -115,14 +115,19 @@ impl<const CAP: usize> Aligner<CAP> {
         }
     }
 
+    /// Sample `i` held (0 the oldest): its stamp and raw value.
+    #[inline(always)]
+    fn sample(&self, i: usize) -> (u32, [i16; 3]) {
+        self.ring[(self.head + i) % CAP]
+    }
+
     /// The window of the moving mean ending at sample `k` (0 the oldest
     /// held; `k ≥ n − 1`): the wrapping sum of its stamps and the sum of its
     /// raw samples (exact in integers).
     fn window(&self, k: usize) -> Window {
-        let at = |i: usize| self.ring[(self.head + i) % CAP];
         let (mut stamps, mut sum) = (0u32, [0i32; 3]);
         for i in 0..self.n {
-            let (ti, ri) = at(k - i);
+            let (ti, ri) = self.sample(k - i);
             stamps = stamps.wrapping_add(ti);
             for a in 0..3 {
                 sum[a] += i32::from(ri[a]);
@@ -135,8 +140,7 @@ impl<const CAP: usize> Aligner<CAP> {
     /// sample out, one in (the walk back through the means costs a
     /// subtraction and an addition a step, not a sum of `n`).
     fn slide_back(&self, k: usize, (stamps, sum): Window) -> Window {
-        let at = |i: usize| self.ring[(self.head + i) % CAP];
-        let ((t_out, r_out), (t_in, r_in)) = (at(k), at(k - self.n));
+        let ((t_out, r_out), (t_in, r_in)) = (self.sample(k), self.sample(k - self.n));
         let mut s = sum;
         for a in 0..3 {
             s[a] += i32::from(r_in[a]) - i32::from(r_out[a]);
@@ -150,7 +154,7 @@ impl<const CAP: usize> Aligner<CAP> {
     /// few ms), as the sum of its raw samples.
     fn mean_of(&self, k: usize, (stamps, sum): Window) -> Mean {
         let n = self.n as u32;
-        let t = self.ring[(self.head + k) % CAP].0;
+        let t = self.sample(k).0;
         let behind = t.wrapping_mul(n).wrapping_sub(stamps);
         (
             t.wrapping_mul(16).wrapping_sub(behind.wrapping_mul(16) / n),
@@ -243,6 +247,32 @@ mod tests {
         };
         assert!((r[0] - 17.75).abs() < 1e-5, "{r:?}");
         assert_eq!(a.at(8_000 * 16, 1.0), Aligned::Missing);
+    }
+
+    #[test]
+    fn sliding_back_gives_each_window_as_summed() {
+        // Ring wrapped, stamps across the u32 wrap, three means of three.
+        let mut a = Aligner::<8>::new(3);
+        let s0 = u32::MAX - 2_000;
+        for k in 0..13u32 {
+            a.push(
+                s0.wrapping_add(k * 250),
+                [k as i16 * 7 - 40, -(k as i16), 3],
+            );
+        }
+        let mut win = a.window(a.len - 1);
+        for k in (a.n..a.len).rev() {
+            win = a.slide_back(k, win);
+            assert_eq!(win, a.window(k - 1), "window ending at {}", k - 1);
+            // The instant as the distances back from the newest stamp, each
+            // taken on its own (no sum of wrapped stamps).
+            let t = a.sample(k - 1).0;
+            let behind: u32 = (1..a.n)
+                .map(|i| t.wrapping_sub(a.sample(k - 1 - i).0))
+                .sum();
+            let mean_t = t.wrapping_mul(16).wrapping_sub(behind * 16 / a.n as u32);
+            assert_eq!(a.mean_of(k - 1, win).0, mean_t, "instant of {}", k - 1);
+        }
     }
 
     #[test]
