@@ -52,36 +52,6 @@ pub struct Args {
     chi2: edf::Chi2,
 }
 
-/// Run it.
-pub fn run(a: Args) -> Res<bool> {
-    let Args {
-        log,
-        columns,
-        dev,
-        grid,
-        format,
-        out,
-        fit,
-        kalibr,
-        svg,
-        confidence,
-        chi2,
-    } = a;
-    allan(
-        &log.file,
-        &columns,
-        log.time.as_deref(),
-        log.tau0,
-        (log.unit, log.lsb_per_dps),
-        &dev,
-        grid,
-        format,
-        out,
-        (fit, kalibr, svg),
-        (confidence, chi2),
-    )
-}
-
 fn confidence_arg(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
@@ -124,20 +94,22 @@ struct CurveOut<'a> {
 }
 
 /// `gyro allan`: read, compute every deviation of every column, write.
-#[allow(clippy::too_many_arguments)]
-fn allan(
-    file: &std::path::Path,
-    columns: &[String],
-    time: Option<&str>,
-    tau0: Option<f64>,
-    (unit, lsb): (table::Unit, Option<f64>),
-    kinds: &[dev::Kind],
-    grid: dev::Grid,
-    format: OutFormat,
-    out: Option<PathBuf>,
-    (want_fit, kalibr, svg): (bool, Option<PathBuf>, Option<PathBuf>),
-    (cf, chi2): (f64, edf::Chi2),
-) -> Res<bool> {
+pub fn run(a: Args) -> Res<bool> {
+    let Args {
+        log,
+        columns,
+        dev: kinds,
+        grid,
+        format,
+        out,
+        fit: want_fit,
+        kalibr,
+        svg,
+        confidence: cf,
+        chi2,
+    } = a;
+    let (file, columns, kinds) = (log.file.as_path(), &columns[..], &kinds[..]);
+    let (time, tau0, unit, lsb) = (log.time.as_deref(), log.tau0, log.unit, log.lsb_per_dps);
     let started = Instant::now();
     let s = table::read(file, columns, time, tau0, unit, lsb)?;
     let read_s = started.elapsed().as_secs_f64();

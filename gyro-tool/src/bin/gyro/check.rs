@@ -25,18 +25,6 @@ pub struct Args {
     acks: Option<Vec<AckKind>>,
 }
 
-/// Run it.
-pub fn run(a: Args) -> Res<bool> {
-    let Args {
-        file,
-        samples,
-        min_samples,
-        fused_crc32,
-        acks,
-    } = a;
-    check(&file, (samples, min_samples), fused_crc32, acks)
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum AckKind {
     Ok,
@@ -66,12 +54,17 @@ fn parse_hex(s: &str) -> Result<u32, String> {
     u32::from_str_radix(s.trim_start_matches("0x"), 16).map_err(|e| format!("{s:?}: {e}"))
 }
 
-fn check(
-    file: &std::path::Path,
-    (samples, min_samples): (Option<u64>, Option<u64>),
-    crc: Option<u32>,
-    acks: Option<Vec<AckKind>>,
-) -> Res<bool> {
+/// `gyro check`: a recording's frames, counts and errors against what
+/// the caller expects.
+pub fn run(a: Args) -> Res<bool> {
+    let Args {
+        file,
+        samples,
+        min_samples,
+        fused_crc32: crc,
+        acks,
+    } = a;
+    let file = file.as_path();
     let (frames, dec) = read_recording(file)?;
     let mut sum = Summary::default();
     for r in &frames {

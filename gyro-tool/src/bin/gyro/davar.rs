@@ -24,26 +24,15 @@ pub struct Args {
     csv: Option<PathBuf>,
 }
 
-/// Run it.
+/// `gyro davar`: the E-DAVAR surface of one column.
 pub fn run(a: Args) -> Res<bool> {
     let Args {
         log,
         column,
-        lambda2,
+        lambda2: l2,
         svg,
-        csv,
+        csv: csv_out,
     } = a;
-    davar(&log, &column, lambda2, &svg, csv.as_deref())
-}
-
-/// `gyro davar`: the E-DAVAR surface of one column.
-fn davar(
-    log: &LogArgs,
-    column: &str,
-    l2: surface::Lambda2,
-    svg: &std::path::Path,
-    csv_out: Option<&std::path::Path>,
-) -> Res<bool> {
     let s = log.read(&[column.to_string()], false)?;
     let rate = s.rates.first().ok_or("no column")?;
     let (rows, lsb, lambda2) = surface::surface(rate, s.tau0, l2)?;
@@ -75,6 +64,6 @@ fn davar(
         }
         w.flush()?;
     }
-    surface::draw(svg, &log.name(), "°/s", &rows, lambda2, s.tau0)?;
+    surface::draw(&svg, &log.name(), "°/s", &rows, lambda2, s.tau0)?;
     Ok(true)
 }

@@ -19,12 +19,6 @@ pub struct Args {
     out: Option<PathBuf>,
 }
 
-/// Run it.
-pub fn run(a: Args) -> Res<bool> {
-    let Args { file, what, out } = a;
-    decode(&file, what, out)
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum What {
     Samples,
@@ -38,7 +32,10 @@ fn lead(link_seq: u32, seq: u32, t_us: u64) -> Vec<String> {
     vec![link_seq.to_string(), seq.to_string(), t_us.to_string()]
 }
 
-fn decode(file: &std::path::Path, what: What, out: Option<PathBuf>) -> Res<bool> {
+/// `gyro decode`: one kind of frame of a recording as CSV.
+pub fn run(a: Args) -> Res<bool> {
+    let Args { file, what, out } = a;
+    let file = file.as_path();
     let (frames, dec) = read_recording(file)?;
     let sink: Box<dyn Write> = match &out {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),

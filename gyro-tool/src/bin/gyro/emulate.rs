@@ -33,7 +33,13 @@ pub struct Args {
     out: PathBuf,
 }
 
-/// Run it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum EmuChip {
+    Icm42688,
+    Adxrs453,
+}
+
+/// `gyro emulate`: a log of an emulated chip at rest.
 pub fn run(a: Args) -> Res<bool> {
     let Args {
         chip,
@@ -44,25 +50,7 @@ pub fn run(a: Args) -> Res<bool> {
         rrw,
         out,
     } = a;
-    emulate(chip, hours, hz, seed, flicker, rrw, &out)
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-enum EmuChip {
-    Icm42688,
-    Adxrs453,
-}
-
-/// `gyro emulate`: a log of an emulated chip at rest.
-fn emulate(
-    chip: EmuChip,
-    hours: f64,
-    hz: f64,
-    seed: u64,
-    flicker: bool,
-    rrw: Option<f32>,
-    out: &std::path::Path,
-) -> Res<bool> {
+    let out = out.as_path();
     use gyro_array::emu::noise::AxisNoise;
     use gyro_array::emu::{NoiseParams, Rng};
     if !(hours > 0.0 && hours <= 1000.0 && hz > 0.0 && hz <= 1e5) {

@@ -26,7 +26,7 @@ pub struct Args {
     csv: Option<PathBuf>,
 }
 
-/// Run it.
+/// `gyro replay`: the board's fusion over a multi-gyro log.
 pub fn run(a: Args) -> Res<bool> {
     let Args {
         log,
@@ -35,17 +35,12 @@ pub fn run(a: Args) -> Res<bool> {
         svg,
         csv,
     } = a;
-    replay_log(&log, &columns, truth.as_deref(), &svg, csv.as_deref())
-}
-
-/// `gyro replay`: the board's fusion over a multi-gyro log.
-fn replay_log(
-    log: &LogArgs,
-    columns: &[String],
-    truth: Option<&str>,
-    svg: &std::path::Path,
-    csv_out: Option<&std::path::Path>,
-) -> Res<bool> {
+    let (columns, truth, svg, csv_out) = (
+        &columns[..],
+        truth.as_deref(),
+        svg.as_path(),
+        csv.as_deref(),
+    );
     let mut s = log.read(columns, true)?;
     // The reference: out of the chips' columns if it is among them (no -c
     // given), else read on its own.
