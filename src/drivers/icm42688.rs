@@ -41,9 +41,9 @@ pub mod reg {
     pub const GYRO_CONFIG_STATIC2: u8 = 0x0B;
     /// Bank 1: GYRO_AAF_DELT (bits 5:0).
     pub const GYRO_CONFIG_STATIC3: u8 = 0x0C;
-    /// Bank 1: GYRO_AAF_DELTSQR[7:0].
+    /// Bank 1: GYRO_AAF_DELTSQR\[7:0\].
     pub const GYRO_CONFIG_STATIC4: u8 = 0x0D;
-    /// Bank 1: GYRO_AAF_BITSHIFT (7:4), GYRO_AAF_DELTSQR[11:8] (3:0).
+    /// Bank 1: GYRO_AAF_BITSHIFT (7:4), GYRO_AAF_DELTSQR\[11:8\] (3:0).
     pub const GYRO_CONFIG_STATIC5: u8 = 0x0E;
     /// Bank 1: factory self-test codes for the gyro axes.
     pub const XG_ST_DATA: u8 = 0x5F;
