@@ -9,8 +9,6 @@ use core::cell::RefCell;
 
 use crate::emu::with_bus;
 
-use embedded_hal_bus::spi::RefCellDevice;
-
 use crate::algo::fusion::{
     AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
     SeedConfig,
@@ -20,8 +18,8 @@ use crate::drivers::adxrs453::{self, Adxrs453};
 use crate::drivers::icm42688::{self, Config, Icm42688};
 use crate::drivers::Gyro;
 use crate::emu::{
-    board_array, board_drivers, Adxrs453Model, BoardDrivers, Chip, CsLine, EmuBus, EmuCs, EmuDelay,
-    Fault, Icm42688Model, Mount, NoiseParams, RateProfile, Rng,
+    board_array, board_drivers, emu_device, Adxrs453Model, BoardDrivers, Chip, CsLine, EmuBus,
+    EmuDelay, Fault, Icm42688Model, Mount, NoiseParams, RateProfile, Rng,
 };
 use crate::pipeline::startup::start_array;
 use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
@@ -465,7 +463,7 @@ fn icm_init(fault: Fault) -> Result<icm42688::SelfTest, icm42688::Error<crate::e
     chip.fault = fault;
     let bus: Bus1 = RefCell::new(EmuBus::new([Chip::Icm(chip)], &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let dev = emu_device(&bus, &cs[0]);
     let mut g = Icm42688::new(dev);
     g.init(&mut delay, Config::default())
         .map_err(|e| e.map_spi(bus_err))?;
@@ -485,7 +483,7 @@ fn adx_run(
     };
     let bus: Bus1 = RefCell::new(EmuBus::new([Chip::Adx(chip)], &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let dev = emu_device(&bus, &cs[0]);
     let mut g = Adxrs453::new(dev, 2);
     let init = g.init(&mut delay).map_err(|e| e.map_spi(bus_err));
     with_bus(&bus, |b| b.chips[0].set_fault(fault));

@@ -2,14 +2,12 @@
 //! through the real driver's FIFO path every millisecond: the harness of
 //! the chip-timing tests and of `timing-eval`.
 
-use std::cell::RefCell;
-
-use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::drivers::icm42688::{Config, Error, FifoSample, Icm42688};
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuDelay, Icm42688Model, NoiseParams,
     RateProfile,
 };
+use std::cell::RefCell;
 
 /// The bus of one chip.
 pub type Bus<'a> = RefCell<EmuBus<'a, 1>>;
@@ -55,7 +53,7 @@ pub fn run(
     let bus: Bus = RefCell::new(EmuBus::new([c], &cs));
     with_bus(&bus, |b| b.clkin_hz = clkin_hz);
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let dev = emu_device(&bus, &cs[0]);
     let mut g = Icm42688::new(dev);
     g.init(&mut delay, cfg).expect("init");
     let mut r = Reads::default();

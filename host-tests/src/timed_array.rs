@@ -10,9 +10,6 @@
 //! Not yet the board's loop: `Pipeline::step` still polls the data
 //! registers. This measures what its alignment will deliver.
 
-use std::cell::RefCell;
-
-use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use gyro_array::drivers::icm42688::{
@@ -21,11 +18,12 @@ use gyro_array::drivers::icm42688::{
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
-    with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCs, EmuDelay, Icm42688Model, NoiseParams,
+    emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuDelay, Icm42688Model, NoiseParams,
     PathModel, RateProfile,
 };
 use gyro_array::pipeline::align::{Aligned, Aligner};
 use gyro_array::pipeline::clock::{ChipClock, Instant16};
+use std::cell::RefCell;
 
 /// Chips in the array.
 pub const N: usize = 4;
@@ -309,7 +307,7 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
     let period_us = 1e6 / r.odr.hz() as f64;
     let mut g: Vec<_> = (0..N)
         .map(|i| {
-            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let d = emu_device(&bus, &cs[i]);
             let mut g = Icm42688::new(d);
             g.init(&mut delay, cfg).expect("init");
             g
@@ -461,7 +459,7 @@ fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let mut g: Vec<_> = (0..N)
         .map(|i| {
-            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let d = emu_device(&bus, &cs[i]);
             let mut g = Icm42688::new(d);
             g.init(&mut delay, Config::default()).expect("init");
             g

@@ -7,19 +7,17 @@
 //! The ADXRS453 is left out: at the array's instant its rate, 3.9 ms old,
 //! is always late (docs/timing.md).
 
-use std::cell::RefCell;
-
-use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
-    timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Fault,
+    emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay, Fault,
     RateProfile,
 };
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
+use std::cell::RefCell;
 
 /// Chips.
 pub const N: usize = 4;
@@ -105,7 +103,7 @@ pub fn run(
     };
     let mut t: Vec<_> = (0..N)
         .map(|i| {
-            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let d = emu_device(&bus, &cs[i]);
             let mut g = Icm42688::new(d);
             if g.init(&mut delay, cfg).is_err() {
                 pipe.mark_init_failed(i);

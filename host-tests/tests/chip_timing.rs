@@ -274,10 +274,9 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
 
 #[test]
 fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
-    use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::drivers::adxrs453::{Adxrs453, DELAY_US};
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuCs, EmuDelay};
+    use gyro_array::emu::{emu_device, AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuDelay};
     use std::cell::RefCell;
     // A 2 Hz, 50 °/s sine on z; no noise. The rate leaves the part's
     // 77.5 Hz filter late, and each response carries the rate latched at
@@ -296,7 +295,7 @@ fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
     let cs: [CsLine; 1] = Default::default();
     let bus = RefCell::new(EmuBus::new([Chip::Adx(m)], &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+    let dev = emu_device(&bus, &cs[0]);
     let mut g = Adxrs453::new(dev, 2);
     g.init(&mut delay).expect("init");
     let mut read = Vec::new();

@@ -5,17 +5,16 @@
 //! timed path (a stuck chip, a reset, a stalled bus, CLKIN lost) handled,
 //! and nothing flagged for timing.
 
-use std::cell::RefCell;
-
-use embedded_hal_bus::spi::RefCellDevice;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688, Odr};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Tone, Vibration};
 use gyro_array::emu::{
-    with_bus, Chip, CsLine, EmuBus, EmuCs, EmuDelay, Fault, Icm42688Model, NoiseParams, RateProfile,
+    emu_device, with_bus, Chip, CsLine, EmuBus, EmuDelay, Fault, Icm42688Model, NoiseParams,
+    RateProfile,
 };
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use std::cell::RefCell;
 
 const N: usize = 4;
 use host_tests::timed_board::{self, DELAY_US};
@@ -160,7 +159,7 @@ fn run_lockstep(ms: u32) -> [f64; 3] {
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let mut g: Vec<_> = (0..N)
         .map(|i| {
-            let Ok(d) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i]));
+            let d = emu_device(&bus, &cs[i]);
             let mut g = Icm42688::new(d);
             g.init(&mut delay, Config::default()).expect("init");
             g

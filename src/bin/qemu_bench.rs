@@ -80,12 +80,11 @@ fn main() -> ! {
 /// time on a clock 0.3 % fast, so reads find one, two or three samples.
 fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
     use core::cell::RefCell;
-    use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::{
-        with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, Icm42688Model,
-        NoiseParams, RateProfile,
+        emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
+        Icm42688Model, NoiseParams, RateProfile,
     };
     use gyro_array::pipeline::timed::TimedIcm;
 
@@ -99,7 +98,7 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         }
         let bus = RefCell::new(EmuBus::new([Chip::Icm(chip)], &cs));
         let mut delay = EmuDelay::new(&bus, 1e-3);
-        let Ok(dev) = RefCellDevice::new_no_delay(&bus, EmuCs(&cs[0]));
+        let dev = emu_device(&bus, &cs[0]);
         let mut g = Icm42688::new(dev);
         let cfg = if timed {
             Config::board_fifo(ClockInput::Internal)
@@ -789,13 +788,13 @@ fn bench_timed_loop_on(
         return true;
     }
     use core::cell::RefCell;
-    use embedded_hal_bus::spi::RefCellDevice;
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
     use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::timing::ClockParams;
     use gyro_array::emu::{
-        timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuCs, EmuDelay, PathModel,
+        emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
+        PathModel,
     };
     use gyro_array::pipeline::timed::TimedIcm;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
@@ -833,8 +832,7 @@ fn bench_timed_loop_on(
     ) else {
         exit(false)
     };
-    let dev =
-        |i: usize| RefCellDevice::new_no_delay(&bus, EmuCs(&cs[i])).unwrap_or_else(|_| exit(false));
+    let dev = |i: usize| emu_device(&bus, &cs[i]);
     let timed = |i: usize, pipe: &mut Pipeline<4>, delay: &mut EmuDelay<'_, '_, 4>| {
         let mut g = Icm42688::new(dev(i));
         if g.init(delay, cfg).is_err() {

@@ -11,8 +11,21 @@ use super::{CsLine, EmuBus, EmuCs};
 use crate::drivers::adxrs453::Adxrs453;
 use crate::drivers::icm42688::Icm42688;
 
-/// One chip's SPI device on the emulated bus.
-pub type EmuDevice<'a, 'c> = RefCellDevice<'a, EmuBus<'c, 5>, EmuCs<'c>, NoDelay>;
+/// One chip's SPI device on an emulated bus of `N` chips (the board's five
+/// by default).
+pub type EmuDevice<'a, 'c, const N: usize = 5> =
+    RefCellDevice<'a, EmuBus<'c, N>, EmuCs<'c>, NoDelay>;
+
+/// The SPI device of the chip behind `cs` on `bus`: what every harness of
+/// the emulated chips, of any array size, talks through.
+pub fn emu_device<'a, 'c, const N: usize>(
+    bus: &'a RefCell<EmuBus<'c, N>>,
+    cs: &'c CsLine,
+) -> EmuDevice<'a, 'c, N> {
+    // An emulated chip-select cannot fail (its error is `Infallible`).
+    let Ok(d) = RefCellDevice::new_no_delay(bus, EmuCs(cs));
+    d
+}
 
 /// The board's five drivers, not yet started.
 pub struct BoardDrivers<'a, 'c> {
@@ -27,11 +40,7 @@ pub fn board_drivers<'a, 'c>(
     bus: &'a RefCell<EmuBus<'c, 5>>,
     cs: &'c [CsLine; 5],
 ) -> BoardDrivers<'a, 'c> {
-    // An emulated chip-select cannot fail (its error is `Infallible`).
-    let dev = |i: usize| {
-        let Ok(d) = RefCellDevice::new_no_delay(bus, EmuCs(&cs[i]));
-        d
-    };
+    let dev = |i: usize| emu_device(bus, &cs[i]);
     BoardDrivers {
         icm: [0, 1, 2, 3].map(|i| Icm42688::new(dev(i))),
         // The ADXRS453 measures the board's z axis (2).

@@ -22,7 +22,7 @@ use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
 pub use adxrs453::{AdxTiming, Adxrs453Model};
-pub use board::{board_drivers, BoardDrivers, EmuDevice};
+pub use board::{board_drivers, emu_device, BoardDrivers, EmuDevice};
 pub use icm42688::{ChipTiming, Icm42688Model, PathModel};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
