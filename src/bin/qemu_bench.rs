@@ -122,9 +122,9 @@ fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         let (mut sum, mut worst, mut good) = (0.0f32, 0.0f32, 0u32);
         for n in 0..READS + 100 {
             with_bus(&bus, |b| b.advance(1e-3));
-            let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
+            let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
             let delay = gyro_array::pipeline::timed::BOARD_DELAY_US;
-            let at = gyro_array::pipeline::timed::array_instant(now_us as u64 as u32, delay);
+            let at = gyro_array::pipeline::timed::array_instant(now_us, delay);
             timed_g.set_instant(at, delay);
             let m0 = meter();
             let t0 = t.now();
@@ -886,8 +886,8 @@ fn bench_timed_loop_on(
         |pipe| {
             // The board's timer would give this instant; the bus's clock
             // stands in for it.
-            let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-            let at = gyro_array::pipeline::timed::array_instant(now_us as u64 as u32, DELAY_US);
+            let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
+            let at = gyro_array::pipeline::timed::array_instant(now_us, DELAY_US);
             let mut gyros: [&mut TimedIcm<_, _>; 4] = [&mut g0, &mut g1, &mut g2, &mut g3];
             for g in gyros.iter_mut() {
                 g.set_instant(at, DELAY_US);

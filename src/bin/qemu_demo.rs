@@ -300,8 +300,8 @@ fn main() -> ! {
         // One instant for the array, a fixed delay behind the read, on the
         // captures' µs clock (the bus's here, TIM5's on the board), in
         // 1/16 µs.
-        let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-        let at = timed::array_instant(now_us as u64 as u32, BOARD_DELAY_US);
+        let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
+        let at = timed::array_instant(now_us, BOARD_DELAY_US);
         for t in [&mut g0, &mut g1, &mut g2, &mut g3] {
             t.set_instant(at, BOARD_DELAY_US);
         }

@@ -345,6 +345,13 @@ impl<'a, const N: usize> EmuBus<'a, N> {
         self.t64_s
     }
 
+    /// The board timer's count at the bus's time, µs, wrapping at 2³²: what
+    /// the board reads from TIM5 (1 µs tick) in one register read; here the
+    /// model's f64 time converted (the emulator's work, not the loop's).
+    pub fn timer_us(&self) -> u32 {
+        (self.t64_s * 1e6) as u64 as u32
+    }
+
     fn exchange(&mut self, mosi: u8) -> Result<u8, BusError> {
         self.bytes = self.bytes.wrapping_add(1);
         let mut selected = None;
