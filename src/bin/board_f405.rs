@@ -65,7 +65,7 @@ use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
-use gyro_array::pipeline::tracker::{self, NoiseTracker};
+use gyro_array::pipeline::tracker::{self, NoiseTracker, Probe};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
@@ -393,31 +393,48 @@ fn main() -> ! {
     watchdog.start(100.millis());
     let mut meter = stack::StackMeter::new();
     let mut status_for: Option<(u32, u64)> = None;
+    // The last sample's noise probe, for the E-DAVARs once its frame is out.
+    let mut probe: Option<Probe> = None;
     let mut last = f405::ticks();
     // Sample clock, µs (64-bit: the tick counter wraps after 49 days).
     let mut t_us: u64 = 0;
     loop {
-        // Idle time until the tick feeds the UART and reads commands.
+        // Idle time until the tick: the UART fed, then the E-DAVARs, then
+        // a status frame when one is due; commands read.
         let now = loop {
             let t = f405::ticks();
             if t != last {
+                // Every sample reaches the E-DAVARs, whatever is still
+                // queued when the next one is due.
+                if let Some(p) = probe.take() {
+                    noise.push_probe(p);
+                }
                 break t;
             }
-            if let Some((seq, t)) = status_for.take() {
-                let st = port.status(
-                    &pipe,
-                    seq,
-                    t,
-                    [1, 16, 256],
-                    1_000_000 / FS_HZ,
-                    meter.peak(),
-                    &clocks([&t0, &t1, &t2, &t3]),
-                );
-                port.send(&st);
-            }
             port.drain(&mut tx);
+            if port.queued() == 0 {
+                if let Some(p) = probe.take() {
+                    noise.push_probe(p);
+                } else if let Some((seq, t)) = status_for.take() {
+                    let st = port.status(
+                        &pipe,
+                        seq,
+                        t,
+                        [1, 16, 256],
+                        1_000_000 / FS_HZ,
+                        meter.peak(),
+                        &clocks([&t0, &t1, &t2, &t3]),
+                    );
+                    port.send(&st);
+                }
+            }
             port.receive(&mut rx, &mut pipe);
-            idle::sleep_unless(|| f405::ticks() != last || port.queued() != 0);
+            idle::sleep_unless(|| {
+                f405::ticks() != last
+                    || port.queued() != 0
+                    || probe.is_some()
+                    || status_for.is_some()
+            });
         };
         let elapsed = now.wrapping_sub(last);
         last = now;
@@ -435,8 +452,11 @@ fn main() -> ! {
         let mut gyros: [&mut dyn Gyro; 5] = [&mut t0, &mut t1, &mut t2, &mut t3, &mut g4];
         let out = pipe.step(&mut gyros);
         pipe.log_health_changes(&out);
-        noise.push(&out);
+        // The frame first, with the E-DAVARs' estimate of the samples
+        // before this one: the antenna waits for the frame, and the
+        // E-DAVARs take this sample in the idle time once it is out.
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
+        probe = Some(Probe::from(&out));
         meter.step(64);
         // A status frame is built in the idle time that follows, not in
         // the sample's own time.

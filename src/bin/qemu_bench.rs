@@ -919,9 +919,10 @@ fn bench_timed_loop_on(
 
 /// The measured part of the whole-loop bench, whatever the chips: per
 /// sample, `before(n)` (faults, the bus's time) untimed, then `step`
-/// (read + calibrate + fuse), the E-DAVARs and the link frame, timed and
-/// marked for the exact count; the UART and the status frame in the idle
-/// time after, timed on their own. `meter` reads the emulated bus's own
+/// (read + calibrate + fuse) and the link frame (the frame's path), the
+/// UART fed, and the E-DAVARs, timed and marked for the exact count (the
+/// UART on its own); the status frame in the idle time after, timed on
+/// its own. `meter` reads the emulated bus's own
 /// ticks and bytes.
 #[allow(clippy::too_many_arguments)]
 fn run_loop<const N: usize>(
@@ -977,14 +978,13 @@ fn run_loop<const N: usize>(
         // operation's own interval one).
         let in_bus = (m1.ticks - m0.ticks) as f32 + (m1.ops - m0.ops) as f32 * clock_cost;
         fallbacks += out.fused.iter().flatten().filter(|f| f.fallback).count() as u32;
-        mark::davar();
-        noise.push(&out);
-        let t2 = t.now();
+        // The frame first, with the E-DAVAR estimate of the samples before
+        // this one: the antenna waits for it, not for the E-DAVARs.
         mark::link();
         port.publish(&out, u64::from(n) * 1000, pipe, &noise.at_taus([0, 4, 8]));
         let status_due = port.status_due(out.seq);
         mark::off();
-        let t3 = t.now();
+        let t2 = t.now();
         // The UART is fed in the idle time, as on the board (timed on its
         // own).
         let d0 = t.now();
@@ -992,6 +992,13 @@ fn run_loop<const N: usize>(
         let dt_drain = net(t.now() - d0, pair);
         drain_sum += dt_drain;
         drain_worst = drain_worst.max(dt_drain);
+        // The E-DAVARs, once the frame is out, as on the board.
+        let t3a = t.now();
+        let probe = gyro_array::pipeline::tracker::Probe::from(&out);
+        mark::davar();
+        noise.push_probe(probe);
+        mark::off();
+        let t3 = t.now();
         // The status frame, as the board builds it: in the idle time after
         // the sample (timed on its own).
         if status_due {
@@ -1009,7 +1016,7 @@ fn run_loop<const N: usize>(
             port.drain(&mut uart);
             status_worst = status_worst.max(net(t.now() - s0, pair));
         }
-        let parts = [net(t1 - t0, pair), net(t2 - t1, pair), net(t3 - t2, pair)];
+        let parts = [net(t1 - t0, pair), net(t3 - t3a, pair), net(t2 - t1, pair)];
         let total: f32 = parts.iter().sum();
         for (s, p) in sum.iter_mut().zip(parts) {
             *s += p;

@@ -58,7 +58,7 @@ use gyro_array::link::port::{timed_clock, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
-use gyro_array::pipeline::tracker::{self, NoiseTracker};
+use gyro_array::pipeline::tracker::{self, NoiseTracker, Probe};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
@@ -226,39 +226,55 @@ fn main() -> ! {
     let mut sample_frames = 0u32;
 
     let mut status_for: Option<(u32, u64)> = None;
+    // The last sample's noise probe, for the E-DAVARs once its frame is out.
+    let mut probe: Option<Probe> = None;
     let mut last_tick = TICKS.load(Ordering::Acquire);
     let mut stuck_at = None;
     let mut excluded_at = None;
     let mut pass = true;
     for n in 0..SAMPLES {
-        // Wait for the sample tick; count periods we missed.
+        // Wait for the sample tick; count periods we missed. Idle time
+        // feeds the UART, then runs the E-DAVARs, then builds a status
+        // frame when one is due, and reads commands.
         let now = loop {
             let t = TICKS.load(Ordering::Acquire);
             if t != last_tick {
+                // Every sample reaches the E-DAVARs, whatever is still
+                // queued when the next one is due.
+                if let Some(p) = probe.take() {
+                    noise.push_probe(p);
+                }
                 break t;
             }
-            // Idle time builds the status frame, feeds the UART and reads
-            // commands.
-            if let Some((seq, t)) = status_for.take() {
-                let peak = stack::stack_usage().peak;
-                let st = port.status(
-                    &pipe,
-                    seq,
-                    t,
-                    [1, 8, 64],
-                    1_000_000 / FS_HZ,
-                    peak,
-                    &clocks([&g0, &g1, &g2, &g3]),
-                );
-                port.send(&st);
-            }
             port.drain(&mut uart);
+            if port.queued() == 0 {
+                if let Some(p) = probe.take() {
+                    noise.push_probe(p);
+                } else if let Some((seq, t)) = status_for.take() {
+                    let peak = stack::stack_usage().peak;
+                    let st = port.status(
+                        &pipe,
+                        seq,
+                        t,
+                        [1, 8, 64],
+                        1_000_000 / FS_HZ,
+                        peak,
+                        &clocks([&g0, &g1, &g2, &g3]),
+                    );
+                    port.send(&st);
+                }
+            }
             port.receive(&mut uart, &mut pipe);
             // Sleep only if the tick has still not come, checked with
             // interrupts masked: a tick taken between the check above and
             // the WFI would otherwise be slept through, a missed sample
             // (WFI still wakes on the pending interrupt).
-            idle::sleep_unless(|| TICKS.load(Ordering::Acquire) != last_tick || port.queued() != 0);
+            idle::sleep_unless(|| {
+                TICKS.load(Ordering::Acquire) != last_tick
+                    || port.queued() != 0
+                    || probe.is_some()
+                    || status_for.is_some()
+            });
         };
         let missed = now.wrapping_sub(last_tick).saturating_sub(1);
         if missed > 0 {
@@ -314,10 +330,12 @@ fn main() -> ! {
                 excluded_at = Some(n);
             }
         }
-        noise.push(&out);
         let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
         let before = port.counters().sent;
+        // The frame first, as on the board (the E-DAVARs take this sample
+        // once it is out).
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
+        probe = Some(Probe::from(&out));
         if port.counters().sent != before {
             sample_frames += 1;
             // What the frame carried (the rates predicted to its last byte:
@@ -383,6 +401,9 @@ fn main() -> ! {
         }
     }
 
+    if let Some(p) = probe.take() {
+        noise.push_probe(p);
+    }
     // Send what is still queued (bounded: the UART takes a byte at a time).
     for _ in 0..100_000 {
         if port.queued() == 0 {

@@ -182,6 +182,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
 
     /// Feed one pipeline output.
     pub fn push<const N: usize>(&mut self, out: &Output<N>) {
+        self.push_probe(Probe::from(out));
+    }
+
+    /// Feed what the tracker takes of one pipeline output (kept by the
+    /// board loop until its sample frame is on the wire).
+    pub fn push_probe(&mut self, out: Probe) {
         let contiguous = self.last_seq.is_some_and(|s| out.seq == s.wrapping_add(1));
         self.last_seq = Some(out.seq);
         for (a, (d, p)) in self.axes.iter_mut().zip(out.noise_probe_dps).enumerate() {
@@ -290,6 +296,27 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     /// Missing samples bridged so far (summed over axes).
     pub fn bridged(&self) -> u32 {
         self.bridged
+    }
+}
+
+/// What the tracker takes of a sample: its sequence number and each axis's
+/// noise probe ([`Output::noise_probe_dps`]). The board keeps it, not the
+/// whole output, for the idle time after the sample's frame has gone out:
+/// the antenna waits for the frame, not for the E-DAVARs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Probe {
+    /// The sample's sequence number.
+    pub seq: u32,
+    /// Per axis, the noise probe (`None`: fewer than two gyros fused).
+    pub noise_probe_dps: [Option<f32>; 3],
+}
+
+impl<const N: usize> From<&Output<N>> for Probe {
+    fn from(out: &Output<N>) -> Self {
+        Self {
+            seq: out.seq,
+            noise_probe_dps: out.noise_probe_dps,
+        }
     }
 }
 

@@ -9,9 +9,11 @@
 //!   environment and run its tests against allantools.
 //! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`); the
 //!   board's loop also counted exactly from QEMU's execution trace.
-//! - `bench-loop`: that exact count alone (some 15 minutes for the twelve
+//! - `bench-loop`: that exact count alone (some 40 minutes for the twelve
 //!   scenarios; `BENCH_SCENARIOS=KL` counts only those named, and
-//!   `XTASK_TRACE_LINES=1` adds the mean sample by source line).
+//!   `XTASK_TRACE_LINES=1` adds the mean sample by source line). Each
+//!   scenario's whole loop and its frame's path (read + fuse, the frame;
+//!   the E-DAVARs run once the frame is out).
 //! - `size`: flash and static RAM of the firmware binaries.
 //! - `panics`: panic call sites in each release ELF, by the code they come
 //!   from (llvm-objdump and llvm-addr2line).
