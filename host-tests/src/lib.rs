@@ -10,9 +10,25 @@ pub mod latency {
     //! `timing-eval` (its latency budget) and `pointing-eval` (when each
     //! sample reaches the positioner).
 
-    /// The board loop's worst sample, µs: `cargo xtask bench-loop`'s
-    /// target (10 000 instructions) at the STM32F405's 168 MHz.
-    pub const LOOP_US: f64 = 10_000.0 / 168.0;
+    use gyro_array::drivers::icm42688::{ClockInput, Config};
+
+    /// The loop's compute on the frame's path, µs: `cargo xtask
+    /// bench-loop`'s target (10 000 instructions) at the STM32F405's
+    /// 168 MHz.
+    pub const COMPUTE_US: f64 = 10_000.0 / 168.0;
+
+    /// The SPI transfers of one sample's reads on the board, µs, with the
+    /// ICM-42688-Ps sampling through `cfg`'s FIFO (the board's own
+    /// figure, `pipeline::timed::board_spi_us`).
+    pub fn spi_us(cfg: &Config) -> f64 {
+        f64::from(gyro_array::pipeline::timed::board_spi_us(cfg))
+    }
+
+    /// From the read to the sample frame queued, µs, with chips sampling
+    /// through `cfg`: the SPI transfers, then the compute.
+    pub fn loop_us(cfg: &Config) -> f64 {
+        spi_us(cfg) + COMPUTE_US
+    }
 
     /// Bytes of the largest sample frame on the wire (every field filled,
     /// an E-DAVAR estimate included, five gyros): the link's own figure,
@@ -27,9 +43,10 @@ pub mod latency {
     }
 
     /// From the read to the sample frame's last byte at the antenna, µs:
-    /// the loop's worst sample and the largest frame on the wire.
+    /// the board's SPI reads, the loop's worst sample and the largest
+    /// frame on the wire.
     pub fn read_to_antenna_us() -> f64 {
-        LOOP_US + wire_us(sample_frame_bytes())
+        loop_us(&Config::board_fifo(ClockInput::ClkIn)) + wire_us(sample_frame_bytes())
     }
 }
 pub mod timed_array;

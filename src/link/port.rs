@@ -72,8 +72,8 @@ pub const RX_MAX: usize = 64;
 /// Samples the delay compensation fits its line to: the length that leaves
 /// the reference pointing loop the least error over the vehicle profiles
 /// (`pointing-eval`: K = 2 to 16 measured; longer fits lag on the 8 Hz
-/// road, two samples pass more noise). At the board's 2.1 ms horizon the
-/// predicted rate's white noise is 2.25 times the measured rate's
+/// road, two samples pass more noise). At the board's 1.97 ms horizon the
+/// predicted rate's white noise is 2.18 times the measured rate's
 /// ([`Predictor::noise_gain`]), all of it at high frequency (the line's
 /// slope), which the positioner integrates away: the pointing error's
 /// share from noise grows 3–7 %.
@@ -86,11 +86,13 @@ pub const PREDICT_K: usize = 3;
 pub const SAMPLE_FRAME_MAX: u32 = 80;
 
 /// The loop's time from the sample's read (`t_us`) to its frame being
-/// queued, µs, that [`Compensation::ToFrame`] allows for: the loop's
-/// 10 000-instruction budget at the STM32F405's 168 MHz (`cargo xtask
-/// bench-loop` measures the loop; its mean on the timed board is some
-/// 10 600, 63 µs).
-pub const LOOP_US: u32 = 60;
+/// queued, µs, that [`Compensation::ToFrame`] allows for: the SPI
+/// transfers of the board's reads (`pipeline::timed::board_spi_us`, 110 µs
+/// at its 4 kHz FIFO sampling) and the frame's path through the loop, its
+/// 10 000-instruction budget at the STM32F405's 168 MHz (60 µs; `cargo
+/// xtask bench-loop` counts it). The E-DAVARs run after the frame is
+/// queued and are not on it. `link::tests` checks the sum.
+pub const LOOP_US: u32 = 170;
 
 /// What a status frame says of a timed chip's clock ([`Port::status`]'s
 /// `clocks`): its source, and its error in ppm once the tracker follows it

@@ -561,9 +561,9 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
     let got = samples(&mut port, &outs);
     assert_eq!(got.len(), 10);
     let d = port.horizon_us().expect("on by default");
-    // The frame's end at 6 Mbaud: the loop's time, then the largest sample
-    // frame, 10 bits a byte.
-    assert_eq!(d, 60 + 134);
+    // The frame's end at 6 Mbaud: the SPI reads and the loop's time, then
+    // the largest sample frame, 10 bits a byte.
+    assert_eq!(d, 170 + 134);
     for (k, s) in got.iter().enumerate() {
         if k + 1 < super::port::PREDICT_K {
             // Not enough samples to fit yet: the measured rates, unstated.
@@ -605,4 +605,15 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
             .collect::<std::vec::Vec<_>>(),
         [false, false, true, false]
     );
+}
+
+#[test]
+fn the_horizon_allows_for_the_boards_spi_reads_and_its_loop() {
+    use crate::drivers::icm42688::{ClockInput, Config};
+    // The loop's 10 000-instruction budget at 168 MHz beside the SPI
+    // transfers of the board's reads, rounded up to the µs.
+    let spi = crate::pipeline::timed::board_spi_us(&Config::board_fifo(ClockInput::ClkIn));
+    let want = spi + 10_000.0 / 168.0;
+    let got = super::port::LOOP_US as f32;
+    assert!(got >= want && got < want + 1.0, "{got} against {want}");
 }

@@ -19,7 +19,7 @@ use embedded_hal::spi::SpiDevice;
 
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
-use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, MAX_PER_READ};
+use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, FIFO_PACKET, MAX_PER_READ};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
 /// Samples kept per chip: 8 ms at 4 kHz, room for an instant up to 7 ms
@@ -73,6 +73,29 @@ pub const SPIKE_DPS: f32 = 25.0;
 /// the mean of four's half-span and a 250 µs sample period, for a chip
 /// 1 % slow.
 pub const BOARD_DELAY_US: u32 = 1670;
+
+/// The board's SPI clocks, Hz (`board-f405` at 168 MHz): SPI1 to the
+/// four ICM-42688-P, APB2's 84 MHz / 4, the fastest within the chip's
+/// 24 MHz; SPI2 to the ADXRS453, APB1's 42 MHz / 8, within its 8 MHz.
+pub const BOARD_SPI_ICM_HZ: u32 = 21_000_000;
+/// See [`BOARD_SPI_ICM_HZ`].
+pub const BOARD_SPI_ADXRS_HZ: u32 = 5_250_000;
+
+/// How long one sample's SPI transfers take on the board, µs, its four
+/// ICM-42688-P sampling through `cfg`'s FIFO: per chip the command byte,
+/// INT_STATUS, FIFO_COUNT and a millisecond's packets (one more command
+/// byte for each further burst of [`MAX_PER_READ`]), and the ADXRS453's
+/// 32-bit frame. The drivers' `SpiDevice` transfers block, so the CPU
+/// waits these out on the frame's path, beside the loop's instructions
+/// (which `cargo xtask bench-loop` counts without them); the bytes are
+/// taken back to back. A configuration read-back or a temperature read,
+/// once in 32 samples, adds a few bytes more.
+pub fn board_spi_us(cfg: &Config) -> f32 {
+    let packets = cfg.odr.per_ms();
+    let bursts = packets.div_ceil(MAX_PER_READ).max(1);
+    let icm_bytes = 4 * (bursts + 3 + FIFO_PACKET * packets);
+    (icm_bytes * 8) as f32 * 1e6 / BOARD_SPI_ICM_HZ as f32 + 32.0 * 1e6 / BOARD_SPI_ADXRS_HZ as f32
+}
 
 /// How far behind its read an instant can be stated for chips sampling
 /// through `cfg`'s FIFO, µs: the path's group delay, the moving mean's
@@ -560,6 +583,14 @@ mod tests {
         );
         assert!(new.read().is_ok());
         assert_eq!(new.delay_us(), 1200);
+    }
+
+    #[test]
+    fn the_boards_spi_time_is_its_bytes_at_its_clocks() {
+        // Four bursts of 1 + 3 + 4 × 16 bytes at 21 MHz, 4 bytes at 5.25 MHz.
+        let us = board_spi_us(&Config::board_fifo(ClockInput::ClkIn));
+        let want = 4.0 * 68.0 * 8.0 / 21.0 + 32.0 / 5.25;
+        assert!((us - want).abs() < 1e-3, "{us} against {want}");
     }
 
     #[test]

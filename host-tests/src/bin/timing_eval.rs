@@ -180,13 +180,15 @@ fn array_delay_us(odr: Odr, filter: Filter) -> u32 {
     })
 }
 
-use host_tests::latency::{sample_frame_bytes, wire_us, LOOP_US};
+use host_tests::latency::{loop_us, sample_frame_bytes, spi_us, wire_us, COMPUTE_US};
 
 /// Delay from the true rate to the sample frame's last byte on the wire,
-/// ms: the stated instant's distance behind the read, the loop's worst
-/// sample, the frame at the link's speed (8N1).
-fn to_wire_ms(delay_us: f64, frame_bytes: usize) -> f64 {
-    (delay_us + LOOP_US + wire_us(frame_bytes)) * 1e-3
+/// ms, for chips sampling through `cfg`: the stated instant's distance
+/// behind the read, the SPI reads and the loop's worst sample, the frame
+/// at the link's speed (8N1).
+fn to_wire_ms(cfg: &Config, frame_bytes: usize) -> f64 {
+    let delay_us = f64::from(gyro_array::pipeline::timed::stated_delay_us(cfg));
+    (delay_us + loop_us(cfg) + wire_us(frame_bytes)) * 1e-3
 }
 
 /// Fused error against the truth at the stated instant, over motion
@@ -373,11 +375,13 @@ fn budget(s: &Setting, frame: usize) {
         array - path - mean
     );
     println!("  = stated instant behind the read (fixed)        {array:>7.0}");
-    println!("  loop, worst sample                              {LOOP_US:>7.0}");
+    let spi = spi_us(&s.config());
+    println!("  SPI reads (4 FIFOs at 21 MHz, ADXRS453 at 5.25) {spi:>7.0}");
+    println!("  loop to the frame queued, worst sample          {COMPUTE_US:>7.0}");
     println!("  sample frame on the wire ({frame} B)                {wire:>7.0}");
     println!(
         "  = true rate to the frame's last byte            {:>7.0}  (median = worst: the delay is fixed; target 2 000 median, 2 500 worst)",
-        array + LOOP_US + wire
+        array + spi + COMPUTE_US + wire
     );
 }
 
@@ -406,7 +410,14 @@ fn search(wire_ms: f64) {
                         ui_order,
                         ui_bw,
                     };
-                    let w = to_wire_ms(array_delay_us(odr, filter) as f64, frame);
+                    let w = to_wire_ms(
+                        &Config {
+                            odr,
+                            filter,
+                            ..Config::board_fifo(ClockInput::Internal)
+                        },
+                        frame,
+                    );
                     if w <= wire_ms {
                         cands.push((
                             w,
@@ -518,17 +529,16 @@ fn main() {
     for s in &settings {
         let d = delay(s);
         let a: Vec<f64> = TONES_HZ.iter().map(|f| alias(s, *f)).collect();
-        let array_us = array_delay_us(s.odr, s.filter) as f64;
         println!(
             "{:<52} {:>9.3} {:>9.3} {}",
             s.name,
             d * 1e3,
-            to_wire_ms(array_us, frame),
+            to_wire_ms(&s.config(), frame),
             a.iter().map(|v| format!("{v:>10.5}")).collect::<String>()
         );
         table.push((d, a));
     }
-    println!("path: the chip's filters and the moving mean, measured on a 5 Hz sine; wire: from the true rate to the sample frame's last byte ({frame} B at {} baud, the loop's worst sample {LOOP_US:.0} µs, the stated instant a path and a sample period behind the read, for a chip 1 % slow)", gyro_array::link::BAUD);
+    println!("path: the chip's filters and the moving mean, measured on a 5 Hz sine; wire: from the true rate to the sample frame's last byte ({frame} B at {} baud, the SPI reads and the loop's worst sample {:.0} µs at 4 kHz, the stated instant a path and a sample period behind the read, for a chip 1 % slow)", gyro_array::link::BAUD, loop_us(&Config::board_fifo(ClockInput::Internal)));
     println!("alias: peak below 100 Hz at the 1 kHz output, °/s, of a {TONE_DPS} °/s tone");
     let board = &table[table.len() - 1];
     let mut worse = 0;
