@@ -124,12 +124,11 @@ pub struct Output<const N: usize> {
     pub noise_probe_dps: [Option<f32>; 3],
     /// Gyros whose health flags changed in this sample.
     pub health_changed: u8,
-    /// This sample ran periodic heavy work (a calibration solve, a
-    /// configuration read-back, a temperature read): work that can wait,
-    /// such as the link's E-DAVAR estimate, waits a sample. A solve for a
-    /// chip that had just warmed up again after bit errors, on a frame with
-    /// an estimate, made the loop's worst sample (10 030 instructions,
-    /// `cargo xtask bench`, fault scenario B).
+    /// This sample ran periodic heavy work (a calibration solve or drift
+    /// verdict, a configuration read-back, a temperature read): work on
+    /// the frame's path that can wait, the link's E-DAVAR estimate (some
+    /// 300 instructions), waits a sample, so that the two do not meet on
+    /// the loop's worst sample (`cargo xtask bench-loop`).
     pub busy: bool,
 }
 
@@ -482,7 +481,7 @@ impl<const N: usize> Pipeline<N> {
                 Ok((f, p)) => (Some(f), p),
                 Err(_) => (None, None),
             };
-            out.busy |= self.cal[a].solved();
+            out.busy |= self.cal[a].busy();
         }
         out
     }

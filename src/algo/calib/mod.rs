@@ -123,8 +123,9 @@ pub struct RelCal<const N: usize> {
     phase: u8,
     /// The update count's offset for solving (see [`RelCal::for_axis`]).
     slot: u32,
-    /// The last [`RelCal::fuse`] solved for the estimates.
-    solved: bool,
+    /// The last [`RelCal::fuse`] solved for the estimates or judged the
+    /// drift watch's block.
+    busy: bool,
     /// Parity of the update counts on which a chip that has just warmed
     /// up is solved for.
     warm_parity: u32,
@@ -174,7 +175,7 @@ impl<const N: usize> RelCal<N> {
             warming: 0,
             phase: 0,
             slot: 0,
-            solved: false,
+            busy: false,
             warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
@@ -206,11 +207,12 @@ impl<const N: usize> RelCal<N> {
         c
     }
 
-    /// Whether the last [`RelCal::fuse`] solved for the estimates (about
-    /// 400 instructions on the Cortex-M4, N = 5): the pipeline reports such
-    /// samples as busy.
-    pub fn solved(&self) -> bool {
-        self.solved
+    /// Whether the last [`RelCal::fuse`] did its periodic work: solved for
+    /// the estimates (about 400 instructions on the Cortex-M4, N = 5) or
+    /// judged the drift watch's block (about 150). The pipeline reports
+    /// such samples as busy, and work that can wait a sample waits.
+    pub fn busy(&self) -> bool {
+        self.busy
     }
 
     /// The corrected readings `(y − b) / s` of every chip.
@@ -255,7 +257,7 @@ impl<const N: usize> RelCal<N> {
         // on the samples [`RelCal::for_axis`] chose for them.
         let learn_now = self.phase == 0;
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
-        self.solved = false;
+        self.busy = false;
         let seen = self.correct(y);
         let r = match fusion.fuse(st, &seen, offered & !self.drifting) {
             Ok(r) => r,
@@ -394,9 +396,10 @@ impl<const N: usize> RelCal<N> {
         let t = self.tick.wrapping_sub(self.slot);
         let warm_turn = self.warming != 0 && t % 2 == self.warm_parity && self.newly_warm();
         if t.is_multiple_of(EVERY) || warm_turn {
-            self.solved = true;
+            self.busy = true;
             self.solve(y, mask);
         } else if t % EVERY == EVERY / 2 {
+            self.busy = true;
             self.judge();
         } else if t.wrapping_add(1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).
