@@ -399,14 +399,16 @@ fn main() -> ! {
     // Sample clock, µs (64-bit: the tick counter wraps after 49 days).
     let mut t_us: u64 = 0;
     loop {
-        // Idle time until the tick: the UART fed, then the E-DAVARs, then
-        // a status frame when one is due; commands read.
+        // Idle time until the tick: the UART fed, then the calibration's
+        // learning and the E-DAVARs, then a status frame when one is due;
+        // commands read.
         let now = loop {
             let t = f405::ticks();
             if t != last {
-                // Every sample reaches the E-DAVARs, whatever is still
-                // queued when the next one is due.
+                // Every sample reaches the calibration and the E-DAVARs,
+                // whatever is still queued when the next one is due.
                 if let Some(p) = probe.take() {
+                    pipe.finish();
                     noise.push_probe(p);
                 }
                 break t;
@@ -414,6 +416,7 @@ fn main() -> ! {
             port.drain(&mut tx);
             if port.queued() == 0 {
                 if let Some(p) = probe.take() {
+                    pipe.finish();
                     noise.push_probe(p);
                 } else if let Some((seq, t)) = status_for.take() {
                     let st = port.status(
@@ -450,11 +453,12 @@ fn main() -> ! {
             t.set_instant(at, BOARD_DELAY_US);
         }
         let mut gyros: [&mut dyn Gyro; 5] = [&mut t0, &mut t1, &mut t2, &mut t3, &mut g4];
-        let out = pipe.step(&mut gyros);
+        let out = pipe.read_and_fuse(&mut gyros);
         pipe.log_health_changes(&out);
         // The frame first, with the E-DAVARs' estimate of the samples
         // before this one: the antenna waits for the frame, and the
-        // E-DAVARs take this sample in the idle time once it is out.
+        // calibration and the E-DAVARs take this sample in the idle time
+        // once it is out.
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         probe = Some(Probe::from(&out));
         meter.step(64);

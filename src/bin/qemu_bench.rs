@@ -758,7 +758,7 @@ fn bench_loop_on(
         },
         |pipe| {
             let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-            pipe.step(&mut gyros)
+            pipe.read_and_fuse(&mut gyros)
         },
     )
 }
@@ -894,7 +894,7 @@ fn bench_timed_loop_on(
             }
             let [a, b, c, d] = gyros;
             let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
-            pipe.step(&mut gyros)
+            pipe.read_and_fuse(&mut gyros)
         },
     );
     let late: [u32; 4] = [
@@ -920,9 +920,9 @@ fn bench_timed_loop_on(
 /// The measured part of the whole-loop bench, whatever the chips: per
 /// sample, `before(n)` (faults, the bus's time) untimed, then `step`
 /// (read + calibrate + fuse) and the link frame (the frame's path), the
-/// UART fed, and the E-DAVARs, timed and marked for the exact count (the
-/// UART on its own); the status frame in the idle time after, timed on
-/// its own. `meter` reads the emulated bus's own
+/// UART fed, and the calibration's learning and the E-DAVARs, timed and
+/// marked for the exact count (the UART on its own); the status frame in
+/// the idle time after, timed on its own. `meter` reads the emulated bus's own
 /// ticks and bytes.
 #[allow(clippy::too_many_arguments)]
 fn run_loop<const N: usize>(
@@ -992,10 +992,12 @@ fn run_loop<const N: usize>(
         let dt_drain = net(t.now() - d0, pair);
         drain_sum += dt_drain;
         drain_worst = drain_worst.max(dt_drain);
-        // The E-DAVARs, once the frame is out, as on the board.
-        let t3a = t.now();
+        // The calibration's learning and the E-DAVARs, once the frame is
+        // out, as on the board.
         let probe = gyro_array::pipeline::tracker::Probe::from(&out);
+        let t3a = t.now();
         mark::davar();
+        pipe.finish();
         noise.push_probe(probe);
         mark::off();
         let t3 = t.now();
@@ -1043,7 +1045,7 @@ fn run_loop<const N: usize>(
     let f = |ticks: f32| (ticks * ipt) as u32;
     let mean = |ticks: f32| (ticks * ipt / SAMPLES as f32) as u32;
     defmt::info!(
-        "bench whole loop (5 gyros read, calibrated and fused on 3 axes, 3 E-DAVARs at lambda2 = 1024, link frame built and queued), {=u32} samples with faults and a variance step: mean {=u32} instructions per sample (read+fuse {=u32}, e-davar {=u32}, link {=u32}), worst {=u32} at sample {=u32} (read+fuse {=u32}, e-davar {=u32}, link {=u32})",
+        "bench whole loop (5 gyros read, calibrated and fused on 3 axes, 3 E-DAVARs at lambda2 = 1024, link frame built and queued), {=u32} samples with faults and a variance step: mean {=u32} instructions per sample (read+fuse {=u32}, after the frame {=u32}, link {=u32}), worst {=u32} at sample {=u32} (read+fuse {=u32}, after the frame {=u32}, link {=u32})",
         SAMPLES,
         mean(sum.iter().sum()),
         mean(sum[0]),
@@ -1056,7 +1058,7 @@ fn run_loop<const N: usize>(
         f(worst_parts[2])
     );
     defmt::info!(
-        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (read+fuse {=u32}, e-davar {=u32}, link {=u32}); SysTick reads each bus operation to a tick (40 instructions), so the worst reads high: `cargo xtask bench` counts it exactly from the execution trace",
+        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (read+fuse {=u32}, after the frame {=u32}, link {=u32}); SysTick reads each bus operation to a tick (40 instructions), so the worst reads high: `cargo xtask bench` counts it exactly from the execution trace",
         mean(bus_sum),
         bus_bytes / SAMPLES,
         mean(fw_sum),

@@ -234,14 +234,16 @@ fn main() -> ! {
     let mut pass = true;
     for n in 0..SAMPLES {
         // Wait for the sample tick; count periods we missed. Idle time
-        // feeds the UART, then runs the E-DAVARs, then builds a status
+        // feeds the UART, then runs the calibration's learning and the
+        // E-DAVARs, then builds a status
         // frame when one is due, and reads commands.
         let now = loop {
             let t = TICKS.load(Ordering::Acquire);
             if t != last_tick {
-                // Every sample reaches the E-DAVARs, whatever is still
-                // queued when the next one is due.
+                // Every sample reaches the calibration and the E-DAVARs,
+                // whatever is still queued when the next one is due.
                 if let Some(p) = probe.take() {
+                    pipe.finish();
                     noise.push_probe(p);
                 }
                 break t;
@@ -249,6 +251,7 @@ fn main() -> ! {
             port.drain(&mut uart);
             if port.queued() == 0 {
                 if let Some(p) = probe.take() {
+                    pipe.finish();
                     noise.push_probe(p);
                 } else if let Some((seq, t)) = status_for.take() {
                     let peak = stack::stack_usage().peak;
@@ -323,7 +326,7 @@ fn main() -> ! {
         }
 
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let out = pipe.step(&mut gyros);
+        let out = pipe.read_and_fuse(&mut gyros);
         pipe.log_health_changes(&out);
         if let (Some(_), None) = (stuck_at, excluded_at) {
             if out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
@@ -332,8 +335,8 @@ fn main() -> ! {
         }
         let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
         let before = port.counters().sent;
-        // The frame first, as on the board (the E-DAVARs take this sample
-        // once it is out).
+        // The frame first, as on the board (the calibration and the
+        // E-DAVARs take this sample once it is out).
         port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
         probe = Some(Probe::from(&out));
         if port.counters().sent != before {
@@ -402,6 +405,7 @@ fn main() -> ! {
     }
 
     if let Some(p) = probe.take() {
+        pipe.finish();
         noise.push_probe(p);
     }
     // Send what is still queued (bounded: the UART takes a byte at a time).

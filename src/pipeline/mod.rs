@@ -124,11 +124,11 @@ pub struct Output<const N: usize> {
     pub noise_probe_dps: [Option<f32>; 3],
     /// Gyros whose health flags changed in this sample.
     pub health_changed: u8,
-    /// This sample ran periodic heavy work (a calibration solve or drift
-    /// verdict, a configuration read-back, a temperature read): work on
-    /// the frame's path that can wait, the link's E-DAVAR estimate (some
-    /// 300 instructions), waits a sample, so that the two do not meet on
-    /// the loop's worst sample (`cargo xtask bench-loop`).
+    /// This sample ran periodic heavy work on the frame's path (a
+    /// configuration read-back, a temperature read): work there that can
+    /// wait, the link's E-DAVAR estimate (some 300 instructions), waits a
+    /// sample, so that the two do not meet on the loop's worst sample
+    /// (`cargo xtask bench-loop`).
     pub busy: bool,
 }
 
@@ -161,7 +161,7 @@ impl<const N: usize> Output<N> {
     }
 }
 
-/// One axis's calibration and fusion ([`RelCal::fuse_probed`]), out of
+/// One axis's calibration and fusion ([`RelCal::fuse_deferred`]), out of
 /// line. Inlined into the board's loop (one function of ~55 KB with the
 /// drivers, the tracker and the link), its register allocation moved with
 /// any change in fusion, by ±100 instructions a sample (`cargo xtask
@@ -176,7 +176,7 @@ fn fuse_axis<const N: usize>(
     y: &[f32; N],
     offered: u8,
 ) -> Result<(Fused<N>, Option<f32>), FuseError> {
-    cal.fuse_probed(fusion, st, y, offered)
+    cal.fuse_deferred(fusion, st, y, offered)
 }
 
 /// The sampling pipeline for `N` gyros.
@@ -344,7 +344,9 @@ impl<const N: usize> Pipeline<N> {
     /// state start again; the relative calibration is kept. On error
     /// nothing changes.
     pub fn set_method(&mut self, method: Method) -> Result<(), ConfigError> {
-        self.fusion = Fusion::new(method)?;
+        let fusion = Fusion::new(method)?;
+        self.finish();
+        self.fusion = fusion;
         self.axes = [AxisState::default(); 3];
         Ok(())
     }
@@ -354,8 +356,22 @@ impl<const N: usize> Pipeline<N> {
         &self.fusion
     }
 
-    /// One sample: read every gyro, update health, fuse.
+    /// One sample: read every gyro, update health, fuse, and let the
+    /// calibration learn from it.
     pub fn step(&mut self, gyros: &mut [&mut dyn Gyro; N]) -> Output<N> {
+        let out = self.read_and_fuse(gyros);
+        self.finish();
+        out
+    }
+
+    /// [`Pipeline::step`] up to its output: what the calibration learns
+    /// from the sample waits for [`Pipeline::finish`] (some 300
+    /// instructions a sample on the Cortex-M4, a solve or a drift verdict
+    /// more on their samples), which the board runs once the sample's
+    /// frame is on the wire. The next `read_and_fuse` finishes first if it
+    /// was not, so every sample is learnt from, in order.
+    pub fn read_and_fuse(&mut self, gyros: &mut [&mut dyn Gyro; N]) -> Output<N> {
+        self.finish();
         let mut out = Output {
             seq: self.seq,
             rate_dps: [[f32::NAN; 3]; N],
@@ -481,9 +497,16 @@ impl<const N: usize> Pipeline<N> {
                 Ok((f, p)) => (Some(f), p),
                 Err(_) => (None, None),
             };
-            out.busy |= self.cal[a].busy();
         }
         out
+    }
+
+    /// The calibration's learning from the last sample fused, if it has
+    /// not been done (see [`Pipeline::read_and_fuse`]).
+    pub fn finish(&mut self) {
+        for (cal, st) in self.cal.iter_mut().zip(self.axes.iter_mut()) {
+            cal.finish(st);
+        }
     }
 
     /// A new die temperature `t` of gyro `i` on sample `seq`: kept for the

@@ -21,8 +21,9 @@ use std::process::Stdio;
 
 use object::{Object, ObjectSymbol};
 
-/// Per sample: firmware instructions in read + calibrate + fuse, E-DAVAR,
-/// link; and the emulated bus's inside read + fuse.
+/// Per sample: firmware instructions in read + calibrate + fuse, after the
+/// frame (the calibration's learning, the E-DAVARs), link; and the
+/// emulated bus's inside read + fuse.
 #[derive(Clone, Copy, Default)]
 struct Sample {
     fw: [u64; 3],
@@ -372,9 +373,9 @@ fn parse(
                     s.bus += b.emu;
                 }
                 // `XTASK_TRACE_PHASE=0|1|2`: the breakdown by function of one
-                // phase alone (read + fuse, E-DAVAR, link).
+                // phase alone (read + fuse, after the frame, link).
                 // By default the frame's path alone (read + fuse, link):
-                // the E-DAVARs run after the frame is out.
+                // the calibration's learning and the E-DAVARs run after it.
                 if only_phase.map_or(p == 1, |q| q != p) {
                     continue;
                 }
@@ -466,7 +467,7 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .max()
         .unwrap_or(0);
     println!(
-        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (read+fuse {:.0}, e-davar {:.0}, link {:.0}; the emulated bus {:.0} more), worst {} at sample {at} (read+fuse {}, e-davar {}, link {}), next worst {second}; target <= 10000",
+        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (read+fuse {:.0}, after the frame (calibration learning, e-davars) {:.0}, link {:.0}; the emulated bus {:.0} more), worst {} at sample {at} (read+fuse {}, after the frame {}, link {}), next worst {second}; target <= 10000",
         mean(&total),
         mean(&|s| s.fw[0]),
         mean(&|s| s.fw[1]),
@@ -482,7 +483,7 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
     let path = |s: &Sample| s.fw[0] + s.fw[2];
     if let Some((pat, pworst)) = samples.iter().enumerate().max_by_key(|(_, s)| path(s)) {
         println!(
-            "  the frame's path (read+fuse, link; the e-davars after the frame is out): mean {:.0}, worst {} at sample {pat} (read+fuse {}, link {}); target <= 10000",
+            "  the frame's path (read+fuse, link; the calibration's learning and the e-davars after the frame is out): mean {:.0}, worst {} at sample {pat} (read+fuse {}, link {}); target <= 10000",
             mean(&path),
             path(pworst),
             pworst.fw[0],

@@ -123,9 +123,9 @@ pub struct RelCal<const N: usize> {
     phase: u8,
     /// The update count's offset for solving (see [`RelCal::for_axis`]).
     slot: u32,
-    /// The last [`RelCal::fuse`] solved for the estimates or judged the
-    /// drift watch's block.
-    busy: bool,
+    /// The last fusion's learning, not yet done (see
+    /// [`RelCal::fuse_deferred`]).
+    pending: Pending<N>,
     /// Parity of the update counts on which a chip that has just warmed
     /// up is solved for.
     warm_parity: u32,
@@ -153,6 +153,16 @@ pub struct RelCal<const N: usize> {
     track: f32,
 }
 
+/// What [`RelCal::finish`] has still to do for the last sample fused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Pending<const N: usize> {
+    None,
+    /// A learning sample fusion refused: counted, nothing learnt.
+    Tick,
+    /// A learning sample: the raw readings and the chips fusion used.
+    Learn([f32; N], u8),
+}
+
 impl<const N: usize> RelCal<N> {
     /// A calibration with no estimate yet (every chip as read).
     pub fn new(cfg: CalConfig) -> Self {
@@ -175,7 +185,7 @@ impl<const N: usize> RelCal<N> {
             warming: 0,
             phase: 0,
             slot: 0,
-            busy: false,
+            pending: Pending::None,
             warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
@@ -205,14 +215,6 @@ impl<const N: usize> RelCal<N> {
         c.slot = SOLVE_SLOTS.get(axis).copied().unwrap_or(0);
         c.warm_parity = u32::from(axis == 2);
         c
-    }
-
-    /// Whether the last [`RelCal::fuse`] did its periodic work: solved for
-    /// the estimates (about 400 instructions on the Cortex-M4, N = 5) or
-    /// judged the drift watch's block (about 150). The pipeline reports
-    /// such samples as busy, and work that can wait a sample waits.
-    pub fn busy(&self) -> bool {
-        self.busy
     }
 
     /// The corrected readings `(y − b) / s` of every chip.
@@ -250,6 +252,27 @@ impl<const N: usize> RelCal<N> {
         y: &[f32; N],
         offered: u8,
     ) -> Result<(Fused<N>, Option<f32>), FuseError> {
+        let r = self.fuse_deferred(fusion, st, y, offered);
+        self.finish(st);
+        r
+    }
+
+    /// [`RelCal::fuse_probed`] up to the fused value and the probe; what
+    /// the calibration learns from the sample (its moments, a solve, a
+    /// drift verdict, fusion's noise estimates forgotten for a chip whose
+    /// correction starts) waits for [`RelCal::finish`], which must run
+    /// before the next fusion (a second `fuse_deferred` runs it first).
+    /// The board's loop fuses, sends the frame, then finishes: the same
+    /// state in the same order, off the frame's path.
+    #[inline]
+    pub fn fuse_deferred(
+        &mut self,
+        fusion: &Fusion<N>,
+        st: &mut AxisState<N>,
+        y: &[f32; N],
+        offered: u8,
+    ) -> Result<(Fused<N>, Option<f32>), FuseError> {
+        self.finish(st);
         // The calibration learns on every other sample: what it tracks
         // moves over seconds, and the consensus and moments of every
         // sample cost 330 instructions per axis on the Cortex-M4. Its
@@ -257,20 +280,35 @@ impl<const N: usize> RelCal<N> {
         // on the samples [`RelCal::for_axis`] chose for them.
         let learn_now = self.phase == 0;
         self.phase = (self.phase + 1) % LEARN_STRIDE as u8;
-        self.busy = false;
         let seen = self.correct(y);
         let r = match fusion.fuse(st, &seen, offered & !self.drifting) {
             Ok(r) => r,
             Err(e) => {
                 if learn_now {
-                    self.tick = self.tick.wrapping_add(1);
+                    self.pending = Pending::Tick;
                 }
                 return Err(e);
             }
         };
         if learn_now {
-            self.learn(y, r.used(), LEARN_STRIDE);
+            self.pending = Pending::Learn(*y, r.used());
         }
+        Ok((r, noise_probe(&seen, &r)))
+    }
+
+    /// Learn from the last sample fused by [`RelCal::fuse_deferred`] (if
+    /// it has not yet): `st` is the axis state it was fused with.
+    pub fn finish(&mut self, st: &mut AxisState<N>) {
+        let (y, used) = match core::mem::replace(&mut self.pending, Pending::None) {
+            Pending::None => return,
+            // Unfused: the update is counted, nothing learnt.
+            Pending::Tick => {
+                self.tick = self.tick.wrapping_add(1);
+                return;
+            }
+            Pending::Learn(y, used) => (y, used),
+        };
+        self.learn(&y, used, LEARN_STRIDE);
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
         // its noise estimate. Where what the correction removes is a large
@@ -283,7 +321,6 @@ impl<const N: usize> RelCal<N> {
         if self.fresh != 0 {
             self.forget_fresh(st);
         }
-        Ok((r, noise_probe(&seen, &r)))
     }
 
     /// Forget the noise estimates of the chips whose correction has just
@@ -396,10 +433,8 @@ impl<const N: usize> RelCal<N> {
         let t = self.tick.wrapping_sub(self.slot);
         let warm_turn = self.warming != 0 && t % 2 == self.warm_parity && self.newly_warm();
         if t.is_multiple_of(EVERY) || warm_turn {
-            self.busy = true;
             self.solve(y, mask);
         } else if t % EVERY == EVERY / 2 {
-            self.busy = true;
             self.judge();
         } else if t.wrapping_add(1).is_multiple_of(EVERY) {
             // The readings the next solve compares with (kept only then).
