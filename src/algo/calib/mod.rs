@@ -298,7 +298,18 @@ impl<const N: usize> RelCal<N> {
 
     /// Learn from the last sample fused by [`RelCal::fuse_deferred`] (if
     /// it has not yet): `st` is the axis state it was fused with.
+    #[inline]
     pub fn finish(&mut self, st: &mut AxisState<N>) {
+        if self.pending == Pending::None {
+            return;
+        }
+        self.learn_pending(st);
+    }
+
+    /// [`RelCal::finish`] with something to learn: out of line, so that
+    /// the check alone is what the fusion's path pays.
+    #[inline(never)]
+    fn learn_pending(&mut self, st: &mut AxisState<N>) {
         let (y, used) = match core::mem::replace(&mut self.pending, Pending::None) {
             Pending::None => return,
             // Unfused: the update is counted, nothing learnt.
