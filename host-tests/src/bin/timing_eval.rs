@@ -187,7 +187,7 @@ use host_tests::latency::{loop_us, sample_frame_bytes, spi_us, wire_us, COMPUTE_
 /// behind the read, the SPI reads and the loop's worst sample, the frame
 /// at the link's speed (8N1).
 fn to_wire_ms(cfg: &Config, frame_bytes: usize) -> f64 {
-    let delay_us = f64::from(gyro_array::pipeline::timed::stated_delay_us(cfg));
+    let delay_us = f64::from(array_delay_us(cfg.odr, cfg.filter));
     (delay_us + loop_us(cfg) + wire_us(frame_bytes)) * 1e-3
 }
 
@@ -410,23 +410,14 @@ fn search(wire_ms: f64) {
                         ui_order,
                         ui_bw,
                     };
-                    let w = to_wire_ms(
-                        &Config {
-                            odr,
-                            filter,
-                            ..Config::board_fifo(ClockInput::Internal)
-                        },
-                        frame,
-                    );
+                    let s = Setting {
+                        name: "",
+                        odr,
+                        filter,
+                    };
+                    let w = to_wire_ms(&s.config(), frame);
                     if w <= wire_ms {
-                        cands.push((
-                            w,
-                            Setting {
-                                name: "",
-                                odr,
-                                filter,
-                            },
-                        ));
+                        cands.push((w, s));
                     }
                 }
             }
