@@ -408,16 +408,14 @@ fn main() -> ! {
                 // Every sample reaches the calibration and the E-DAVARs,
                 // whatever is still queued when the next one is due.
                 if let Some(p) = probe.take() {
-                    pipe.finish();
-                    noise.push_probe(p);
+                    pipe.after_frame(noise, p);
                 }
                 break t;
             }
             port.drain(&mut tx);
             if port.queued() == 0 {
                 if let Some(p) = probe.take() {
-                    pipe.finish();
-                    noise.push_probe(p);
+                    pipe.after_frame(noise, p);
                 } else if let Some((seq, t)) = status_for.take() {
                     let st = port.status(
                         &pipe,

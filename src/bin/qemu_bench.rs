@@ -997,8 +997,7 @@ fn run_loop<const N: usize>(
         let probe = gyro_array::pipeline::tracker::Probe::from(&out);
         let t3a = t.now();
         mark::davar();
-        pipe.finish();
-        noise.push_probe(probe);
+        pipe.after_frame(noise, probe);
         mark::off();
         let t3 = t.now();
         // The status frame, as the board builds it: in the idle time after

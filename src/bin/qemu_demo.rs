@@ -243,16 +243,14 @@ fn main() -> ! {
                 // Every sample reaches the calibration and the E-DAVARs,
                 // whatever is still queued when the next one is due.
                 if let Some(p) = probe.take() {
-                    pipe.finish();
-                    noise.push_probe(p);
+                    pipe.after_frame(&mut noise, p);
                 }
                 break t;
             }
             port.drain(&mut uart);
             if port.queued() == 0 {
                 if let Some(p) = probe.take() {
-                    pipe.finish();
-                    noise.push_probe(p);
+                    pipe.after_frame(&mut noise, p);
                 } else if let Some((seq, t)) = status_for.take() {
                     let peak = stack::stack_usage().peak;
                     let st = port.status(
@@ -405,8 +403,7 @@ fn main() -> ! {
     }
 
     if let Some(p) = probe.take() {
-        pipe.finish();
-        noise.push_probe(p);
+        pipe.after_frame(&mut noise, p);
     }
     // Send what is still queued (bounded: the UART takes a byte at a time).
     for _ in 0..100_000 {

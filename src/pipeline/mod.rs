@@ -509,6 +509,18 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
+    /// What the board's loop runs once a sample's frame is on the wire,
+    /// for the sample `probe` was taken of: the calibration's learning
+    /// ([`Pipeline::finish`]) and the noise tracker's E-DAVARs.
+    pub fn after_frame<const CAP: usize, const FRAMES: usize, const T: usize>(
+        &mut self,
+        noise: &mut tracker::NoiseTracker<CAP, FRAMES, T>,
+        probe: tracker::Probe,
+    ) {
+        self.finish();
+        noise.push_probe(probe);
+    }
+
     /// A new die temperature `t` of gyro `i` on sample `seq`: kept for the
     /// bias model, and its rate of change sets how far the calibration
     /// lets a chip's bias move before it calls the chip drifting, and how
