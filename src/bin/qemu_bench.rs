@@ -981,7 +981,12 @@ fn run_loop<const N: usize>(
         // The frame first, with the E-DAVAR estimate of the samples before
         // this one: the antenna waits for it, not for the E-DAVARs.
         mark::link();
-        port.publish(&out, u64::from(n) * 1000, pipe, &noise.at_taus([0, 4, 8]));
+        port.publish(
+            &out,
+            u64::from(n) * 1000,
+            pipe,
+            &noise.at_taus(gyro_array::pipeline::tracker::LINK_TAUS),
+        );
         let status_due = port.status_due(out.seq);
         mark::off();
         let t2 = t.now();

@@ -203,6 +203,7 @@ fn main() -> ! {
         c
     };
     let mut noise = Tracker::new(tracker::config(512)).unwrap_or_else(|_| exit(false));
+    noise.set_view(NOISE_TAU);
     let mut sigma_x_1ms = f32::NAN;
 
     let _ticks = {

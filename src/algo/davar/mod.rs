@@ -269,6 +269,9 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Segmented: a segment of K frames).
     thresholds: [f32; FRAMES],
     last: Option<Published<T>>,
+    /// Times `last` has changed (published or cleared), wrapping: what a
+    /// reader keeping something made of it compares.
+    edition: u32,
     /// The last published window's first block, and per τ the end of its
     /// whole blocks and their sum (for the next window's update).
     win_f0: Option<u64>,
@@ -391,6 +394,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             quad_frames: 0,
             thresholds: [0.0; FRAMES],
             last: None,
+            edition: 0,
             win_f0: None,
             win_q: [0; T],
             win_sum: [0; T],
@@ -452,6 +456,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.cov_q = [0.0; 4];
         self.quad_frames = 0;
         self.last = None;
+        self.edition = self.edition.wrapping_add(1);
         self.win_f0 = None;
         self.pending = None;
         self.dp.first = None;
@@ -685,6 +690,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// instructions per τ on a Cortex-M4).
     pub fn estimate_window(&self) -> Option<(u64, u16)> {
         self.last.map(|p| (p.t, (p.end - p.start) as u16))
+    }
+
+    /// A count that moves whenever the last estimate changes (published or
+    /// cleared by a reset): equal counts, the same estimate.
+    pub fn estimate_edition(&self) -> u32 {
+        self.edition
     }
 
     /// The last estimate's window [start, end), in sample indices.

@@ -41,6 +41,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             end: f1 * SEG as u64,
             acc,
         });
+        self.edition = self.edition.wrapping_add(1);
         t
     }
     /// σ² at τ = 2ʲ from a published window's exact sums (0 where the
