@@ -334,18 +334,14 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             // Each sample goes to the aligner as it is parsed, on the
             // driver's stamps: the clock is needed only for the instant a
             // read asks for.
-            let mut newest = None;
             let Self {
                 g,
                 align,
                 spike,
                 counters,
-                last_raw,
                 ..
             } = self;
             let r = g.read_fifo_with(MAX_PER_READ, |x| {
-                newest = Some(x.stamp_us);
-                *last_raw = x.raw;
                 if spike.pass(x.raw, lim) {
                     align.push(x.stamp_us, x.raw);
                 } else {
@@ -358,8 +354,9 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 Ok(f) => {
                     fresh |= f.samples > 0;
                     self.counters.samples = self.counters.samples.wrapping_add(f.samples as u32);
-                    if let Some(s) = newest {
-                        self.observe(s, capture);
+                    if let Some(x) = f.last {
+                        self.last_raw = x.raw;
+                        self.observe(x.stamp_us, capture);
                     }
                     if f.left == 0 {
                         break;
