@@ -58,9 +58,16 @@ type Mean = (u32, [i32; 3]);
 type Window = (u32, [i32; 3]);
 
 impl<const CAP: usize> Aligner<CAP> {
+    /// The ring wraps by mask.
+    const POW2: () = assert!(
+        CAP.is_power_of_two(),
+        "an aligner's capacity is a power of two"
+    );
+
     /// An aligner over moving means of `n` samples (1 for none; at most
     /// [`MAX_MEAN`], and fewer than `CAP`).
     pub const fn new(n: u8) -> Self {
+        let () = Self::POW2;
         let n = n as usize;
         let n = if n == 0 {
             1
@@ -95,23 +102,16 @@ impl<const CAP: usize> Aligner<CAP> {
 
     /// One sample: its stamp (chip µs) and its raw value.
     pub fn push(&mut self, stamp_us: u32, raw: [i16; 3]) {
-        // (Wraps by compare, not `%`: a division and its multiply-back
-        // each time on the Cortex-M4.)
-        let mut j = self.head + self.len;
-        if j >= CAP {
-            j -= CAP;
-        }
-        if let Some(slot) = self.ring.get_mut(j) {
+        let () = Self::POW2;
+        // (Wraps by mask, CAP a power of two: no division, and no bounds
+        // check on the store.)
+        if let Some(slot) = self.ring.get_mut((self.head + self.len) & (CAP - 1)) {
             *slot = (stamp_us, raw);
         }
         if self.len < CAP {
             self.len += 1;
         } else {
-            self.head = if self.head + 1 >= CAP {
-                0
-            } else {
-                self.head + 1
-            };
+            self.head = (self.head + 1) & (CAP - 1);
         }
     }
 
