@@ -124,8 +124,11 @@ pub struct RelCal<const N: usize> {
     /// The update count's offset for solving (see [`RelCal::for_axis`]).
     slot: u32,
     /// The last fusion's learning, not yet done (see
-    /// [`RelCal::fuse_deferred`]).
-    pending: Pending<N>,
+    /// [`RelCal::fuse_deferred`]), and the raw readings it learns from.
+    pending: Pending,
+    /// (Kept beside `pending`, not in it: in the enum the copy was a
+    /// `memcpy` call, some 30 instructions an axis, on the Cortex-M4.)
+    kept: [f32; N],
     /// Parity of the update counts on which a chip that has just warmed
     /// up is solved for.
     warm_parity: u32,
@@ -155,12 +158,13 @@ pub struct RelCal<const N: usize> {
 
 /// What [`RelCal::finish`] has still to do for the last sample fused.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Pending<const N: usize> {
+enum Pending {
     None,
     /// A learning sample fusion refused: counted, nothing learnt.
     Tick,
-    /// A learning sample: the raw readings and the chips fusion used.
-    Learn([f32; N], u8),
+    /// A learning sample (its raw readings in `RelCal::kept`) and the
+    /// chips fusion used.
+    Learn(u8),
 }
 
 impl<const N: usize> RelCal<N> {
@@ -186,6 +190,7 @@ impl<const N: usize> RelCal<N> {
             phase: 0,
             slot: 0,
             pending: Pending::None,
+            kept: [0.0; N],
             warm_parity: 0,
             last_raw: [f32::NAN; N],
             grow: (1.0 / cfg.alpha.max(1e-6)) as u32,
@@ -291,7 +296,8 @@ impl<const N: usize> RelCal<N> {
             }
         };
         if learn_now {
-            self.pending = Pending::Learn(*y, r.used());
+            self.kept = *y;
+            self.pending = Pending::Learn(r.used());
         }
         Ok((r, noise_probe(&seen, &r)))
     }
@@ -310,15 +316,16 @@ impl<const N: usize> RelCal<N> {
     /// the check alone is what the fusion's path pays.
     #[inline(never)]
     fn learn_pending(&mut self, st: &mut AxisState<N>) {
-        let (y, used) = match core::mem::replace(&mut self.pending, Pending::None) {
+        let used = match core::mem::replace(&mut self.pending, Pending::None) {
             Pending::None => return,
             // Unfused: the update is counted, nothing learnt.
             Pending::Tick => {
                 self.tick = self.tick.wrapping_add(1);
                 return;
             }
-            Pending::Learn(y, used) => (y, used),
+            Pending::Learn(used) => used,
         };
+        let y = self.kept;
         self.learn(&y, used, LEARN_STRIDE);
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
