@@ -260,6 +260,7 @@ fn parse(
     // The current sample's firmware instructions by function id.
     let mut by_fn: Vec<u64> = Vec::new();
     let only_phase = only_phase();
+    let whole_loop = whole_loop();
     for line in r.split(b'\n') {
         let Ok(line) = line else { break };
         if line.starts_with(b"IN:") {
@@ -373,10 +374,10 @@ fn parse(
                     s.bus += b.emu;
                 }
                 // `XTASK_TRACE_PHASE=0|1|2`: the breakdown by function of one
-                // phase alone (read + fuse, after the frame, link).
+                // phase alone (read + fuse, after the frame, link), `all` every one.
                 // By default the frame's path alone (read + fuse, link):
                 // the calibration's learning and the E-DAVARs run after it.
-                if only_phase.map_or(p == 1, |q| q != p) {
+                if !whole_loop && only_phase.map_or(p == 1, |q| q != p) {
                     continue;
                 }
                 let lines = std::env::var_os("XTASK_TRACE_LINES").is_some();
@@ -424,6 +425,7 @@ fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
         }
         if let Some(last) = sc.samples.last() {
             let total = match only_phase() {
+                _ if whole_loop() => last.fw.iter().sum(),
                 Some(q) => last.fw.get(q).copied().unwrap_or(0),
                 None => last.fw[0] + last.fw[2],
             };
@@ -440,6 +442,12 @@ fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
         }
     }
     by_fn.iter_mut().for_each(|n| *n = 0);
+}
+
+/// `XTASK_TRACE_PHASE=all`: the breakdowns by function over the whole
+/// loop (its worst sample, every phase).
+fn whole_loop() -> bool {
+    std::env::var("XTASK_TRACE_PHASE").is_ok_and(|v| v == "all")
 }
 
 fn only_phase() -> Option<usize> {
@@ -521,7 +529,7 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .iter()
         .take(if std::env::var_os("XTASK_TRACE_LINES").is_some() {
             400
-        } else if only_phase().is_some() {
+        } else if only_phase().is_some() || whole_loop() {
             40
         } else {
             16
