@@ -135,6 +135,25 @@ fn every_frame_kind_round_trips() {
     }
 }
 
+/// Every frame kind's payload is postcard's own bytes.
+#[test]
+fn every_payload_is_postcards() {
+    for (k, f) in [big_sample(5), big_raw(5), big_status(5), big_sample(1)]
+        .iter()
+        .enumerate()
+    {
+        let mut payload = [0u8; MAX_FRAME];
+        let n = super::wire::encode_payload(k as u32, f, &mut payload).unwrap();
+        let mut want = [0u8; MAX_FRAME];
+        want[0] = VERSION;
+        let body = postcard::to_slice(&(k as u32).to_le_bytes(), &mut want[1..])
+            .unwrap()
+            .len();
+        let m = 1 + body + postcard::to_slice(f, &mut want[1 + body..]).unwrap().len();
+        assert_eq!(payload[..n - 2], want[..m], "{f:?}");
+    }
+}
+
 #[test]
 fn frame_ref_encodes_as_the_frame() {
     let frames = [
