@@ -190,14 +190,54 @@ pub fn deviations_of_finite(
             })
             .collect());
     }
-    factors
-        .iter()
-        .map(|&m| match deviation_checked(kind, x, tau0, m) {
-            Ok(p) => Ok(Some(p)),
-            Err(DevError::TooShort) => Ok(None),
-            Err(e) => Err(e),
-        })
-        .collect()
+    let one = |m: usize| match deviation_checked(kind, x, tau0, m) {
+        Ok(p) => Ok(Some(p)),
+        Err(DevError::TooShort) => Ok(None),
+        Err(e) => Err(e),
+    };
+    if kind != Kind::Oadev {
+        return factors.iter().map(|&m| one(m)).collect();
+    }
+    // OADEV at runs of consecutive factors (every τ): up to
+    // `allan::GROUP` at once through the grouped kernel, the same sums as
+    // one factor at a time.
+    let n = x.len();
+    let fits = |m: usize| m > 0 && n > 2 * m;
+    let mut out = Vec::with_capacity(factors.len());
+    let mut k = 0;
+    while let Some(&m0) = factors.get(k) {
+        if !fits(m0) {
+            out.push(one(m0)?);
+            k += 1;
+            continue;
+        }
+        let mut g = 1;
+        while g < allan::GROUP && factors.get(k + g) == Some(&(m0 + g)) && fits(m0 + g) {
+            g += 1;
+        }
+        let mut sums = [0.0; allan::GROUP];
+        second_diff_sums(x, m0, &mut sums[..g]);
+        for (j, s) in sums[..g].iter().enumerate() {
+            let m = m0 + j;
+            let (span, tau) = (n - 2 * m, m as f64 * tau0);
+            let var = s / (2.0 * span as f64 * tau * tau);
+            out.push(Some(Point::bare(m, tau0, var.sqrt(), span, n)));
+        }
+        k += g;
+    }
+    Ok(out)
+}
+
+/// [`allan::second_diff_sums`], in its AVX2 build where the CPU has AVX2
+/// (the same bits).
+fn second_diff_sums(x: &[f64], m0: usize, sums: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked just above), the only
+        // requirement of the AVX2 build.
+        return unsafe { allan::second_diff_sums_avx2(x, m0, sums) };
+    }
+    allan::second_diff_sums(x, m0, sums)
 }
 
 /// The octave sweep (`allan::oavar_octave_phase`), in its AVX2 build where
@@ -534,6 +574,38 @@ pub fn noise_alpha(x: &[f64], m: usize) -> Option<i32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// OADEV at every τ (the grouped kernel) is each τ's own point, bit
+    /// for bit, with gaps in the factors, factors too long for the data
+    /// and a factor of 0 refused as one at a time refuses it.
+    #[test]
+    fn every_tau_in_groups_is_each_tau_alone() {
+        let mut x = vec![0.0f64; 1201];
+        let mut v = 0.1f64;
+        for i in 1..x.len() {
+            v = (v * 3.9 * (1.0 - v)).clamp(1e-6, 1.0 - 1e-6);
+            x[i] = x[i - 1] + v - 0.5;
+        }
+        let mut ms: Vec<usize> = (1..=700).collect();
+        ms.retain(|m| m % 97 != 0);
+        let got = deviations_of_finite(Kind::Oadev, &x, 0.01, &ms).unwrap();
+        assert_eq!(got.len(), ms.len());
+        for (p, &m) in got.iter().zip(&ms) {
+            match deviation_checked(Kind::Oadev, &x, 0.01, m) {
+                Ok(want) => assert_eq!(
+                    p.map(|p| p.dev.to_bits()),
+                    Some(want.dev.to_bits()),
+                    "m {m}"
+                ),
+                Err(DevError::TooShort) => assert_eq!(*p, None, "m {m}"),
+                Err(e) => panic!("m {m}: {e}"),
+            }
+            if let Some(p) = p {
+                assert_eq!(Some(*p), deviation_checked(Kind::Oadev, &x, 0.01, m).ok());
+            }
+        }
+        assert!(deviations_of_finite(Kind::Oadev, &x, 0.01, &[3, 0, 4]).is_err());
+    }
 
     /// The lines of `text` that are neither comments nor blank.
     fn data_lines(text: &str) -> impl Iterator<Item = &str> {

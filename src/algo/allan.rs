@@ -291,6 +291,84 @@ fn second_diff_inline(phase: &[f64], m: usize, from: usize, to: usize) -> f64 {
     l.iter().sum()
 }
 
+/// Factors one pass of [`second_diff_sums`] takes at most.
+pub const GROUP: usize = 16;
+/// Terms of each factor a block of [`second_diff_sums`] sums before the
+/// next factor: a multiple of [`LANES`], its three stretches of the phase
+/// (12 KiB) within a core's L1 cache.
+const GROUP_BLOCK: usize = 512;
+
+/// [`second_diff_sum`] from 0 over every term (i + 2m < len) for the
+/// consecutive factors m0, m0 + 1, … (`sums.len()` of them, at most
+/// [`GROUP`]; each must have a term): the same sums, bit for bit. Each
+/// factor's lanes add its terms in the order the one-factor kernel does
+/// (lane q the terms q, q + LANES, … and the remainder in lane 0), but
+/// the factors take turns block by block, so the three stretches of the
+/// phase a block reads come from the L1 cache for all of them: one factor
+/// at a time streams the whole series from the outer caches each time,
+/// and the sum is bound by their bandwidth (every τ of 10⁵ points).
+pub fn second_diff_sums(phase: &[f64], m0: usize, sums: &mut [f64]) {
+    second_diff_sums_inline(phase, m0, sums);
+}
+
+/// [`second_diff_sums`] compiled for AVX2 (see [`oavar_phase_avx2`]).
+///
+/// # Safety
+///
+/// Call it only on a CPU with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub fn second_diff_sums_avx2(phase: &[f64], m0: usize, sums: &mut [f64]) {
+    second_diff_sums_inline(phase, m0, sums);
+}
+
+#[inline(always)]
+fn second_diff_sums_inline(phase: &[f64], m0: usize, sums: &mut [f64]) {
+    let n = phase.len();
+    let g_n = sums.len().min(GROUP);
+    // Each factor's term count and the part of it in whole lanes.
+    let span = |g: usize| n.saturating_sub(2 * (m0 + g));
+    let mut lanes = [[0.0f64; LANES]; GROUP];
+    let whole = |g: usize| span(g) - span(g) % LANES;
+    let longest = whole(0);
+    let mut b = 0;
+    while b < longest {
+        let e = (b + GROUP_BLOCK).min(longest);
+        for (g, l) in lanes.iter_mut().enumerate().take(g_n) {
+            let end = e.min(whole(g));
+            if end <= b {
+                break;
+            }
+            let m = m0 + g;
+            let (Some(x0), Some(x1), Some(x2)) = (
+                phase.get(b..end),
+                phase.get(b + m..end + m),
+                phase.get(b + 2 * m..end + 2 * m),
+            ) else {
+                break;
+            };
+            let c0 = x0.chunks_exact(LANES);
+            let c1 = x1.chunks_exact(LANES);
+            let c2 = x2.chunks_exact(LANES);
+            for ((a, bb), c) in c0.zip(c1).zip(c2) {
+                for q in 0..LANES {
+                    let d = c[q] - 2.0 * bb[q] + a[q];
+                    l[q] += d * d;
+                }
+            }
+        }
+        b = e;
+    }
+    for (g, (l, out)) in lanes.iter_mut().zip(sums.iter_mut()).enumerate().take(g_n) {
+        let m = m0 + g;
+        for i in whole(g)..span(g) {
+            let d = phase[i + 2 * m] - 2.0 * phase[i + m] + phase[i];
+            l[0] += d * d;
+        }
+        *out = l.iter().sum();
+    }
+}
+
 /// Check m and τ0 against phase data; the number of rate samples.
 fn check_cluster(phase: &[f64], tau0_s: f64, m: usize) -> Result<usize, AllanError> {
     if m == 0 || !(tau0_s > 0.0) || !tau0_s.is_finite() {

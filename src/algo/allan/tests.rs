@@ -362,3 +362,46 @@ fn avx2_build_gives_the_same_bits() {
         0.0
     );
 }
+
+/// The grouped kernel gives each factor the one-factor kernel's sum bit
+/// for bit: random-walk phase, lengths around the lane and block edges,
+/// groups of 1 to GROUP factors up to the longest that fits.
+#[test]
+#[allow(unsafe_code)]
+fn grouped_sums_are_the_one_factor_sums() {
+    let mut rng = crate::emu::Rng::new(5);
+    for n in [3usize, 17, 40, 513, 1030, 1100, 3001] {
+        let mut x = vec![0.0f64; n];
+        for i in 1..n {
+            x[i] = x[i - 1] + f64::from(rng.gaussian()) * 1e-3;
+        }
+        let top = (n - 1) / 2;
+        for g in 1..=GROUP {
+            let mut m0 = 1;
+            while m0 + g - 1 <= top {
+                let mut sums = [f64::NAN; GROUP];
+                second_diff_sums(&x, m0, &mut sums[..g]);
+                #[cfg(target_arch = "x86_64")]
+                let mut wide = [f64::NAN; GROUP];
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU has AVX2.
+                    unsafe { second_diff_sums_avx2(&x, m0, &mut wide[..g]) };
+                    for (w, s) in wide[..g].iter().zip(&sums[..g]) {
+                        assert_eq!(w.to_bits(), s.to_bits());
+                    }
+                }
+                for (k, s) in sums[..g].iter().enumerate() {
+                    let m = m0 + k;
+                    let one = second_diff_sum(&x, m, 0, n - 2 * m);
+                    assert_eq!(
+                        s.to_bits(),
+                        one.to_bits(),
+                        "n {n} m {m} group {g} from {m0}"
+                    );
+                }
+                m0 += if m0 < 40 { 1 } else { 37 };
+            }
+        }
+    }
+}
