@@ -135,15 +135,24 @@ fn every_frame_kind_round_trips() {
     }
 }
 
-/// Every frame kind's payload is postcard's own bytes.
+/// Every frame kind's payload is postcard's own bytes (the port writes it
+/// byte by byte), and a buffer a byte short is refused.
 #[test]
 fn every_payload_is_postcards() {
-    for (k, f) in [big_sample(5), big_raw(5), big_status(5), big_sample(1)]
+    let ack = Frame::Ack(Ack {
+        id: Some(7),
+        result: Err(Reject::OutOfRange),
+    });
+    for (k, f) in [big_sample(5), big_raw(5), big_status(5), big_sample(1), ack]
         .iter()
         .enumerate()
     {
         let mut payload = [0u8; MAX_FRAME];
         let n = super::wire::encode_payload(k as u32, f, &mut payload).unwrap();
+        // Short of the CRC, and of the envelope's last byte.
+        for short in [n - 1, n - 3] {
+            assert!(super::wire::encode_payload(k as u32, f, &mut payload[..short]).is_err());
+        }
         let mut want = [0u8; MAX_FRAME];
         want[0] = VERSION;
         let body = postcard::to_slice(&(k as u32).to_le_bytes(), &mut want[1..])
