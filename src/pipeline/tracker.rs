@@ -278,14 +278,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
 
     /// Remake `axis`'s link record if its estimate has changed since.
     fn make_ready(&mut self, axis: usize) {
+        let edition = self.axes.get(axis).map(|d| d.estimate_edition());
+        if self.ready.get(axis).map(|r| r.0) != edition {
+            self.remake(axis);
+        }
+    }
+
+    /// Make `axis`'s link record at the view's τ from its estimate now.
+    fn remake(&mut self, axis: usize) {
         let Some(edition) = self.axes.get(axis).map(|d| d.estimate_edition()) else {
             return;
         };
-        if self.ready.get(axis).is_some_and(|r| r.0 != edition) {
-            let record = self.record(axis, self.view);
-            if let Some(r) = self.ready.get_mut(axis) {
-                *r = (edition, record);
-            }
+        let record = self.record(axis, self.view);
+        if let Some(r) = self.ready.get_mut(axis) {
+            *r = (edition, record);
         }
     }
 
@@ -294,10 +300,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     pub fn set_view(&mut self, taus: [usize; 3]) {
         self.view = taus;
         for a in 0..3 {
-            let record = self.record(a, taus);
-            if let (Some(r), Some(d)) = (self.ready.get_mut(a), self.axes.get(a)) {
-                *r = (d.estimate_edition(), record);
-            }
+            self.remake(a);
         }
     }
 
@@ -576,6 +579,12 @@ mod tests {
             });
             let view = t.view;
             for a in 0..3 {
+                // The record is the current estimate's, so the link copies it.
+                assert_eq!(
+                    t.ready[a].0,
+                    t.axes[a].estimate_edition(),
+                    "axis {a} at {k}"
+                );
                 let ready = t.at_taus(view).newest(a);
                 assert_eq!(ready, t.record(a, view), "axis {a} at {k}");
                 compared += usize::from(ready.is_some());
