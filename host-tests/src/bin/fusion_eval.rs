@@ -127,6 +127,116 @@ fn simulate(sc: Scenario, seed: u64) -> (Vec<[f32; 4]>, f32, [f32; 4]) {
     (frames, truth, sig)
 }
 
+/// Every method of `checks::methods()` and the pipeline's default path
+/// (the online relative calibration, then adaptive fusion) over one
+/// realisation of a table class: each one's error statistics and, in (d),
+/// the samples from each fault (stuck at 5 s, saturated at 10 s) until the
+/// failed chip's weight is 0.
+fn run_methods(
+    sc: Scenario,
+    frames: &[[f32; 4]],
+    truth: f32,
+) -> Vec<(&'static str, Stats, [Option<usize>; 2])> {
+    use gyro_array::algo::calib::{CalConfig, RelCal};
+    let mut out = Vec::new();
+    let named =
+        methods().map(|(name, m)| (name, Fusion::<4>::new(m).expect("valid method"), false));
+    let default = ("default", method::<4>("adaptive"), true);
+    for (name, f, calibrated) in named.into_iter().chain([default]) {
+        let mut st = AxisState::default();
+        let mut cal = RelCal::<4>::new(CalConfig::default());
+        let mut s = Stats::new();
+        let mut first_excluded = [None, None];
+        for (k, y) in frames.iter().enumerate() {
+            let r = if calibrated {
+                cal.fuse(&f, &mut st, y, 0b1111)
+            } else {
+                f.fuse(&mut st, y, 0b1111)
+            }
+            .expect("valid input");
+            s.add((r.rate_dps - truth) as f64);
+            if let Scenario::Failing = sc {
+                for (phase, start) in [(0, 5000), (1, 10000)] {
+                    if k >= start && first_excluded[phase].is_none() && r.weights[2] == 0.0 {
+                        first_excluded[phase] = Some(k - start);
+                    }
+                }
+            }
+        }
+        out.push((name, s, first_excluded));
+    }
+    out
+}
+
+/// The table classes (a)–(e) again over REALISATIONS runs each, for what a
+/// single run cannot settle: the default path against the simple methods
+/// and the seed's variant against Zhang. In (d) one run is a draw of luck:
+/// the stuck chip holds one noisy sample, and a method that keeps it (Zhang,
+/// the seed's) gains or loses by how near the truth that sample fell (its
+/// RMS from 5 to 10 s is 0.038–0.066 °/s over seeds 21–40, against 0.044
+/// with four live chips). There the simple methods are also run told of the
+/// fault (chip 2 masked from 5 s), the reference the default path, which
+/// excludes a frozen chip, is held to. Returns per class (name, default,
+/// better simple method, seed-scaled, zhang), means over the runs.
+fn pooled_classes(scenarios: &[Scenario], seed: u64) -> Vec<(String, f64, f64, f64, f64)> {
+    const REALISATIONS: u64 = 10;
+    println!("\n(a)-(e) again, {REALISATIONS} realisations x {SAMPLES} samples each (RMS mean +- sd); default = relative calibration + adaptive, the pipeline's path");
+    let mut out = Vec::new();
+    for (si, sc) in scenarios.iter().enumerate() {
+        let mut res = vec![Vec::new(); 6];
+        for r in 0..REALISATIONS {
+            let (frames, truth, _) = simulate(*sc, seed * 100_000 + 50_000 + si as u64 * 100 + r);
+            let runs = run_methods(*sc, &frames, truth);
+            let rms = |n: &str| {
+                runs.iter()
+                    .find(|(name, ..)| *name == n)
+                    .map(|(_, s, _)| s.rms())
+                    .expect("a method run")
+            };
+            for (v, x) in res.iter_mut().zip([
+                rms("mean"),
+                rms("zhang"),
+                rms("seed-scaled"),
+                rms("default"),
+            ]) {
+                v.push(x);
+            }
+            if let Scenario::Failing = sc {
+                // Told of the fault: chip 2 out from the sample it froze.
+                let [mean, zhang, _] = mean_zhang_adaptive::<4>();
+                for (f, v) in [mean, zhang].iter().zip(&mut res[4..]) {
+                    let mut st = AxisState::default();
+                    let mut s = Stats::new();
+                    for (k, y) in frames.iter().enumerate() {
+                        let mask = if k >= 5000 { 0b1011 } else { 0b1111 };
+                        let r = f.fuse(&mut st, y, mask).expect("valid input");
+                        s.add((r.rate_dps - truth) as f64);
+                    }
+                    v.push(s.rms());
+                }
+            }
+        }
+        let labels = ["mean", "zhang", "seed-scaled", "default"];
+        let (m, simple) = if let Scenario::Failing = sc {
+            let told = [
+                "mean",
+                "zhang",
+                "seed-scaled",
+                "default",
+                "mean, told the fault",
+                "zhang, told the fault",
+            ];
+            let m = report(&sc.name(), told, &res);
+            ([m[0], m[1], m[2], m[3]], m[4].min(m[5]))
+        } else {
+            let m = report(&sc.name(), labels, &res[..4]);
+            (m, m[0].min(m[1]))
+        };
+        out.push((sc.name(), m[3], simple, m[2], m[1]));
+    }
+    out
+}
+
 /// Mean and sample standard deviation over the seeds.
 fn mean_sd(v: &[f64]) -> (f64, f64) {
     let m = v.iter().sum::<f64>() / v.len() as f64;
@@ -612,22 +722,7 @@ fn main() {
             o.rms()
         );
         rms.insert((si, "oracle".to_string()), o.rms());
-        for (name, m) in methods() {
-            let f = Fusion::<4>::new(m).expect("valid method");
-            let mut st = AxisState::default();
-            let mut s = Stats::new();
-            let mut first_excluded = [None, None];
-            for (k, y) in frames.iter().enumerate() {
-                let r = f.fuse(&mut st, y, 0b1111).expect("valid input");
-                s.add((r.rate_dps - truth) as f64);
-                if let Scenario::Failing = sc {
-                    for (phase, start) in [(0, 5000), (1, 10000)] {
-                        if k >= start && first_excluded[phase].is_none() && r.weights[2] == 0.0 {
-                            first_excluded[phase] = Some(k - start);
-                        }
-                    }
-                }
-            }
+        for (name, s, first_excluded) in run_methods(*sc, &frames, truth) {
             println!(
                 "{:<14} {:>12.5} {:>12.5} {:>12.5}",
                 name,
@@ -641,6 +736,7 @@ fn main() {
             }
         }
     }
+    let pooled = pooled_classes(&scenarios, seed);
     println!(
         "\n(d) samples from the fault until the failed chip's weight is 0 (stuck, saturated):"
     );
@@ -682,13 +778,19 @@ fn main() {
     }
     for si in 1..=3 {
         let (s, z, m) = (r(si, "seed-scaled"), r(si, "zhang"), r(si, "mean"));
+        let (_, _, _, ps, pz) = &pooled[si];
+        println!(
+            "  (report) {}: seed-scaled {s:.5} vs zhang {z:.5} in the one run above (ratio {:.4})",
+            scenarios[si].name(),
+            s / z
+        );
         target(
             format!(
-                "{}: seed-scaled {s:.5} <= zhang {z:.5} (ratio {:.4}, tolerance 1.005)",
+                "{}: seed-scaled {ps:.5} <= zhang {pz:.5} over the realisations (ratio {:.4}, tolerance 1.005)",
                 scenarios[si].name(),
-                s / z
+                ps / pz
             ),
-            s <= 1.005 * z,
+            *ps <= 1.005 * pz,
         );
         target(
             format!("{}: zhang {z:.5} <= mean {m:.5}", scenarios[si].name()),
@@ -705,6 +807,18 @@ fn main() {
             ),
             a / o <= 1.15,
         );
+    }
+    // The table classes, over their realisations; "no worse" allows the
+    // RMS's sampling error, as below.
+    for (name, default, simple_ref, _, _) in &pooled {
+        target(
+            format!(
+                "{name}: default {default:.5} <= the better of mean and zhang {simple_ref:.5} over the realisations (ratio {:.4}, tolerance 1.005)",
+                default / simple_ref
+            ),
+            *default <= 1.005 * simple_ref,
+        );
+        simple.push((name.clone(), default / simple_ref));
     }
     for (name, cal, oracle, mean) in &motion {
         target(
