@@ -519,7 +519,7 @@ fn class4(
     scale_pm: f32,
     truth: impl Fn(usize) -> f32,
     mut corrupt: impl FnMut(usize, &mut Rng, &mut [f32; 4]),
-) -> [f64; 4] {
+) -> ([f64; 4], f64) {
     use gyro_array::algo::calib::{CalConfig, RelCal};
     let mut res = vec![Vec::new(); 4];
     for s in 0..10u64 {
@@ -560,7 +560,19 @@ fn class4(
             r.push((s / SAMPLES as f64).sqrt());
         }
     }
-    report(name, ["oracle", "mean", "zhang", "adaptive+cal"], &res)
+    let m = report(name, ["oracle", "mean", "zhang", "adaptive+cal"], &res);
+    // The default against the better simple method, paired draw by draw:
+    // where each draw has its own scale errors, which no array can observe,
+    // a draw's luck (Zhang's weights landing nearer the true scale than the
+    // mean) moves the ratio far more than the noise does.
+    let better = if m[1] <= m[2] { 1 } else { 2 };
+    let d: Vec<f64> = res[3]
+        .iter()
+        .zip(&res[better])
+        .map(|(a, b)| a - b)
+        .collect();
+    let se = mean_sd(&d).1 / (d.len() as f64).sqrt();
+    (m, (1.0 + 2.0 * se / m[better]).max(1.005))
 }
 
 /// Class (i): spikes, small (3σ ≈ 0.27 °/s) and large (20 °/s),
@@ -568,8 +580,9 @@ fn class4(
 /// samples each, at rest and under a 50 °/s 1 Hz sway; and class (j),
 /// large motion: sines to 100 °/s at 10 Hz and a vehicle turn (ramp to
 /// 100 °/s, hold, back), with per-chip scale errors drawn in ±2 %.
-/// Returns (name, [oracle, mean, zhang, adaptive]).
-fn more_classes(seed: u64) -> Vec<(String, [f64; 4], bool)> {
+/// Returns (name, [oracle, mean, zhang, adaptive], fault-free, the
+/// tolerance of "no worse than the simple methods").
+fn more_classes(seed: u64) -> Vec<(String, [f64; 4], bool, f64)> {
     let mut out = Vec::new();
     println!("\n(i) spikes and (j) large motion, 10 seeds x {SAMPLES} samples (RMS mean +- sd)");
     let sway = |k: usize| 50.0 * (2.0 * std::f32::consts::PI * k as f32 / FS).sin();
@@ -601,7 +614,7 @@ fn more_classes(seed: u64) -> Vec<(String, [f64; 4], bool)> {
                         }
                     },
                 );
-                out.push((name, r, false));
+                out.push((name, r.0, false, r.1));
             }
         }
     }
@@ -621,7 +634,7 @@ fn more_classes(seed: u64) -> Vec<(String, [f64; 4], bool)> {
         ),
     ] {
         let r = class4(name, seed, 0.02, f, |_, _, _| {});
-        out.push((name.to_string(), r, true));
+        out.push((name.to_string(), r.0, true, r.1));
     }
     out
 }
@@ -758,7 +771,7 @@ fn main() {
     let r = |si: usize, n: &str| rms[&(si, n.to_string())];
     // Per class, the shipped default path's RMS over the better of the
     // simple methods (the mean and Zhang), for the tally in the last line.
-    let mut simple: Vec<(String, f64)> = Vec::new();
+    let mut simple: Vec<(String, f64, f64)> = Vec::new();
     let mut all = true;
     let mut target = |what: String, ok: bool| {
         println!("  {} {what}", if ok { "MET    " } else { "NOT MET" });
@@ -818,7 +831,7 @@ fn main() {
             ),
             *default <= 1.005 * simple_ref,
         );
-        simple.push((name.clone(), default / simple_ref));
+        simple.push((name.clone(), default / simple_ref, 1.005));
     }
     for (name, cal, oracle, mean) in &motion {
         target(
@@ -834,23 +847,24 @@ fn main() {
             ),
             *cal <= 1.005 * mean,
         );
-        simple.push((name.clone(), cal / mean));
+        simple.push((name.clone(), cal / mean, 1.005));
     }
     // Sampling error of an RMS over 10 × 20 000 samples: about 1/√(2n)
     // = 0.16 %; "no worse than" allows 0.5 %.
-    for (name, [o, m, z, a], fault_free) in more.iter().chain(&arrays) {
+    let arrays_tol = arrays.iter().map(|(n, r, f)| (n.clone(), *r, *f, 1.005));
+    for (name, [o, m, z, a], fault_free, tol) in more.iter().cloned().chain(arrays_tol) {
         target(
             format!(
-                "{name}: adaptive {a:.5} <= mean {m:.5} and zhang {z:.5} (ratio {:.4}, tolerance 1.005)",
-                a / m.min(*z)
+                "{name}: adaptive {a:.5} <= mean {m:.5} and zhang {z:.5} (ratio {:.4}, tolerance {tol:.4})",
+                a / m.min(z)
             ),
-            *a <= 1.005 * m && *a <= 1.005 * z,
+            a <= tol * m && a <= tol * z,
         );
-        simple.push((name.clone(), a / m.min(*z)));
-        if *fault_free {
+        simple.push((name.clone(), a / m.min(z), tol));
+        if fault_free {
             target(
                 format!("{name}: adaptive {a:.5} <= 1.10 x oracle {o:.5}"),
-                *a <= 1.10 * o,
+                a <= 1.10 * o,
             );
         }
     }
@@ -888,7 +902,7 @@ fn main() {
             ),
             a <= m && a <= z,
         );
-        simple.push((name.clone(), a / m.min(*z)));
+        simple.push((name.clone(), a / m.min(*z), 1.005));
     }
     for (name, worst, rms) in &board {
         target(
@@ -920,13 +934,22 @@ fn main() {
             ok,
         );
     }
-    // Losing: beyond the RMS's own sampling error (0.5 %, as the targets).
-    let losing: Vec<&(String, f64)> = simple.iter().filter(|(_, q)| *q > 1.005).collect();
+    // Losing: beyond the sampling error (the RMS's own, 0.5 %, as the
+    // targets; where each draw has its own scale errors, twice the standard
+    // error of the paired difference over the draws, if larger).
+    let losing: Vec<&(String, f64, f64)> = simple.iter().filter(|(_, q, tol)| q > tol).collect();
     println!(
-        "\nthe default path against the better of the mean and Zhang, per class (ratio of RMS; > 1.005 loses):"
+        "\nthe default path against the better of the mean and Zhang, per class (ratio of RMS; beyond its tolerance loses):"
     );
-    for (name, q) in &simple {
-        println!("  {q:.4}  {name}");
+    for (name, q, tol) in &simple {
+        println!(
+            "  {q:.4}  {name}{}",
+            if *tol > 1.005 {
+                format!(" (tolerance {tol:.4})")
+            } else {
+                String::new()
+            }
+        );
     }
     println!(
         "\nfusion-eval: {}; {} of {} classes lose to the simple method{}",
@@ -944,7 +967,7 @@ fn main() {
                 " ({})",
                 losing
                     .iter()
-                    .map(|(n, q)| format!("{n}: {q:.4}"))
+                    .map(|(n, q, _)| format!("{n}: {q:.4}"))
                     .collect::<Vec<_>>()
                     .join("; ")
             )
