@@ -46,6 +46,30 @@ fn kind_of(name: &str) -> PyResult<Kind> {
 /// non-finite sample is an error naming it, as in `gyro allan`. (For
 /// frequency data the finiteness comes from the sums: a NaN or infinite
 /// sample makes the total so, and only then is it looked for.)
+/// An empty vector with room for `n` values. Where it is large, its pages
+/// are asked to come as transparent huge pages (Linux `MADV_HUGEPAGE`):
+/// the phase of 10⁷ points is 80 MB of fresh memory on every call, and in
+/// 4 KiB pages its 20 000 page faults cost about as much as the octave
+/// sweep's arithmetic.
+fn buffer(n: usize) -> Vec<f64> {
+    let v = Vec::<f64>::with_capacity(n);
+    #[cfg(target_os = "linux")]
+    if n >= 1 << 18 {
+        let page = 4096usize;
+        let start = (v.as_ptr() as usize).next_multiple_of(page);
+        let end = (v.as_ptr() as usize + n * 8) / page * page;
+        if end > start {
+            // SAFETY: the range lies inside the vector's own allocation,
+            // and MADV_HUGEPAGE is advice: it changes no contents or
+            // mapping the vector relies on, and on failure nothing happens.
+            unsafe {
+                libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE);
+            }
+        }
+    }
+    v
+}
+
 fn phase_of(data: &[f64], rate: f64, data_type: &str) -> PyResult<Vec<f64>> {
     if !(rate.is_finite() && rate > 0.0) {
         return Err(value_error(DevError::Tau0));
@@ -59,16 +83,25 @@ fn phase_of(data: &[f64], rate: f64, data_type: &str) -> PyResult<Vec<f64>> {
             if data.iter().any(|v| !v.is_finite()) {
                 return Err(bad(data));
             }
-            Ok(data.to_vec())
+            let mut x = buffer(data.len());
+            x.extend_from_slice(data);
+            Ok(x)
         }
         "freq" => {
             let tau0 = 1.0 / rate;
-            let total = data.iter().sum::<f64>();
+            // The phase is integrated about the mean of the first rates
+            // (a constant rate is a line in phase, which every deviation's
+            // differences cancel; taking it out keeps the phase's values,
+            // and so their rounding, small). The first 2¹⁶ stand for all of
+            // them: the mean of the whole series took a pass over 80 MB of
+            // its own on 10⁷ points.
+            let head = &data[..data.len().min(1 << 16)];
+            let total = head.iter().sum::<f64>();
             if !total.is_finite() {
-                return Err(bad(data));
+                return Err(bad(head));
             }
-            let mean = total / data.len().max(1) as f64;
-            let mut x = Vec::with_capacity(data.len() + 1);
+            let mean = total / head.len().max(1) as f64;
+            let mut x = buffer(data.len() + 1);
             let mut acc = 0.0;
             x.push(0.0);
             x.extend(data.iter().map(|&y| {
@@ -77,6 +110,9 @@ fn phase_of(data: &[f64], rate: f64, data_type: &str) -> PyResult<Vec<f64>> {
             }));
             // Once not finite a running sum stays so: its end says.
             if !acc.is_finite() {
+                if data.iter().any(|v| !v.is_finite()) {
+                    return Err(bad(data));
+                }
                 return Err(value_error(
                     "the phase (the running sum of the rate times tau0) is not finite",
                 ));

@@ -430,11 +430,11 @@ pub struct OctaveSums {
 impl OctaveSums {
     const MAX_J: usize = 48;
     const BLOCK: usize = 64;
-    /// The τ below 2^NEAR_J (whose three streams lie within 16 KiB) are
-    /// swept apart from the longer ones: 24 streams in one sweep are more
-    /// than the prefetchers follow, the near ones read memory once and the
-    /// far ones are some 14 streams.
-    const NEAR_J: usize = 10;
+    /// The τ are swept in tiers, m = 2ʲ for j in TIERS[i]..TIERS[i + 1]:
+    /// 24 streams in one sweep are more than the prefetchers follow. The
+    /// first tier's streams lie within 16 KiB (L1), the second's within
+    /// 1 MiB (L2), so each of them reads memory about once.
+    const TIERS: [usize; 4] = [0, 10, 16, Self::MAX_J];
 
     /// Sums for phase data of `phase_len` points (rate samples + 1).
     pub fn new(phase_len: usize) -> Self {
@@ -465,10 +465,9 @@ impl OctaveSums {
         // falsely aliasing the loads).
         let mut local = self.acc;
         let count = self.count;
-        let near = count.min(Self::NEAR_J);
-        let (near_acc, far_acc) = local.split_at_mut(near);
-        let far_acc = far_acc.get_mut(..count - near).unwrap_or(&mut []);
-        for (j0, acc) in [(0, near_acc), (near, far_acc)] {
+        for w in Self::TIERS.windows(2) {
+            let (j0, j1) = (w[0].min(count), w[1].min(count));
+            let acc = &mut local[j0..j1];
             let mut k0 = from;
             while k0 < to {
                 let k1 = (k0 + Self::BLOCK).min(to);
