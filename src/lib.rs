@@ -17,7 +17,7 @@
 //!   UART, commands back) and its decoder, shared with the host tools.
 //! - [`board`]: bindings for the QEMU machine and the STM32F405 board
 //!   (firmware builds only), and the reset record that survives a fault.
-#![cfg_attr(not(test), no_std)]
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN.

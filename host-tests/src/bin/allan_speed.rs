@@ -44,7 +44,7 @@ fn ours_2threads(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usiz
 fn oavar_m(phase: &[f64], m: usize) -> AdevPoint {
     #[cfg(target_arch = "x86_64")]
     if avx2() {
-        // SAFETY: the CPU has AVX2 (checked), the AVX2 build's only
+        // SAFETY: the CPU has AVX2 and FMA (checked), the build's only
         // requirement.
         return unsafe { oavar_phase_avx2(phase, 1.0, m) }.expect("a term");
     }
@@ -53,7 +53,8 @@ fn oavar_m(phase: &[f64], m: usize) -> AdevPoint {
 
 fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx2");
+    return std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma");
     #[cfg(not(target_arch = "x86_64"))]
     false
 }

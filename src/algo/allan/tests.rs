@@ -307,13 +307,14 @@ fn huge_cluster_sizes_and_stray_indices_are_errors_not_panics() {
     assert_eq!(local_slope(&[], 0), None);
 }
 
-/// The AVX2 builds of the OADEV kernel give the plain build's bits (the
-/// host tool and `allan-speed` take them where the CPU has AVX2).
+/// The AVX2 + FMA builds of the OADEV kernel give the plain build's bits
+/// (the host tool and `allan-speed` take them where the CPU has both).
 #[cfg(target_arch = "x86_64")]
 #[test]
 #[allow(unsafe_code)]
 fn avx2_build_gives_the_same_bits() {
-    if !std::arch::is_x86_feature_detected!("avx2") {
+    if !(std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"))
+    {
         return;
     }
     let mut rng = crate::emu::Rng::new(5);
@@ -328,7 +329,7 @@ fn avx2_build_gives_the_same_bits() {
     fill_phase(&y, &mut phase).unwrap();
     for m in (1..10_000).step_by(37).chain([1, 2, 3, 7, 8, 9, 10_005]) {
         let plain = oavar_phase(&phase, 0.01, m);
-        // SAFETY: the CPU has AVX2 (checked above).
+        // SAFETY: the CPU has AVX2 and FMA (checked above).
         let fast = unsafe { oavar_phase_avx2(&phase, 0.01, m) };
         assert_eq!(
             plain.map(|p| p.avar.to_bits()),
@@ -384,8 +385,10 @@ fn grouped_sums_are_the_one_factor_sums() {
                 #[cfg(target_arch = "x86_64")]
                 let mut wide = [f64::NAN; GROUP];
                 #[cfg(target_arch = "x86_64")]
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2.
+                if (std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma"))
+                {
+                    // SAFETY: the CPU has AVX2 and FMA.
                     unsafe { second_diff_sums_avx2(&x, m0, &mut wide[..g]) };
                     for (w, s) in wide[..g].iter().zip(&sums[..g]) {
                         assert_eq!(w.to_bits(), s.to_bits());
@@ -403,5 +406,17 @@ fn grouped_sums_are_the_one_factor_sums() {
                 m0 += if m0 < 40 { 1 } else { 37 };
             }
         }
+    }
+}
+
+/// The kernels' fused multiply-add is libm's on the board and std's on the
+/// host: both round a·b + c once, so the sums are the same bits in both.
+#[test]
+fn libm_fma_is_std_mul_add() {
+    let mut rng = crate::emu::Rng::new(11);
+    for _ in 0..100_000 {
+        let d = 1e3 * rng.gaussian() as f64 + rng.gaussian() as f64 * 1e-9;
+        let acc = 1e6 * f64::from(rng.uniform()) + 1e-7 * rng.gaussian() as f64;
+        assert_eq!(libm::fma(d, d, acc).to_bits(), d.mul_add(d, acc).to_bits());
     }
 }
