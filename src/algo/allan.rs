@@ -558,9 +558,9 @@ impl OctaveSums {
     }
 }
 
-/// a·b + c with one rounding: std's `mul_add` on the host, which the AVX2
-/// + FMA builds vectorise; libm's (the same correctly rounded result) on
-/// the board, which does not run these kernels.
+/// a·b + c with one rounding: std's `mul_add` on the host, which the
+/// builds for AVX2 and FMA vectorise; libm's (the same correctly rounded
+/// result) on the board, which does not run these kernels.
 #[inline(always)]
 fn fma(a: f64, b: f64, c: f64) -> f64 {
     #[cfg(any(test, feature = "std"))]

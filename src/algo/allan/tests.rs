@@ -385,8 +385,8 @@ fn grouped_sums_are_the_one_factor_sums() {
                 #[cfg(target_arch = "x86_64")]
                 let mut wide = [f64::NAN; GROUP];
                 #[cfg(target_arch = "x86_64")]
-                if (std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma"))
+                if std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
                 {
                     // SAFETY: the CPU has AVX2 and FMA.
                     unsafe { second_diff_sums_avx2(&x, m0, &mut wide[..g]) };
