@@ -1,7 +1,7 @@
 //! E-DAVAR evaluation over scenario classes and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
-//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--csv PATH] [--other-lambdas]`
+//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas]`
 //!
 //! Every class is run over N seeds (20 by default). The error is the RMS of
 //! σ²(τ0) against the true local Allan variance at τ0, over the times every
@@ -521,6 +521,9 @@ struct Args {
     /// Seeds per class (at least 2: the tables print seed-to-seed sd).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
     seeds: u64,
+    /// First seed of each class's run (seeds S..S+N; the trace is of S).
+    #[arg(long, default_value_t = 1)]
+    first_seed: u64,
     /// Where the paper experiment's window trace goes (default
     /// target/davar-trace.csv).
     #[arg(long)]
@@ -573,7 +576,7 @@ fn main() -> ExitCode {
         let mut oracle_errs = Vec::new();
         let mut centred_errs = Vec::new();
         let mut soft_errs = [Vec::new(), Vec::new()];
-        for seed in 1..=seeds {
+        for seed in args.first_seed..args.first_seed + seeds {
             let (w, truth) = (class.gen)(seed * 7919 + class.n as u64);
             for (i, (name, cfg)) in ms.iter().enumerate() {
                 let r = run(*cfg, &w);
@@ -592,7 +595,7 @@ fn main() -> ExitCode {
                 short[i] += r.hops.iter().filter(|h| h.2 < full).count() as f64
                     / r.hops.len() as f64
                     / seeds as f64;
-                if seed == 1 && matches!(class.kind, Kind::Paper) {
+                if seed == args.first_seed && matches!(class.kind, Kind::Paper) {
                     for &(t, v, len) in &r.hops {
                         let _ = writeln!(trace, "{name},{t},{len},{v},{}", truth[t]);
                     }
@@ -674,7 +677,10 @@ fn main() -> ExitCode {
         concat!(env!("CARGO_MANIFEST_DIR"), "/../target/davar-trace.csv").to_string()
     });
     match std::fs::write(&path, trace) {
-        Ok(()) => println!("\npaper experiment, seed 1: window trace written to {path}"),
+        Ok(()) => println!(
+            "\npaper experiment, seed {}: window trace written to {path}",
+            args.first_seed
+        ),
         Err(e) => eprintln!("davar-eval: cannot write {path}: {e}"),
     }
     println!(
