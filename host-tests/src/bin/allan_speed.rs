@@ -14,8 +14,10 @@ use std::process::Command;
 use std::time::Instant;
 
 #[cfg(target_arch = "x86_64")]
-use gyro_array::algo::allan::oavar_phase_avx2;
-use gyro_array::algo::allan::{fill_phase, oavar_octave, oavar_phase, AdevPoint, OctaveSums};
+use gyro_array::algo::allan::second_diff_sums_avx2;
+use gyro_array::algo::allan::{
+    fill_phase, oavar_octave, second_diff_sums, AdevPoint, OctaveSums, GROUP,
+};
 use gyro_array::emu::Rng;
 
 const N: usize = 10_000_000;
@@ -39,18 +41,6 @@ fn ours_2threads(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usiz
     a.finish(1.0, out)
 }
 
-/// OADEV at factor m, in the library's AVX2 build where the CPU has AVX2
-/// (the same bits as the plain build: `allan::tests`).
-fn oavar_m(phase: &[f64], m: usize) -> AdevPoint {
-    #[cfg(target_arch = "x86_64")]
-    if avx2() {
-        // SAFETY: the CPU has AVX2 and FMA (checked), the build's only
-        // requirement.
-        return unsafe { oavar_phase_avx2(phase, 1.0, m) }.expect("a term");
-    }
-    oavar_phase(phase, 1.0, m).expect("a term")
-}
-
 fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     return std::arch::is_x86_feature_detected!("avx2")
@@ -59,22 +49,45 @@ fn avx2() -> bool {
     false
 }
 
+/// The sums of factors m0, m0 + 1, … (`sums.len()`, at most `GROUP`)
+/// through the library's grouped kernel, in its AVX2 + FMA build where the
+/// CPU has both (the same bits as the plain build: `allan::tests`).
+fn grouped(phase: &[f64], m0: usize, sums: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU has AVX2 and FMA (checked), the build's only
+        // requirements.
+        return unsafe { second_diff_sums_avx2(phase, m0, sums) };
+    }
+    second_diff_sums(phase, m0, sums)
+}
+
 /// Every τ of `rate` (m = 1 … (N − 1)/2), on `threads` threads taking
-/// the factors in turn (the cost of a factor falls with m).
+/// groups of `GROUP` consecutive factors in turn, through the grouped
+/// kernel as `gyro allan` and the Python package run them.
 fn ours_all(rate: &[f64], threads: usize) -> Vec<AdevPoint> {
     let mut phase = vec![0.0; rate.len() + 1];
     fill_phase(rate, &mut phase).expect("finite data");
     let max_m = rate.len().saturating_sub(1) / 2;
+    let n = rate.len() as u64;
     let mut parts: Vec<Vec<AdevPoint>> = Vec::new();
     std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
                 let phase = &phase;
                 s.spawn(move || {
-                    (1 + t..=max_m)
-                        .step_by(threads)
-                        .map(|m| oavar_m(phase, m))
-                        .collect::<Vec<_>>()
+                    let mut out = Vec::new();
+                    let mut sums = [0.0; GROUP];
+                    for m0 in (1 + t * GROUP..=max_m).step_by(threads * GROUP) {
+                        let g = GROUP.min(max_m - m0 + 1);
+                        grouped(phase, m0, &mut sums[..g]);
+                        for (j, s) in sums[..g].iter().enumerate() {
+                            let m = m0 + j;
+                            let terms = (phase.len() - 2 * m) as u64;
+                            out.push(AdevPoint::from_sum(m, 1.0, *s, terms, n));
+                        }
+                    }
+                    out
                 })
             })
             .collect();
