@@ -37,15 +37,6 @@ fn kind_of(name: &str) -> PyResult<Kind> {
     })
 }
 
-/// The phase the deviations read, checked finite. Frequency (rate) data
-/// becomes phase as allantools makes it: the mean taken out first (the
-/// deviations do not see a constant rate; its running sum would cost
-/// digits), then the running sum of the samples times τ0 after a leading
-/// 0 (allantools multiplies the sum by τ0 afterwards: the same to
-/// rounding). A
-/// non-finite sample is an error naming it, as in `gyro allan`. (For
-/// frequency data the finiteness comes from the sums: a NaN or infinite
-/// sample makes the total so, and only then is it looked for.)
 /// An empty vector with room for `n` values. Where it is large, its pages
 /// are asked to come as transparent huge pages (Linux `MADV_HUGEPAGE`):
 /// the phase of 10⁷ points is 80 MB of fresh memory on every call, and in
@@ -57,7 +48,7 @@ fn buffer(n: usize) -> Vec<f64> {
     if n >= 1 << 18 {
         let page = 4096usize;
         let start = (v.as_ptr() as usize).next_multiple_of(page);
-        let end = (v.as_ptr() as usize + n * 8) / page * page;
+        let end = (v.as_ptr() as usize + n * core::mem::size_of::<f64>()) / page * page;
         if end > start {
             // SAFETY: the range lies inside the vector's own allocation,
             // and MADV_HUGEPAGE is advice: it changes no contents or
@@ -70,6 +61,15 @@ fn buffer(n: usize) -> Vec<f64> {
     v
 }
 
+/// The phase the deviations read, checked finite. Frequency (rate) data
+/// becomes phase as allantools makes it: a mean taken out first (the
+/// deviations do not see a constant rate; its running sum would cost
+/// digits), then the running sum of the samples times τ0 after a leading
+/// 0 (allantools multiplies the sum by τ0 afterwards: the same to
+/// rounding). A non-finite sample is an error naming it, as in `gyro
+/// allan`. (For frequency data the finiteness comes from the sums: a NaN
+/// or infinite sample makes the head's total or the running sum so, and
+/// only then is it looked for.)
 fn phase_of(data: &[f64], rate: f64, data_type: &str) -> PyResult<Vec<f64>> {
     if !(rate.is_finite() && rate > 0.0) {
         return Err(value_error(DevError::Tau0));
