@@ -232,7 +232,7 @@ pub fn deviations_of_finite(
 /// (the same bits).
 fn second_diff_sums(x: &[f64], m0: usize, sums: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if allan::has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above), the only
         // requirements of the AVX2 build.
         return unsafe { allan::second_diff_sums_avx2(x, m0, sums) };
@@ -244,7 +244,7 @@ fn second_diff_sums(x: &[f64], m0: usize, sums: &mut [f64]) {
 /// the CPU has AVX2 (the same bits).
 fn octave_sweep(x: &[f64], tau0: f64, out: &mut [allan::AdevPoint]) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if allan::has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above), the only
         // requirements of the AVX2 build.
         return unsafe { allan::oavar_octave_phase_avx2(x, tau0, out) };
@@ -263,8 +263,7 @@ fn second_diff_sum(x: &[f64], m: usize, from: usize, to: usize, stride: usize) -
     }
     if stride == 1 {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if allan::has_avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above), the only
             // requirements of the AVX2 build.
             return unsafe { allan::second_diff_sum_avx2(x, m, from, to) };

@@ -235,13 +235,21 @@ pub fn oavar_phase(phase: &[f64], tau0_s: f64, m: usize) -> Result<AdevPoint, Al
     oavar_phase_inline(phase, tau0_s, m)
 }
 
+/// Whether this CPU runs the `_avx2` builds of the kernels below (AVX2 and
+/// FMA), which give the plain builds' bits faster (host builds).
+#[cfg(all(target_arch = "x86_64", any(test, feature = "std")))]
+pub fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
 /// [`oavar_phase`] compiled for AVX2 and FMA (x86-64 hosts; call it only
-/// where `is_x86_feature_detected!` holds for both). The same operations in
-/// the same order, so the same bits: checked by a test. Each term is added
-/// to its lane by a fused multiply-add (`fma`, in every build: one
-/// rounding, the same in the scalar build's call as in the instruction). Every-τ sweeps are bound by arithmetic: 10⁵ samples at
-/// every τ took 0.51 s instead of 0.70 on `allan-speed`'s host with AVX2,
-/// and the grouped kernel 0.30 s instead of 0.36 with FMA on an EPYC.
+/// where `has_avx2_fma` holds). The same operations in the same order, so
+/// the same bits: checked by a test. Each term is added to its lane by a
+/// fused multiply-add (`fma`, in every build: one rounding, the same in
+/// the scalar build's call as in the instruction). Every-τ sweeps are
+/// bound by arithmetic: 10⁵ samples at every τ took 0.51 s instead of 0.70
+/// on `allan-speed`'s host with AVX2, and the grouped kernel 0.30 s
+/// instead of 0.36 with FMA on an EPYC.
 ///
 /// # Safety
 ///
@@ -351,24 +359,23 @@ fn second_diff_sums_inline(phase: &[f64], m0: usize, sums: &mut [f64]) {
     let mut b = 0;
     while b < longest {
         let e = (b + GROUP_BLOCK).min(longest);
-        // Factors in fours that all run to the block's end share each
+        // Factors in SHAREs that all run to the block's end share each
         // chunk's load of θ[i]: two loads a term instead of three.
         let mut g = 0;
         while g + SHARE <= g_n && whole(g + SHARE - 1) >= e {
             let x0 = &phase[b..e];
             let m = m0 + g;
             let far = |k: usize| &phase[b + k..e + k];
-            let (x10, x11, x12, x13) = (far(m), far(m + 1), far(m + 2), far(m + 3));
-            let (x20, x21, x22, x23) = (far(2 * m), far(2 * m + 2), far(2 * m + 4), far(2 * m + 6));
-            let mut acc = [lanes[g], lanes[g + 1], lanes[g + 2], lanes[g + 3]];
+            let x1: [&[f64]; SHARE] = core::array::from_fn(|s| far(m + s));
+            let x2: [&[f64]; SHARE] = core::array::from_fn(|s| far(2 * (m + s)));
+            let mut acc: [[f64; LANES]; SHARE] = core::array::from_fn(|s| lanes[g + s]);
             // (Every stretch is e − b long.)
             let mut j = 0;
             while j + LANES <= x0.len() {
                 let a = &x0[j..j + LANES];
-                add_terms(&mut acc[0], a, &x10[j..j + LANES], &x20[j..j + LANES]);
-                add_terms(&mut acc[1], a, &x11[j..j + LANES], &x21[j..j + LANES]);
-                add_terms(&mut acc[2], a, &x12[j..j + LANES], &x22[j..j + LANES]);
-                add_terms(&mut acc[3], a, &x13[j..j + LANES], &x23[j..j + LANES]);
+                for s in 0..SHARE {
+                    add_terms(&mut acc[s], a, &x1[s][j..j + LANES], &x2[s][j..j + LANES]);
+                }
                 j += LANES;
             }
             lanes[g..g + SHARE].copy_from_slice(&acc);

@@ -43,8 +43,7 @@ fn ours_2threads(rate: &[f64], phase: &mut [f64], out: &mut [AdevPoint]) -> usiz
 
 fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma");
+    return gyro_array::algo::allan::has_avx2_fma();
     #[cfg(not(target_arch = "x86_64"))]
     false
 }

@@ -17,7 +17,7 @@ const N: usize = 100_001;
 
 fn one(x: &[f64], m: usize) -> f64 {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if gyro_array::algo::allan::has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA.
         return unsafe { second_diff_sum_avx2(x, m, 0, x.len() - 2 * m) };
     }
@@ -26,7 +26,7 @@ fn one(x: &[f64], m: usize) -> f64 {
 
 fn grouped(x: &[f64], m0: usize, sums: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if gyro_array::algo::allan::has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA.
         return unsafe { second_diff_sums_avx2(x, m0, sums) };
     }

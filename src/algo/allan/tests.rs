@@ -313,8 +313,7 @@ fn huge_cluster_sizes_and_stray_indices_are_errors_not_panics() {
 #[test]
 #[allow(unsafe_code)]
 fn avx2_build_gives_the_same_bits() {
-    if !(std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"))
-    {
+    if !has_avx2_fma() {
         return;
     }
     let mut rng = crate::emu::Rng::new(5);
@@ -385,9 +384,7 @@ fn grouped_sums_are_the_one_factor_sums() {
                 #[cfg(target_arch = "x86_64")]
                 let mut wide = [f64::NAN; GROUP];
                 #[cfg(target_arch = "x86_64")]
-                if std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                {
+                if has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA.
                     unsafe { second_diff_sums_avx2(&x, m0, &mut wide[..g]) };
                     for (w, s) in wide[..g].iter().zip(&sums[..g]) {
