@@ -98,6 +98,7 @@ pub fn allan_digest() -> u64 {
         entropy,
         threshold: Threshold::Auto { p_fa: 0.01 },
         placement,
+        tau_octaves: 1,
     };
     let (Ok(mut a), Ok(mut b)) = (
         Davar::<512, 19, 7>::new(cfg(EntropyKind::Temporal, Placement::Segmented)),

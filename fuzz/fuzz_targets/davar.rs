@@ -34,6 +34,7 @@ fuzz_target!(|data: &[u8]| {
         } else {
             Placement::Segmented
         },
+        tau_octaves: 1,
     };
     let Ok(mut d) = Davar::<512, 19, 6>::new(cfg) else {
         return;

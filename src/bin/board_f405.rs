@@ -89,7 +89,7 @@ fn spi_clock(pclk: Hertz, max: u32) -> Hertz {
 }
 
 /// The board's noise tracker: three E-DAVARs.
-type Tracker = NoiseTracker<1024, 35, 9>;
+type Tracker = NoiseTracker<1024, 35, 3>;
 
 /// The noise tracker (33 KB) in a static of its own, built in place
 /// (`NoiseTracker::init_in`). `None` if the configuration is refused.
@@ -103,7 +103,7 @@ fn noise_tracker() -> Option<&'static mut Tracker> {
     static mut TRACKER: MaybeUninit<Tracker> = MaybeUninit::uninit();
     // SAFETY: called once, from main, before anything refers to TRACKER.
     let slot = unsafe { (&raw mut TRACKER).as_mut() }?;
-    Tracker::init_in(slot, tracker::config(1024)).ok()
+    Tracker::init_in(slot, tracker::link_config(1024)).ok()
 }
 
 /// The self-test's five 8 KB blocks, in CCM RAM (`.ccmram`, see memory.x),

@@ -60,11 +60,16 @@ fn main() -> ! {
             entropy: EntropyKind::Temporal,
             threshold: Threshold::Auto { p_fa: 0.01 },
             placement: Placement::Centred,
+            tau_octaves: 1,
         };
         ok &= bench_davar::<1024, 35, 7, 35, 1>(&t, ipt, step, centred, "centred temporal");
-        // The board's tracker: three axes, 9 τ, λ2 = 1024, fed the same
-        // samples, hops staggered as the tracker does it.
-        ok &= bench_davar::<1024, 35, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker");
+        // The board's tracker: three axes, the link's three τ (1, 16 and
+        // 256 samples), λ2 = 1024, fed the same samples, hops staggered as
+        // the tracker does it; and the same at every octave (9 τ).
+        let link = gyro_array::pipeline::tracker::link_config(1024);
+        ok &= bench_davar::<1024, 35, 3, 0, 1>(&t, ipt, step, link, "board tracker, one axis");
+        ok &= bench_davar::<1024, 35, 3, 0, 3>(&t, ipt, step, link, "board tracker");
+        ok &= bench_davar::<1024, 35, 9, 0, 3>(&t, ipt, step, seg(1024), "board tracker, 9 tau");
     }
     ok &= bench_selftest(&t, ipt, &mut rng);
     ok &= bench_timed_read(&t, ipt);
@@ -708,8 +713,8 @@ fn bench_loop_on(
         Some(20),
         &mut pipe,
     );
-    let mut slot = core::mem::MaybeUninit::<NoiseTracker<1024, 35, 9>>::uninit();
-    let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::config(1024)) else {
+    let mut slot = core::mem::MaybeUninit::<NoiseTracker<1024, 35, 3>>::uninit();
+    let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::link_config(1024)) else {
         exit(false)
     };
     // The reads alone (drivers and the emulated SPI exchange), fault-free:
@@ -857,8 +862,8 @@ fn bench_timed_loop_on(
     for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
         let _ = g.driver().flush_fifo();
     }
-    let mut slot = core::mem::MaybeUninit::<NoiseTracker<1024, 35, 9>>::uninit();
-    let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::config(1024)) else {
+    let mut slot = core::mem::MaybeUninit::<NoiseTracker<1024, 35, 3>>::uninit();
+    let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::link_config(1024)) else {
         exit(false)
     };
     with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
@@ -931,7 +936,7 @@ fn run_loop<const N: usize>(
     faults: &str,
     all: bool,
     pipe: &mut gyro_array::pipeline::Pipeline<N>,
-    noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 9>,
+    noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 3>,
     meter: &dyn Fn() -> (gyro_array::emu::Meter, u32),
     mut before: impl FnMut(u32),
     mut step: impl FnMut(&mut gyro_array::pipeline::Pipeline<N>) -> gyro_array::pipeline::Output<N>,

@@ -71,8 +71,9 @@ const NOISE_TAU: [usize; 3] = [0, 3, 6];
 /// mps2-an386 core clock.
 const CORE_HZ: u32 = 25_000_000;
 
-/// E-DAVAR per axis: λ2 = 512 samples, 17 STFT frames, τ = 1 … 64 ms.
-type Tracker = NoiseTracker<512, 19, 7>;
+/// E-DAVAR per axis: λ2 = 512 samples, the link's τ alone (1, 8 and 64 ms:
+/// every third octave).
+type Tracker = NoiseTracker<512, 19, 3>;
 
 static TICKS: AtomicU32 = AtomicU32::new(0);
 
@@ -202,7 +203,8 @@ fn main() -> ! {
         }
         c
     };
-    let mut noise = Tracker::new(tracker::config(512)).unwrap_or_else(|_| exit(false));
+    let mut noise =
+        Tracker::new(tracker::config(512).with_tau_octaves(3)).unwrap_or_else(|_| exit(false));
     noise.set_view(NOISE_TAU);
     let mut sigma_x_1ms = f32::NAN;
 

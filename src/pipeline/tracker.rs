@@ -26,13 +26,30 @@ pub const fn config(lambda2: u16) -> DavarConfig {
 /// record a new tracker makes ready ([`NoiseTracker::set_view`]).
 pub const LINK_TAUS: [usize; 3] = [0, 4, 8];
 
-/// The three axes' hop phases. Each axis's heavy samples are the hop and
-/// the τ terms after it (samples 0–8 of its hop) and the placement,
-/// publication and segmentation start (17–21). Chosen by measuring one
-/// axis's cost at every sample (`cargo xtask bench` input, stationary and
-/// with a variance step) and taking the stagger whose worst 3-axis sample
-/// is least: [1, 12, 22]; the [1, 3, 29] used before came to 5 480.
-pub const HOP_PHASES: [u8; 3] = [1, 12, 22];
+/// [`config`] summing the link's three τ alone (every fourth octave, a
+/// tracker with `T` = 3): what the board runs. The link's records are the
+/// every-octave tracker's bit for bit, and the sums of the six τ nobody
+/// reads are not made (some 100 instructions a sample an axis, and 60 %
+/// of each axis's block sums in RAM).
+pub const fn link_config(lambda2: u16) -> DavarConfig {
+    config(lambda2).with_tau_octaves(LINK_TAUS[1] as u8)
+}
+
+/// The three axes' hop phases. Each axis's heavy samples are the hop, the
+/// τ terms after it and the segmentation's last rows (samples 0–7 of its
+/// hop) and the placement, publication and segmentation start (17–21).
+/// Chosen from one axis's mean cost at every sample of the hop (`cargo
+/// xtask bench`, "board tracker, one axis") as the stagger whose worst
+/// sample is least once three more costs are added where they fall: 1 000
+/// instructions where the calibration solves or the configuration is read
+/// back (`calib::SOLVE_SLOTS`, `pipeline::CHECK_AT`; the tracker's sample
+/// n is the pipeline's n − 1), and 340 on the frame after each axis
+/// publishes (it carries the estimate). [8, 17, 30] scores 2 622, against
+/// 2 998 for the [1, 12, 22] chosen when the tracker summed nine τ; the
+/// board loop's worst sample (`cargo xtask bench-loop`) fell by 235 on
+/// scenario A and 149 on K with it, where [1, 14, 23] (best without the
+/// estimate's frames) raised both.
+pub const HOP_PHASES: [u8; 3] = [8, 17, 30];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's
 /// temporaries reuse one frame.
@@ -313,7 +330,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             seq: origin.wrapping_add(t as u32),
             len,
             bridged: self.bridged_in(axis, origin, d.estimate_span()?),
-            sigma_dps: taus.map(|j| d.estimate_avar(j).map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)),
+            sigma_dps: taus.map(|e| {
+                d.tau_index(e)
+                    .and_then(|j| d.estimate_avar(j))
+                    .map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)
+            }),
         })
     }
 
@@ -432,10 +453,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> LinkNoise<'_, CAP, F
 }
 
 /// σ(τ = 2ʲ samples) of a surface row from [`NoiseTracker::estimate`], °/s
-/// (NaN for j out of range). Takes the row
+/// (NaN where the row has no such τ). Takes the row
 /// so that logging several τ converts the sums once.
 pub fn sigma_dps<const T: usize>(e: &DavarStep<T>, j: usize) -> f32 {
-    e.avar.get(j).map_or(f32::NAN, |&v| sqrtf(v) * LSB_DPS)
+    e.avar_at(j).map_or(f32::NAN, |v| sqrtf(v) * LSB_DPS)
 }
 
 #[cfg(test)]
@@ -603,6 +624,54 @@ mod tests {
             t.bridged()
         );
         assert!(compared > 60_000 && changed > 2_000, "{compared} {changed}");
+    }
+
+    /// The board's tracker, summing the link's three τ alone, sends the
+    /// every-octave tracker's records bit for bit, through a variance
+    /// step, bridges and a restart.
+    #[test]
+    fn the_link_taus_alone_give_the_same_records() {
+        let mut all = NoiseTracker::<1024, 35, 9>::new(config(1024)).unwrap();
+        let mut three = NoiseTracker::<1024, 35, 3>::new(link_config(1024)).unwrap();
+        let mut rng = Rng::new(12);
+        let mut compared = 0;
+        for k in 0..20_000u32 {
+            let p = 0.01 * rng.gaussian() * if k > 9_000 { 2.0 } else { 1.0 };
+            let probe = Probe {
+                seq: k,
+                noise_probe_dps: [
+                    Some(p),
+                    (k % 130 != 77).then_some(p),
+                    (!(12_000..12_040).contains(&k)).then_some(p),
+                ],
+            };
+            all.push_probe(probe);
+            three.push_probe(probe);
+            for a in 0..3 {
+                let (x, y) = (
+                    all.at_taus(LINK_TAUS).newest(a),
+                    three.at_taus(LINK_TAUS).newest(a),
+                );
+                assert_eq!(
+                    x.map(|r| (r.seq, r.len, r.bridged, r.sigma_dps.map(f32::to_bits))),
+                    y.map(|r| (r.seq, r.len, r.bridged, r.sigma_dps.map(f32::to_bits))),
+                    "axis {a} at {k}"
+                );
+                compared += usize::from(x.is_some());
+                let (e, f) = (all.estimate(a), three.estimate(a));
+                for j in LINK_TAUS {
+                    assert_eq!(
+                        e.map(|e| sigma_dps(&e.step, j).to_bits()),
+                        f.map(|f| sigma_dps(&f.step, j).to_bits())
+                    );
+                }
+            }
+            // A τ the three-τ tracker does not sum is NaN, not another's.
+            if let Some(f) = three.estimate(0) {
+                assert!(sigma_dps(&f.step, 2).is_nan());
+            }
+        }
+        assert!(compared > 40_000, "{compared}");
     }
 
     /// After a quiet stretch an axis bridges a burst of BRIDGE_BURST

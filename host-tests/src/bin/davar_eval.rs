@@ -297,6 +297,7 @@ fn methods(l1: u16, l2: u16) -> Vec<(String, DavarConfig)> {
         entropy,
         threshold,
         placement: Placement::Centred,
+        tau_octaves: 1,
     };
     vec![
         (format!("fixed {l1}"), DavarConfig::fixed(l1)),

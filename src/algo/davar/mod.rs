@@ -113,7 +113,7 @@ const CELLS: usize = 16;
 /// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
 /// and the last segmentation's rows (which run on the samples after its
 /// start: CELLS of them, from START_AT + 1 around to the next hop's
-/// sample 4). The changes are refined to the frame on the
+/// sample 5, or 7 where they make way for the τ terms). The changes are refined to the frame on the
 /// `REFINE_PARTS` samples before (from `REFINE_AT`, a share of them on
 /// each): with many changes found (a chip gated in and out of a fused
 /// axis) refining and placing together cost 1 100 instructions more than
@@ -177,8 +177,24 @@ pub struct DavarStep<const T: usize> {
     pub score: f32,
     /// Threshold the score was compared with.
     pub threshold: f32,
-    /// Allan variance at τ = 2ʲ·τ0 in (sample unit)²; multiply by lsb².
+    /// Allan variance at τ_j = 2^(j·`tau_octaves`)·τ0 in (sample unit)²;
+    /// multiply by lsb².
     pub avar: [f32; T],
+    /// Octaves between consecutive τ ([`DavarConfig::tau_octaves`]).
+    pub tau_octaves: u8,
+}
+
+impl<const T: usize> DavarStep<T> {
+    /// The Allan variance at τ = 2^`e` samples, if that is one of the row's
+    /// τ.
+    pub fn avar_at(&self, e: usize) -> Option<f32> {
+        let oct = usize::from(self.tau_octaves.max(1));
+        if e.is_multiple_of(oct) {
+            self.avar.get(e / oct).copied()
+        } else {
+            None
+        }
+    }
 }
 
 /// Exact window sums of one published hop.
@@ -324,6 +340,15 @@ struct Segmentation {
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     Davar<CAP, FRAMES, T, STFT>
 {
+    /// Whether the segmentation's rows make way for the τ terms (samples
+    /// 1..T of the hop): where the rows left after the hop (those past the
+    /// `SEG − START_AT − 1` samples before it) still end before
+    /// `TAILS_AT`. The last rows are the costliest (a row weighs every
+    /// earlier cell), some 800 instructions on the Cortex-M4, as much as
+    /// one τ's 32 new terms: with three τ (the board's) the hop's samples
+    /// 1–2 cost 1 600 with both, where samples 6–11 had nothing to do.
+    const ROWS_YIELD: bool = T + CELLS - (SEG - START_AT - 1) < TAILS_AT;
+
     /// Check the settings against the capacities.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
         let (l1, l2) = (cfg.lambda1 as usize, cfg.lambda2 as usize);
@@ -341,8 +366,14 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let span = l2 / SEG;
         let min_frames = l1.div_ceil(SEG).min(span);
         // Terms are added once per hop, so the ring must still hold the
-        // oldest sample of a term 2^T + 32 samples back.
-        if T == 0 || T > 11 || (1usize << T) > min_frames * SEG || (1usize << T) + SEG + 1 > CAP {
+        // oldest sample of a term 2·τ_max + 32 samples back; τ ≤ 2¹⁰ keeps
+        // every sum exact (see the module's head).
+        let top = (T.max(1) - 1) * cfg.tau_octaves as usize;
+        if T == 0 || cfg.tau_octaves == 0 || top > 10 {
+            return Err(DavarError::Capacity);
+        }
+        let term_span = 2usize << top;
+        if term_span > min_frames * SEG || term_span + SEG + 1 > CAP {
             return Err(DavarError::Capacity);
         }
         let centred_adaptive = cfg.placement == Placement::Centred && min_frames < span;
@@ -559,7 +590,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let n = self.n;
         self.ring[n as usize & (CAP - 1)] = w;
         self.n = n + 1;
-        if n >> T == 0 {
+        if n < self.term_span() {
             self.gather_first_terms(w);
         }
         let n = self.n;
@@ -568,19 +599,19 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let centred_adaptive =
             self.cfg.placement == Placement::Centred && self.min_frames < self.span;
-        // The work of a hop is spread over its 32 samples (1 is the hop):
-        // phase 0 the STFT of the finished frame (centred windows), phase
-        // 1 + j the new Allan terms of τ = 2ʲ (τ0 at the hop, the others on
-        // the next samples), every other sample one row of the
-        // segmentation.
+        // The work of a hop is spread over its 32 samples (rel 0 is the
+        // hop): phase 0 the STFT of the finished frame (centred windows),
+        // rel j the new Allan terms of τ_j (τ0 at the hop), every other
+        // sample one row of the segmentation.
         let phase = (n % SEG as u64) as usize;
         let hop_phase = self.hop_phase as usize;
-        // Samples since the hop: the terms of τ = 2ʲ come j samples after it.
+        // Samples since the hop.
         let rel = (phase + SEG - hop_phase) % SEG;
         if phase == 0 && centred_adaptive {
             self.store_frame();
         }
-        if (1..T).contains(&rel) {
+        let terms = (1..T).contains(&rel);
+        if terms {
             self.add_terms(rel);
         }
         if rel == TAILS_AT {
@@ -617,7 +648,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 if let Some(first) = self.dp.next_first.take() {
                     self.dp_start(first);
                 }
-            } else if self.dp.row >= 1 && self.dp.row <= self.dp.cells {
+            } else if self.dp.row >= 1
+                && self.dp.row <= self.dp.cells
+                && !(terms && Self::ROWS_YIELD)
+            {
                 self.dp_row();
             }
             return Ok(None);
@@ -672,7 +706,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let len = p.end - p.start;
         let mut avar = [0.0f32; T];
         for (j, v) in avar.iter_mut().enumerate() {
-            *v = Self::avar_of(p, j);
+            *v = Self::avar_of(p, j, self.cfg.tau_octaves);
         }
         Some(DavarStep {
             t: p.t,
@@ -682,7 +716,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             score: self.score,
             threshold: self.threshold,
             avar,
+            tau_octaves: self.cfg.tau_octaves,
         })
+    }
+
+    /// The index j of τ = 2^`e` samples among this estimator's τ
+    /// (τ_j = 2^(j·octaves)), if it is one of them.
+    pub fn tau_index(&self, e: usize) -> Option<usize> {
+        let oct = usize::from(self.cfg.tau_octaves.max(1));
+        (e.is_multiple_of(oct) && e / oct < T).then_some(e / oct)
     }
 
     /// The last estimate's time `t` and window length: what
@@ -709,7 +751,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // By reference: a copy of the published row (its u128 sums) cost
         // some 170 instructions a call on the Cortex-M4.
         let p = self.last.as_ref()?;
-        (j < T).then(|| Self::avar_of(p, j))
+        (j < T).then(|| Self::avar_of(p, j, self.cfg.tau_octaves))
     }
 }
 

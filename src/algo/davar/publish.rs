@@ -44,11 +44,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.edition = self.edition.wrapping_add(1);
         t
     }
-    /// σ² at τ = 2ʲ from a published window's exact sums (0 where the
-    /// window has no term at that τ).
-    pub(super) fn avar_of(p: &Published<T>, j: usize) -> f32 {
+    /// σ² at τ_j = 2^(j·`octaves`) from a published window's exact sums
+    /// (0 where the window has no term at that τ).
+    pub(super) fn avar_of(p: &Published<T>, j: usize, octaves: u8) -> f32 {
         let len = p.end - p.start;
-        let m = 1u64 << j;
+        let e = j * octaves as usize;
+        let m = 1u64 << e;
         let terms = (len + 1).saturating_sub(2 * m);
         match p.acc.get(j) {
             // In f32 (the board's FPU): the exact integer sum and the term
@@ -57,7 +58,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             // `avar_in_f32_is_within_two_ulp_of_f64`), and a tenth of the
             // soft-f64 cost on the Cortex-M4 (`cargo xtask bench`).
             Some(&acc) if terms > 0 => {
-                let inv_2m2 = f32::from_bits((127 - 1 - 2 * j as u32) << 23);
+                let inv_2m2 = f32::from_bits((127 - 1 - 2 * e as u32) << 23);
                 // (Both conversions equal `as f32`, without the library
                 // calls: 300 instructions per link frame that carries an
                 // estimate, on the Cortex-M4. A window has < 2³² terms.)

@@ -68,6 +68,11 @@ pub struct DavarConfig {
     pub threshold: Threshold,
     /// Window placement.
     pub placement: Placement,
+    /// Octaves between consecutive τ: τ_j = 2^(j·tau_octaves) samples, j
+    /// below the estimator's `T`. 1 gives every octave; the board, whose
+    /// link reads σ at 1, 16 and 256 samples alone, sums those three (4)
+    /// and no τ that nothing reads.
+    pub tau_octaves: u8,
 }
 
 impl DavarConfig {
@@ -82,6 +87,7 @@ impl DavarConfig {
             entropy: EntropyKind::Temporal,
             threshold: Threshold::Auto { p_fa: 0.01 },
             placement: Placement::Centred,
+            tau_octaves: 1,
         }
     }
 
@@ -97,7 +103,14 @@ impl DavarConfig {
             entropy: EntropyKind::Temporal,
             threshold: Threshold::Auto { p_fa: 0.01 },
             placement: Placement::Segmented,
+            tau_octaves: 1,
         }
+    }
+
+    /// The same settings with τ_j = 2^(j·`octaves`) samples.
+    pub const fn with_tau_octaves(mut self, octaves: u8) -> Self {
+        self.tau_octaves = octaves;
+        self
     }
 }
 
@@ -109,8 +122,9 @@ pub enum DavarError {
     Lambda,
     /// λ2 over the capacity `CAP`, `FRAMES` < CAP/32 + 3 (or ≥ 2¹⁵), `STFT` < FRAMES
     /// for an adaptive centred window,
-    /// λ1 below 2^T (the largest τ's term span), CAP < 2^T + 33, T outside
-    /// 1..=11, or CAP not a power of two.
+    /// λ1 below the largest τ's term span (2·τ_{T−1}), CAP below that
+    /// span + 33, a τ over 2¹⁰ samples, T = 0, τ octaves 0, or CAP not a
+    /// power of two.
     Capacity,
     /// ΔL = 0 (or odd) on an adaptive centred window.
     DeltaL,

@@ -50,19 +50,33 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             s + 1
         }
     }
-    /// After sample `w` (the `n`th, from 1): at n = 2ʲ the first term's b
-    /// of τ = 2ʲ is the running sum, and a of τ = 2ʲ⁻¹ the sum since
-    /// n = 2ʲ⁻¹. Runs for the first 2^T samples after a start.
+    /// τ_j in samples: 2^(j·octaves).
+    #[inline(always)]
+    pub(super) fn tau(&self, j: usize) -> u64 {
+        1u64 << (j * self.cfg.tau_octaves as usize)
+    }
+    /// Samples the longest τ's first term spans: 2·τ_{T−1}.
+    #[inline(always)]
+    pub(super) fn term_span(&self) -> u64 {
+        2 * self.tau(T - 1)
+    }
+    /// After sample `w` (the `n`th, from 1): at n = τ_j the first term's b
+    /// of τ_j is the running sum, and at n = 2τ_j its a the sum since
+    /// n = τ_j. Runs for the first 2·τ_{T−1} samples after a start.
     #[inline]
     pub(super) fn gather_first_terms(&mut self, w: i32) {
         self.prefix = self.prefix.wrapping_add(w);
         let n = self.n;
         if n.is_power_of_two() {
             let i = n.trailing_zeros() as usize;
-            if let Some(b) = self.first_b.get_mut(i) {
-                *b = self.prefix;
+            let oct = self.cfg.tau_octaves as usize;
+            if i.is_multiple_of(oct) {
+                if let Some(b) = self.first_b.get_mut(i / oct) {
+                    *b = self.prefix;
+                }
             }
-            if let Some(j) = i.checked_sub(1) {
+            if let Some(e) = i.checked_sub(1).filter(|e| e.is_multiple_of(oct)) {
+                let j = e / oct;
                 if let (Some(a), Some(&b)) = (self.first_a.get_mut(j), self.first_b.get(j)) {
                     *a = self.prefix.wrapping_sub(b);
                 }
@@ -80,7 +94,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             return;
         }
         {
-            let m = 1u64 << j;
+            let m = self.tau(j);
             if n < 2 * m {
                 return;
             }
@@ -247,7 +261,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let slot = |b: u64| Self::slot_near(f0, s_f0, b);
         let old_f0 = self.win_f0;
         for j in taus.start..taus.end.min(T) {
-            let m = 1u64 << j;
+            let m = self.tau(j);
             // Terms k ∈ [s, e − 2m]: whole blocks f0..q, then q's prefix.
             let q = (e - 2 * m) / SEG as u64;
             // The whole blocks: from the last window's by the blocks that
@@ -295,7 +309,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // Two plain loops rather than a chained iterator (whose every step
         // asks which half it is in). Where the blocks carry nothing
         // ([`carry_free`]) their high parts are 0 and are not read.
-        let free = carry_free(1 << j);
+        let free = carry_free(self.tau(j) as usize);
         for r in [s0..s0 + first_run, 0..count - first_run] {
             if free {
                 for l in lo_j.get(r).unwrap_or(&[]) {

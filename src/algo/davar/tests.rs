@@ -36,6 +36,7 @@ fn paper_window(p_fa: f32) -> DavarConfig {
         entropy: EntropyKind::Temporal,
         threshold: Threshold::Auto { p_fa },
         placement: Placement::Centred,
+        tau_octaves: 1,
     }
 }
 
@@ -305,6 +306,7 @@ fn bad_settings_are_typed() {
         entropy: EntropyKind::Spectral,
         threshold: Threshold::Fixed(0.2),
         placement: Placement::Centred,
+        tau_octaves: 1,
     };
     assert!(D::new(ok).is_ok());
     let bad = |f: fn(&mut DavarConfig)| {
@@ -352,6 +354,67 @@ fn bad_settings_are_typed() {
     let mut d = D::new(ok).unwrap();
     assert_eq!(d.push(1 << 21), Err(AllanError::SampleRange));
     assert_eq!(d.push(0), Ok(None));
+    // τ spacing: none, or a largest τ over 2¹⁰ (its sums would not stay
+    // exact), or one whose terms span more than λ1.
+    let seg = DavarConfig::segmented(512, 1024);
+    assert_eq!(
+        Davar::<1024, 35, 3, 0>::new(seg.with_tau_octaves(0)).err(),
+        Some(DavarError::Capacity)
+    );
+    assert_eq!(
+        Davar::<1024, 35, 3, 0>::new(seg.with_tau_octaves(6)).err(),
+        Some(DavarError::Capacity)
+    );
+    assert!(Davar::<1024, 35, 3, 0>::new(seg.with_tau_octaves(4)).is_ok());
+    assert_eq!(
+        Davar::<1024, 35, 3, 0>::new(DavarConfig::segmented(256, 1024).with_tau_octaves(4)).err(),
+        Some(DavarError::Capacity)
+    );
+}
+
+/// Every fourth octave (the board's three τ: 1, 16 and 256 samples) gives
+/// the every-octave estimator's figures at those τ bit for bit, with the
+/// same windows at the same samples: the τ are summed apart, and the
+/// window is placed from τ0 alone. Over a variance step, a ramp and a
+/// reset, at the board's λ and at the hop phase of its third axis.
+#[test]
+fn every_fourth_octave_is_the_every_octave_estimate_at_its_tau() {
+    let cfg = DavarConfig::segmented(512, 1024);
+    let mut all = Davar::<1024, 35, 9, 0>::new(cfg)
+        .unwrap()
+        .with_hop_phase(22);
+    let mut three = Davar::<1024, 35, 3, 0>::new(cfg.with_tau_octaves(4))
+        .unwrap()
+        .with_hop_phase(22);
+    let w = white(31, 12_000, |i| match i {
+        0..3000 => 1.0,
+        3000..6000 => 3.0,
+        _ => 1.0 + (i as f32 - 6000.0) / 3000.0,
+    });
+    let mut published = 0;
+    for (i, &x) in w.iter().enumerate() {
+        if i == 9000 {
+            all.reset();
+            three.reset();
+        }
+        let (a, b) = (all.push(x).unwrap(), three.push(x).unwrap());
+        assert_eq!(a, b, "sample {i}");
+        if a.is_some() {
+            published += 1;
+            let (ea, eb) = (all.estimate().unwrap(), three.estimate().unwrap());
+            assert_eq!((ea.t, ea.start, ea.end), (eb.t, eb.start, eb.end));
+            for (k, j) in [0, 4, 8].into_iter().enumerate() {
+                assert_eq!(
+                    ea.avar[j].to_bits(),
+                    eb.avar[k].to_bits(),
+                    "t {} tau 2^{j}",
+                    ea.t
+                );
+                assert_eq!(all.estimate_avar(j), three.estimate_avar(k));
+            }
+        }
+    }
+    assert!(published > 300, "{published}");
 }
 
 #[test]
@@ -585,7 +648,7 @@ fn avar_in_f32_is_within_two_ulp_of_f64() {
             acc: [0; 8],
         };
         p.acc[j] = acc;
-        let got = D::avar_of(&p, j);
+        let got = D::avar_of(&p, j, 1);
         let mf = m as f64;
         let want = (acc as f64 / (2.0 * mf * mf * terms as f64)) as f32;
         let ulp = (got.to_bits() as i64 - want.to_bits() as i64).unsigned_abs() as u32;
