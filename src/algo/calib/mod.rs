@@ -55,10 +55,11 @@ pub const LEARN_STRIDE: u32 = 2;
 /// one (x and z on even samples, y on odd), so x solves on samples ≡ 10
 /// (mod 64), y on ≡ 59 and z on ≡ 62: samples ≡ 10, 27 and 30 (mod 32),
 /// where the E-DAVARs, whose frames are on the same 32-sample grid
-/// (`pipeline::tracker`), cost least (1 558, 1 540 and 1 662 instructions
-/// for the three axes against up to 2 630; `cargo xtask bench`'s whole
-/// loop); a solve on the tracker's segmentation start makes the loop's
-/// worst sample.
+/// (`pipeline::tracker`), cost little (1 547, 1 590 and 1 627 instructions
+/// for the three axes against up to 2 500, from the one-axis profile of
+/// `cargo xtask bench` at `tracker::HOP_PHASES`, which were chosen with
+/// these slots fixed); a solve on the tracker's segmentation start makes
+/// the loop's worst sample.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
