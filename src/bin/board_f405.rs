@@ -91,7 +91,7 @@ fn spi_clock(pclk: Hertz, max: u32) -> Hertz {
 /// The board's noise tracker: three E-DAVARs.
 type Tracker = NoiseTracker<1024, 35, 3>;
 
-/// The noise tracker (33 KB) in a static of its own, built in place
+/// The noise tracker (22 KB) in a static of its own, built in place
 /// (`NoiseTracker::init_in`). `None` if the configuration is refused.
 /// Not inlined, so that the axis under construction is off main's frame
 /// once built. Called once.

@@ -29,8 +29,8 @@ pub const LINK_TAUS: [usize; 3] = [0, 4, 8];
 /// [`config`] summing the link's three τ alone (every fourth octave, a
 /// tracker with `T` = 3): what the board runs. The link's records are the
 /// every-octave tracker's bit for bit, and the sums of the six τ nobody
-/// reads are not made (some 100 instructions a sample an axis, and 60 %
-/// of each axis's block sums in RAM).
+/// reads are not made (some 250 instructions a sample and 3.9 KB of RAM
+/// an axis, `cargo xtask bench`).
 pub const fn link_config(lambda2: u16) -> DavarConfig {
     config(lambda2).with_tau_octaves(LINK_TAUS[1] as u8)
 }
@@ -179,8 +179,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     }
 
     /// Build the tracker in place in `slot` (a firmware static), one axis
-    /// at a time: the stack holds one axis under construction (≈ 11 KB
-    /// for λ2 = 1024) instead of the whole tracker twice, as returning it
+    /// at a time: the stack holds one axis under construction (≈ 7 KB for
+    /// the board's λ2 = 1024 and three τ, 11 KB at nine) instead of the whole tracker twice, as returning it
     /// by value does (66 KB on the board, measured from the frame size).
     /// On error `slot` stays uninitialised.
     #[allow(unsafe_code)]

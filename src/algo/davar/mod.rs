@@ -188,13 +188,15 @@ impl<const T: usize> DavarStep<T> {
     /// The Allan variance at τ = 2^`e` samples, if that is one of the row's
     /// τ.
     pub fn avar_at(&self, e: usize) -> Option<f32> {
-        let oct = usize::from(self.tau_octaves.max(1));
-        if e.is_multiple_of(oct) {
-            self.avar.get(e / oct).copied()
-        } else {
-            None
-        }
+        self.avar.get(tau_index(self.tau_octaves, e, T)?).copied()
     }
+}
+
+/// The index j of τ = 2^`e` samples among `count` τ spaced `octaves` apart
+/// (τ_j = 2^(j·octaves)), if it is one of them.
+fn tau_index(octaves: u8, e: usize, count: usize) -> Option<usize> {
+    let oct = usize::from(octaves.max(1));
+    (e.is_multiple_of(oct) && e / oct < count).then_some(e / oct)
 }
 
 /// Exact window sums of one published hop.
@@ -723,8 +725,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// The index j of τ = 2^`e` samples among this estimator's τ
     /// (τ_j = 2^(j·octaves)), if it is one of them.
     pub fn tau_index(&self, e: usize) -> Option<usize> {
-        let oct = usize::from(self.cfg.tau_octaves.max(1));
-        (e.is_multiple_of(oct) && e / oct < T).then_some(e / oct)
+        tau_index(self.cfg.tau_octaves, e, T)
     }
 
     /// The last estimate's time `t` and window length: what
