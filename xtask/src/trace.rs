@@ -137,17 +137,35 @@ pub fn loop_counts(elf: &Path) -> bool {
             println!("  ({counts}");
         }
     }
-    // The figure the deadline is about: the worst sample of them all.
-    let worst = scenarios
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| !s.samples.is_empty())
-        .map(|(k, s)| (s.worst_total, names.get(k).map_or("?", |n| n.0)))
-        .max_by_key(|&(w, _)| w);
-    if let Some((w, name)) = worst {
+    // The worst samples of them all: the frame's path (what the
+    // antenna's deadline is about) and the whole loop (the CPU's load).
+    let worst_of = |f: &dyn Fn(&Sample) -> u64| {
+        scenarios
+            .iter()
+            .enumerate()
+            .flat_map(|(k, s)| {
+                let name = names.get(k).map_or("?", |n| n.0);
+                s.samples.iter().map(move |x| (f(x), name))
+            })
+            .max_by_key(|&(w, _)| w)
+    };
+    let verdict = |w: u64| {
+        if w <= 10_000 {
+            format!("met, {} to spare", 10_000 - w)
+        } else {
+            format!("NOT met, {} over", w - 10_000)
+        }
+    };
+    if let Some((w, name)) = worst_of(&|x| x.fw[0] + x.fw[2]) {
         println!(
-            "bench whole loop, every scenario: the frame's path's worst sample {w} instructions ({name}), {} under the 10000 target",
-            10_000i64 - w as i64
+            "bench whole loop, every scenario: the frame's path's worst sample {w} instructions ({name}); target <= 10000: {}",
+            verdict(w)
+        );
+    }
+    if let Some((w, name)) = worst_of(&|x| x.fw.iter().sum()) {
+        println!(
+            "bench whole loop, every scenario: the whole loop's worst sample {w} instructions ({name}); target <= 10000: {}",
+            verdict(w)
         );
     }
     ok && !scenarios.is_empty()
