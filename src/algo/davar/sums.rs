@@ -87,9 +87,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// τ in one tight loop (sliding sums in registers): ~10 instructions a
     /// term, where doing it sample by sample cost ~60 (state reloads).
     /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
-    /// to add and `a`, `b` hold the sums of the term before it.
+    /// to add and `a`, `b` hold the sums of the term before it (τ > τ0:
+    /// τ0's terms need no sums, [`Self::add_tau0`]).
     pub(super) fn add_terms(&mut self, j: usize) {
         let n = self.n;
+        if j == 0 {
+            return self.add_tau0();
+        }
         if j >= T {
             return;
         }
@@ -105,7 +109,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             }
             let (mu, m2) = (m as usize, 2 * m as usize);
             let (mut a, mut b) = (self.a[j], self.b[j]);
-            let first_k = k;
             let pre_off = (SEG - m2 % SEG) % SEG;
             while k <= last {
                 let block = k / SEG as u64;
@@ -152,34 +155,94 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 }
                 self.lo[j][slot] = lo;
                 self.hi[j][slot] = hi;
-                if j == 0 && end % SEG as u64 == SEG as u64 - 1 {
-                    self.x0[slot] = u64_to_f32(lo);
-                    self.marks[slot] = stale(block);
-                    self.marks_near[slot] = stale(block);
-                }
                 k = end + 1;
             }
             self.next[j] = k;
             (self.a[j], self.b[j]) = (a, b);
-            if j == 0 {
-                // τ0 lag sums for ν: d = w[i + 1] − w[i] (|d| < 2²¹, so the
-                // products fit).
-                let mask = CAP - 1;
-                let ([mut s0, mut s1, mut s2], [mut p1, mut p2]) = (self.lag, self.dprev);
-                for i in first_k as usize..=last as usize {
-                    let d = self.ring[(i + 1) & mask] - self.ring[i & mask];
-                    s0 += d as i64 * d as i64;
-                    s1 += d as i64 * p1 as i64;
-                    s2 += d as i64 * p2 as i64;
-                    (p1, p2) = (d, p1);
-                }
-                (self.lag, self.dprev) = ([s0, s1, s2], [p1, p2]);
-                // The tails take the last whole frame's terms, whatever
-                // the hop's phase (so that staggered axes learn the same).
-                let end = (last + 1) / SEG as u64 * SEG as u64;
-                self.tail_terms = end.checked_sub(SEG as u64).map(|f| (f, end - 1));
-            }
         }
+    }
+    /// The terms of τ0 = 1 sample since the last hop: the squared first
+    /// differences d_k = w[k + 1] − w[k], in the same pass as the lag
+    /// sums of d that ν is learnt from (`learn_nu`), which need the same
+    /// d. Two passes over the hop's samples cost one axis's hop some 300
+    /// instructions more on the Cortex-M4.
+    fn add_tau0(&mut self) {
+        let Some(last) = self.n.checked_sub(2) else {
+            return; // no complete term yet
+        };
+        let mut k = self.next[0];
+        if k > last {
+            return;
+        }
+        let mask = CAP - 1;
+        let ([mut s0, mut s1, mut s2], [mut p1, mut p2]) = (self.lag, self.dprev);
+        // The prefix kept for window sums ends with the block's term at
+        // offset SEG − 2 (the last whose two samples are in the block).
+        const PRE_OFF: u64 = SEG as u64 - 2;
+        while k <= last {
+            let block = k / SEG as u64;
+            let end = last.min(block * SEG as u64 + SEG as u64 - 1);
+            // (Slots are < FRAMES by construction; the `min` lets the
+            // compiler see it.)
+            let slot = self.slot_of(block).min(FRAMES - 1);
+            // |d| ≤ 2·SAMPLE_MAX: a block's 32 squares fit the u64
+            // (`carry_free(1)`), so its carry byte is left as it is.
+            let mut lo = if k.is_multiple_of(SEG as u64) {
+                self.hi[0][slot] = 0;
+                0u64
+            } else {
+                self.lo[0][slot]
+            };
+            let pre_k = block * SEG as u64 + PRE_OFF;
+            let mut from = k as usize;
+            // The block's terms in at most two runs, split after the
+            // prefix's term; each run in contiguous stretches of the ring.
+            for stop in [pre_k.min(end), end] {
+                let stop = stop as usize;
+                while from <= stop {
+                    let i0 = from & mask;
+                    let run = (stop + 1 - from).min(CAP - 1 - i0);
+                    if run == 0 {
+                        // The pair wraps the ring: w[CAP − 1], w[0].
+                        let d = self.ring[0] - self.ring[CAP - 1];
+                        lo = lo.wrapping_add((d as i64 * d as i64) as u64);
+                        s0 += d as i64 * d as i64;
+                        s1 += d as i64 * p1 as i64;
+                        s2 += d as i64 * p2 as i64;
+                        (p1, p2) = (d, p1);
+                        from += 1;
+                        continue;
+                    }
+                    let xs = self.ring.get(i0..=i0 + run).unwrap_or(&[]);
+                    for w in xs.windows(2) {
+                        let d = w[1] - w[0];
+                        let q = d as i64 * d as i64;
+                        lo = lo.wrapping_add(q as u64);
+                        s0 += q;
+                        s1 += d as i64 * p1 as i64;
+                        s2 += d as i64 * p2 as i64;
+                        (p1, p2) = (d, p1);
+                    }
+                    from += run;
+                }
+                if stop as u64 == pre_k && k <= pre_k {
+                    self.pre[0][slot] = lo;
+                }
+            }
+            self.lo[0][slot] = lo;
+            if end % SEG as u64 == SEG as u64 - 1 {
+                self.x0[slot] = u64_to_f32(lo);
+                self.marks[slot] = stale(block);
+                self.marks_near[slot] = stale(block);
+            }
+            k = end + 1;
+        }
+        self.next[0] = k;
+        (self.lag, self.dprev) = ([s0, s1, s2], [p1, p2]);
+        // The tails take the last whole frame's terms, whatever the hop's
+        // phase (so that staggered axes learn the same).
+        let end = (last + 1) / SEG as u64 * SEG as u64;
+        self.tail_terms = end.checked_sub(SEG as u64).map(|f| (f, end - 1));
     }
     /// `count` terms of τ = m: slide the sums from the term starting at
     /// i + 1 − 1 = i to the next (samples i, i + m, i + 2m), add each d².
