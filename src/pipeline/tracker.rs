@@ -35,20 +35,19 @@ pub const fn link_config(lambda2: u16) -> DavarConfig {
     config(lambda2).with_tau_octaves(LINK_TAUS[1] as u8)
 }
 
-/// The three axes' hop phases. Each axis's heavy samples are the hop, the
-/// τ terms after it and the segmentation's last rows (samples 0–7 of its
+/// The three axes' hop phases. Each axis's heavy samples are the τ terms
+/// after its hop and the segmentation's last rows (samples 1–7 of its
 /// hop) and the placement, publication and segmentation start (17–21).
 /// Chosen from one axis's mean cost at every sample of the hop (`cargo
-/// xtask bench`, "board tracker, one axis") as the stagger whose worst
-/// sample is least once three more costs are added where they fall: 1 000
+/// xtask bench`, "board tracker, one axis") as a stagger whose worst
+/// sample is low once three more costs are added where they fall: 1 000
 /// instructions where the calibration solves or the configuration is read
 /// back (`calib::SOLVE_SLOTS`, `pipeline::CHECK_AT`; the tracker's sample
 /// n is the pipeline's n − 1), and 340 on the frame after each axis
-/// publishes (it carries the estimate). [8, 17, 30] scores 2 622, against
-/// 2 998 for the [1, 12, 22] chosen when the tracker summed nine τ; the
-/// board loop's worst sample (`cargo xtask bench-loop`) fell by 235 on
-/// scenario A and 149 on K with it, where [1, 14, 23] (best without the
-/// estimate's frames) raised both.
+/// publishes (it carries the estimate): 2 603 for [8, 17, 30]. The
+/// model's best, [17, 20, 25] (2 405), lowered the board loop's worst
+/// sample (`cargo xtask bench-loop`) by 104 on A and D but raised it by
+/// 229 on K, where the loop is heaviest.
 pub const HOP_PHASES: [u8; 3] = [8, 17, 30];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's

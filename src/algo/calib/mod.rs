@@ -55,8 +55,8 @@ pub const LEARN_STRIDE: u32 = 2;
 /// one (x and z on even samples, y on odd), so x solves on samples ≡ 10
 /// (mod 64), y on ≡ 59 and z on ≡ 62: samples ≡ 10, 27 and 30 (mod 32),
 /// where the E-DAVARs, whose frames are on the same 32-sample grid
-/// (`pipeline::tracker`), cost little (1 547, 1 590 and 1 627 instructions
-/// for the three axes against up to 2 500, from the one-axis profile of
+/// (`pipeline::tracker`), cost little (1 554, 1 592 and 1 603 instructions
+/// for the three axes against up to 2 300, from the one-axis profile of
 /// `cargo xtask bench` at `tracker::HOP_PHASES`, which were chosen with
 /// these slots fixed); a solve on the tracker's segmentation start makes
 /// the loop's worst sample.
