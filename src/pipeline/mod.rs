@@ -89,6 +89,11 @@ pub const RESTART_AT: u32 = 1;
 /// for good.
 pub const ACQUIRE_AT_BOOT: u32 = 100;
 
+impl PipelineConfig {
+    /// The default [`Self::check_every`].
+    pub const DEFAULT_CHECK_EVERY: u32 = 64;
+}
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         Self {
@@ -98,7 +103,7 @@ impl Default for PipelineConfig {
             sample_us: 1000,
             backoff_min: 25,
             backoff_max: 1000,
-            check_every: 64,
+            check_every: Self::DEFAULT_CHECK_EVERY,
         }
     }
 }

@@ -85,11 +85,17 @@ pub(super) fn regate<const N: usize>(
 /// others about it as about the median (residual variance vᵢ + v_med: a
 /// reference's own variance must not widen the gate, or a chip the noise
 /// model already distrusts would vouch for everybody), and keep the
-/// consistent set of largest total inverse variance; the first gate's
-/// choice stands unless another set has more gyros or, as many, outweighs
-/// it. Returns the set, and whether it is no majority of the active gyros
-/// (a split: two against two). Two rejections are rare (two faulty chips
-/// at once), so this is out of line.
+/// largest consistent set; the first gate's choice stands unless another
+/// set has more gyros or, as many, fits its members better (the least
+/// weighted spread Σwᵢ(yᵢ − ȳ)², a χ² with as many degrees of freedom).
+/// A noisy chip (an ADXRS453) sits within the wide gate of two pairs that
+/// disagree, so both sets count the same; its reading still says which
+/// pair it is near, and the spread reads that where the sets' total
+/// weights did not (two chips with a corrupted range, their noise model
+/// frozen while gated out, outweighed the quiet pair: `fault-campaign`,
+/// seed 777972). Returns the set, and whether it is no majority of the
+/// active gyros (a split: two against two). Two rejections are rare (two
+/// faulty chips at once), so this is out of line.
 #[cold]
 #[inline(never)]
 pub(super) fn consensus_gate<const N: usize>(
@@ -120,18 +126,13 @@ pub(super) fn consensus_gate<const N: usize>(
             agree[i] |= u8::from(e2 <= lim[j]) << j;
         }
     }
-    // The set's total inverse variance, from the caller's weights (1/vᵢ
-    // over the active gyros: every set here is within them).
-    let weight = |set: u8| -> f32 {
-        let mut s = 0.0;
-        for i in 0..N {
-            s += if has(set, i) { w[i] } else { 0.0 };
-        }
-        s
-    };
-    // Majority logic first (more gyros agreeing wins), weight second: the
-    // weights are only summed for a tie.
-    let (mut best, mut best_n, mut best_w) = (first, first.count_ones(), None);
+    // The set's weighted spread about its weighted mean, from the
+    // caller's weights (1/vᵢ over the active gyros: every set here is
+    // within them).
+    let spread = |set: u8| -> f32 { weighted_spread(y, w, set) };
+    // Majority logic first (more gyros agreeing wins), fit second: the
+    // spreads are only summed for a tie.
+    let (mut best, mut best_n, mut best_s) = (first, first.count_ones(), None);
     for j in 0..N {
         let set = agree[j] & active;
         let n = set.count_ones();
@@ -139,17 +140,37 @@ pub(super) fn consensus_gate<const N: usize>(
             continue;
         }
         if n > best_n {
-            (best, best_n, best_w) = (set, n, None);
+            (best, best_n, best_s) = (set, n, None);
             continue;
         }
-        let bw = *best_w.get_or_insert_with(|| weight(best));
-        let w = weight(set);
-        if w > bw {
-            (best, best_w) = (set, Some(w));
+        let bs = *best_s.get_or_insert_with(|| spread(best));
+        let s = spread(set);
+        if s < bs {
+            (best, best_s) = (set, Some(s));
         }
     }
     // Split: the largest consistent set is not a majority of the gyros.
     (best, 2 * best_n <= active.count_ones())
+}
+
+/// Σ wᵢ(yᵢ − ȳ)² over `set`, ȳ the set's weighted mean, in index order.
+pub(super) fn weighted_spread<const N: usize>(y: &[f32; N], w: &[f32; N], set: u8) -> f32 {
+    let (mut sw, mut swy) = (0.0f32, 0.0f32);
+    for i in 0..N {
+        if has(set, i) {
+            sw += w[i];
+            swy += w[i] * y[i];
+        }
+    }
+    let mean = swy / sw;
+    let mut s = 0.0f32;
+    for i in 0..N {
+        if has(set, i) {
+            let e = y[i] - mean;
+            s += w[i] * e * e;
+        }
+    }
+    s
 }
 
 /// Gate of the warm-up (robust sigmas from the median): wide, because a
