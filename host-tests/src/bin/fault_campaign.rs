@@ -31,7 +31,7 @@
 //! 5. every chip is back in fusion after its fault ends: within 100 samples,
 //!    plus the part's datasheet restart time after a reset (ICM-42688-P
 //!    46 ms, ADXRS453 100 ms of start-up check; a corrupted register, up to
-//!    250 samples until its read-back comes round), plus, when the chip was in
+//!    [`READ_BACK`] samples until its read-back comes round), plus, when the chip was in
 //!    the restart cycle as its fault ended, the back-off then in force and
 //!    one restart (retries of a chip that stays lost slow down to once a
 //!    second).
@@ -43,6 +43,12 @@ use gyro_array::checks::run_board_array_from;
 use gyro_array::emu::{Fault, RateProfile, Rng};
 
 const SAMPLES: u32 = 3000;
+
+/// Samples until a gyro's configuration is read back, at most: the
+/// pipeline reads one gyro's in turn every `check_every` samples, five
+/// gyros. A chip with a corrupted register counts as faulty until then
+/// and its restart.
+const READ_BACK: u32 = 5 * gyro_array::pipeline::PipelineConfig::DEFAULT_CHECK_EVERY;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Kind {
@@ -270,7 +276,7 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
                                 || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 200
                                 || i.kind == Kind::CorruptConfig
                                     && n >= i.start
-                                    && n < i.start + 300)
+                                    && n < i.start + READ_BACK + 50)
                     })
                     .count();
                 let total = (0..5).filter(|&c| on_axis(c)).count();
@@ -332,7 +338,7 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
                 (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), 4) => 100,
                 (Kind::PowerCycle | Kind::Fault(Fault::PoweredOff), _) => 46,
                 // Found by the read-back: each gyro every 5 × 50 samples.
-                (Kind::CorruptConfig, _) => 250 + 46,
+                (Kind::CorruptConfig, _) => READ_BACK + 46,
                 _ => 0,
             };
             // A chip out of fusion long enough is restarted; when its fault
@@ -518,7 +524,7 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
                                 || i.kind == Kind::PowerCycle && n >= i.start && n < i.start + 250
                                 || i.kind == Kind::CorruptConfig
                                     && n >= i.start
-                                    && n < i.start + 350)
+                                    && n < i.start + READ_BACK + 100)
                     })
                 };
                 let regrace = ev.iter().any(|e| {
@@ -609,7 +615,7 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
             // the longest, the chip may have been lost for a while).
             let restart = match i.kind {
                 Kind::PowerCycle | Kind::Fault(Fault::PoweredOff) => 46 + 16 + 30,
-                Kind::CorruptConfig => 3 * 250 + 46 + 30,
+                Kind::CorruptConfig => 3 * READ_BACK + 46 + 30,
                 _ => 30,
             };
             let limit = i.end + 100 + restart + 1000;
