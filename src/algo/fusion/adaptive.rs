@@ -250,6 +250,8 @@ pub(super) fn adaptive_active<const N: usize>(
             good = active;
             out.fallback = true;
         }
+    } else if n == 2 && all_warm && voters == active {
+        good = pair_gate(st, y, &v, active, k2);
     } else if n >= 3 {
         (good, warm_cap) = warm_up_gate(c, y, voters, med);
         good &= active;
@@ -292,10 +294,50 @@ pub(super) fn adaptive_active<const N: usize>(
     } else {
         r
     };
-    if let Some((x, _)) = r {
+    if let Some((x, wts)) = r {
         st.last_out = x;
+        let mut used = 0u8;
+        for (i, &wi) in wts.iter().enumerate() {
+            used |= u8::from(wi > 0.0) << i;
+        }
+        st.last_used = used;
     }
     r
+}
+
+/// Two voters: no third to say which is off. Where they disagree beyond
+/// the gate and fusion used one of them last sample but not the other,
+/// that one stays alone: the other was already out of the consensus (a
+/// chip with a corrupted range that no read-back has found yet, beside a
+/// good one whose partner dropped a sample: `fault-campaign --timed`,
+/// seed 786741, fused their mean, 108 °/s off). Otherwise both stay, as
+/// before: a pair both fused (under motion their scale errors part them)
+/// is the pair's own noise model's to weigh.
+#[cold]
+#[inline(never)]
+fn pair_gate<const N: usize>(
+    st: &AxisState<N>,
+    y: &[f32; N],
+    v: &[f32; N],
+    active: u8,
+    k2: f32,
+) -> u8 {
+    let i = active.trailing_zeros() as usize & 7;
+    let j = (active & active.wrapping_sub(1)).trailing_zeros() as usize & 7;
+    let (Some(&yi), Some(&yj), Some(&vi), Some(&vj)) = (y.get(i), y.get(j), v.get(i), v.get(j))
+    else {
+        return active;
+    };
+    let e = yi - yj;
+    if e * e <= k2 * (vi + vj) {
+        return active;
+    }
+    let kept = st.last_used & active;
+    if kept.is_power_of_two() {
+        kept
+    } else {
+        active
+    }
 }
 
 /// [`update_and_fuse`] over the constant set `M` with one gyro, `M` less

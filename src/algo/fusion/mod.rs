@@ -159,8 +159,10 @@ pub struct AxisState<const N: usize> {
     /// Prior noise variances ((°/s)², 0 = none): how two gyros share the
     /// variance of their difference ([`AxisState::set_noise_priors`]).
     prior: [f32; N],
-    /// The last output, held when the gyros split with no majority.
+    /// The last output, held when the gyros split with no majority, and
+    /// the gyros it used (weight > 0).
     last_out: f32,
+    last_used: u8,
     /// With exactly two gyros and priors: which two, and the learnt power
     /// of their difference, (°/s)².
     pair: u8,
@@ -182,6 +184,7 @@ impl<const N: usize> Default for AxisState<N> {
             warm: 0,
             prior: [0.0; N],
             last_out: f32::NAN,
+            last_used: 0,
             pair: 0,
             pair_power: 0.0,
         }

@@ -860,3 +860,30 @@ fn every_methods_probe_cancels_motion() {
         assert!(probes > 19_000, "{m:?}: {probes} probes");
     }
 }
+
+/// The timed fault campaign's case at seed 786741: three gyros, one read
+/// far off (a corrupted range) and gated out; then the third drops a
+/// sample and the off one is left with a good one. The pair disagree and
+/// fusion used only the good one last sample: it stays alone, where the
+/// pair's weighted mean was 108 °/s off.
+#[test]
+fn of_two_that_disagree_the_one_in_the_consensus_stays() {
+    let f = Fusion::<3>::new(Method::Adaptive(AdaptiveConfig::default())).unwrap();
+    let mut st = AxisState::default();
+    let mut rng = Rng::new(5);
+    for _ in 0..3000 {
+        let y = [0, 1, 2].map(|_| -15.0 + 0.05 * rng.gaussian());
+        f.fuse(&mut st, &y, 0b111).unwrap();
+    }
+    let r = f.fuse(&mut st, &[-240.0, -15.02, -14.98], 0b111).unwrap();
+    assert!((r.rate_dps + 15.0).abs() < 0.1, "{r:?}");
+    assert_ne!(r.rejected & 0b001, 0, "{r:?}");
+    // Chip 2 drops out: chips 0 and 1 alone.
+    let r = f.fuse(&mut st, &[-241.0, -15.01, f32::NAN], 0b011).unwrap();
+    assert!((r.rate_dps + 15.0).abs() < 0.1, "{r:?}");
+    assert_ne!(r.rejected & 0b001, 0, "{r:?}");
+    // Both back in agreement: both fused again.
+    let r = f.fuse(&mut st, &[-15.0, -15.01, f32::NAN], 0b011).unwrap();
+    assert!((r.rate_dps + 15.0).abs() < 0.1, "{r:?}");
+    assert_eq!(r.rejected, 0, "{r:?}");
+}
