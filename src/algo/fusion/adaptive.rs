@@ -294,13 +294,10 @@ pub(super) fn adaptive_active<const N: usize>(
     } else {
         r
     };
-    if let Some((x, wts)) = r {
+    if let Some((x, _)) = r {
         st.last_out = x;
-        let mut used = 0u8;
-        for (i, &wi) in wts.iter().enumerate() {
-            used |= u8::from(wi > 0.0) << i;
-        }
-        st.last_used = used;
+        // (Every gyro in `good` has a weight 1/vᵢ > 0.)
+        st.last_used = good;
     }
     r
 }

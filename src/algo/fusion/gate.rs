@@ -143,6 +143,10 @@ pub(super) fn consensus_gate<const N: usize>(
             (best, best_n, best_s) = (set, n, None);
             continue;
         }
+        if set == best {
+            // (Most references give the same set: no spread to compare.)
+            continue;
+        }
         let bs = *best_s.get_or_insert_with(|| spread(best));
         let s = spread(set);
         if s < bs {
