@@ -16,6 +16,7 @@ use gyro_array::drivers::icm42688::{
     ClockInput, Config, FifoSample, Filter, Icm42688, Odr, Sampling,
 };
 use gyro_array::drivers::Gyro;
+use gyro_array::emu::rng::Rng;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuDelay, Icm42688Model, NoiseParams,
@@ -66,6 +67,10 @@ pub struct Run {
     pub vibration: Vibration,
     /// Also measure the errors below 100 Hz.
     pub band_limited: bool,
+    /// Draw the free-running clocks from this seed (each PLL off by up
+    /// to ±1 % and drifting, the failing chip's RC oscillator by up to
+    /// ±8 %) instead of the fixed set the tables quote.
+    pub clock_seed: Option<u64>,
 }
 
 /// What one run measured, per axis.
@@ -99,8 +104,8 @@ pub struct Outcome {
     pub newest_behind_us: Vec<[f64; N]>,
 }
 
-fn timings(c: Clocks, vibration: Vibration) -> [ChipTiming; N] {
-    let free = [
+fn timings(c: Clocks, vibration: Vibration, clock_seed: Option<u64>) -> [ChipTiming; N] {
+    let mut free = [
         ClockParams {
             offset: 0.008,
             drift_per_s: 2e-5,
@@ -121,12 +126,27 @@ fn timings(c: Clocks, vibration: Vibration) -> [ChipTiming; N] {
         },
         ClockParams::fixed(0.0),
     ];
+    let mut rc = -0.07;
+    if let Some(seed) = clock_seed {
+        let mut rng = Rng::new(seed);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * f64::from(rng.uniform());
+        for p in free.iter_mut() {
+            *p = ClockParams {
+                offset: u(-0.01, 0.01),
+                drift_per_s: u(-2e-5, 2e-5),
+                wander: u(0.0, 1e-3),
+                wander_period_s: u(3.0, 15.0),
+            };
+        }
+        // The RC oscillator's ±8 %, at least 1 % off (else it reads as a PLL).
+        rc = u(0.01, 0.08) * if u(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
+    }
     core::array::from_fn(|i| ChipTiming {
         pll: match c {
             Clocks::Free => free[i],
             Clocks::ClkIn => ClockParams::fixed(0.02),
         },
-        rc: ClockParams::fixed(-0.07),
+        rc: ClockParams::fixed(rc),
         vibration,
         path: PathModel::Filters,
     })
@@ -270,7 +290,7 @@ impl Fuser {
 
 /// (stated instant s, fused rate) per output sample.
 fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
-    let t = timings(r.clocks, r.vibration);
+    let t = timings(r.clocks, r.vibration, r.clock_seed);
     let chips: [Chip; N] = core::array::from_fn(|i| {
         let mut c = Icm42688Model::new(
             noise(i, r.scale_errors),

@@ -56,10 +56,8 @@ pub struct PipelineConfig {
 
 /// The sample (mod `check_every`, 64 by default) of each configuration
 /// read-back, and of each temperature read. A read-back costs the
-/// firmware about 900 instructions (its bus time aside); every 50 samples
-/// it fell in turn on each phase of the E-DAVARs' 32-sample frames and the
-/// calibration's solves, and made the loop's worst sample (9 941, on a
-/// frame with an estimate; `cargo xtask bench`). On the shared 64-sample
+/// firmware about 900 instructions (its bus time aside), as much as an
+/// E-DAVAR stretch or a calibration solve, so on the shared 64-sample
 /// schedule (`calib::SOLVE_SLOTS`, `pipeline::tracker`) both take samples
 /// where the E-DAVARs cost least and no solve falls: ≡ 27 and ≡ 6 (mod 32).
 pub const CHECK_AT: u32 = 27;
@@ -69,13 +67,12 @@ pub const TEMP_AT: u32 = 38;
 /// A gyro's restart runs its steps (a reset; the configuration and its
 /// read-back, some 30 SPI transactions for an ICM-42688-P) only on samples
 /// ≡ [`RESTART_AT`] (mod [`RESTART_EVERY`]), where the E-DAVARs' frames
-/// cost least and no solve, read-back or temperature read falls. Run when
-/// due, the configuration step made the loop's costliest sample: fault
-/// scenario B's worst went 9 913 → 9 730 instructions with the slots
-/// (`cargo xtask bench-loop`, exact). Each step waits up to 3 samples
-/// more: back in fusion after an ICM-42688-P reset 64 → 73 samples, an
-/// ADXRS453 reset 119 → 125, a late power-up 166 → 189
-/// (`checks::recovery_comes_back`).
+/// cost least and no solve, read-back or temperature read falls: the
+/// configuration step is the costliest of the loop's rare steps (some 200
+/// instructions off fault scenario B's worst sample, `cargo xtask
+/// bench-loop`). Each step waits up to 3 samples more: a chip is back in
+/// fusion 73 samples after an ICM-42688-P reset, 125 after an ADXRS453
+/// reset, 189 after a late power-up (`checks::recovery_comes_back`).
 pub const RESTART_EVERY: u32 = 4;
 /// See [`RESTART_EVERY`].
 pub const RESTART_AT: u32 = 1;

@@ -60,9 +60,10 @@ pub struct TimingCounters {
 /// (the worst the AAF and UI filter let through, some 4.5 °/s of it) some
 /// 4 (some 7 at 2 kHz with 0.5 ms between samples). A spike left in
 /// would be smeared by the moving mean and the interpolation over two or
-/// three outputs of a few °/s each, inside the fusion's gate: the timed
-/// fault campaign (seed 9209, 200 °/s spikes on 5 % of samples) saw the
-/// spiking chip take all the weight. The sample is left out and the read
+/// three outputs of a few °/s each, inside the fusion's gate, where a chip
+/// spiking 200 °/s on 5 % of its samples takes all the weight (its
+/// residual, less the others', drives its variance down; `fault-campaign
+/// --timed`). The sample is left out and the read
 /// is a read error, as a garbled frame is; two samples in a row that
 /// agree with each other are a new level (a chip that saturates), taken.
 pub const SPIKE_DPS: f32 = 25.0;

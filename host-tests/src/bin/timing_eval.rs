@@ -194,7 +194,12 @@ fn to_wire_ms(cfg: &Config, frame_bytes: usize) -> f64 {
 /// Fused error against the truth at the stated instant, over motion
 /// classes and clocks, against the same array as today's lockstep
 /// sampler; and the lag that best aligns the fused rate with the truth.
-fn fusion_table(seconds: u32, odr: Odr, filter: Filter) -> usize {
+fn fusion_table(
+    seconds: u32,
+    (seed, clock_seed): (u64, Option<u64>),
+    odr: Odr,
+    filter: Filter,
+) -> usize {
     let delay_us = array_delay_us(odr, filter);
     println!();
     println!(
@@ -292,11 +297,12 @@ fn fusion_table(seconds: u32, odr: Odr, filter: Filter) -> usize {
                 filter,
                 delay_us,
                 ms: seconds * 1000,
-                seed: 5,
+                seed,
                 restart_at_ms: restart,
                 scale_errors,
                 vibration,
                 band_limited: vibration != Vibration::NONE,
+                clock_seed,
             });
             if vibration != Vibration::NONE {
                 // The lockstep sampler has no signal path, so nothing to
@@ -470,6 +476,18 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(10);
+    // The emulated chips' noise, clock offsets and drifts (5 unless told).
+    let seed = std::env::args()
+        .skip_while(|a| a != "--seed")
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5);
+    // `--clocks N`: the free-running clocks drawn from seed N.
+    let clocks = std::env::args()
+        .skip_while(|a| a != "--clocks")
+        .nth(1)
+        .and_then(|s| s.parse().ok());
+    let seed = (seed, clocks);
     if let Some(ms) = std::env::args()
         .skip_while(|a| a != "--search")
         .nth(1)
@@ -479,11 +497,11 @@ fn main() {
         return;
     }
     if std::env::args().any(|a| a == "--fusion") {
-        fusion_table(seconds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+        fusion_table(seconds, seed, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
         return;
     }
     if std::env::args().any(|a| a == "--fusion-2k") {
-        fusion_table(seconds, SLOW_2K.odr, SLOW_2K.filter);
+        fusion_table(seconds, seed, SLOW_2K.odr, SLOW_2K.filter);
         return;
     }
     let settings = [
@@ -553,5 +571,5 @@ fn main() {
         table[1].0 * 1e3
     );
     budget(&settings[settings.len() - 1], frame);
-    fusion_table(seconds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+    fusion_table(seconds, seed, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
 }

@@ -233,8 +233,7 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// m..2m), kept as the samples arrive from a running sum read at
     /// each power of two, so that the first term is not summed from
     /// scratch: 2m samples on one sample of the loop (some 7 000
-    /// instructions for τ = 1024 after a restart; `cargo xtask
-    /// bench-loop`'s scenario E made its worst sample with τ = 256).
+    /// instructions for τ = 1024 after a restart).
     first_a: [i32; T],
     first_b: [i32; T],
     /// Σ of the samples so far (wrapping: a difference of two of them is
@@ -249,10 +248,9 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// segmentation that put a change at it (`marks`), or within a frame of
     /// it (`marks_near`); a stale stamp from the time the block completed
     /// otherwise ([`stale`]). Whether one of the last [`LAG`]
-    /// segmentations had a change within a frame of c is then one read:
-    /// a list per segmentation, walked beside each change, cost ~700
-    /// instructions on one sample with fifteen changes (`cargo xtask
-    /// bench-loop`, scenario I, after two stuck chips came back).
+    /// segmentations had a change within a frame of c is then one read,
+    /// where walking each segmentation's change list costs some 700
+    /// instructions on a sample whose span holds fifteen changes.
     marks: [u16; FRAMES],
     marks_near: [u16; FRAMES],
     /// Prefix sums of x0 over the span being segmented.

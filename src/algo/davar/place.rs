@@ -182,11 +182,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean. Each side's
         // gap is computed once per frame it reaches, the frames' energies
-        // walked outward over the prefix sums as slices: recomputing both
-        // sides' gaps on every step, through checked reads, made an axis's
-        // placement ~1 000 instructions dearer when t's segment was a few
-        // frames long (`cargo xtask bench-loop`, scenario F, after two
-        // chips power-cycled).
+        // walked outward over the prefix sums as slices (both sides' gaps
+        // recomputed at every step cost some 1 000 instructions more where
+        // t's segment is a few frames long).
         let seg_mean = mean(s);
         let gap = |w: &[f32]| match *w {
             [a, b] => ratio_gap(b - a, seg_mean),

@@ -154,9 +154,8 @@ pub(super) fn adaptive_frozen<const N: usize>(
         };
     }
     // (Pairs among the first four too: two ICM-42688-Ps left on x or y
-    // while two others that stuck together are not yet flagged. Through
-    // the general path those samples cost 300 more, and made the loop's
-    // worst sample in `cargo xtask bench-loop`'s scenario F.)
+    // while two others that stuck together are not yet flagged, 300
+    // instructions more through the general path.)
     dispatch!(3 5 6 9 10 12 7 11 13 14 15 19 21 22 23 25 26 27 28 29 30)
 }
 
@@ -305,11 +304,11 @@ pub(super) fn adaptive_active<const N: usize>(
 /// Two voters: no third to say which is off. Where they disagree beyond
 /// the gate and fusion used one of them last sample but not the other,
 /// that one stays alone: the other was already out of the consensus (a
-/// chip with a corrupted range that no read-back has found yet, beside a
-/// good one whose partner dropped a sample: `fault-campaign --timed`,
-/// seed 786741, fused their mean, 108 °/s off). Otherwise both stay, as
-/// before: a pair both fused (under motion their scale errors part them)
-/// is the pair's own noise model's to weigh.
+/// chip with a corrupted range that no read-back has found yet, left with
+/// a good one while a third drops a sample, would otherwise be fused at
+/// half weight, its error some 100 °/s). Otherwise both stay: a pair both
+/// fused (under motion their scale errors part them) is the pair's own
+/// noise model's to weigh.
 #[cold]
 #[inline(never)]
 fn pair_gate<const N: usize>(

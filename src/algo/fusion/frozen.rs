@@ -44,9 +44,8 @@ pub(super) fn frozen_check<const N: usize>(
 /// The gyros of `valid` left after dropping the `candidates` whose run of
 /// repeats is longer than the shortest among `valid`. Select-style: it
 /// runs on every sample while a chip that stuck is caught here but not
-/// yet flagged by the pipeline, and with branches it cost 330
-/// instructions per 3-axis sample then (`cargo xtask bench`, whole loop).
-/// Out of line: inlined, it cost the all-in path 16 more.
+/// yet flagged by the pipeline (branchy, some 330 instructions a 3-axis
+/// sample). Out of line: inlined, it costs the all-in path 16 more.
 #[cold]
 #[inline(never)]
 pub(super) fn drop_frozen<const N: usize>(st: &AxisState<N>, valid: u8, candidates: u8) -> u8 {

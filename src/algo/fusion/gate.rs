@@ -91,9 +91,8 @@ pub(super) fn regate<const N: usize>(
 /// A noisy chip (an ADXRS453) sits within the wide gate of two pairs that
 /// disagree, so both sets count the same; its reading still says which
 /// pair it is near, and the spread reads that where the sets' total
-/// weights did not (two chips with a corrupted range, their noise model
-/// frozen while gated out, outweighed the quiet pair: `fault-campaign`,
-/// seed 777972). Returns the set, and whether it is no majority of the
+/// weights cannot (two chips with a corrupted range, their noise model
+/// frozen while gated out, can outweigh the quiet pair). Returns the set, and whether it is no majority of the
 /// active gyros (a split: two against two). Two rejections are rare (two
 /// faulty chips at once), so this is out of line.
 #[cold]
