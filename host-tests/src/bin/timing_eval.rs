@@ -470,38 +470,29 @@ fn search(wire_ms: f64) {
     }
 }
 
+/// The value after `--name` on the command line, if it parses.
+fn arg_value<T: std::str::FromStr>(name: &str) -> Option<T> {
+    std::env::args()
+        .skip_while(|a| a != name)
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+}
+
 fn main() {
-    let seconds = std::env::args()
-        .skip_while(|a| a != "--seconds")
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(10);
-    // The emulated chips' noise, clock offsets and drifts (5 unless told).
-    let seed = std::env::args()
-        .skip_while(|a| a != "--seed")
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(5);
-    // `--clocks N`: the free-running clocks drawn from seed N.
-    let clocks = std::env::args()
-        .skip_while(|a| a != "--clocks")
-        .nth(1)
-        .and_then(|s| s.parse().ok());
-    let seed = (seed, clocks);
-    if let Some(ms) = std::env::args()
-        .skip_while(|a| a != "--search")
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-    {
+    let seconds = arg_value("--seconds").unwrap_or(10);
+    // The emulated chips' noise (5 unless told), and `--clocks N`: the
+    // free-running clocks drawn from seed N instead of the fixed set.
+    let seeds = (arg_value("--seed").unwrap_or(5), arg_value("--clocks"));
+    if let Some(ms) = arg_value("--search") {
         search(ms);
         return;
     }
     if std::env::args().any(|a| a == "--fusion") {
-        fusion_table(seconds, seed, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+        fusion_table(seconds, seeds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
         return;
     }
     if std::env::args().any(|a| a == "--fusion-2k") {
-        fusion_table(seconds, seed, SLOW_2K.odr, SLOW_2K.filter);
+        fusion_table(seconds, seeds, SLOW_2K.odr, SLOW_2K.filter);
         return;
     }
     let settings = [
@@ -571,5 +562,5 @@ fn main() {
         table[1].0 * 1e3
     );
     budget(&settings[settings.len() - 1], frame);
-    fusion_table(seconds, seed, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+    fusion_table(seconds, seeds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
 }
