@@ -571,6 +571,10 @@ struct Args {
     /// carries its LSB²/12.
     #[arg(long, value_parser = positive)]
     lsb: Option<f64>,
+    /// Run only the classes whose name holds this text (as printed, e.g.
+    /// `"ramp 1→3 over 1000"` or `"every 200"`).
+    #[arg(long)]
+    only: Option<String>,
 }
 
 fn positive(s: &str) -> Result<f64, String> {
@@ -597,7 +601,13 @@ fn main() -> ExitCode {
         other_lambdas()
     } else {
         classes()
-    } {
+    }
+    .into_iter()
+    .filter(|c| {
+        args.only
+            .as_ref()
+            .is_none_or(|o| c.name.contains(o.as_str()))
+    }) {
         let (l1, l2) = class.lambda;
         let ms = methods(l1, l2);
         let (a, b) = (l2 as usize / 2 + SEG, class.n - l2 as usize / 2 - SEG);

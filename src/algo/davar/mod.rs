@@ -100,6 +100,17 @@ const STRONG: f32 = 3.0;
 /// ([`Davar::segment_window`]).
 const GRADUAL: f32 = 2.0;
 
+/// A change alone in the span is gradual where two lines joined at it
+/// explain the frames' energies as well as the step, less this × β. The
+/// step's location is chosen from the data, which on a ramp gains it as
+/// much as a line's better shape: on a ramp the joined lines' edge over the
+/// step scatters about −2 (sd 4), on a ×2 step about −10 (sd 5), in cost
+/// units of β ≈ 13.
+const HINGE_SLACK: f32 = 0.5;
+
+/// …and gains less than this × β (a ×4 step gains some 14β in a span).
+const HINGE_MAX_GAIN: f32 = 8.0;
+
 /// t's segment is a stair of a ramp, not the level of a step, where its
 /// energies' slope has z² above this (and runs with the change).
 const SLOPE_Z2: f32 = 9.0;

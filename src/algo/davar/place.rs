@@ -2,9 +2,12 @@
 //! ([`Placement::Segmented`]), or centred on t with the entropy rule of
 //! eq. 1–4 ([`Placement::Centred`]).
 
-use super::refine::{line_over_step, ratio_gap, slope_z2};
+use super::refine::{hinge_over_step, line_over_step, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
-use super::{Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, LAG, SEG, SLOPE_Z2, STRONG};
+use super::{
+    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, SEG,
+    SLOPE_Z2, STRONG,
+};
 use crate::algo::math::lnf;
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
@@ -106,7 +109,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // - one line through both explains their energies better than the
         //   step does ([`line_over_step`]), or as well less the penalty for
         //   the step's location where the change gains less than GRADUAL·β;
-        //   or
+        // - where the change is alone in the span, two lines joined at it
+        //   explain the energies as well as the step does, less
+        //   HINGE_SLACK·β ([`hinge_over_step`]): a level that starts to
+        //   slope, which the step's free location fits as well as one line
+        //   does; or
         // - a blurred step fits them better than the sharp one: the two
         //   levels joined by a linear transition over 2h frames centred on
         //   the change, h ≥ λ1 (so a one-sided window of λ1 inside the
@@ -151,7 +158,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 }
                 false
             };
-            line() || blurred()
+            // (Each of its segments half λ1 at least: joined to a few
+            // frames, a steep line is a step. And a change gaining over
+            // HINGE_MAX_GAIN·β is a step: the second-order form holds near
+            // equal levels and understates a large step's edge.)
+            let hinge = || {
+                nb == 2
+                    && c.abs_diff(ft) * 2 <= min_frames
+                    && hinge_over_step(px, nu, (l, c, r)) > -HINGE_SLACK * beta
+                    && cost(l, r) - step() < HINGE_MAX_GAIN * beta
+            };
+            line() || hinge() || blurred()
         };
         let r0 = s - usize::from(s > 0 && gradual(s));
         let r1 = s + usize::from(s + 1 < nb && gradual(s + 1));

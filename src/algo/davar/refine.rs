@@ -134,6 +134,49 @@ pub(super) fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usiz
     (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
 }
 
+/// How much better two lines joined at c explain the frame energies of
+/// l..r than the step at c does, in the cost units of [`line_over_step`]
+/// (the same second-order form of the Gamma deviances, from the prefix
+/// sums). A hinge (a level that starts to slope, or a slope that levels
+/// off) is a gradual change that one line through both segments fits
+/// poorly, so the step at c wins the line test and bounds the window,
+/// one-sided on the slope; the joined lines fit it. A sharp step is
+/// explained three quarters by them wherever c falls (as by one line when
+/// c is central), so a step shows as a deficit of about a quarter of its
+/// gain. −∞ where it does not apply.
+pub(super) fn hinge_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
+    if c < l + 2 || r < c + 2 {
+        return f32::NEG_INFINITY;
+    }
+    let (n1, n2) = ((c - l) as f32, (r - c) as f32);
+    let n = n1 + n2;
+    let ((m1, f1, _), (m2, f2, _)) = (line_sums(px, l, c), line_sums(px, c, r));
+    let (s1, s2) = (m1 * n1, m2 * n2);
+    let m = (s1 + s2) / n;
+    if !(m > 0.5) {
+        return f32::NEG_INFINITY;
+    }
+    // Regressors u = f − c + ½ on the left frames and v = f − c + ½ on the
+    // right ones (0 elsewhere): their sums, squares and products with the
+    // energies (line_sums' Σ (f − f̄)·x about each segment's centre,
+    // moved to c), centred over l..r; the explained sum of squares is
+    // gᵀA⁻¹g for the 2 × 2 centred system.
+    let (su, sv) = (-0.5 * n1 * n1, 0.5 * n2 * n2);
+    let suu = n1 * (4.0 * n1 * n1 - 1.0) / 12.0;
+    let svv = n2 * (4.0 * n2 * n2 - 1.0) / 12.0;
+    let (sux, svx) = (f1 - 0.5 * n1 * s1, f2 + 0.5 * n2 * s2);
+    let sx = s1 + s2;
+    let (cuu, cvv, cuv) = (suu - su * su / n, svv - sv * sv / n, -su * sv / n);
+    let (cux, cvx) = (sux - su * sx / n, svx - sv * sx / n);
+    let det = cuu * cvv - cuv * cuv;
+    if !(det > 0.0) {
+        return f32::NEG_INFINITY;
+    }
+    let hinge = (cvv * cux * cux - 2.0 * cuv * cux * cvx + cuu * cvx * cvx) / det;
+    let d = m1 - m2;
+    (hinge - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+}
+
 /// The slope of the frames' energies over l..r, squared, over its own
 /// variance under the scaled-χ²_ν model at their mean (a z²), and whether
 /// it rises. None where fewer than 4 frames or a mean not positive.
