@@ -2,7 +2,7 @@
 //! ([`Placement::Segmented`]), or centred on t with the entropy rule of
 //! eq. 1–4 ([`Placement::Centred`]).
 
-use super::refine::{hinge_over_step, line_over_step, ratio_gap, slope_z2};
+use super::refine::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
 use super::{
     Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, SEG,
@@ -143,32 +143,37 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             if r - l < 2 * min_frames {
                 return false;
             }
+            let sums = line_sums(px, l, r);
+            let d = line_over_step_from(px, nu, (l, c, r), sums);
+            if d > 0.0 {
+                return true;
+            }
             let step = || cost(l, c) + cost(c, r);
-            let line = || {
-                let d = line_over_step(px, nu, (l, c, r));
-                d > 0.0 || (d > -beta && cost(l, r) - step() < GRADUAL * beta)
-            };
-            let blurred = || {
-                let mut h = min_frames.max(1);
-                while c > l + h && c + h < r {
-                    if transition_cost(px, ln_n, nu, (l, c, r), h, q).is_some_and(|v| v < step()) {
-                        return true;
-                    }
-                    h *= 2;
+            if d > -beta && cost(l, r) - step() < GRADUAL * beta {
+                return true;
+            }
+            // Near t (within λ1/2: farther, the segment that holds t is
+            // most of a one-sided window's length on either side of t, and
+            // a few frames beyond the change let a steep line mimic the
+            // step) and not strong (the second-order form holds near equal
+            // levels and understates a large step's edge).
+            if nb == 2
+                && c.abs_diff(ft) * 2 <= min_frames
+                && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
+                && cost(l, r) - step() < HINGE_MAX_GAIN * beta
+            {
+                return true;
+            }
+            let mut h = min_frames.max(1);
+            let mut st = None;
+            while c > l + h && c + h < r {
+                let st = *st.get_or_insert_with(step);
+                if transition_cost(px, ln_n, nu, (l, c, r), h, q).is_some_and(|v| v < st) {
+                    return true;
                 }
-                false
-            };
-            // (Each of its segments half λ1 at least: joined to a few
-            // frames, a steep line is a step. And a change gaining over
-            // HINGE_MAX_GAIN·β is a step: the second-order form holds near
-            // equal levels and understates a large step's edge.)
-            let hinge = || {
-                nb == 2
-                    && c.abs_diff(ft) * 2 <= min_frames
-                    && hinge_over_step(px, nu, (l, c, r)) > -HINGE_SLACK * beta
-                    && cost(l, r) - step() < HINGE_MAX_GAIN * beta
-            };
-            line() || hinge() || blurred()
+                h *= 2;
+            }
+            false
         };
         let r0 = s - usize::from(s > 0 && gradual(s));
         let r1 = s + usize::from(s + 1 < nb && gradual(s + 1));

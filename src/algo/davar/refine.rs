@@ -120,13 +120,23 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
 /// deviances, from the prefix sums alone: r − l additions and no
 /// logarithm, so the board's placement sample can afford it. −∞ where it
 /// does not apply.
+#[cfg(test)]
 pub(super) fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
+    line_over_step_from(px, nu, (l, c, r), line_sums(px, l, r))
+}
+
+/// `line_over_step` with [`line_sums`] over l..r already made.
+pub(super) fn line_over_step_from(
+    px: &[f32],
+    nu: f32,
+    (l, c, r): (usize, usize, usize),
+    (m, sfc, sxx): (f32, f32, f32),
+) -> f32 {
     let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
     if c <= l || r <= c || r < l + 3 {
         return f32::NEG_INFINITY;
     }
     let (n, n1, n2) = ((r - l) as f32, (c - l) as f32, (r - c) as f32);
-    let (m, sfc, sxx) = line_sums(px, l, r);
     if !(m > 0.5) {
         return f32::NEG_INFINITY;
     }
@@ -135,7 +145,7 @@ pub(super) fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usiz
 }
 
 /// How much better two lines joined at c explain the frame energies of
-/// l..r than the step at c does, in the cost units of [`line_over_step`]
+/// l..r than the step at c does, in the cost units of `line_over_step`
 /// (the same second-order form of the Gamma deviances, from the prefix
 /// sums). A hinge (a level that starts to slope, or a slope that levels
 /// off) is a gradual change that one line through both segments fits
@@ -144,18 +154,35 @@ pub(super) fn line_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usiz
 /// explained three quarters by them wherever c falls (as by one line when
 /// c is central), so a step shows as a deficit of about a quarter of its
 /// gain. −∞ where it does not apply.
+#[cfg(test)]
 pub(super) fn hinge_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
+    hinge_over_step_from(px, nu, (l, c, r), line_sums(px, l, r))
+}
+
+/// `hinge_over_step` with [`line_sums`] over l..r already made: the
+/// right segment's sums follow from them and the left's.
+pub(super) fn hinge_over_step_from(
+    px: &[f32],
+    nu: f32,
+    (l, c, r): (usize, usize, usize),
+    (m, sfc, _): (f32, f32, f32),
+) -> f32 {
     if c < l + 2 || r < c + 2 {
         return f32::NEG_INFINITY;
     }
     let (n1, n2) = ((c - l) as f32, (r - c) as f32);
     let n = n1 + n2;
-    let ((m1, f1, _), (m2, f2, _)) = (line_sums(px, l, c), line_sums(px, c, r));
-    let (s1, s2) = (m1 * n1, m2 * n2);
-    let m = (s1 + s2) / n;
     if !(m > 0.5) {
         return f32::NEG_INFINITY;
     }
+    let (m1, f1, _) = line_sums(px, l, c);
+    let sx = m * n;
+    let s1 = m1 * n1;
+    let s2 = sx - s1;
+    let m2 = s2 / n2;
+    // Σ (f − f̄)·x over l..r is the two segments' about their own centres
+    // moved to the whole's (by −n2/2 and +n1/2 frames).
+    let f2 = sfc - f1 + 0.5 * n2 * s1 - 0.5 * n1 * s2;
     // Regressors u = f − c + ½ on the left frames and v = f − c + ½ on the
     // right ones (0 elsewhere): their sums, squares and products with the
     // energies (line_sums' Σ (f − f̄)·x about each segment's centre,
@@ -165,7 +192,6 @@ pub(super) fn hinge_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usi
     let suu = n1 * (4.0 * n1 * n1 - 1.0) / 12.0;
     let svv = n2 * (4.0 * n2 * n2 - 1.0) / 12.0;
     let (sux, svx) = (f1 - 0.5 * n1 * s1, f2 + 0.5 * n2 * s2);
-    let sx = s1 + s2;
     let (cuu, cvv, cuv) = (suu - su * su / n, svv - sv * sv / n, -su * sv / n);
     let (cux, cvx) = (sux - su * sx / n, svx - sv * sx / n);
     let det = cuu * cvv - cuv * cuv;
