@@ -117,13 +117,42 @@ const SLOPE_Z2: f32 = 9.0;
 
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
-const CELLS: usize = 16;
+const CELLS: usize = 32;
+
+/// The hop's samples that run the segmentation's rows: one row on each,
+/// two where a span has more cells than this. A span is cut into this
+/// many cells, or into cells of one frame per 6 of λ1 where that makes
+/// more (up to [`CELLS`]): a change every λ1 or less must still fall
+/// between cells (at λ 256/1024, cells of two frames missed changes every
+/// 200 samples in whole spans, 1.08× the best fixed window, and cells of
+/// one frame find them, 0.96×), and at the board's λ1 = λ2/2 sixteen
+/// cells already are λ1/8.
+const ROW_SAMPLES: usize = 16;
+
+/// Frames per cell of a span of `span` frames whose shortest window is
+/// `min_frames`: see [`ROW_SAMPLES`].
+const fn cell_group(span: usize, min_frames: usize) -> usize {
+    let coarse = span.div_ceil(ROW_SAMPLES);
+    let fine = if min_frames / 6 > 1 {
+        min_frames / 6
+    } else {
+        1
+    };
+    let g = if fine < coarse { fine } else { coarse };
+    let floor = span.div_ceil(CELLS);
+    let g = if g > floor { g } else { floor };
+    if g > 1 {
+        g
+    } else {
+        1
+    }
+}
 
 /// Segmented placement: samples after the hop at which the last span's
 /// window is placed, then published, then the next span's segmentation
 /// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
 /// and the last segmentation's rows (which run on the samples after its
-/// start: CELLS of them, from START_AT + 1 around to the next hop's
+/// start: ROW_SAMPLES of them, from START_AT + 1 around to the next hop's
 /// sample 5, or 7 where they make way for the τ terms). The changes are refined to the frame on the
 /// `REFINE_PARTS` samples before (from `REFINE_AT`, a share of them on
 /// each): with many changes found (a chip gated in and out of a fused
@@ -358,7 +387,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// earlier cell), some 800 instructions on the Cortex-M4, as much as
     /// one τ's 32 new terms: with three τ (the board's) the hop's samples
     /// 1–2 cost 1 600 with both, where samples 6–11 had nothing to do.
-    const ROWS_YIELD: bool = T + CELLS - (SEG - START_AT - 1) < TAILS_AT;
+    const ROWS_YIELD: bool = T + ROW_SAMPLES - (SEG - START_AT - 1) < TAILS_AT;
 
     /// Check the settings against the capacities.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
@@ -447,8 +476,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 next_first: None,
                 placed: None,
                 refined: None,
-                group: span.div_ceil(CELLS).max(1),
-                cells: span.div_ceil(span.div_ceil(CELLS).max(1)),
+                group: cell_group(span, min_frames),
+                cells: span.div_ceil(cell_group(span, min_frames)),
                 sum: [0.0; CELLS + 1],
                 cost: [0.0; CELLS + 1],
                 arg: [0; CELLS + 1],
@@ -664,6 +693,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 && !(terms && Self::ROWS_YIELD)
             {
                 self.dp_row();
+                if self.dp.cells > ROW_SAMPLES && self.dp.row <= self.dp.cells {
+                    self.dp_row();
+                }
             }
             return Ok(None);
         }

@@ -591,8 +591,10 @@ fn heavy_tails_and_sub_lsb_rounding_lower_nu_not_the_window() {
     assert!(share < 0.03 && nu < 16.0, "t5: {share} shortened, ν {nu}");
     let mut rng = Rng::new(6);
     let (share, nu) = shortened_share(200_000, || (0.3 * rng.gaussian()).round() as i32);
+    // (5.0 % measured: the cells of one frame that λ1 = λ2/4 takes put
+    // more candidate changes in a span than the cells of two, 1.5 %.)
     assert!(
-        share < 0.05 && nu < 10.0,
+        share < 0.07 && nu < 10.0,
         "0.3 LSB: {share} shortened, ν {nu}"
     );
     // Gaussian frames keep the Gaussian ν: the gate lets the noisier
@@ -740,6 +742,34 @@ fn a_hinge_keeps_windows_centred_at_the_boards_lambda() {
     eprintln!("one-sided on a ramp over 1000 at λ 512/1024: {f:.3}");
     // 0.098 measured; 0.230 without the joined lines.
     assert!(f < 0.16, "{f}");
+}
+
+/// Changes closer than λ1 (σ² 1 ↔ 3 every 200 samples at λ 256/1024)
+/// fall between the segmentation's cells: there a cell is one frame, and
+/// the windows stay near λ1 instead of spanning changes it merged.
+#[test]
+fn changes_closer_than_lambda1_are_resolved() {
+    let (mut long, mut all) = (0u32, 0u32);
+    for seed in 1..=4 {
+        let w = white(300 + seed, 8000, |i| {
+            if (i / 200) % 2 == 0 {
+                1.0
+            } else {
+                3f32.sqrt()
+            }
+        });
+        let mut d = D::new(DavarConfig::segmented(256, 1024)).unwrap();
+        for &x in &w {
+            if d.push(x).unwrap().is_some() {
+                all += 1;
+                long += u32::from(d.estimate().unwrap().len >= 512);
+            }
+        }
+    }
+    let share = f64::from(long) / f64::from(all);
+    eprintln!("windows of 2λ1 or more among changes every 200: {share:.3}");
+    // 0.118 measured; 0.321 with cells of two frames.
+    assert!(share < 0.2, "{share}");
 }
 
 /// `k` frame energies, each a χ²₂₂ / 22 times 6e5 · `level(f)` (at least
