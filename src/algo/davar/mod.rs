@@ -353,9 +353,13 @@ struct Segmentation {
     /// The window placed at [`PLACE_AT`] (span's first frame, window
     /// frames), published at [`PUBLISH_AT`].
     placed: Option<(u64, usize, usize)>,
-    /// The segment bounds being refined from [`REFINE_AT`] (span's first
-    /// frame, bounds, their count less one, the next change to refine).
-    refined: Option<(u64, [u16; CELLS + 1], usize, usize)>,
+    /// The refinement under way from [`REFINE_AT`] (span's first frame,
+    /// the count of `bounds` less one, the next change to refine).
+    refined: Option<(u64, usize, usize)>,
+    /// The segment bounds of the segmentation being refined (or placed),
+    /// in place: copies of them cost a refinement sample some 50
+    /// instructions each at 33 bounds.
+    bounds: [u16; CELLS + 1],
     /// Frames per cell and cells.
     group: usize,
     cells: usize,
@@ -476,6 +480,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 next_first: None,
                 placed: None,
                 refined: None,
+                bounds: [0; CELLS + 1],
                 group: cell_group(span, min_frames),
                 cells: span.div_ceil(cell_group(span, min_frames)),
                 sum: [0.0; CELLS + 1],

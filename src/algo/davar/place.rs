@@ -17,9 +17,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// returns the window [lo, hi) in frames of the span at `first`.
     pub(super) fn segment_window(&mut self, first: u64) -> (usize, usize) {
         // The bounds refined from REFINE_AT (the rest, if any, now).
-        let (mut bounds, nb, next) = self.refining(first);
+        let (nb, next) = self.refining(first);
         self.dp.refined = None;
-        self.refine(&mut bounds, nb, next..nb);
+        self.refine(nb, next..nb);
+        let bounds = self.dp.bounds;
         let k = self.span.min(FRAMES - 1);
         let ft = k / 2; // frame that starts at (or holds) t
                         // The span's frame prefix sums (from `dp_start`): every mean below

@@ -20,51 +20,44 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         while self.dp.row <= self.dp.cells {
             self.dp_row();
         }
-        let (mut bounds, nb, next) = self.refining(prev);
+        let (nb, next) = self.refining(prev);
         let to = (1 + nb.saturating_sub(1) * (part + 1) / REFINE_PARTS)
             .min(nb)
             .max(next);
-        self.refine(&mut bounds, nb, next..to);
-        self.dp.refined = Some((prev, bounds, nb, to));
+        self.refine(nb, next..to);
+        self.dp.refined = Some((prev, nb, to));
     }
-    /// The refinement of the span at `first` so far (bounds, their count
-    /// less one, the next change to refine), or its start.
-    pub(super) fn refining(&self, first: u64) -> ([u16; CELLS + 1], usize, usize) {
+    /// The refinement of the span at `first` so far (the count of
+    /// `dp.bounds` less one, the next change to refine), or its start.
+    pub(super) fn refining(&mut self, first: u64) -> (usize, usize) {
         match self.dp.refined {
-            Some((f, b, nb, next)) if f == first => (b, nb, next),
-            _ => {
-                let (b, nb) = self.backtrack();
-                (b, nb, 1)
-            }
+            Some((f, nb, next)) if f == first => (nb, next),
+            _ => (self.backtrack(), 1),
         }
     }
-    /// Refine changes `which` (in order) of `bounds` (nb segments) to the
+    /// Refine changes `which` (in order) of `dp.bounds` (nb segments) to the
     /// frame: the cells group g frames, and each change moves to the best
     /// split of its two segments within ± (g − 1) frames (every frame for
     /// g < 4; else, near a change the last segmentation placed, that frame
     /// and the two beside it, and otherwise every other frame and then the
     /// two beside the best).
     #[inline(never)]
-    pub(super) fn refine(
-        &self,
-        bounds: &mut [u16; CELLS + 1],
-        nb: usize,
-        which: core::ops::Range<usize>,
-    ) {
+    pub(super) fn refine(&mut self, nb: usize, which: core::ops::Range<usize>) {
         let g = self.dp.group.max(1);
         if g <= 1 {
             return;
         }
-        // Over the span's frame prefix sums (from `dp_start`).
-        let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
-        let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
-        let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         // The changes the last segmentation placed: the span's blocks
         // that carry its stamp.
         let first = self.dp.first.unwrap_or(0);
         let last =
             (self.dp.recent_len > 0).then(|| self.dp.recent[(self.dp.recent_at + LAG - 1) % LAG]);
         let s0 = self.slot_of(first).min(FRAMES - 1);
+        // Over the span's frame prefix sums (from `dp_start`).
+        let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
+        let bounds = &mut self.dp.bounds;
+        let cost = |i: usize, j: usize| seg_cost(px, ln_n, nu, i, j);
+        let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         let marks = &self.marks;
         let placed_last =
             |q: usize| last.is_some_and(|l| marks.get(Self::ahead(s0, q)) == Some(&l));

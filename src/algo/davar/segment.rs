@@ -169,11 +169,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.dp.row = j + 1;
     }
     /// The finished segmentation's segment bounds in frames, backtracked
-    /// (0 = b₀ < b₁ < … < b_nb = k), and nb.
-    pub(super) fn backtrack(&self) -> ([u16; CELLS + 1], usize) {
+    /// into `dp.bounds` (0 = b₀ < b₁ < … < b_nb = k); returns nb.
+    pub(super) fn backtrack(&mut self) -> usize {
         let (g, k) = (self.dp.group.max(1), self.span.min(FRAMES - 1));
         let cells = self.dp.cells.min(CELLS);
-        let mut bounds = [0u16; CELLS + 1];
+        let bounds = &mut self.dp.bounds;
         let mut nb = 0;
         let mut j = cells;
         while j > 0 && nb < CELLS {
@@ -184,7 +184,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let nb = nb.min(CELLS);
         bounds[nb] = 0;
         bounds[..=nb].reverse();
-        (bounds, nb)
+        nb
     }
 }
 
