@@ -102,10 +102,10 @@ const GRADUAL: f32 = 2.0;
 
 /// A change alone in the span is gradual where two lines joined at it
 /// explain the frames' energies as well as the step, less this × β. The
-/// step's location is chosen from the data, which on a ramp gains it as
-/// much as a line's better shape: on a ramp the joined lines' edge over the
-/// step scatters about −2 (sd 4), on a ×2 step about −10 (sd 5), in cost
-/// units of β ≈ 13.
+/// step's location is chosen from the data, which on a ramp gains it about
+/// as much as a line's better shape; the joined lines then come within
+/// β/2 of the step in nearly every span, and a ×2 step's in a third
+/// (test `on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines`).
 const HINGE_SLACK: f32 = 0.5;
 
 /// …and gains less than this × β (a ×4 step gains some 14β in a span).

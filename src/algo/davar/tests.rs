@@ -744,6 +744,67 @@ fn a_hinge_keeps_windows_centred_at_the_boards_lambda() {
     assert!(f < 0.16, "{f}");
 }
 
+/// On a ramp the step's location is chosen from the data, and that
+/// choice gains the step about as much as one line's better shape: at the
+/// best split of 32 frames rising 1 → 3, one line beats the step in about
+/// half the spans (0.58 measured), while two lines joined at the split come
+/// within HINGE_SLACK·β (β ≈ 13 for 32 frames) in nearly all (0.98). Where
+/// the level starts to slope halfway (a hinge) the line almost never wins
+/// (0.04) and the joined lines mostly do (0.77); at a ×2 step they come
+/// within the slack in a third of the spans (0.35), about 9 cost units
+/// short on average: the price the ×2 steps pay in `davar-eval`.
+#[test]
+fn on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines() {
+    let mut rng = Rng::new(21);
+    let slack = f64::from(super::HINGE_SLACK) * 13.0;
+    let mut shares = Vec::new();
+    for shape in [0u8, 1, 2] {
+        let (mut line_wins, mut hinge_ok, mut edge) = (0u32, 0u32, 0.0f64);
+        let spans = 300;
+        for _ in 0..spans {
+            let (_, px) = chi2_frames(&mut rng, 32, |f| match shape {
+                0 => 1.0 + 2.0 * f as f64 / 31.0,
+                1 => 1.0 + 2.0 * (f as f64 - 16.0).max(0.0) / 15.0,
+                _ => {
+                    if f < 16 {
+                        1.0
+                    } else {
+                        2.0
+                    }
+                }
+            });
+            // The step's best split (the largest between-means sum of
+            // squares), as the segmentation would place it.
+            let p = |i: usize| f64::from(px[i]);
+            let c = (4..=28)
+                .max_by(|&a, &b| {
+                    let ss = |c: usize| {
+                        let (n1, n2) = (c as f64, (32 - c) as f64);
+                        let d = p(c) / n1 - (p(32) - p(c)) / n2;
+                        n1 * n2 / 32.0 * d * d
+                    };
+                    ss(a).total_cmp(&ss(b))
+                })
+                .unwrap();
+            let line = line_over_step(&px, 21.6, (0, c, 32));
+            let hinge = f64::from(hinge_over_step(&px, 21.6, (0, c, 32)));
+            line_wins += u32::from(line > 0.0);
+            hinge_ok += u32::from(hinge > -slack);
+            edge += hinge / f64::from(spans);
+        }
+        let (l, h) = (
+            f64::from(line_wins) / f64::from(spans),
+            f64::from(hinge_ok) / f64::from(spans),
+        );
+        eprintln!("shape {shape}: line beats the step {l:.2}, joined lines within the slack {h:.2}, their mean edge {edge:.1}");
+        shares.push((l, h, edge));
+    }
+    let (ramp, hinge, step) = (shares[0], shares[1], shares[2]);
+    assert!(ramp.0 < 0.75 && ramp.1 > 0.9, "ramp {ramp:?}");
+    assert!(hinge.0 < 0.2 && hinge.1 > 0.6, "hinge {hinge:?}");
+    assert!(step.1 < 0.5 && step.2 < -5.0, "×2 step {step:?}");
+}
+
 /// Changes closer than λ1 (σ² 1 ↔ 3 every 200 samples at λ 256/1024)
 /// fall between the segmentation's cells: there a cell is one frame, and
 /// the windows stay near λ1 instead of spanning changes it merged.
