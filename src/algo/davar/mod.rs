@@ -134,21 +134,9 @@ const ROW_SAMPLES: usize = 16;
 
 /// Frames per cell of a span of `span` frames whose shortest window is
 /// `min_frames`: see [`ROW_SAMPLES`].
-const fn cell_group(span: usize, min_frames: usize) -> usize {
-    let coarse = span.div_ceil(ROW_SAMPLES);
-    let fine = if min_frames / 6 > 1 {
-        min_frames / 6
-    } else {
-        1
-    };
-    let g = if fine < coarse { fine } else { coarse };
-    let floor = span.div_ceil(CELLS);
-    let g = if g > floor { g } else { floor };
-    if g > 1 {
-        g
-    } else {
-        1
-    }
+fn cell_group(span: usize, min_frames: usize) -> usize {
+    let coarse = span.div_ceil(ROW_SAMPLES).max(1);
+    (min_frames / 6).clamp(1, coarse).max(span.div_ceil(CELLS))
 }
 
 /// Segmented placement: samples after the hop at which the last span's
