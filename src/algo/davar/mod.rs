@@ -400,6 +400,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let span = l2 / SEG;
         let min_frames = l1.div_ceil(SEG).min(span);
+        let group = cell_group(span, min_frames);
         // Terms are added once per hop, so the ring must still hold the
         // oldest sample of a term 2·τ_max + 32 samples back; τ ≤ 2¹⁰ keeps
         // every sum exact (see the module's head).
@@ -472,8 +473,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 placed: None,
                 refined: None,
                 bounds: [0; CELLS + 1],
-                group: cell_group(span, min_frames),
-                cells: span.div_ceil(cell_group(span, min_frames)),
+                group,
+                cells: span.div_ceil(group),
                 sum: [0.0; CELLS + 1],
                 cost: [0.0; CELLS + 1],
                 arg: [0; CELLS + 1],

@@ -149,8 +149,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             if d > 0.0 {
                 return true;
             }
-            let step = || cost(l, c) + cost(c, r);
-            if d > -beta && cost(l, r) - step() < GRADUAL * beta {
+            // The step's cost and its gain over one segment, each made at
+            // most once (three logarithms).
+            let (mut step, mut gain) = (None, None);
+            let mut gain_of = |step: &mut Option<f32>| {
+                *gain.get_or_insert_with(|| {
+                    cost(l, r) - *step.get_or_insert_with(|| cost(l, c) + cost(c, r))
+                })
+            };
+            if d > -beta && gain_of(&mut step) < GRADUAL * beta {
                 return true;
             }
             // Near t (within λ1/2: farther, the segment that holds t is
@@ -161,14 +168,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             if nb == 2
                 && c.abs_diff(ft) * 2 <= min_frames
                 && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
-                && cost(l, r) - step() < HINGE_MAX_GAIN * beta
+                && gain_of(&mut step) < HINGE_MAX_GAIN * beta
             {
                 return true;
             }
             let mut h = min_frames.max(1);
-            let mut st = None;
             while c > l + h && c + h < r {
-                let st = *st.get_or_insert_with(step);
+                let st = *step.get_or_insert_with(|| cost(l, c) + cost(c, r));
                 if transition_cost(px, ln_n, nu, (l, c, r), h, q).is_some_and(|v| v < st) {
                     return true;
                 }

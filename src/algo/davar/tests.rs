@@ -863,6 +863,14 @@ fn line_sums(y: &[f64]) -> (f64, f64, f64) {
     (y.iter().sum::<f64>() / n, sxy, sxx)
 }
 
+/// The sum of squares about `m` (the mean of `y`) that the two means of
+/// `y[..at]` and `y[at..]` explain, in f64.
+fn step_ss(y: &[f64], at: usize, m: f64) -> f64 {
+    let (a, b) = y.split_at(at);
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    a.len() as f64 * (mean(a) - m).powi(2) + b.len() as f64 * (mean(b) - m).powi(2)
+}
+
 /// `line_over_step` against an f64 reference written from the definition:
 /// the least-squares line through the frame energies and the two segment
 /// means, their explained sums of squares about the pooled mean, scaled by
@@ -888,12 +896,7 @@ fn line_over_step_matches_an_f64_reference() {
         let y = &x[l..r];
         let (m, sxy, sxx) = line_sums(y);
         let ss_line = sxy * sxy / sxx;
-        let (a, b) = y.split_at(c - l);
-        let (ma, mb) = (
-            a.iter().sum::<f64>() / a.len() as f64,
-            b.iter().sum::<f64>() / b.len() as f64,
-        );
-        let ss_step = a.len() as f64 * (ma - m).powi(2) + b.len() as f64 * (mb - m).powi(2);
+        let ss_step = step_ss(y, c - l, m);
         let want = (ss_line - ss_step) * nu as f64 / (2.0 * m * m);
         let got = line_over_step(&px, nu, (l, c, r)) as f64;
         // In cost units, against the scale of the two sums (a change is
@@ -963,12 +966,7 @@ fn hinge_over_step_matches_an_f64_reference() {
         }
         let det = a * cc - b * b;
         let ss_hinge = (cc * gu * gu - 2.0 * b * gu * gv + a * gv * gv) / det;
-        let (p, q) = y.split_at(c - l);
-        let (mp, mq) = (
-            p.iter().sum::<f64>() / p.len() as f64,
-            q.iter().sum::<f64>() / q.len() as f64,
-        );
-        let ss_step = p.len() as f64 * (mp - m).powi(2) + q.len() as f64 * (mq - m).powi(2);
+        let ss_step = step_ss(y, c - l, m);
         let want = (ss_hinge - ss_step) * nu as f64 / (2.0 * m * m);
         let got = hinge_over_step(&px, nu, (l, c, r)) as f64;
         let scale = (ss_hinge + ss_step) * nu as f64 / (2.0 * m * m);
