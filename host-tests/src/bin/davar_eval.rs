@@ -1,7 +1,7 @@
 //! E-DAVAR evaluation over scenario classes and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
-//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas]`
+//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P]`
 //!
 //! Every class is run over N seeds (20 by default). The error is the RMS of
 //! σ²(τ0) against the true local Allan variance at τ0, over the times every
@@ -290,7 +290,7 @@ fn classes() -> Vec<Class> {
     v
 }
 
-fn methods(l1: u16, l2: u16) -> Vec<(String, DavarConfig)> {
+fn methods(l1: u16, l2: u16, p_fa: Option<f32>) -> Vec<(String, DavarConfig)> {
     let mid = ((l1 as u32 + l2 as u32) / 2) as u16;
     let centred = |entropy, threshold| DavarConfig {
         lambda1: l1,
@@ -315,7 +315,16 @@ fn methods(l1: u16, l2: u16) -> Vec<(String, DavarConfig)> {
             "centred temporal, auto".into(),
             centred(EntropyKind::Temporal, Threshold::Auto { p_fa: 0.01 }),
         ),
-        ("segmented (default)".into(), DavarConfig::segmented(l1, l2)),
+        match p_fa {
+            None => ("segmented (default)".into(), DavarConfig::segmented(l1, l2)),
+            Some(p) => (
+                format!("segmented, p_fa {p}"),
+                DavarConfig {
+                    threshold: Threshold::Auto { p_fa: p },
+                    ..DavarConfig::segmented(l1, l2)
+                },
+            ),
+        },
     ]
 }
 
@@ -575,6 +584,18 @@ struct Args {
     /// `"ramp 1→3 over 1000"` or `"every 200"`).
     #[arg(long)]
     only: Option<String>,
+    /// The segmentation's false-alarm probability per hop in place of the
+    /// default's 1 % (its threshold β follows): the detector's operating
+    /// curve, weak changes found against stationary windows shortened.
+    #[arg(long, value_parser = probability)]
+    p_fa: Option<f32>,
+}
+
+fn probability(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!("{s}: not a probability in (0, 1)")),
+    }
 }
 
 fn positive(s: &str) -> Result<f64, String> {
@@ -609,7 +630,7 @@ fn main() -> ExitCode {
             .is_none_or(|o| c.name.contains(o.as_str()))
     }) {
         let (l1, l2) = class.lambda;
-        let ms = methods(l1, l2);
+        let ms = methods(l1, l2, args.p_fa);
         let (a, b) = (l2 as usize / 2 + SEG, class.n - l2 as usize / 2 - SEG);
         // errs[method][seed], short[method] (fraction of hops shortened).
         let mut errs = vec![Vec::new(); ms.len()];
