@@ -8,8 +8,8 @@
 //! FILE holds one rate sample (°/s) per line; TAU0_S, the sample period in
 //! seconds, is required with it (finite, > 0, ≤ 1e6). `--demo` runs the
 //! report on 4 h at 100 Hz of the emulated ICM-42688-P noise model and
-//! compares the terms it reads with the model's settings (it used to run
-//! whenever TAU0 was missing, even for a file that does not exist).
+//! compares the terms it reads with the model's settings; it never runs in
+//! place of a FILE whose TAU0 is missing (that is a usage error).
 
 use gyro_array::algo::allan::{edf, local_slope, noise_terms, oavar_octave, AdevPoint, NoiseType};
 use gyro_array::emu::noise::AxisNoise;

@@ -144,19 +144,17 @@ fn cell_group(span: usize, min_frames: usize) -> usize {
 /// starts, one on each sample. Past the τ terms (samples 1..T of the hop)
 /// and the last segmentation's rows (which run on the samples after its
 /// start: ROW_SAMPLES of them, from START_AT + 1 around to the next hop's
-/// sample 5, or 7 where they make way for the τ terms). The changes are refined to the frame on the
-/// `REFINE_PARTS` samples before (from `REFINE_AT`, a share of them on
-/// each): with many changes found (a chip gated in and out of a fused
-/// axis) refining and placing together cost 1 100 instructions more than
-/// with none, on one sample of the board's loop, which then went over its
-/// 10 000; in two parts, one of them still left 17 to spare.
+/// sample 5, or 7 where they make way for the τ terms). The changes are
+/// refined to the frame on the `REFINE_PARTS` samples before (from
+/// `REFINE_AT`, a share on each): with many changes found (a chip gated in
+/// and out of a fused axis) refining costs some 1 100 instructions, more
+/// than one sample of the board's loop can take beside the placement.
 const PLACE_AT: usize = 17;
 
 /// The sample of the hop that learns the noise's tails (~630
 /// instructions), once the span has filled: after the τ terms (T ≤ 11)
-/// and before the refinement, where no segmentation row runs. (Spread over
-/// four samples it cost 30 a sample more in all, and moving it to samples
-/// 8–11 moved the board's three-axis peak, not lowered it.)
+/// and before the refinement, where no segmentation row runs; in one
+/// piece, as a split costs more than it spreads.
 const TAILS_AT: usize = 12;
 
 const REFINE_PARTS: usize = 4;

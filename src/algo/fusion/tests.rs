@@ -57,7 +57,8 @@ fn bad_inputs_never_panic_and_are_rejected() {
         let none = f.fuse(&mut st, &[f32::NAN; 4], 0b1111);
         assert_eq!(none, Err(FuseError::NoValidInput));
         assert_eq!(f.fuse(&mut st, &[1.0; 4], 0), Err(FuseError::NoValidInput));
-        // Huge finite values are no rates: they used to overflow to ±inf.
+        // Huge finite values are no rates, and their sums must not overflow
+        // to ±inf.
         let huge = f.fuse(&mut st, &[3e38, 3e38, -3e38, 2.0], 0b1111).unwrap();
         assert_eq!(huge.rate_dps, 2.0, "{m:?}");
         assert_eq!(huge.rejected & 0b0111, 0b0111);
