@@ -88,6 +88,10 @@ pub struct Outcome {
     /// The lag that best aligns the fused rate with the truth, minus the
     /// stated one, µs (positive: the rate is older than stated).
     pub lag_error_us: [f64; 3],
+    /// The standard error of that lag, µs (from the fit's residuals): large
+    /// where the motion barely moves over the run, so that no lag is
+    /// measurable.
+    pub lag_se_us: [f64; 3],
     /// Output samples with fewer than four chips aligned.
     pub short: u32,
     /// Samples read that were not one sample period after the last, per
@@ -208,15 +212,18 @@ pub fn run(r: Run) -> Outcome {
                 [dw, w, 1.0, s.1[a] - w]
             })
             .collect();
-        let best = lag_fit(&rows);
+        let (best, se) = lag_fit(&rows);
         out.lag_error_us[a] = best * 1e6;
+        out.lag_se_us[a] = se * 1e6;
     }
     out
 }
 
-/// −β₀ of the least-squares fit of column 3 on columns 0..3, or 0 where
-/// the derivative does not vary (no motion).
-fn lag_fit(rows: &[[f64; 4]]) -> f64 {
+/// −β₀ of the least-squares fit of column 3 on columns 0..3 and its
+/// standard error (σ̂²·(XᵀX)⁻¹₀₀, σ̂² the residuals' mean square over
+/// n − 3); (0, ∞) where the derivative does not vary (no motion) or the
+/// columns are collinear.
+fn lag_fit(rows: &[[f64; 4]]) -> (f64, f64) {
     let mut ata = nalgebra::Matrix3::<f64>::zeros();
     let mut atb = nalgebra::Vector3::<f64>::zeros();
     for r in rows {
@@ -224,10 +231,29 @@ fn lag_fit(rows: &[[f64; 4]]) -> f64 {
         ata += x * x.transpose();
         atb += x * r[3];
     }
-    if ata[(0, 0)] < 1e-6 * rows.len() as f64 {
-        return 0.0;
+    let none = (0.0, f64::INFINITY);
+    if ata[(0, 0)] < 1e-6 * rows.len() as f64 || rows.len() < 4 {
+        return none;
     }
-    ata.lu().solve(&atb).map_or(0.0, |b| -b[0])
+    let (Some(b), Some(inv)) = (ata.lu().solve(&atb), ata.try_inverse()) else {
+        return none;
+    };
+    let rss: f64 = rows
+        .iter()
+        .map(|r| {
+            let e = r[3] - (b[0] * r[0] + b[1] * r[1] + b[2] * r[2]);
+            e * e
+        })
+        .sum();
+    let var = rss / (rows.len() - 3) as f64 * inv[(0, 0)];
+    (
+        -b[0],
+        if var >= 0.0 {
+            var.sqrt()
+        } else {
+            f64::INFINITY
+        },
+    )
 }
 
 /// RMS of the part of `x` (sampled at `fs`) below `f_max`, from its DFT
