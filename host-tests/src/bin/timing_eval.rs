@@ -381,7 +381,9 @@ fn fusion_table(
 /// The latency budget of a setting, part by part (the same on every axis:
 /// z is fused from the four ICM-42688-P; see `docs/timing.md` for the
 /// ADXRS453).
-fn budget(s: &Setting, frame: usize) {
+/// Its stated instant behind the read and the true rate's delay to the
+/// frame's last byte, µs.
+fn budget(s: &Setting, frame: usize) -> (f64, f64) {
     let n = s.per_ms() as f64;
     let period = 1e6 / s.odr.hz() as f64;
     let path = s.filter.group_delay_us(s.odr) as f64;
@@ -400,9 +402,43 @@ fn budget(s: &Setting, frame: usize) {
     println!("  SPI reads (4 FIFOs at 21 MHz, ADXRS453 at 5.25) {spi:>7.0}");
     println!("  loop to the frame queued, worst sample          {COMPUTE_US:>7.0}");
     println!("  sample frame on the wire ({frame} B)                {wire:>7.0}");
+    let total = array + spi + COMPUTE_US + wire;
     println!(
-        "  = true rate to the frame's last byte            {:>7.0}  (median = worst: the delay is fixed; target 2 000 median, 2 500 worst)",
-        array + spi + COMPUTE_US + wire
+        "  = true rate to the frame's last byte            {total:>7.0}  (median = worst: the delay is fixed; target 2 000 median, 2 500 worst)"
+    );
+    (array, total)
+}
+
+/// What the ADXRS453 could bring to z, against what its lag costs: its
+/// stated delay against the array's (`array_us` behind the read), the
+/// latency z would have if the array waited for it, and the most any
+/// fusion of it could gain (inverse-variance weights of independent
+/// noises, the emulated parts' datasheet figures: angle random walk and
+/// the bias-instability floor, against the mean of the four
+/// ICM-42688-P).
+fn adxrs453_on_z((array_us, wire_us): (f64, f64)) {
+    use gyro_array::emu::NoiseParams;
+    let adx_us = gyro_array::drivers::adxrs453::DELAY_US as f64;
+    let (icm, adx) = (NoiseParams::ICM42688, NoiseParams::ADXRS453);
+    // Deviation of the four's mean with the ADXRS453 weighed in, over
+    // the four's alone: √(v₄ ∥ v_adx / v₄).
+    let gain = |one: f32, other: f32| {
+        let v4 = (one as f64).powi(2) / 4.0;
+        let va = (other as f64).powi(2);
+        (1.0 / (1.0 / v4 + 1.0 / va) / v4).sqrt()
+    };
+    println!(
+        "ADXRS453 on z: its reading {adx_us:.0} µs behind the read, the array's {array_us:.0}; waiting for it puts z's frame {:.0} µs from the true rate (target 2 000); fused at the array's instant it is always late",
+        wire_us + adx_us - array_us
+    );
+    println!(
+        "  the most fusing it could gain on z (independent noises, inverse-variance weights): angle random walk {:.4}× the four's, bias-instability floor {:.4}× ({} °/√h and {} °/h against the four's {:.3} and {:.2})",
+        gain(icm.arw_deg_rt_h, adx.arw_deg_rt_h),
+        gain(icm.bias_instability_deg_h, adx.bias_instability_deg_h),
+        adx.arw_deg_rt_h,
+        adx.bias_instability_deg_h,
+        icm.arw_deg_rt_h / 2.0,
+        icm.bias_instability_deg_h / 2.0
     );
 }
 
@@ -600,6 +636,6 @@ fn main() {
         table[0].0 * 1e3,
         table[1].0 * 1e3
     );
-    budget(&settings[settings.len() - 1], frame);
+    adxrs453_on_z(budget(&settings[settings.len() - 1], frame));
     fusion_table(args.seconds, seeds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
 }
