@@ -534,3 +534,53 @@ fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
     }
     fused
 }
+
+#[cfg(test)]
+mod tests {
+    use super::lag_fit;
+    use gyro_array::emu::Rng;
+
+    /// Rows of the lag fit for a rate `w(t)` read `lag` late with white
+    /// noise `sd`, a bias and a scale error, at 1 kHz for `secs`.
+    fn rows(w: impl Fn(f64) -> f64, lag: f64, sd: f64, secs: f64, seed: u64) -> Vec<[f64; 4]> {
+        let mut rng = Rng::new(seed);
+        let h = 1e-4;
+        (0..(secs * 1000.0) as usize)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                let truth = w(t);
+                let dw = (w(t + h) - w(t - h)) / (2.0 * h);
+                let read = 1.002 * w(t - lag) + 0.05 + sd * f64::from(rng.gaussian());
+                [dw, truth, 1.0, read - truth]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_fitted_lag_lies_within_its_standard_errors() {
+        // A 2 Hz sway, 95 °/s: the lag is well placed (a few µs).
+        let sway = |t: f64| 95.0 * (2.0 * std::f64::consts::PI * 2.0 * t).sin();
+        for (seed, lag) in [(1, 0.0), (2, 30e-6), (3, -80e-6)] {
+            let (fit, se) = lag_fit(&rows(sway, lag, 0.05, 10.0, seed));
+            assert!(se < 5e-6, "sd {se}");
+            assert!(
+                (fit - lag).abs() < 4.0 * se + 1e-6,
+                "{fit} against {lag} ± {se}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_slow_turn_over_a_short_run_has_no_measurable_lag() {
+        // 2 s of a 0.1 Hz turn: the derivative barely moves, collinear with
+        // the bias; the standard error says so.
+        let turn = |t: f64| 100.0 * (2.0 * std::f64::consts::PI * 0.1 * t).sin();
+        let (_, short) = lag_fit(&rows(turn, 0.0, 0.05, 2.0, 4));
+        let (_, long) = lag_fit(&rows(turn, 0.0, 0.05, 10.0, 4));
+        assert!(short > 25e-6, "2 s: ±{short}");
+        assert!(long < short / 4.0, "10 s: ±{long} against 2 s: ±{short}");
+        // No motion at all: no lag, and no claim to one.
+        let (fit, se) = lag_fit(&rows(|_| 0.0, 0.0, 0.05, 2.0, 5));
+        assert_eq!((fit, se), (0.0, f64::INFINITY));
+    }
+}
