@@ -5,6 +5,19 @@
 
 pub mod single_chip;
 
+pub mod args {
+    //! Value parsers the evaluations' command lines share (clap's
+    //! `value_parser`).
+
+    /// A finite number above 0.
+    pub fn positive(s: &str) -> Result<f64, String> {
+        match s.parse::<f64>() {
+            Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+            _ => Err(format!("{s}: not a positive number")),
+        }
+    }
+}
+
 pub mod latency {
     //! The board's delay from a sample's read to the antenna, shared by
     //! `timing-eval` (its latency budget) and `pointing-eval` (when each

@@ -578,7 +578,7 @@ struct Args {
     /// one LSB of noise, as a raw log of a gyro at a wide range reads: the
     /// rounding is then a good part of each frame's energy, and the truth
     /// carries its LSB²/12.
-    #[arg(long, value_parser = positive)]
+    #[arg(long, value_parser = host_tests::args::positive)]
     lsb: Option<f64>,
     /// Run only the classes whose name holds this text (as printed, e.g.
     /// `"ramp 1→3 over 1000"` or `"every 200"`).
@@ -595,13 +595,6 @@ fn probability(s: &str) -> Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
         _ => Err(format!("{s}: not a probability in (0, 1)")),
-    }
-}
-
-fn positive(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("{s}: not a positive number")),
     }
 }
 

@@ -380,9 +380,8 @@ fn fusion_table(
 
 /// The latency budget of a setting, part by part (the same on every axis:
 /// z is fused from the four ICM-42688-P; see `docs/timing.md` for the
-/// ADXRS453).
-/// Its stated instant behind the read and the true rate's delay to the
-/// frame's last byte, µs.
+/// ADXRS453). Returns the stated instant's delay behind the read and the
+/// true rate's delay to the frame's last byte, µs.
 fn budget(s: &Setting, frame: usize) -> (f64, f64) {
     let n = s.per_ms() as f64;
     let period = 1e6 / s.odr.hz() as f64;
@@ -413,17 +412,19 @@ fn budget(s: &Setting, frame: usize) -> (f64, f64) {
 /// stated delay against the array's (`array_us` behind the read), the
 /// latency z would have if the array waited for it, and the most any
 /// fusion of it could gain (inverse-variance weights of independent
-/// noises, the emulated parts' datasheet figures: angle random walk and
-/// the bias-instability floor, against the mean of the four
+/// noises, the emulated parts' figures, `emu::NoiseParams`: angle random
+/// walk and the bias-instability floor, against the mean of the four
 /// ICM-42688-P).
 fn adxrs453_on_z((array_us, wire_us): (f64, f64)) {
     use gyro_array::emu::NoiseParams;
+    const ICMS: f64 = 4.0;
     let adx_us = gyro_array::drivers::adxrs453::DELAY_US as f64;
     let (icm, adx) = (NoiseParams::ICM42688, NoiseParams::ADXRS453);
+    let mean_of_icms = |one: f32| one as f64 / ICMS.sqrt();
     // Deviation of the four's mean with the ADXRS453 weighed in, over
     // the four's alone: √(v₄ ∥ v_adx / v₄).
     let gain = |one: f32, other: f32| {
-        let v4 = (one as f64).powi(2) / 4.0;
+        let v4 = mean_of_icms(one).powi(2);
         let va = (other as f64).powi(2);
         (1.0 / (1.0 / v4 + 1.0 / va) / v4).sqrt()
     };
@@ -437,8 +438,8 @@ fn adxrs453_on_z((array_us, wire_us): (f64, f64)) {
         gain(icm.bias_instability_deg_h, adx.bias_instability_deg_h),
         adx.arw_deg_rt_h,
         adx.bias_instability_deg_h,
-        icm.arw_deg_rt_h / 2.0,
-        icm.bias_instability_deg_h / 2.0
+        mean_of_icms(icm.arw_deg_rt_h),
+        mean_of_icms(icm.bias_instability_deg_h)
     );
 }
 
@@ -544,15 +545,8 @@ struct Args {
     fusion_2k: bool,
     /// Every setting the driver can write that reaches the wire within
     /// this many ms, against the aliasing target.
-    #[arg(long, value_parser = positive_ms)]
+    #[arg(long, value_parser = host_tests::args::positive)]
     search: Option<f64>,
-}
-
-fn positive_ms(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("{s}: not a positive number of ms")),
-    }
 }
 
 fn main() {
