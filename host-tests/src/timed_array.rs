@@ -235,7 +235,8 @@ fn lag_fit(rows: &[[f64; 4]]) -> (f64, f64) {
     if ata[(0, 0)] < 1e-6 * rows.len() as f64 || rows.len() < 4 {
         return none;
     }
-    let (Some(b), Some(inv)) = (ata.lu().solve(&atb), ata.try_inverse()) else {
+    let lu = ata.lu();
+    let (Some(b), Some(inv)) = (lu.solve(&atb), lu.try_inverse()) else {
         return none;
     };
     let rss: f64 = rows
