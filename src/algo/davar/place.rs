@@ -20,7 +20,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (nb, next) = self.refining(first);
         self.dp.refined = None;
         self.refine(nb, next..nb);
-        let bounds = self.dp.bounds;
+        let bounds = &self.dp.bounds;
         let k = self.span.min(FRAMES - 1);
         let ft = k / 2; // frame that starts at (or holds) t
                         // The span's frame prefix sums (from `dp_start`): every mean below
