@@ -100,19 +100,20 @@ const STRONG: f32 = 3.0;
 /// ([`Davar::segment_window`]).
 const GRADUAL: f32 = 2.0;
 
-/// A change alone in the span is gradual where two lines joined at it
-/// explain the frames' energies as well as the step, less this × β. The
-/// step's location is chosen from the data, which on a ramp gains it about
-/// as much as a line's better shape; the joined lines then come within
-/// β/2 of the step in nearly every span, and a ×2 step's in a third
-/// (test `on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines`).
+/// A change alone in the span is gradual where two lines joined at their
+/// best knot explain the frames' energies as well as the step, less this
+/// × β. Both choose a location from the data; the joined lines then come
+/// within β/2 of the step in nearly every ramp span, and of a ×2 step's in
+/// 0.61 (test `on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines`).
+/// At β/4 the board-λ ramp loses to the fixed window (`davar-eval
+/// --first-seed 9001`: 1.024), so the weak steps pay instead.
 const HINGE_SLACK: f32 = 0.5;
 
 /// …and gains less than this × β: the second-order form holds near equal
-/// levels and understates a large step's edge (without the bound, ×4 steps
-/// at λ 256/1024 read 0.741 of the best fixed window's error, not 0.710:
-/// `davar-eval`).
-const HINGE_MAX_GAIN: f32 = 8.0;
+/// levels and understates a large step's edge (`davar-eval
+/// --other-lambdas`: ×3 at 256/1024 0.746 here, 0.788 at 8β; at 4β the
+/// board-λ ramp at seed 9001 loses, 1.034).
+const HINGE_MAX_GAIN: f32 = 6.0;
 
 /// t's segment is a stair of a ramp, not the level of a step, where its
 /// energies' slope has z² above this (and runs with the change).

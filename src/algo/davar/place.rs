@@ -110,11 +110,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // - one line through both explains their energies better than the
         //   step does ([`line_over_step`]), or as well less the penalty for
         //   the step's location where the change gains less than GRADUAL·β;
-        // - where the change is alone in the span, two lines joined at it
-        //   explain the energies as well as the step does, less
-        //   HINGE_SLACK·β ([`hinge_over_step`]): a level that starts to
-        //   slope, which the step's free location fits as well as one line
-        //   does; or
+        // - where the change is alone in the span, two lines joined at
+        //   their best knot explain the energies as well as the step does,
+        //   less HINGE_SLACK·β ([`hinge_over_step`]): a level that starts
+        //   to slope, which the step's free location fits as well as one
+        //   line does; or
         // - a blurred step fits them better than the sharp one: the two
         //   levels joined by a linear transition over 2h frames centred on
         //   the change, h ≥ λ1 (so a one-sided window of λ1 inside the
@@ -167,8 +167,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             // levels and understates a large step's edge).
             if nb == 2
                 && c.abs_diff(ft) * 2 <= min_frames
-                && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
                 && gain_of(&mut step) < HINGE_MAX_GAIN * beta
+                && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
             {
                 return true;
             }

@@ -137,63 +137,68 @@ pub(super) fn line_over_step_from(
     (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
 }
 
-/// How much better two lines joined at c explain the frame energies of
-/// l..r than the step at c does, in the cost units of `line_over_step`
-/// (the same second-order form of the Gamma deviances, from the prefix
-/// sums). A hinge (a level that starts to slope, or a slope that levels
-/// off) is a gradual change that one line through both segments fits
-/// poorly, so the step at c wins the line test and bounds the window,
-/// one-sided on the slope; the joined lines fit it. A sharp step is
-/// explained three quarters by them wherever c falls (as by one line when
-/// c is central), so a step shows as a deficit of about a quarter of its
-/// gain. −∞ where it does not apply.
+/// How much better two lines joined at the best knot explain the frame
+/// energies of l..r than the step at c does, in the cost units of
+/// `line_over_step` (the same second-order form of the Gamma deviances,
+/// from the prefix sums). A hinge (a level that starts to slope, or a
+/// slope that levels off) is a gradual change that one line through both
+/// segments fits poorly, so the step at c wins the line test and bounds
+/// the window, one-sided on the slope; joined lines fit it. The knot is
+/// free (every frame boundary with two frames on either side), not the
+/// step's c: on a ramp the segmentation puts c where the noise makes the
+/// step look best, often far from where the slope starts, and lines forced
+/// to join there fall short of a step that chose its place. A sharp step
+/// is explained about three quarters by joined lines wherever their knot
+/// falls (one knot cannot both rise and level off), so a step shows as a
+/// deficit of about a quarter of its gain. −∞ where it does not apply.
 #[cfg(test)]
 pub(super) fn hinge_over_step(px: &[f32], nu: f32, (l, c, r): (usize, usize, usize)) -> f32 {
     hinge_over_step_from(px, nu, (l, c, r), line_sums(px, l, r))
 }
 
-/// `hinge_over_step` with [`line_sums`] over l..r already made: the
-/// right segment's sums follow from them and the left's.
+/// `hinge_over_step` with [`line_sums`] over l..r already made. One walk
+/// from r down to l: for a knot at κ the regressors are the frame index
+/// and w = f − κ + ½ on the frames f ≥ κ (0 before), whose sums are
+/// closed forms in the count on the right, and whose product with the
+/// energies follows from the previous knot's (R₁(κ) = R₁(κ+1) + R₀(κ+1),
+/// R₀ the energy from κ on, R₁ = Σ (f − κ)·x_f): O(1) a knot, no
+/// second pass.
 pub(super) fn hinge_over_step_from(
     px: &[f32],
     nu: f32,
     (l, c, r): (usize, usize, usize),
-    (m, sfc, _): (f32, f32, f32),
+    (m, sfc, sxx): (f32, f32, f32),
 ) -> f32 {
-    if c < l + 2 || r < c + 2 {
+    let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
+    if c < l + 2 || r < c + 2 || !(m > 0.5) {
         return f32::NEG_INFINITY;
     }
+    let n = (r - l) as f32;
     let (n1, n2) = ((c - l) as f32, (r - c) as f32);
-    let n = n1 + n2;
-    if !(m > 0.5) {
-        return f32::NEG_INFINITY;
+    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
+    let step = n1 * n2 / n * d * d;
+    // The explained sum of squares of (f, w) about their means is the
+    // line's, sfc²/sxx, plus w's part orthogonal to f: (cwe − b·sfc)² over
+    // cww − cxw²/sxx, b = cxw/sxx. (The 2 × 2 form gᵀA⁻¹g of the same
+    // cancels to a few digits where w is nearly f.) Knot r − 1 starts the
+    // running sums; knots r − 2 down to l + 2 are scored.
+    let (pr, slope, half_m) = (p(r), sfc / sxx, 0.5 * m);
+    let (mut r0, mut r1, mut mr, mut best) = (pr - p(r - 1), 0.0f32, 1.0f32, 0.0f32);
+    for &pk in px.get(l + 2..r - 1).unwrap_or(&[]).iter().rev() {
+        r1 += r0;
+        r0 = pr - pk;
+        mr += 1.0;
+        let (nl, m2) = (n - mr, mr * mr);
+        let sww = mr * (4.0 * m2 - 1.0) * (1.0 / 12.0);
+        let cxw = sww + 0.25 * (nl - mr) * m2;
+        let e = r1 + 0.5 * r0 - half_m * m2 - cxw * slope;
+        // 144 (sxx·cww − cxw²), factored: positive with two frames a side.
+        let q = mr * nl;
+        let det = q * (4.0 * q * q - 3.0 * q - m2 - nl * nl + 1.0);
+        best = best.max(e * e / det);
     }
-    let (m1, f1, _) = line_sums(px, l, c);
-    let sx = m * n;
-    let s1 = m1 * n1;
-    let s2 = sx - s1;
-    let m2 = s2 / n2;
-    // Σ (f − f̄)·x over l..r is the two segments' about their own centres
-    // moved to the whole's (by −n2/2 and +n1/2 frames).
-    let f2 = sfc - f1 + 0.5 * n2 * s1 - 0.5 * n1 * s2;
-    // Regressors u = f − c + ½ on the left frames and v = f − c + ½ on the
-    // right ones (0 elsewhere): their sums, squares and products with the
-    // energies (line_sums' Σ (f − f̄)·x about each segment's centre,
-    // moved to c), centred over l..r; the explained sum of squares is
-    // gᵀA⁻¹g for the 2 × 2 centred system.
-    let (su, sv) = (-0.5 * n1 * n1, 0.5 * n2 * n2);
-    let suu = n1 * (4.0 * n1 * n1 - 1.0) / 12.0;
-    let svv = n2 * (4.0 * n2 * n2 - 1.0) / 12.0;
-    let (sux, svx) = (f1 - 0.5 * n1 * s1, f2 + 0.5 * n2 * s2);
-    let (cuu, cvv, cuv) = (suu - su * su / n, svv - sv * sv / n, -su * sv / n);
-    let (cux, cvx) = (sux - su * sx / n, svx - sv * sx / n);
-    let det = cuu * cvv - cuv * cuv;
-    if !(det > 0.0) {
-        return f32::NEG_INFINITY;
-    }
-    let hinge = (cvv * cux * cux - 2.0 * cuv * cux * cvx + cuu * cvx * cvx) / det;
-    let d = m1 - m2;
-    (hinge - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+    let hinge = sfc * slope + 144.0 * sxx * best;
+    (hinge - step) * nu / (2.0 * m * m)
 }
 
 /// The slope of the frames' energies over l..r, squared, over its own

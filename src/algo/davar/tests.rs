@@ -735,24 +735,24 @@ fn a_ramp_keeps_windows_centred() {
 /// At the board's λ1 = λ2/2 the segmentation puts a single change in a
 /// span that a ramp fills in part: a level, then the slope. One line fits
 /// that hinge no better than the step, whose location is chosen from the
-/// data; two lines joined at the change do, so the window stays centred.
+/// data; two lines joined at the best knot do, so the window stays centred.
 #[test]
 fn a_hinge_keeps_windows_centred_at_the_boards_lambda() {
     let f = one_sided_on_a_ramp_at(1000, 512);
     eprintln!("one-sided on a ramp over 1000 at λ 512/1024: {f:.3}");
-    // 0.098 measured; 0.230 without the joined lines.
-    assert!(f < 0.16, "{f}");
+    // 0.047 measured; 0.230 without the joined lines.
+    assert!(f < 0.1, "{f}");
 }
 
 /// On a ramp the step's location is chosen from the data, and that
 /// choice gains the step about as much as one line's better shape: at the
 /// best split of 32 frames rising 1 → 3, one line beats the step in about
-/// half the spans (0.58 measured), while two lines joined at the split come
-/// within HINGE_SLACK·β (β ≈ 13 for 32 frames) in nearly all (0.98). Where
-/// the level starts to slope halfway (a hinge) the line almost never wins
-/// (0.04) and the joined lines mostly do (0.77); at a ×2 step they come
-/// within the slack in a third of the spans (0.35), about 9 cost units
-/// short on average: the price the ×2 steps pay in `davar-eval`.
+/// half the spans (0.58 measured), while two lines joined at their best
+/// knot come within HINGE_SLACK·β (β ≈ 13 for 32 frames) in nearly all
+/// (0.99). Where the level starts to slope halfway (a hinge) the line
+/// almost never wins (0.04) and the joined lines mostly do (0.94); at a ×2
+/// step they come within the slack in 0.61 of the spans, about 5 cost
+/// units short on average: the price the weak steps pay in `davar-eval`.
 #[test]
 fn on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines() {
     let mut rng = Rng::new(21);
@@ -800,9 +800,9 @@ fn on_a_ramp_the_best_step_ties_with_a_line_and_not_with_joined_lines() {
         shares.push((l, h, edge));
     }
     let (ramp, hinge, step) = (shares[0], shares[1], shares[2]);
-    assert!(ramp.0 < 0.75 && ramp.1 > 0.9, "ramp {ramp:?}");
-    assert!(hinge.0 < 0.2 && hinge.1 > 0.6, "hinge {hinge:?}");
-    assert!(step.1 < 0.5 && step.2 < -5.0, "×2 step {step:?}");
+    assert!(ramp.0 < 0.75 && ramp.1 > 0.95, "ramp {ramp:?}");
+    assert!(hinge.0 < 0.2 && hinge.1 > 0.85, "hinge {hinge:?}");
+    assert!(step.1 < 0.75 && step.2 < -3.0, "×2 step {step:?}");
 }
 
 /// Changes closer than λ1 (σ² 1 ↔ 3 every 200 samples at λ 256/1024)
@@ -916,10 +916,11 @@ fn line_over_step_matches_an_f64_reference() {
     );
 }
 
-/// `hinge_over_step` against an f64 reference: the least-squares fit of
-/// an intercept and the two half-line regressors joined at c (normal
-/// equations solved in f64), its explained sum of squares less the step's,
-/// scaled as in `line_over_step`. Spans up to 128 frames, hinges and steps.
+/// `hinge_over_step` against an f64 reference: for every knot κ with two
+/// frames on either side, the least-squares fit of an intercept, the frame
+/// index and the half-line f − κ + ½ on f ≥ κ (normal equations solved in
+/// f64); the best explained sum of squares less the step's at c, scaled as
+/// in `line_over_step`. Spans up to 128 frames, hinges and steps.
 #[test]
 fn hinge_over_step_matches_an_f64_reference() {
     let mut rng = Rng::new(11);
@@ -940,40 +941,45 @@ fn hinge_over_step_matches_an_f64_reference() {
         let y = &x[l..r];
         let n = y.len() as f64;
         let m = y.iter().sum::<f64>() / n;
-        // Centred regressors, then the 2 × 2 normal equations.
-        let g: Vec<(f64, f64)> = (l..r)
-            .map(|f| {
-                let q = f as f64 - c as f64 + 0.5;
-                if f < c {
-                    (q, 0.0)
-                } else {
-                    (0.0, q)
-                }
-            })
-            .collect();
-        let (mu, mv) = (
-            g.iter().map(|p| p.0).sum::<f64>() / n,
-            g.iter().map(|p| p.1).sum::<f64>() / n,
-        );
-        let (mut a, mut b, mut cc, mut gu, mut gv) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (&(u, v), &v_y) in g.iter().zip(y) {
-            let (u, v, yy) = (u - mu, v - mv, v_y - m);
-            a += u * u;
-            b += u * v;
-            cc += v * v;
-            gu += u * yy;
-            gv += v * yy;
-        }
-        let det = a * cc - b * b;
-        let ss_hinge = (cc * gu * gu - 2.0 * b * gu * gv + a * gv * gv) / det;
+        let explained = |kn: usize| {
+            // Centred regressors, then the 2 × 2 normal equations.
+            let g: Vec<(f64, f64)> = (l..r)
+                .map(|f| {
+                    let w = if f >= kn {
+                        f as f64 - kn as f64 + 0.5
+                    } else {
+                        0.0
+                    };
+                    (f as f64, w)
+                })
+                .collect();
+            let (mu, mv) = (
+                g.iter().map(|p| p.0).sum::<f64>() / n,
+                g.iter().map(|p| p.1).sum::<f64>() / n,
+            );
+            let (mut a, mut b, mut cc, mut gu, mut gv) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (&(u, v), &v_y) in g.iter().zip(y) {
+                let (u, v, yy) = (u - mu, v - mv, v_y - m);
+                a += u * u;
+                b += u * v;
+                cc += v * v;
+                gu += u * yy;
+                gv += v * yy;
+            }
+            (cc * gu * gu - 2.0 * b * gu * gv + a * gv * gv) / (a * cc - b * b)
+        };
+        let ss_hinge = (l + 2..=r - 2).map(explained).fold(0.0, f64::max);
         let ss_step = step_ss(y, c - l, m);
         let want = (ss_hinge - ss_step) * nu as f64 / (2.0 * m * m);
         let got = hinge_over_step(&px, nu, (l, c, r)) as f64;
-        let scale = (ss_hinge + ss_step) * nu as f64 / (2.0 * m * m);
-        worst = worst.max((got - want).abs() / scale.max(1.0));
+        worst = worst.max((got - want).abs());
     }
-    eprintln!("hinge_over_step: worst error {worst:.2e} of the sums' scale");
-    assert!(worst < 1e-3, "{worst}");
+    // In cost units, against the HINGE_SLACK·β ≈ 6.5 the decision uses:
+    // the f32 sums lose a few digits only for a knot two frames from the
+    // span's end, where the half-line is nearly the frame index (0.012
+    // measured there, 1e-4 elsewhere).
+    eprintln!("hinge_over_step: worst error {worst:.2e} cost units");
+    assert!(worst < 0.05, "{worst}");
     // Where it does not apply: a segment under two frames, no energy.
     let px = [0.0f32, 1.0, 2.0, 3.0, 4.0];
     assert_eq!(hinge_over_step(&px, 21.6, (0, 1, 4)), f32::NEG_INFINITY);
