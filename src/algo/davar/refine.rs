@@ -125,16 +125,19 @@ pub(super) fn line_over_step_from(
     (l, c, r): (usize, usize, usize),
     (m, sfc, sxx): (f32, f32, f32),
 ) -> f32 {
+    if c <= l || r <= c || r < l + 3 || !(m > 0.5) {
+        return f32::NEG_INFINITY;
+    }
+    (sfc * sfc / sxx - step_ss(px, (l, c, r))) * nu / (2.0 * m * m)
+}
+
+/// The sum of squares about the mean of l..r that the two segment means
+/// of l..c and c..r explain (l < c < r), from the prefix sums.
+fn step_ss(px: &[f32], (l, c, r): (usize, usize, usize)) -> f32 {
     let p = |i: usize| px.get(i).copied().unwrap_or(0.0);
-    if c <= l || r <= c || r < l + 3 {
-        return f32::NEG_INFINITY;
-    }
     let (n, n1, n2) = ((r - l) as f32, (c - l) as f32, (r - c) as f32);
-    if !(m > 0.5) {
-        return f32::NEG_INFINITY;
-    }
     let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
-    (sfc * sfc / sxx - n1 * n2 / n * d * d) * nu / (2.0 * m * m)
+    n1 * n2 / n * d * d
 }
 
 /// How much better two lines joined at the best knot explain the frame
@@ -174,9 +177,6 @@ pub(super) fn hinge_over_step_from(
         return f32::NEG_INFINITY;
     }
     let n = (r - l) as f32;
-    let (n1, n2) = ((c - l) as f32, (r - c) as f32);
-    let d = (p(c) - p(l)) / n1 - (p(r) - p(c)) / n2;
-    let step = n1 * n2 / n * d * d;
     // The explained sum of squares of (f, w) about their means is the
     // line's, sfc²/sxx, plus w's part orthogonal to f: (cwe − b·sfc)² over
     // cww − cxw²/sxx, b = cxw/sxx. (The 2 × 2 form gᵀA⁻¹g of the same
@@ -186,13 +186,11 @@ pub(super) fn hinge_over_step_from(
     // scan's cost on the board's placement sample halves).
     let (pr, slope, half_m) = (p(r), sfc / sxx, 0.5 * m);
     let (mut r0, mut r1, mut mr, mut best) = (pr - p(r - 1), 0.0f32, 1.0f32, 0.0f32);
-    let mut odd = true;
-    for &pk in px.get(l + 2..r - 1).unwrap_or(&[]).iter().rev() {
+    for (i, &pk) in px.get(l + 2..r - 1).unwrap_or(&[]).iter().rev().enumerate() {
         r1 += r0;
         r0 = pr - pk;
         mr += 1.0;
-        odd = !odd;
-        if odd {
+        if i % 2 == 1 {
             continue;
         }
         let (nl, m2) = (n - mr, mr * mr);
@@ -205,7 +203,7 @@ pub(super) fn hinge_over_step_from(
         best = best.max(e * e / det);
     }
     let hinge = sfc * slope + 144.0 * sxx * best;
-    (hinge - step) * nu / (2.0 * m * m)
+    (hinge - step_ss(px, (l, c, r))) * nu / (2.0 * m * m)
 }
 
 /// The slope of the frames' energies over l..r, squared, over its own

@@ -917,10 +917,11 @@ fn line_over_step_matches_an_f64_reference() {
 }
 
 /// `hinge_over_step` against an f64 reference: for every other knot κ
-/// with two frames on either side (r − κ even), the least-squares fit of an intercept, the frame
-/// index and the half-line f − κ + ½ on f ≥ κ (normal equations solved in
-/// f64); the best explained sum of squares less the step's at c, scaled as
-/// in `line_over_step`. Spans up to 128 frames, hinges and steps.
+/// with two frames on either side (r − κ even), the least-squares fit of
+/// an intercept, the frame index and the half-line f − κ + ½ on f ≥ κ
+/// (normal equations solved in f64); the best explained sum of squares
+/// less the step's at c, scaled as in `line_over_step`. Spans up to 128
+/// frames, hinges and steps.
 #[test]
 fn hinge_over_step_matches_an_f64_reference() {
     let mut rng = Rng::new(11);
@@ -979,7 +980,7 @@ fn hinge_over_step_matches_an_f64_reference() {
     }
     // In cost units, against the HINGE_SLACK·β ≈ 6.5 the decision uses:
     // the f32 sums lose a few digits only for a knot two frames from the
-    // span's end, where the half-line is nearly the frame index (0.012
+    // span's end, where the half-line is nearly the frame index (0.010
     // measured there, 1e-4 elsewhere).
     eprintln!("hinge_over_step: worst error {worst:.2e} cost units");
     assert!(worst < 0.05, "{worst}");
