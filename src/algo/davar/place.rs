@@ -5,10 +5,11 @@
 use super::refine::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
 use super::{
-    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, SEG,
-    SLOPE_Z2, STRONG,
+    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_REACH, HINGE_SLACK,
+    LAG, SEG, SLOPE_Z2, STRONG,
 };
 use crate::algo::math::lnf;
+use core::cell::Cell;
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     Davar<CAP, FRAMES, T, STFT>
@@ -129,6 +130,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         } else {
             None
         };
+        // Whether the hinge test is what read a change as gradual.
+        let hinged = Cell::new(false);
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
             // t's own segment rising (or falling) toward or away from the
@@ -170,6 +173,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 && gain_of(&mut step) < HINGE_MAX_GAIN * beta
                 && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
             {
+                hinged.set(true);
                 return true;
             }
             let mut h = min_frames.max(1);
@@ -202,6 +206,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             let mut h = ft
                 .saturating_sub(run_lo)
                 .min(run_hi.saturating_sub(ft + odd));
+            if hinged.get() {
+                h = h.min(HINGE_REACH * self.min_frames / 2);
+            }
             if 2 * h + odd < self.min_frames {
                 h = self.min_frames.saturating_sub(odd).div_ceil(2).min(ft);
             }
