@@ -163,13 +163,16 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             if d > -beta && gain_of(&mut step) < GRADUAL * beta {
                 return true;
             }
-            // Near t (within λ1/2: farther, the segment that holds t is
-            // most of a one-sided window's length on either side of t, and
-            // a few frames beyond the change let a steep line mimic the
-            // step) and not strong (the second-order form holds near equal
-            // levels and understates a large step's edge).
+            // Near t: within 3λ1/4 of it and inside the span's middle half
+            // (farther, the segment that holds t is most of a one-sided
+            // window's length on either side of t, and the few frames
+            // beyond the change let a steep line mimic the step; at the
+            // board's λ1 = λ2/2 the middle half is the nearer bound, λ1/2,
+            // where a step read as gradual gets the whole span). And not
+            // strong (the second-order form holds near equal levels and
+            // understates a large step's edge).
             if nb == 2
-                && c.abs_diff(ft) * 2 <= min_frames
+                && c.abs_diff(ft) * 4 <= (3 * min_frames).min(k)
                 && gain_of(&mut step) < HINGE_MAX_GAIN * beta
                 && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
             {
