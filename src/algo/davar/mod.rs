@@ -127,7 +127,7 @@ const HINGE_MAX_GAIN: f32 = 6.0;
 /// the span's window 0.913; the ramp over 500 0.906 against 0.977. (A cap
 /// of λ1 costs the ramps at λ1 = λ2/4 more than it gains the steps: the
 /// alternatives are in docs/davar.md.)
-const HINGE_REACH: usize = 2;
+const HINGE_WINDOW: usize = 2;
 
 /// t's segment is a stair of a ramp, not the level of a step, where its
 /// energies' slope has z² above this (and runs with the change).

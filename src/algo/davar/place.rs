@@ -5,7 +5,7 @@
 use super::refine::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
 use super::{
-    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_REACH, HINGE_SLACK,
+    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, HINGE_WINDOW,
     LAG, SEG, SLOPE_Z2, STRONG,
 };
 use crate::algo::math::lnf;
@@ -210,7 +210,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 .saturating_sub(run_lo)
                 .min(run_hi.saturating_sub(ft + odd));
             if hinged.get() {
-                h = h.min(HINGE_REACH * self.min_frames / 2);
+                h = h.min(HINGE_WINDOW * self.min_frames / 2);
             }
             if 2 * h + odd < self.min_frames {
                 h = self.min_frames.saturating_sub(odd).div_ceil(2).min(ft);
