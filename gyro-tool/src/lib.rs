@@ -3,6 +3,7 @@
 //! E-DAVAR surface, fusion replay, recordings and their summaries.
 
 pub mod analyse;
+pub mod assess;
 pub mod dev;
 pub mod edf;
 pub mod fit;

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use gyro_tool::{replay, short, Res};
+use gyro_tool::{assess, replay, short, Res};
 
 use crate::log_args::LogArgs;
 
@@ -86,6 +86,7 @@ pub fn run(a: Args) -> Res<bool> {
         let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
         println!("  fused: error RMS {rms:.4}, max {max:.4}");
     }
+    print_assessment(&assess::assess(&s.rates, &r, s.tau0)?, &s.names);
     // The fused gyro's noise, free of the motion: the probe's Allan
     // deviation (and, with a reference, the fused error's beside it).
     let (len, probe) = replay::longest_run_adev(&r.probe, s.tau0);
@@ -135,4 +136,52 @@ pub fn run(a: Args) -> Res<bool> {
     }
     replay::draw(svg, &log.name(), &s.names, &s.rates, &r, s.tau0)?;
     Ok(true)
+}
+
+/// The truth-free measure: leave-one-out, the weights' spread and, on a
+/// static log, the Allan deviations' ratios.
+fn print_assessment(a: &assess::Assessment, names: &[String]) {
+    if !a.loo.is_empty() {
+        println!(
+            "  leave-one-out (fuse the others, RMS against the chip, means out), fused / plain mean / fixed inverse-variance:"
+        );
+        for (c, l) in a.loo.iter().enumerate() {
+            println!(
+                "    {:<10} {:>12.6} {:>12.6} {:>12.6}   hat variance {:.4e}",
+                names[c], l.fused, l.mean, l.fixed_iv, a.hat[c]
+            );
+        }
+        println!(
+            "    over the chips: fused {:.3}x the plain mean, fixed inverse-variance {:.3}x{}",
+            a.loo_ratio(),
+            a.fixed_iv_ratio(),
+            if a.shared_error() {
+                " (the hat reads a variance below 0: some chips share an error)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!("  weights (mean, sd over the samples a chip answered; samples at weight 0):");
+    for (c, w) in a.spread.iter().enumerate() {
+        println!(
+            "    {:<10} {:.3} ± {:.3}   {}",
+            names[c], w.mean, w.sd, w.zero
+        );
+    }
+    println!(
+        "    one chip above 0.9 on {:.2} % of the samples with three or more fused",
+        100.0 * a.one_chip_share
+    );
+    if a.is_static {
+        println!("  static log: Allan deviation, fused / plain mean and probe / fused:");
+        for p in &a.static_points {
+            println!(
+                "    tau = {:>3} samples  {:.3}  {:.3}",
+                p.m, p.fused_over_mean, p.probe_over_fused
+            );
+        }
+    } else {
+        println!("  not static (the chips' mean moves more than their noise): no Allan ratios");
+    }
 }
