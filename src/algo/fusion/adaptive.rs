@@ -98,12 +98,12 @@ pub(super) fn adaptive_const<const N: usize>(
     }
 }
 
-/// Each gyro's noise variance, floored: the weights' and the gate's.
+/// Each gyro's variance for the gate, floored.
 #[inline(always)]
 pub(super) fn floored<const N: usize>(st: &AxisState<N>, c: &AdaptiveConfig) -> [f32; N] {
     let mut v = [0.0f32; N];
     for i in 0..N {
-        v[i] = at_least(st.var[i], c.var_floor);
+        v[i] = at_least(st.gvar[i], c.var_floor);
     }
     v
 }
@@ -199,7 +199,11 @@ pub(super) fn adaptive_active<const N: usize>(
     };
     let mut w = [0.0f32; N];
     for i in 0..N {
-        let wi = if all_warm { 1.0 / v[i] } else { 1.0 };
+        let wi = if all_warm {
+            1.0 / at_least(st.var[i], c.var_floor)
+        } else {
+            1.0
+        };
         w[i] = if has(active, i) { wi } else { 0.0 };
     }
     // Median gate (needs 3 gyros to tell which one is off): the residual
@@ -414,8 +418,26 @@ pub(super) fn update_and_fuse<const N: usize>(
     } else {
         0.0
     };
-    // At least two good gyros (one AND, no popcount).
-    if good & good.wrapping_sub(1) != 0 {
+    // Three or more good gyros, no pair with priors: the pairwise model.
+    let three = rest & rest.wrapping_sub(1) != 0;
+    if three && pair_prior == 0.0 {
+        pairwise_update(c, st, y, active, good, warm_cap);
+        for i in 0..N {
+            if has(good, i) {
+                let e = y[i] - med;
+                let e2 = e * e;
+                let g = 1.0 / st.n_pair[i].max(1) as f32;
+                st.ef[i] += g.max(c.alpha) * (e2 - st.ef[i]);
+                st.es[i] += g.max(NOISE_ALPHA) * (e2 - st.es[i]);
+            }
+        }
+        if active != st.solved || st.k % SOLVE_EVERY == 0 {
+            attribute(st, active);
+            rise(st, active);
+        }
+    } else if good & good.wrapping_sub(1) != 0 {
+        // Two good gyros (or a pair with priors): the residual against the
+        // other one, as below.
         for i in 0..N {
             let inside = has(good, i);
             let wo = if inside { sw - w[i] } else { sw };
@@ -495,9 +517,13 @@ pub(super) fn update_and_fuse<const N: usize>(
                 // weight instead of 1/26.)
                 let (p, knee) = (st.pair_power, PAIR_SLACK * pair_prior);
                 st.var[i] = st.prior[i] * (p.min(knee) / pair_prior) + 0.5 * (p - knee).max(0.0);
+                st.gvar[i] = st.var[i];
+                st.own[i] = st.var[i];
                 continue;
             }
             st.var[i] += a * (e2 - v_others - st.var[i]);
+            st.gvar[i] = st.var[i];
+            st.own[i] = st.var[i];
         }
     }
     if pair_prior == 0.0 {
@@ -510,7 +536,272 @@ pub(super) fn update_and_fuse<const N: usize>(
     })
 }
 
-/// Sum of the priors of the two gyros in `good`, or 0 unless both have one.
+/// Factor of the slow mean of each pair's squared difference once its
+/// growing window is full: 1/4096, the relative calibration's forgetting
+/// (`CalConfig::alpha`). The weights follow the pairs, so they move no
+/// faster than the calibration removes the chips' biases: a weight that
+/// wanders by 0.03 multiplies a 3 °/s bias difference into 0.09 °/s of
+/// fused error. (With 1/256 the weights of a static eight-chip rig
+/// wandered that much.)
+pub const NOISE_ALPHA: f32 = 1.0 / 4096.0;
+
+/// The attribution is solved again every `SOLVE_EVERY` samples (and at
+/// once when the set changes): the pairs move by 1/4096 a sample.
+pub(super) const SOLVE_EVERY: u32 = 16;
+
+/// Shrinkage towards equal weights: each attributed variance is raised by
+/// this share of the median one. A chip the hat reads as noiseless then
+/// takes at most 1/SHRINK = 4 times a typical chip's weight (0.57 of four
+/// equal chips' sum, never 0.9), while a chip 5× noisier than the rest
+/// (25× the variance) still weighs 1/20 of them.
+pub(super) const SHRINK: f32 = 0.25;
+
+/// A gyro whose distance from the median has grown faster than the slow
+/// pairs follow: the ratio of its fast mean square to its slow one, over
+/// the median gyro's ratio, above which its weight falls as the square of
+/// the excess. The slow pairs take seconds to see a chip that starts to
+/// drift or grow noisy, and its weight must fall first (a chip drifting at
+/// 0.2 °/s per s under 5 % of the weight before its error reaches 3σ);
+/// over the median gyro's, so that a burst every chip sees moves nothing.
+/// The fast mean (1/256) of a χ² fluctuates by 6 %: 1.25 is four of those.
+pub(super) const RISE: f32 = 1.25;
+
+/// Raise the weighing variance of each gyro in `set` by the square of its
+/// fast-over-slow ratio's excess over [`RISE`] times the median's.
+pub(super) fn rise<const N: usize>(st: &mut AxisState<N>, set: u8) {
+    let mut r = [0.0f32; N];
+    for i in 0..N {
+        r[i] = if has(set, i) && st.es[i] > 0.0 {
+            st.ef[i] / st.es[i]
+        } else {
+            1.0
+        };
+    }
+    let m = RISE * super::median(&r, set);
+    if !(m > 0.0) {
+        return;
+    }
+    for i in 0..N {
+        let x = r[i] / m;
+        if has(set, i) && x > 1.0 {
+            st.var[i] *= x * x;
+        }
+    }
+}
+
+/// Learn each pair's squared difference among the gyros that learn this
+/// sample: the good ones, and the active ones still warming up (a chip
+/// the warm-up gate left out still warms up, with its difference capped).
+/// Once both are warm, Huber's cap at c² = 4 times the pair's mean, times
+/// κ, keeps a chip's spikes from inflating its pairs.
+#[inline(always)]
+fn pairwise_update<const N: usize>(
+    c: &AdaptiveConfig,
+    st: &mut AxisState<N>,
+    y: &[f32; N],
+    active: u8,
+    good: u8,
+    warm_cap: f32,
+) {
+    let was_warm = st.warm;
+    let learn = good | (active & !was_warm);
+    let full = (1.0 / NOISE_ALPHA) as u16;
+    for i in 0..N {
+        if has(learn, i) {
+            if !has(was_warm, i) {
+                st.n_upd[i] += 1;
+                st.warm |= ((st.n_upd[i] >= c.warmup) as u8) << i;
+            }
+            st.n_pair[i] = (st.n_pair[i] + 1).min(full);
+        }
+    }
+    for i in 0..N {
+        if !has(learn, i) {
+            continue;
+        }
+        for j in (i + 1)..N {
+            if !has(learn, j) {
+                continue;
+            }
+            let d = y[i] - y[j];
+            let mut d2 = d * d;
+            let p = st.pd[i][j];
+            if has(was_warm, i) && has(was_warm, j) && p > 0.0 {
+                let cap = HUBER_C2 * p;
+                d2 = if d2 > cap { cap } else { d2 } * HUBER_KAPPA;
+            } else if d2 > 4.0 * warm_cap {
+                // Each is within √cap of the median while warming up.
+                d2 = 4.0 * warm_cap;
+            }
+            let n = st.n_pair[i].min(st.n_pair[j]).max(1);
+            let a = (1.0 / n as f32).max(NOISE_ALPHA);
+            st.pd[i][j] = p + a * (d2 - p);
+        }
+    }
+}
+
+/// Each gyro's noise variance in `set` from the pairs: the N-cornered
+/// hat, σᵢ² = (Rᵢ − S)/(n − 2) with Rᵢ = Σⱼ Dᵢⱼ and S = Σσ² =
+/// ΣRᵢ/(2(n − 1)), which no weight enters (estimated against a fused rate
+/// a chip itself dominates, a chip that gains weight looks quieter and
+/// gains more: on a flying quadrotor one chip took 0.9 of the weight on
+/// 93 % of the samples). Then:
+///
+/// - a variance below zero means chips share an error (two on one arm of
+///   a vibrating frame): as much as the most negative one is spread over
+///   every chip, which pulls the weights together;
+/// - [`SHRINK`] of the median is added to each, so that weak evidence
+///   gives near-equal weights;
+/// - three gyros: the hat is exactly determined, and a chip that is
+///   noisier cannot be told from two that share an error (on the
+///   quadrotor's flights, weights from each three chips' own hat, known
+///   in advance, lose to the plain mean on 59 of 81 axes under
+///   leave-one-out). Four can: so three are weighed by their hat only
+///   after the last attribution over four or more found no shared error.
+///   Otherwise, without priors the three are weighed equally; with priors
+///   the priors share what they explain and the excess over
+///   [`PAIR_SLACK`] of their sum is split equally, as with two.
+pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
+    let n = set.count_ones();
+    if n < 3 {
+        return;
+    }
+    let mut r = [0.0f32; N];
+    for i in 0..N {
+        for j in (i + 1)..N {
+            if has(set, i) && has(set, j) {
+                r[i] += st.pd[i][j];
+                r[j] += st.pd[i][j];
+            }
+        }
+    }
+    let nf = n as f32;
+    let mut total = 0.0;
+    for i in 0..N {
+        total += if has(set, i) { r[i] } else { 0.0 };
+    }
+    let s_all = total / (2.0 * (nf - 1.0));
+    // Each chip's own share, the gate's variance in any case.
+    let mut h = [0.0f32; N];
+    let mut lo = 0.0f32;
+    for i in 0..N {
+        if has(set, i) {
+            h[i] = (r[i] - s_all) / (nf - 2.0);
+            lo = lo.min(h[i]);
+        }
+    }
+    // A variance below zero beyond the estimates' own noise (5 % of the
+    // mean chip's: the pairs' slow means fluctuate by about 2 %) means some
+    // chips share an error; within it, it is noise.
+    let shared = lo < -0.05 * s_all / nf;
+    if !shared {
+        lo = 0.0;
+    }
+    if n >= 4 {
+        st.four = if shared { 2 } else { 1 };
+    }
+    // No shared error and four or more: one reweighted step. Each pair's
+    // mean square has a variance ∝ its square, so the pairs of quiet chips
+    // say most about them; with equal pair weights a chip 5× noisier than
+    // three others made their estimates 3× as noisy.
+    if n >= 4 && !shared {
+        if let Some(w) = reweighted(&st.pd, &h, set) {
+            h = w;
+        }
+    }
+    for i in 0..N {
+        h[i] = h[i].max(0.0);
+    }
+    let m = super::median(&h, set);
+    for i in 0..N {
+        if has(set, i) {
+            st.own[i] = h[i];
+            st.gvar[i] = h[i] - lo + SHRINK * m;
+        }
+    }
+    if n == 3 && st.four != 1 {
+        let priors = pair_prior_sum(&st.prior, set);
+        for i in 0..N {
+            if has(set, i) {
+                st.var[i] = if priors > 0.0 {
+                    let knee = PAIR_SLACK * priors;
+                    st.prior[i] * (s_all.min(knee) / priors) + (s_all - knee).max(0.0) / nf
+                } else {
+                    s_all / nf
+                };
+            }
+        }
+    } else {
+        for i in 0..N {
+            if has(set, i) {
+                st.var[i] = st.gvar[i];
+            }
+        }
+    }
+    st.solved = set;
+}
+
+/// The hat by weighted least squares: minimise Σ wᵢⱼ(Dᵢⱼ − σᵢ² − σⱼ²)²
+/// with wᵢⱼ = 1/(hᵢ + hⱼ)² from the equal-weight solution `h` (the
+/// variance of an mean square is ∝ its mean's square). The normal
+/// equations are Aσ = b with Aᵢᵢ = Σⱼwᵢⱼ, Aᵢⱼ = wᵢⱼ, bᵢ = ΣⱼwᵢⱼDᵢⱼ,
+/// solved by Gaussian elimination (A is diagonally dominant: no pivoting).
+/// `None` if a pivot vanishes.
+fn reweighted<const N: usize>(pd: &[[f32; N]; N], h: &[f32; N], set: u8) -> Option<[f32; N]> {
+    let mut a = [[0.0f32; N]; N];
+    let mut b = [0.0f32; N];
+    for i in 0..N {
+        for j in (i + 1)..N {
+            if has(set, i) && has(set, j) {
+                let p = (h[i] + h[j]).max(f32::MIN_POSITIVE);
+                let w = 1.0 / (p * p);
+                a[i][i] += w;
+                a[j][j] += w;
+                a[i][j] = w;
+                a[j][i] = w;
+                b[i] += w * pd[i][j];
+                b[j] += w * pd[i][j];
+            }
+        }
+    }
+    // Outside the set: the identity, so the elimination runs over 0..N.
+    for i in 0..N {
+        if !has(set, i) {
+            a[i][i] = 1.0;
+        }
+    }
+    for k in 0..N {
+        let piv = a[k][k];
+        if !(piv > 0.0) {
+            return None;
+        }
+        for i in (k + 1)..N {
+            let f = a[i][k] / piv;
+            if f != 0.0 {
+                for j in k..N {
+                    a[i][j] -= f * a[k][j];
+                }
+                b[i] -= f * b[k];
+            }
+        }
+    }
+    let mut x = [0.0f32; N];
+    for k in (0..N).rev() {
+        let mut v = b[k];
+        for j in (k + 1)..N {
+            v -= a[k][j] * x[j];
+        }
+        x[k] = v / a[k][k];
+    }
+    for i in 0..N {
+        if !has(set, i) {
+            x[i] = 0.0;
+        }
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Sum of the priors of the gyros in `good`, or 0 unless all have one.
 pub(super) fn pair_prior_sum<const N: usize>(prior: &[f32; N], good: u8) -> f32 {
     let mut sum = 0.0;
     for i in 0..N {

@@ -167,6 +167,31 @@ pub struct AxisState<const N: usize> {
     /// of their difference, (°/s)².
     pair: u8,
     pair_power: f32,
+    /// Per pair i < j, the slow mean of (yᵢ − yⱼ)², (°/s)²: Var(yᵢ − yⱼ)
+    /// = σᵢ² + σⱼ² for independent errors, the N-cornered hat's input
+    /// (`adaptive::attribute`).
+    pd: [[f32; N]; N],
+    /// Per gyro, pair updates counted up to 1/[`adaptive::NOISE_ALPHA`]
+    /// (the growing window before the slow mean takes over).
+    n_pair: [u16; N],
+    /// The set `var` was last attributed over.
+    solved: u8,
+    /// Per gyro, the variance the median gate judges it by: its own share
+    /// of the disagreement, even where the weights are kept equal
+    /// (`adaptive::attribute`), so that a chip that sees more vibration
+    /// than the others is not gated for it.
+    gvar: [f32; N],
+    /// Per gyro, its own noise variance as the hat attributes it (no
+    /// shrinkage, no shared part): what [`AxisState::sigma_dps`] reports.
+    own: [f32; N],
+    /// Per gyro, the fast (`AdaptiveConfig::alpha`) and the slow
+    /// ([`adaptive::NOISE_ALPHA`]) mean of its squared distance from the
+    /// median: the quick side of the noise model (`adaptive::rise`).
+    ef: [f32; N],
+    es: [f32; N],
+    /// What the last attribution over four or more gyros found: 0 none
+    /// yet, 1 independent errors, 2 an error some chips share.
+    four: u8,
 }
 
 impl<const N: usize> Default for AxisState<N> {
@@ -187,6 +212,14 @@ impl<const N: usize> Default for AxisState<N> {
             last_used: 0,
             pair: 0,
             pair_power: 0.0,
+            pd: [[0.0; N]; N],
+            n_pair: [0; N],
+            solved: 0,
+            gvar: [0.0; N],
+            own: [0.0; N],
+            ef: [0.0; N],
+            es: [0.0; N],
+            four: 0,
         }
     }
 }
@@ -219,15 +252,29 @@ impl<const N: usize> AxisState<N> {
         for i in 0..N {
             if mask & (1 << i) != 0 {
                 self.n_upd[i] = 0;
+                self.n_pair[i] = 0;
                 self.var[i] = 0.0;
+                self.gvar[i] = 0.0;
+                self.own[i] = 0.0;
+                self.ef[i] = 0.0;
+                self.es[i] = 0.0;
             }
         }
         self.warm &= !mask;
+        self.solved = 0;
     }
 
-    /// The adaptive method's raw noise variance estimate of gyro `i`,
-    /// (°/s)² (0 before any update or out of range).
+    /// The adaptive method's noise variance estimate of gyro `i`, its own
+    /// share of the disagreement, (°/s)² (0 before any update or out of
+    /// range).
     pub fn noise_var(&self, i: usize) -> f32 {
+        self.own.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// The variance gyro `i` is weighed by, (°/s)²: its own, raised by
+    /// any error the chips share and by the shrinkage towards equal
+    /// weights (equal among three chips without priors).
+    pub fn weighing_var(&self, i: usize) -> f32 {
         self.var.get(i).copied().unwrap_or(0.0)
     }
 
@@ -237,7 +284,7 @@ impl<const N: usize> AxisState<N> {
         let mut s = [f32::NAN; N];
         for i in 0..N {
             if self.n_upd[i] > 0 {
-                s[i] = sqrtf(at_least(self.var[i], cfg.var_floor));
+                s[i] = sqrtf(at_least(self.own[i], cfg.var_floor));
             }
         }
         s

@@ -1,0 +1,258 @@
+//! The board's fusion on real multi-IMU recordings made by others, judged
+//! without a truth (`gyro_tool::assess`): leave-one-out against the plain
+//! mean and against fixed inverse-variance weights from the whole log, the
+//! weights' spread, and on static logs the Allan ratios.
+//!
+//! `cargo run -p host-tests --profile host --bin real-eval -- [--dir D] [--align]`
+//!
+//! `D` holds `path_N/IMU_k.csv.gz` as the quadrotor recordings of Hurwitz
+//! and Klein do (CC BY 4.0, `host-tests/vectors/real/README.md`): every
+//! `path_*` folder is one log, every `IMU_k` one chip, its `Gyr_X/Y/Z`
+//! columns the three axes. By default the three flights committed under
+//! `host-tests/vectors/real/quadrotor`; `--dir ../shared/real/quadrotor-horizontal`
+//! takes all 27. The files of one flight were cut from the raw recordings
+//! by row, so chips sit up to four samples apart on some flights; with
+//! `--align` each chip is shifted by the lag (±6 samples) that best
+//! correlates its three axes with the first chip's before fusing.
+//!
+//! Prints one row per log and axis and the targets' verdicts; exits 1 when
+//! a target fails.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use clap::Parser;
+use gyro_tool::{assess, replay};
+
+#[derive(Parser)]
+#[command(name = "real-eval")]
+struct Cli {
+    /// Folder of `path_*/IMU_k.csv.gz` logs.
+    #[arg(long)]
+    dir: Option<PathBuf>,
+    /// Shift each chip by its best-correlating lag first.
+    #[arg(long)]
+    align: bool,
+}
+
+/// One log: per chip, the three axes' rates (°/s), 120 Hz.
+struct Log {
+    name: String,
+    chips: Vec<[Vec<f64>; 3]>,
+}
+
+fn read_gz(p: &Path) -> Result<String, String> {
+    let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+    let mut s = String::new();
+    flate2::read::GzDecoder::new(f)
+        .read_to_string(&mut s)
+        .map_err(|e| format!("{}: {e}", p.display()))?;
+    Ok(s)
+}
+
+/// The `Gyr_X/Y/Z` columns of one IMU file.
+fn gyro_columns(text: &str, p: &Path) -> Result<[Vec<f64>; 3], String> {
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    let col = |n: &str| {
+        head.iter()
+            .position(|h| h.trim() == n)
+            .ok_or_else(|| format!("{}: no column {n}", p.display()))
+    };
+    let idx = [col("Gyr_X")?, col("Gyr_Y")?, col("Gyr_Z")?];
+    let mut out: [Vec<f64>; 3] = Default::default();
+    for (ln, l) in lines.enumerate() {
+        let f: Vec<&str> = l.split(',').collect();
+        for (a, &c) in idx.iter().enumerate() {
+            let v = f
+                .get(c)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .ok_or_else(|| {
+                    format!("{} line {}: no number in column {c}", p.display(), ln + 2)
+                })?;
+            out[a].push(v);
+        }
+    }
+    Ok(out)
+}
+
+fn load(dir: &Path) -> Result<Vec<Log>, String> {
+    let mut paths: Vec<(u32, PathBuf)> = std::fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().to_string();
+            name.strip_prefix("path_")
+                .and_then(|n| n.parse().ok())
+                .map(|n| (n, e.path()))
+        })
+        .collect();
+    paths.sort();
+    let mut logs = Vec::new();
+    for (n, p) in paths {
+        let mut chips = Vec::new();
+        for k in 1..=8 {
+            let f = p.join(format!("IMU_{k}.csv.gz"));
+            if !f.exists() {
+                break;
+            }
+            chips.push(gyro_columns(&read_gz(&f)?, &f)?);
+        }
+        // The files of a flight differ in length by a few rows: cut to
+        // the shortest.
+        let len = chips.iter().map(|c| c[0].len()).min().unwrap_or(0);
+        for c in &mut chips {
+            for a in c.iter_mut() {
+                a.truncate(len);
+            }
+        }
+        logs.push(Log {
+            name: format!("path {n}"),
+            chips,
+        });
+    }
+    Ok(logs)
+}
+
+/// The lag (samples, |lag| ≤ 6) at which `b` best correlates with `a`
+/// over the three axes: b[i + lag] ~ a[i].
+fn best_lag(a: &[Vec<f64>; 3], b: &[Vec<f64>; 3]) -> i64 {
+    let n = a[0].len() as i64;
+    (-6..=6i64)
+        .max_by(|&l, &m| {
+            let score = |lag: i64| -> f64 {
+                (0..3)
+                    .map(|ax| {
+                        (12.max(-lag)..(n - 12).min(n - lag))
+                            .map(|i| a[ax][i as usize] * b[ax][(i + lag) as usize])
+                            .sum::<f64>()
+                    })
+                    .sum()
+            };
+            score(l).total_cmp(&score(m))
+        })
+        .unwrap_or(0)
+}
+
+/// Shift every chip by its lag against the first and cut to the common
+/// span; the lags.
+fn align(log: &mut Log) -> Vec<i64> {
+    let lags: Vec<i64> = log
+        .chips
+        .iter()
+        .map(|c| best_lag(&log.chips[0], c))
+        .collect();
+    let n = log.chips[0][0].len() as i64;
+    let lo = lags.iter().map(|&l| (-l).max(0)).max().unwrap_or(0);
+    let hi = n - lags.iter().map(|&l| l.max(0)).max().unwrap_or(0);
+    for (c, &l) in log.chips.iter_mut().zip(&lags) {
+        for a in c.iter_mut() {
+            *a = ((lo + l)..(hi + l)).map(|i| a[i as usize]).collect();
+        }
+    }
+    lags
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let dir = cli
+        .dir
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("vectors/real/quadrotor"));
+    let mut logs = match load(&dir) {
+        Ok(l) if !l.is_empty() => l,
+        Ok(_) => {
+            eprintln!("{}: no path_* logs", dir.display());
+            std::process::exit(2);
+        }
+        Err(e) => {
+            eprintln!("{e}");
+            std::process::exit(2);
+        }
+    };
+    println!(
+        "{} logs from {}{}",
+        logs.len(),
+        dir.display(),
+        if cli.align { ", aligned" } else { "" }
+    );
+    println!(
+        "{:<9} {:>2} {:>6} {:>8} {:>8} {:>8} {:>8} {:>9}  weights mean (sd)",
+        "log", "ax", "n", "loo", "fixedIV", "vs IV", "1>0.9 %", "shared"
+    );
+    let (mut worst_loo, mut worst_iv, mut worst_one) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut lose, mut off_iv, mut rows) = (0, 0, 0);
+    let (mut sum_loo, mut sum_iv) = (0.0, 0.0);
+    for log in &mut logs {
+        if cli.align {
+            let lags = align(log);
+            println!("{}: lags against IMU_1 {lags:?}", log.name);
+        }
+        for ax in 0..3 {
+            let chips: Vec<Vec<f64>> = log.chips.iter().map(|c| c[ax].clone()).collect();
+            let r = match replay::replay(&chips) {
+                Ok(r) => r,
+                Err(e) => {
+                    eprintln!("{} axis {ax}: {e}", log.name);
+                    std::process::exit(2);
+                }
+            };
+            let a = match assess::assess(&chips, &r, 1.0 / 120.0) {
+                Ok(a) => a,
+                Err(e) => {
+                    eprintln!("{} axis {ax}: {e}", log.name);
+                    std::process::exit(2);
+                }
+            };
+            let (l, iv) = (a.loo_ratio(), a.fixed_iv_ratio());
+            let w: Vec<String> = a
+                .spread
+                .iter()
+                .map(|s| format!("{:.2}({:.2})", s.mean, s.sd))
+                .collect();
+            println!(
+                "{:<9} {:>2} {:>6} {:>8.3} {:>8.3} {:>8.3} {:>8.2} {:>9}  {}",
+                log.name,
+                ["x", "y", "z"][ax],
+                chips[0].len(),
+                l,
+                iv,
+                l / iv,
+                100.0 * a.one_chip_share,
+                if a.shared_error() { "yes" } else { "no" },
+                w.join(" ")
+            );
+            worst_loo = worst_loo.max(l);
+            worst_iv = worst_iv.max(l / iv);
+            worst_one = worst_one.max(a.one_chip_share);
+            lose += usize::from(l > 1.0);
+            off_iv += usize::from(l > 1.03 * iv);
+            rows += 1;
+            sum_loo += l;
+            sum_iv += iv;
+        }
+    }
+    println!();
+    println!(
+        "leave-one-out, fused / plain mean: mean {:.3}, worst {:.3}; axes above 1.00: {lose} of {rows}",
+        sum_loo / rows as f64,
+        worst_loo
+    );
+    println!(
+        "fixed inverse-variance weights (the whole log's hat): mean {:.3}; axes where the fusion is over 1.03x it: {off_iv} of {rows} (worst {:.3}x)",
+        sum_iv / rows as f64,
+        worst_iv
+    );
+    println!(
+        "one chip above 0.9 of the weight: worst {:.2} % of the samples (target <= 1 %)",
+        100.0 * worst_one
+    );
+    // The targets this binary can fail: never worse than the mean (its
+    // RMS's own 0.5 % of slack: the warm-up's median output and the
+    // calibration move a three-chip fusion off the exact mean), and never
+    // one chip at 0.9. The fixed weights' figure is printed, not required:
+    // each three chips' own hat, known in advance, loses to the mean on
+    // these flights (docs/fusion.md).
+    let ok = worst_loo <= 1.005 && worst_one <= 0.01;
+    println!("targets: {}", if ok { "met" } else { "MISSED" });
+    std::process::exit(i32::from(!ok));
+}
