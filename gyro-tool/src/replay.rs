@@ -89,12 +89,7 @@ pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
                 out.offered[c] += 1;
             }
         }
-        let res = if std::env::var_os("NOCAL").is_some() {
-            fusion.fuse(&mut st, &y, offered).map(|f| (f, None))
-        } else {
-            cal.fuse_probed(&fusion, &mut st, &y, offered)
-        };
-        match res {
+        match cal.fuse_probed(&fusion, &mut st, &y, offered) {
             Ok((f, p)) => {
                 out.fused.push(f64::from(f.rate_dps));
                 out.probe.push(p.map_or(f64::NAN, f64::from));

@@ -185,9 +185,10 @@ pub struct AxisState<const N: usize> {
     /// shrinkage, no shared part): what [`AxisState::sigma_dps`] reports.
     own: [f32; N],
     /// Per gyro, the fast (`AdaptiveConfig::alpha`) and the slow
-    /// ([`adaptive::NOISE_ALPHA`]) mean of its squared distance from the
-    /// median: the quick side of the noise model (`adaptive::rise`).
-    ef: [f32; N],
+    /// ([`adaptive::NOISE_ALPHA`]) mean of its distance from the median,
+    /// and the slow mean of its square: the drift watch (`adaptive::rise`).
+    mf: [f32; N],
+    ms: [f32; N],
     es: [f32; N],
     /// What the last attribution over four or more gyros found: 0 none
     /// yet, 1 independent errors, 2 an error some chips share.
@@ -217,7 +218,8 @@ impl<const N: usize> Default for AxisState<N> {
             solved: 0,
             gvar: [0.0; N],
             own: [0.0; N],
-            ef: [0.0; N],
+            mf: [0.0; N],
+            ms: [0.0; N],
             es: [0.0; N],
             four: 0,
         }
@@ -256,7 +258,8 @@ impl<const N: usize> AxisState<N> {
                 self.var[i] = 0.0;
                 self.gvar[i] = 0.0;
                 self.own[i] = 0.0;
-                self.ef[i] = 0.0;
+                self.mf[i] = 0.0;
+                self.ms[i] = 0.0;
                 self.es[i] = 0.0;
             }
         }
