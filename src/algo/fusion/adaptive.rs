@@ -433,7 +433,7 @@ pub(super) fn update_and_fuse<const N: usize>(
                 st.es[i] += slow * (e2 - st.es[i]);
             }
         }
-        if active != st.solved || st.k % SOLVE_EVERY == 0 {
+        if active != st.solved || st.k.is_multiple_of(SOLVE_EVERY) {
             attribute(st, active);
             rise(st, active, c.alpha);
         }
@@ -846,7 +846,7 @@ pub(super) const PAIR_HUBER_C2: f32 = 9.0;
 
 /// 1 / E[min(z², 9)] for z ~ N(0, 1): 1 / (P(|z| < 3) − 6φ(3) + 9·P(|z| > 3))
 /// = 1 / 0.995 005.
-pub(super) const PAIR_HUBER_KAPPA: f32 = 1.005_020;
+pub(super) const PAIR_HUBER_KAPPA: f32 = 1.005_02;
 
 /// Huber's c² for the noise update (c = 2).
 pub(super) const HUBER_C2: f32 = 4.0;
