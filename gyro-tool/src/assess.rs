@@ -263,3 +263,96 @@ pub fn assess(chips: &[Vec<f64>], r: &Replay, tau0: f64) -> Res<Assessment> {
         static_points,
     })
 }
+
+/// Most samples [`lags`] looks either side.
+pub const MAX_LAG: usize = 8;
+
+/// Each chip's lag against the first, in samples (chip `c` at sample
+/// `i + lag` saw what the first chip saw at `i`), from the cross-
+/// correlation of the rates (means out) summed over `axes` (one
+/// slice of chips per axis, same lengths). A lag is taken only where the
+/// common motion says so: the peak correlation at least 0.3, and what it
+/// leaves unexplained (1 − ρ) at most 0.8 of what lag 0 leaves; otherwise
+/// 0 (a static log is noise about its mean, and any peak is chance).
+///
+/// Why: the board puts its chips on one time grid (their FIFO stamps and
+/// the clock tracker); a log cut by rows does not, and on a turning
+/// vehicle one sample of skew between chips reads as a disagreement of
+/// the rate's change per sample, which the gate then takes for a fault
+/// (the quadrotor flights' chips sit up to four samples apart).
+pub fn lags(axes: &[&[Vec<f64>]]) -> Vec<i64> {
+    let k = axes.first().map_or(0, |a| a.len());
+    // Each rate less its mean (NaN as 0): the motion itself, not its
+    // change per sample, whose vibration near the Nyquist frequency
+    // correlates at the wrong lag.
+    let diff = |x: &[f64]| -> Vec<f64> {
+        let fin = x.iter().filter(|v| v.is_finite());
+        let n = fin.clone().count().max(1) as f64;
+        let m = fin.sum::<f64>() / n;
+        x.iter()
+            .map(|v| if v.is_finite() { v - m } else { 0.0 })
+            .collect()
+    };
+    let d: Vec<Vec<Vec<f64>>> = axes
+        .iter()
+        .map(|chips| chips.iter().map(|c| diff(c)).collect())
+        .collect();
+    let corr = |c: usize, lag: i64| -> f64 {
+        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+        for ax in &d {
+            let (a, b) = (&ax[0], &ax[c]);
+            let n = a.len().min(b.len()) as i64;
+            let m = MAX_LAG as i64;
+            for i in m..(n - m) {
+                let (x, y) = (a[i as usize], b[(i + lag) as usize]);
+                sab += x * y;
+                saa += x * x;
+                sbb += y * y;
+            }
+        }
+        let den = (saa * sbb).sqrt();
+        if den > 0.0 {
+            sab / den
+        } else {
+            0.0
+        }
+    };
+    let m = MAX_LAG as i64;
+    (0..k)
+        .map(|c| {
+            if c == 0 || d[0][c].len() <= 2 * MAX_LAG + 16 {
+                return 0;
+            }
+            let (best, peak) = (-m..=m)
+                .map(|l| (l, corr(c, l)))
+                .fold((0, f64::MIN), |b, x| if x.1 > b.1 { x } else { b });
+            if peak >= 0.3 && 1.0 - peak <= 0.8 * (1.0 - corr(c, 0)) {
+                best
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// `chips` with each shifted by its lag: chip `c`'s sample `i + lag`
+/// becomes its sample `i`; where that falls outside the log, NaN (no
+/// answer).
+pub fn shifted(chips: &[Vec<f64>], lags: &[i64]) -> Vec<Vec<f64>> {
+    chips
+        .iter()
+        .zip(lags)
+        .map(|(c, &l)| {
+            (0..c.len() as i64)
+                .map(|i| {
+                    let j = i + l;
+                    if (0..c.len() as i64).contains(&j) {
+                        c[j as usize]
+                    } else {
+                        f64::NAN
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}

@@ -3,7 +3,7 @@
 //! mean and against fixed inverse-variance weights from the whole log, the
 //! weights' spread, and on static logs the Allan ratios.
 //!
-//! `cargo run -p host-tests --profile host --bin real-eval -- [--dir D] [--align]`
+//! `cargo run -p host-tests --profile host --bin real-eval -- [--dir D] [--no-align]`
 //!
 //! `D` holds `path_N/IMU_k.csv.gz` as the quadrotor recordings of Hurwitz
 //! and Klein do (CC BY 4.0, `host-tests/vectors/real/README.md`): every
@@ -11,9 +11,11 @@
 //! columns the three axes. By default the three flights committed under
 //! `host-tests/vectors/real/quadrotor`; `--dir ../shared/real/quadrotor-horizontal`
 //! takes all 27. The files of one flight were cut from the raw recordings
-//! by row, so chips sit up to four samples apart on some flights; with
-//! `--align` each chip is shifted by the lag (±6 samples) that best
-//! correlates its three axes with the first chip's before fusing.
+//! by row, so chips sit up to four samples apart on some flights: as
+//! `gyro replay` does, each chip is shifted by its lag against the first
+//! (`gyro_tool::assess::lags` over the three axes, ±8 samples) before
+//! fusing, the host's stand-in for the board's time alignment; with
+//! `--no-align` the chips are fused as cut.
 //!
 //! Prints one row per log and axis and the targets' verdicts; exits 1 when
 //! a target fails.
@@ -30,9 +32,9 @@ struct Cli {
     /// Folder of `path_*/IMU_k.csv.gz` logs.
     #[arg(long)]
     dir: Option<PathBuf>,
-    /// Shift each chip by its best-correlating lag first.
+    /// Fuse the chips as cut, without shifting each by its lag.
     #[arg(long)]
-    align: bool,
+    no_align: bool,
 }
 
 /// One log: per chip, the three axes' rates (°/s), 120 Hz.
@@ -114,40 +116,17 @@ fn load(dir: &Path) -> Result<Vec<Log>, String> {
     Ok(logs)
 }
 
-/// The lag (samples, |lag| ≤ 6) at which `b` best correlates with `a`
-/// over the three axes: b[i + lag] ~ a[i].
-fn best_lag(a: &[Vec<f64>; 3], b: &[Vec<f64>; 3]) -> i64 {
-    let n = a[0].len() as i64;
-    (-6..=6i64)
-        .max_by(|&l, &m| {
-            let score = |lag: i64| -> f64 {
-                (0..3)
-                    .map(|ax| {
-                        (12.max(-lag)..(n - 12).min(n - lag))
-                            .map(|i| a[ax][i as usize] * b[ax][(i + lag) as usize])
-                            .sum::<f64>()
-                    })
-                    .sum()
-            };
-            score(l).total_cmp(&score(m))
-        })
-        .unwrap_or(0)
-}
-
-/// Shift every chip by its lag against the first and cut to the common
-/// span; the lags.
+/// Shift every chip by its lag against the first (`assess::lags` over
+/// the three axes); the lags.
 fn align(log: &mut Log) -> Vec<i64> {
-    let lags: Vec<i64> = log
-        .chips
-        .iter()
-        .map(|c| best_lag(&log.chips[0], c))
+    let axes: Vec<Vec<Vec<f64>>> = (0..3)
+        .map(|ax| log.chips.iter().map(|c| c[ax].clone()).collect())
         .collect();
-    let n = log.chips[0][0].len() as i64;
-    let lo = lags.iter().map(|&l| (-l).max(0)).max().unwrap_or(0);
-    let hi = n - lags.iter().map(|&l| l.max(0)).max().unwrap_or(0);
-    for (c, &l) in log.chips.iter_mut().zip(&lags) {
-        for a in c.iter_mut() {
-            *a = ((lo + l)..(hi + l)).map(|i| a[i as usize]).collect();
+    let refs: Vec<&[Vec<f64>]> = axes.iter().map(|a| &a[..]).collect();
+    let lags = assess::lags(&refs);
+    for (ax, chips) in axes.iter().enumerate() {
+        for (c, v) in assess::shifted(chips, &lags).into_iter().enumerate() {
+            log.chips[c][ax] = v;
         }
     }
     lags
@@ -173,7 +152,11 @@ fn main() {
         "{} logs from {}{}",
         logs.len(),
         dir.display(),
-        if cli.align { ", aligned" } else { "" }
+        if cli.no_align {
+            ", not aligned"
+        } else {
+            ", aligned"
+        }
     );
     println!(
         "{:<9} {:>2} {:>6} {:>8} {:>8} {:>8} {:>8} {:>9}  weights mean (sd)",
@@ -183,7 +166,7 @@ fn main() {
     let (mut lose, mut off_iv, mut rows) = (0, 0, 0);
     let (mut sum_loo, mut sum_iv) = (0.0, 0.0);
     for log in &mut logs {
-        if cli.align {
+        if !cli.no_align {
             let lags = align(log);
             println!("{}: lags against IMU_1 {lags:?}", log.name);
         }

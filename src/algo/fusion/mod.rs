@@ -190,6 +190,9 @@ pub struct AxisState<const N: usize> {
     mf: [f32; N],
     ms: [f32; N],
     es: [f32; N],
+    /// Per gyro, the quick mean ([`adaptive::GATE_ALPHA`]) of its squared
+    /// distance from the median: the gate's floor in a burst.
+    ef: [f32; N],
     /// What the last attribution over four or more gyros found: 0 none
     /// yet, 1 independent errors, 2 an error some chips share.
     four: u8,
@@ -221,6 +224,7 @@ impl<const N: usize> Default for AxisState<N> {
             mf: [0.0; N],
             ms: [0.0; N],
             es: [0.0; N],
+            ef: [0.0; N],
             four: 0,
         }
     }
@@ -261,6 +265,7 @@ impl<const N: usize> AxisState<N> {
                 self.mf[i] = 0.0;
                 self.ms[i] = 0.0;
                 self.es[i] = 0.0;
+                self.ef[i] = 0.0;
             }
         }
         self.warm &= !mask;

@@ -24,6 +24,13 @@ pub struct Args {
     /// Also the fused rate and each chip's weight per sample, as CSV.
     #[arg(long)]
     csv: Option<PathBuf>,
+    /// Fuse the chips as logged. By default each chip is first shifted by
+    /// its lag against the first chip (cross-correlation of the rates'
+    /// changes, up to 8 samples, taken only where the motion says so), as
+    /// the board puts its chips on one time grid: a log cut by rows can
+    /// hold chips a few samples apart.
+    #[arg(long)]
+    no_align: bool,
 }
 
 /// `gyro replay`: the board's fusion over a multi-gyro log.
@@ -34,6 +41,7 @@ pub fn run(a: Args) -> Res<bool> {
         truth,
         svg,
         csv,
+        no_align,
     } = a;
     let (columns, truth, svg, csv_out) = (
         &columns[..],
@@ -54,6 +62,16 @@ pub fn run(a: Args) -> Res<bool> {
         }),
         None => None,
     };
+    if !no_align {
+        let lags = assess::lags(&[&s.rates[..]]);
+        if lags.iter().any(|&l| l != 0) {
+            println!(
+                "aligned: each chip's lag against {}, in samples: {lags:?} (--no-align: fuse as logged)",
+                s.names[0]
+            );
+            s.rates = assess::shifted(&s.rates, &lags);
+        }
+    }
     let r = replay::replay(&s.rates)?;
     let n = r.fused.len();
     let valid = r.fused.iter().filter(|v| v.is_finite()).count();
