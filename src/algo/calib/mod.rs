@@ -80,12 +80,13 @@ pub struct CalConfig {
     pub ridge_dps2: f32,
     /// Bound on |s − 1|.
     pub max_scale: f32,
-    /// Bound on |b|, °/s: ±5, what MEMS gyros of a real array show at
-    /// turn-on (an eight-chip static rig spans −3 to +3 °/s; the
-    /// ICM-42688-P's datasheet states ±0.5 °/s after board-level
-    /// calibration, so an uncalibrated part sits well inside). With ±2 the
-    /// chips beyond it were read as they are, their offsets counted as
-    /// noise, and fusion gave them almost no weight.
+    /// Bound on |b| against the median chip, °/s: ±10, two chips at the
+    /// ±5 °/s that MEMS gyros of a real array show at turn-on (an
+    /// eight-chip static rig spans −3 to +3 °/s; the ICM-42688-P's
+    /// datasheet states ±0.5 °/s after board-level calibration, so its
+    /// parts sit well inside). With ±2 the chips beyond it were read as
+    /// they are, their offsets counted as noise, and fusion gave them
+    /// almost no weight.
     pub max_bias_dps: f32,
 }
 
@@ -95,7 +96,7 @@ impl Default for CalConfig {
             alpha: 1.0 / 4096.0,
             ridge_dps2: 1.0,
             max_scale: 0.05,
-            max_bias_dps: 5.0,
+            max_bias_dps: 10.0,
         }
     }
 }
@@ -127,6 +128,9 @@ pub struct RelCal<const N: usize> {
     /// just started to apply (their noise estimates are then forgotten).
     applied: u8,
     fresh: u8,
+    /// Per chip, what its correction changed when it started to apply
+    /// ([`RelCal::change_ms`]).
+    fresh_ms: [f32; N],
     /// Chips started but not yet [`WARM`].
     warming: u8,
     /// Which sample of [`LEARN_STRIDE`] [`RelCal::fuse`] is on.
@@ -172,9 +176,9 @@ enum Pending {
     None,
     /// A learning sample fusion refused: counted, nothing learnt.
     Tick,
-    /// A learning sample (its raw readings in `RelCal::kept`) and the
-    /// chips fusion used.
-    Learn(u8),
+    /// A learning sample (its raw readings in `RelCal::kept`), the chips
+    /// fusion used and those offered to it.
+    Learn(u8, u8),
 }
 
 impl<const N: usize> RelCal<N> {
@@ -196,6 +200,7 @@ impl<const N: usize> RelCal<N> {
             inv_scale: [1.0; N],
             applied: 0,
             fresh: 0,
+            fresh_ms: [0.0; N],
             warming: 0,
             phase: 0,
             slot: 0,
@@ -307,7 +312,7 @@ impl<const N: usize> RelCal<N> {
         };
         if learn_now {
             self.kept = *y;
-            self.pending = Pending::Learn(r.used());
+            self.pending = Pending::Learn(r.used(), offered);
         }
         Ok((r, noise_probe(&seen, &r)))
     }
@@ -333,10 +338,14 @@ impl<const N: usize> RelCal<N> {
                 self.tick = self.tick.wrapping_add(1);
                 return;
             }
-            Pending::Learn(used) => used,
+            Pending::Learn(used, offered) => (used, offered),
         };
         let y = self.kept;
-        self.learn(&y, used, LEARN_STRIDE);
+        let mut finite = 0u8;
+        for (i, v) in y.iter().enumerate() {
+            finite |= u8::from(v.is_finite()) << i;
+        }
+        self.learn(&y, used.0, used.1 & finite, LEARN_STRIDE);
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
         // its noise estimate. Where what the correction removes is a large
@@ -359,7 +368,7 @@ impl<const N: usize> RelCal<N> {
     fn forget_fresh(&mut self, st: &mut AxisState<N>) {
         let mut forget = false;
         for i in 0..N {
-            forget |= self.fresh & (1 << i) != 0 && self.removed_ms(i) > 0.5 * st.noise_var(i);
+            forget |= self.fresh & (1 << i) != 0 && self.fresh_ms[i] > 0.5 * st.noise_var(i);
         }
         // All of them or none: keeping some inflated estimates beside
         // fresh ones would weight the chips by when they were learnt.
@@ -393,7 +402,7 @@ impl<const N: usize> RelCal<N> {
         for (i, v) in y.iter().enumerate() {
             finite |= u8::from(v.is_finite()) << i;
         }
-        self.learn(y, used & finite, 1);
+        self.learn(y, used & finite, used & finite, 1);
     }
 
     /// [`RelCal::update`] for an update that stands for `stride` samples
@@ -403,7 +412,7 @@ impl<const N: usize> RelCal<N> {
     /// the correction it saw them through is bounded), and `update` checks
     /// its own. (Checking fusion's again cost the default fusion path 43
     /// instructions a 3-axis sample.)
-    fn learn(&mut self, y: &[f32; N], used: u8, stride: u32) {
+    fn learn(&mut self, y: &[f32; N], used: u8, voters: u8, stride: u32) {
         // Every update counts, learnt from or not: solves keep their
         // samples.
         self.tick = self.tick.wrapping_add(1);
@@ -412,7 +421,21 @@ impl<const N: usize> RelCal<N> {
         if mask.count_ones() < 3 {
             return;
         }
-        let c = median(y, mask);
+        // The consensus: the median of the raw readings of every chip
+        // offered (a faulty minority cannot move a median). Over the chips
+        // fusion used this sample only, it jumped by half the offsets
+        // between chips whenever the gate left a different chip out (with
+        // turn-on offsets of a few °/s, 1.9 °/s at rest), which read as
+        // motion and pulled every scale to its bound.
+        let voters = voters & ((1u16 << N) - 1) as u8 & !self.drifting;
+        let c = median(
+            y,
+            if voters.count_ones() >= 3 {
+                voters
+            } else {
+                mask
+            },
+        );
         if self.drifting != 0 {
             self.watch_drifting(y, c);
         }
@@ -463,7 +486,7 @@ impl<const N: usize> RelCal<N> {
         // While a chip warms up its bias-only correction is solved every
         // [`EARLY_EVERY`] updates: a start-up offset is out of the fused
         // rate within a few samples, not after the first scheduled solve.
-        let early = self.warming != 0 && t.is_multiple_of(EARLY_EVERY);
+        let early = self.warming != 0 && (t < EARLY_EVERY || t.is_multiple_of(EARLY_EVERY));
         if t.is_multiple_of(EVERY) || warm_turn || early {
             self.solve(y, mask);
         } else if t % EVERY == EVERY / 2 {
@@ -511,7 +534,14 @@ impl<const N: usize> RelCal<N> {
             // Outside the bounds it is a fault (a wrong range, a chip
             // going bad), not a calibration: such a chip is read as is and
             // kept out of the common reference.
-            let inside = (s - 1.0).abs() <= m && b.abs() <= self.cfg.max_bias_dps;
+            // Before it is warm only its offset is judged: a few dozen
+            // samples at rest say nothing of a scale (with a burst of
+            // spikes in the consensus they read 0.04).
+            let inside = if self.n[i] > WARM {
+                (s - 1.0).abs() <= m && b.abs() <= self.cfg.max_bias_dps
+            } else {
+                (self.mean_y[i] - self.mean_c[i]).abs() <= self.cfg.max_bias_dps
+            };
             if inside {
                 self.wild &= !(1 << i);
             } else {
@@ -529,14 +559,6 @@ impl<const N: usize> RelCal<N> {
         // Only chips with `WARM` updates are corrected: a few dozen
         // samples give a scale estimate that is worse than none.
         let warm = |i: usize| self.n[i] > WARM && self.wild & (1 << i) == 0;
-        let (mut ms, mut mb, mut n) = (0.0f32, 0.0f32, 0.0f32);
-        for i in 0..N {
-            if warm(i) {
-                ms += self.scale[i];
-                mb += self.bias[i];
-                n += 1.0;
-            }
-        }
         // A chip still warming up is corrected for its bias alone (its
         // offset from the consensus, scale 1): a bias is pinned in a few
         // samples where a scale needs motion. Uncorrected, a turn-on
@@ -546,22 +568,26 @@ impl<const N: usize> RelCal<N> {
         // deviation 1.4–1.9× the plain mean's at τ = 16–64 samples.
         let early =
             |i: usize| self.started & (1 << i) != 0 && !warm(i) && self.wild & (1 << i) == 0;
-        let (mut eb, mut ne) = (0.0f32, 0.0f32);
+        // The reference: the average of every corrected chip, warm or
+        // early. Over the warm chips alone it jumped by a quarter of an
+        // offset (1 °/s) while one chip of four was still early, and the
+        // fused rate with it.
+        let (mut ms, mut mb, mut n) = (0.0f32, 0.0f32, 0.0f32);
         for i in 0..N {
-            if early(i) {
-                eb += self.mean_y[i] - self.mean_c[i];
-                ne += 1.0;
+            if warm(i) {
+                ms += self.scale[i];
+                mb += self.bias[i];
+                n += 1.0;
+            } else if early(i) {
+                ms += 1.0;
+                mb += self.mean_y[i] - self.mean_c[i];
+                n += 1.0;
             }
         }
-        // The reference: the average warm chip, or, before any, the average
-        // early one.
-        let (ms, mb) = if n > 0.0 {
-            (ms / n, mb / n)
-        } else if ne > 0.0 {
-            (1.0, eb / ne)
-        } else {
+        if !(n > 0.0) {
             return;
-        };
+        }
+        let (ms, mb) = (ms / n, mb / n);
         let mut applied = 0u8;
         for i in 0..N {
             if used & (1 << i) == 0 {
@@ -570,8 +596,12 @@ impl<const N: usize> RelCal<N> {
             }
             if warm(i) {
                 applied |= 1 << i;
+                let (kb, ko) = (self.applied_bias[i], self.inv_scale[i]);
                 self.inv_scale[i] = ms / self.scale[i];
                 self.applied_bias[i] = self.bias[i] - mb * self.scale[i] / ms;
+                if self.applied & (1 << i) == 0 {
+                    self.fresh_ms[i] = self.change_ms(i, kb, ko);
+                }
             } else if early(i) {
                 let b = self.mean_y[i] - self.mean_c[i];
                 self.inv_scale[i] = 1.0;
@@ -584,16 +614,16 @@ impl<const N: usize> RelCal<N> {
         self.applied = applied;
     }
 
-    /// Mean square of what the correction removes from chip `i`'s readings,
-    /// `E[(y − (y − b)/s)²]` over the consensus's recent mean and variance,
-    /// (°/s)².
-    fn removed_ms(&self, i: usize) -> f32 {
-        let (k, b) = (
-            1.0 - self.inv_scale[i],
-            self.applied_bias[i] * self.inv_scale[i],
-        );
+    /// Mean square of what chip `i`'s correction changes against the one
+    /// it had, (bias `kb`, factor `ko`): E[((y − b)k − (y − kb)ko)²] over
+    /// the consensus's recent mean and variance, (°/s)². A chip already
+    /// corrected for its bias while warming up changes little when its
+    /// scale starts to apply on a still board, and keeps its noise model.
+    fn change_ms(&self, i: usize, kb: f32, ko: f32) -> f32 {
+        let dk = self.inv_scale[i] - ko;
+        let db = self.applied_bias[i] * self.inv_scale[i] - kb * ko;
         let m = self.mean_c[i];
-        k * k * (self.var_c[i] + m * m) + 2.0 * k * b * m + b * b
+        dk * dk * (self.var_c[i] + m * m) - 2.0 * dk * db * m + db * db
     }
 
     /// Chip `i` is back from a restart: a chip's scale and bias are its
@@ -636,6 +666,19 @@ impl<const N: usize> RelCal<N> {
             (self.lag[i], self.lag_ms[i], self.over[i]) = (0.0, 0.0, 0);
             (self.blk_sum[i], self.blk_sq[i], self.blk_n[i]) = (0.0, 0.0, 0);
             self.drifting &= !(1 << i);
+        }
+    }
+
+    /// Chips whose calibration is outside the bounds ([`CalConfig`]): read
+    /// as they are, kept out of the calibration's reference, and flagged
+    /// by the pipeline (`pipeline::flag::CAL_BOUND`). Only ever a minority
+    /// of the started chips: the bounds are against the median chip, so
+    /// when half or more read outside, it is the consensus that moved.
+    pub fn out_of_bounds(&self) -> u8 {
+        if 2 * self.wild.count_ones() < self.started.count_ones() {
+            self.wild
+        } else {
+            0
         }
     }
 
