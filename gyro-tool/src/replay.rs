@@ -39,6 +39,9 @@ pub struct Replay {
     pub weights: Vec<[f32; MAX_CHIPS]>,
     /// The noise probe per sample (NaN where fewer than two chips fused).
     pub probe: Vec<f64>,
+    /// Samples on which fusion's noise model read an error the chips
+    /// share (`AxisState::shared_error`): the probe cannot see that part.
+    pub shared: usize,
     /// Per chip, samples it answered and samples fusion used it.
     pub offered: Vec<usize>,
     pub used: Vec<usize>,
@@ -72,6 +75,7 @@ pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
         fused: Vec::with_capacity(n),
         weights: Vec::with_capacity(n),
         probe: Vec::with_capacity(n),
+        shared: 0,
         offered: vec![0; k],
         used: vec![0; k],
     };
@@ -89,7 +93,9 @@ pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
                 out.offered[c] += 1;
             }
         }
-        match cal.fuse_probed(&fusion, &mut st, &y, offered) {
+        let fused = cal.fuse_probed(&fusion, &mut st, &y, offered);
+        out.shared += usize::from(st.shared_error());
+        match fused {
             Ok((f, p)) => {
                 out.fused.push(f64::from(f.rate_dps));
                 out.probe.push(p.map_or(f64::NAN, f64::from));

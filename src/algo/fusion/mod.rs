@@ -272,6 +272,15 @@ impl<const N: usize> AxisState<N> {
         self.solved = 0;
     }
 
+    /// The last attribution over four or more gyros read a variance below
+    /// zero: some chips share an error (two on one arm of a vibrating
+    /// frame, a common vibration). The noise probe, a combination whose
+    /// coefficients sum to 0, cannot see what the chips share, so its
+    /// figure then is the part of the fused error the chips do not share.
+    pub fn shared_error(&self) -> bool {
+        self.four == 2
+    }
+
     /// The adaptive method's noise variance estimate of gyro `i`, its own
     /// share of the disagreement, (°/s)² (0 before any update or out of
     /// range).

@@ -118,6 +118,12 @@ pub fn run(a: Args) -> Res<bool> {
         println!(
             "  noise probe (the fused noise without the motion), Allan deviation over {len} contiguous samples:"
         );
+        if r.shared > 0 {
+            println!(
+                "  (on {:.1} % of the samples the chips share an error, which the probe cannot see: there it gives the part they do not share)",
+                100.0 * r.shared as f64 / n.max(1) as f64
+            );
+        }
         println!(
             "  {:>12} {:>14}{}",
             "tau_s",
