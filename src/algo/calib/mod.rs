@@ -572,16 +572,23 @@ impl<const N: usize> RelCal<N> {
         // early. Over the warm chips alone it jumped by a quarter of an
         // offset (1 °/s) while one chip of four was still early, and the
         // fused rate with it.
+        // Each weighed by its updates up to [`WARM`]: a chip a few updates
+        // into its warm-up counts little, so that a chip garbling bits
+        // from power-up, corrected from its first updates, cannot move
+        // every chip's correction with a few samples of garbage (2 °/s at
+        // equal weights, `fusion-eval` (l), seed 55555), and a chip that
+        // turns warm changes nothing.
         let (mut ms, mut mb, mut n) = (0.0f32, 0.0f32, 0.0f32);
         for i in 0..N {
+            let k = self.n[i].min(WARM) as f32;
             if warm(i) {
-                ms += self.scale[i];
-                mb += self.bias[i];
-                n += 1.0;
+                ms += k * self.scale[i];
+                mb += k * self.bias[i];
+                n += k;
             } else if early(i) {
-                ms += 1.0;
-                mb += self.mean_y[i] - self.mean_c[i];
-                n += 1.0;
+                ms += k;
+                mb += k * (self.mean_y[i] - self.mean_c[i]);
+                n += k;
             }
         }
         if !(n > 0.0) {

@@ -111,10 +111,17 @@ pub(super) fn floored<const N: usize>(st: &AxisState<N>, c: &AdaptiveConfig) -> 
     for i in 0..N {
         let g = st.gvar[i];
         let f = st.ef[i];
+        let f = if f > BURST_CAP * g { BURST_CAP * g } else { f };
         v[i] = at_least(if f > g { f } else { g }, c.var_floor);
     }
     v
 }
+
+/// The quick mean square widens the gate to at most this multiple of the
+/// slow share (2× in σ): enough for a manoeuvre's burst on the quadrotor
+/// flights (the same leave-one-out as without a cap), while a chip whose
+/// faults pass the gate cannot widen its own gate without bound.
+pub(super) const BURST_CAP: f32 = 4.0;
 
 /// Factor of the gate's quick mean square (a time constant of 64
 /// samples; its χ² with 128 degrees of freedom reads within ±25 %).
