@@ -81,8 +81,12 @@ pub struct Sample {
     pub rate_dps: [f32; 3],
     /// Bit a set: axis a has a fused value.
     pub valid: u8,
-    /// Bit a set: axis a fell back to the plain mean (degraded). Bit 7
-    /// set: the board runs without a static calibration record.
+    /// Bit a set: axis a fell back to the plain mean (degraded). Bit
+    /// 3 + a set: axis a's chips share an error (a common vibration, two
+    /// chips on one arm of a flexing frame), which the noise figures sent
+    /// for it, measured on the array's noise probe, cannot see: they give
+    /// the part of the fused error the chips do not share. Bit 7 set: the
+    /// board runs without a static calibration record.
     pub degraded: u8,
     /// Per axis, the gyros in the fused value (bit i = gyro i).
     pub used: [u8; 3],

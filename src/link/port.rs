@@ -336,7 +336,10 @@ impl<const TX: usize> Port<TX> {
                         s.predicted_us = Some(d);
                     }
                 }
-                // Bit 7: no static calibration record in use.
+                // Bits 3–5: the axis's chips share an error its noise
+                // figures cannot see. Bit 7: no static calibration record
+                // in use.
+                s.degraded |= pipe.shared_errors() << 3;
                 s.degraded |= u8::from(!pipe.calibrated()) << 7;
                 // An estimate describes a sample half a window back: on a
                 // busy sample it waits for the next frame.

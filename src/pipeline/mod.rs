@@ -331,6 +331,17 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
+    /// Per axis (bit a), fusion reads an error its chips share
+    /// ([`crate::algo::fusion::AxisState::shared_error`]): the noise probe
+    /// and the E-DAVAR on it cover only the part they do not share.
+    pub fn shared_errors(&self) -> u8 {
+        let mut m = 0u8;
+        for (a, st) in self.axes.iter().enumerate() {
+            m |= u8::from(st.shared_error()) << a;
+        }
+        m
+    }
+
     /// Whether a static calibration record is in use.
     pub fn calibrated(&self) -> bool {
         self.calibrated
