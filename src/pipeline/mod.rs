@@ -221,7 +221,7 @@ impl<const N: usize> Pipeline<N> {
         Ok(Self {
             cfg,
             fusion: Fusion::new(method)?,
-            axes: [AxisState::default(); 3],
+            axes: core::array::from_fn(AxisState::for_axis),
             cal: core::array::from_fn(|a| RelCal::for_axis(CalConfig::default(), a)),
             static_cal: [ChipCal::IDENTITY; N],
             calibrated: false,
@@ -360,7 +360,7 @@ impl<const N: usize> Pipeline<N> {
         let fusion = Fusion::new(method)?;
         self.finish();
         self.fusion = fusion;
-        self.axes = [AxisState::default(); 3];
+        self.axes = core::array::from_fn(AxisState::for_axis);
         Ok(())
     }
 

@@ -446,14 +446,14 @@ pub(super) fn update_and_fuse<const N: usize>(
                 let e = y[i] - med;
                 let e2 = e * e;
                 let g = 1.0 / st.n_pair[i].max(1) as f32;
-                let (fast, slow) = (g.max(c.alpha), g.max(NOISE_ALPHA));
+                let (fast, slow) = (at_least(g, c.alpha), at_least(g, NOISE_ALPHA));
                 st.mf[i] += fast * (e - st.mf[i]);
                 st.ms[i] += slow * (e - st.ms[i]);
                 st.es[i] += slow * (e2 - st.es[i]);
-                st.ef[i] += g.max(GATE_ALPHA) * (e2 - st.ef[i]);
+                st.ef[i] += at_least(g, GATE_ALPHA) * (e2 - st.ef[i]);
             }
         }
-        if active != st.solved || st.k.is_multiple_of(SOLVE_EVERY) {
+        if active != st.solved || st.k.wrapping_add(st.slot).is_multiple_of(SOLVE_EVERY) {
             attribute(st, active);
             rise(st, active, c.alpha);
         }
@@ -567,6 +567,9 @@ pub(super) fn update_and_fuse<const N: usize>(
 /// wandered that much.)
 pub const NOISE_ALPHA: f32 = 1.0 / 4096.0;
 
+/// Once warm, the pairs learn on one sample in `PAIR_STRIDE`.
+pub(super) const PAIR_STRIDE: u32 = 2;
+
 /// The attribution is solved again every `SOLVE_EVERY` samples (and at
 /// once when the set changes): the pairs move by 1/4096 a sample.
 pub(super) const SOLVE_EVERY: u32 = 16;
@@ -606,7 +609,7 @@ pub(super) fn rise<const N: usize>(st: &mut AxisState<N>, set: u8, alpha: f32) {
             continue;
         }
         let d = dd[i] - d0;
-        let v = (st.es[i] - st.ms[i] * st.ms[i]).max(0.0) * (0.5 * alpha);
+        let v = at_least(st.es[i] - st.ms[i] * st.ms[i], 0.0) * (0.5 * alpha);
         let z2 = d * d / (DRIFT_Z * DRIFT_Z * v);
         if z2 > 1.0 {
             st.var[i] *= z2;
@@ -640,6 +643,16 @@ fn pairwise_update<const N: usize>(
             st.n_pair[i] = (st.n_pair[i] + 1).min(full);
         }
     }
+    // Once every learner is warm, the pairs learn on one sample in
+    // [`PAIR_STRIDE`] (each update standing for that many): their slow
+    // means move by 1/4096 a sample, and learning all of them on every
+    // sample cost the board's frame path some 800 instructions (three
+    // axes, 22 pairs).
+    let all_warm = learn & !was_warm == 0;
+    if all_warm && !st.k.wrapping_add(st.slot).is_multiple_of(PAIR_STRIDE) {
+        return;
+    }
+    let stride = if all_warm { PAIR_STRIDE as f32 } else { 1.0 };
     for i in 0..N {
         if !has(learn, i) {
             continue;
@@ -659,7 +672,8 @@ fn pairwise_update<const N: usize>(
                 d2 = 4.0 * warm_cap;
             }
             let n = st.n_pair[i].min(st.n_pair[j]).max(1);
-            let a = (1.0 / n as f32).max(NOISE_ALPHA);
+            let a = at_least(stride / n as f32, stride * NOISE_ALPHA);
+            let a = if a < 1.0 { a } else { 1.0 };
             st.pd[i][j] = p + a * (d2 - p);
         }
     }
@@ -712,7 +726,7 @@ pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
     for i in 0..N {
         if has(set, i) {
             h[i] = (r[i] - s_all) / (nf - 2.0);
-            lo = lo.min(h[i]);
+            lo = if h[i] < lo { h[i] } else { lo };
         }
     }
     // A variance below zero beyond the estimates' own noise (5 % of the
@@ -735,7 +749,7 @@ pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
         }
     }
     for i in 0..N {
-        h[i] = h[i].max(0.0);
+        h[i] = at_least(h[i], 0.0);
     }
     let m = super::median(&h, set);
     for i in 0..N {
@@ -750,7 +764,8 @@ pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
             if has(set, i) {
                 st.var[i] = if priors > 0.0 {
                     let knee = PAIR_SLACK * priors;
-                    st.prior[i] * (s_all.min(knee) / priors) + (s_all - knee).max(0.0) / nf
+                    st.prior[i] * (if s_all < knee { s_all } else { knee } / priors)
+                        + at_least(s_all - knee, 0.0) / nf
                 } else {
                     s_all / nf
                 };
@@ -778,7 +793,7 @@ fn reweighted<const N: usize>(pd: &[[f32; N]; N], h: &[f32; N], set: u8) -> Opti
     for i in 0..N {
         for j in (i + 1)..N {
             if has(set, i) && has(set, j) {
-                let p = (h[i] + h[j]).max(f32::MIN_POSITIVE);
+                let p = at_least(h[i] + h[j], f32::MIN_POSITIVE);
                 let w = 1.0 / (p * p);
                 a[i][i] += w;
                 a[j][j] += w;
