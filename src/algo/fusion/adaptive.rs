@@ -1,6 +1,9 @@
 //! The adaptive method (ours, the default): per-gyro noise variances from
-//! leave-one-out residuals, inverse-variance weights, and the dispatch
-//! that runs each set of three or more gyros with a constant mask.
+//! the pairs' slow mean squares (the N-cornered hat, [`attribute`]; with
+//! two gyros, from the residual against the other), weights that tend to
+//! equal where the evidence is weak, a drift watch ([`rise`]), and the
+//! dispatch that runs each set of three or more gyros with a constant
+//! mask.
 
 use super::frozen::frozen_check;
 use super::gate::{first_gate, first_gate_any, regate, warm_up_gate, Gate};

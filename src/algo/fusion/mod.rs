@@ -7,8 +7,9 @@
 //!   optionally Grubbs rejection of abnormal supports (eq. 10–12) and
 //!   limited-memory weighting (eq. 13–16). Every ambiguity is a knob.
 //! - [`Method::Adaptive`] (ours, the default): per-gyro noise variance from
-//!   leave-one-out residuals, inverse-variance weights, median gating and
-//!   frozen-output rejection.
+//!   the slow mean squares of the pairs' differences (the N-cornered hat),
+//!   weights that tend to equal where the evidence is weak, median gating,
+//!   a drift watch and frozen-output rejection.
 //!
 //! Settings ([`Fusion`]) are immutable and shared by the three axes; the
 //! per-axis running state is [`AxisState`]. Capacity is the const `N ≤ 8`;

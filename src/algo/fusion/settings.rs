@@ -126,11 +126,12 @@ impl SeedConfig {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AdaptiveConfig {
-    /// EWMA factor of the squared residuals once warmed up (1/256: a
-    /// time constant of 0.26 s at 1 kHz. With 1/64 the weights' own
-    /// estimation noise cost 1.0 % RMS against the oracle on four equal
-    /// chips, and made `adaptive` 0.8–1.2 % worse than the mean with small
-    /// spikes; with 1/256, 0.3 %, and no worse: `fusion-eval`).
+    /// EWMA factor of the quick means once warmed up: the squared
+    /// residual of two gyros (the pairs of three or more learn at
+    /// `adaptive::NOISE_ALPHA`, 1/4096) and the drift watch's fast mean
+    /// (1/256: a time constant of 0.26 s at 1 kHz. As the residuals'
+    /// factor, 1/64 made the weights' own estimation noise cost 1.0 % RMS
+    /// against the oracle on four equal chips).
     pub alpha: f32,
     /// Samples averaged plainly before the EWMA takes over (≥ 1).
     pub warmup: u16,
