@@ -553,10 +553,9 @@ fn class4(
                     .expect("valid input");
                 sums[j + 1] += ((r.rate_dps - t) as f64).powi(2);
             }
-            let r = match cal.fuse(&fusers[2], &mut states[2], &y, 0b1111) {
-                Ok(r) => r,
-                Err(e) => panic!("{name} seed {s} sample {k}: {e:?}, y {y:?}, wild {:b} drifting {:b} scale {:?} bias {:?}", cal.out_of_bounds(), cal.drifting(), cal.scale(), cal.bias()),
-            };
+            let r = cal
+                .fuse(&fusers[2], &mut states[2], &y, 0b1111)
+                .expect("valid input");
             sums[3] += ((r.rate_dps - t) as f64).powi(2);
         }
         for (r, s) in res.iter_mut().zip(sums) {

@@ -67,7 +67,17 @@ pub const LEARN_STRIDE: u32 = 2;
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
+
 use crate::algo::math::{at_least, bound};
+
+/// The chips whose reading in `y` is finite (bit i = chip i).
+fn finite_mask<const N: usize>(y: &[f32; N]) -> u8 {
+    let mut finite = 0u8;
+    for (i, v) in y.iter().enumerate() {
+        finite |= u8::from(v.is_finite()) << i;
+    }
+    finite
+}
 
 /// Settings of [`RelCal`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -341,11 +351,7 @@ impl<const N: usize> RelCal<N> {
             Pending::Learn(used, offered) => (used, offered),
         };
         let y = self.kept;
-        let mut finite = 0u8;
-        for (i, v) in y.iter().enumerate() {
-            finite |= u8::from(v.is_finite()) << i;
-        }
-        self.learn(&y, used.0, used.1 & finite, LEARN_STRIDE);
+        self.learn(&y, used.0, used.1 & finite_mask(&y), LEARN_STRIDE);
         // A chip whose correction starts now was judged by fusion on its
         // uncorrected readings: its rate-proportional disagreement sits in
         // its noise estimate. Where what the correction removes is a large
@@ -398,10 +404,7 @@ impl<const N: usize> RelCal<N> {
     /// (those fusion trusted: faulty chips must not teach the consensus).
     /// Needs at least three chips in `used`; otherwise nothing changes.
     pub fn update(&mut self, y: &[f32; N], used: u8) {
-        let mut finite = 0u8;
-        for (i, v) in y.iter().enumerate() {
-            finite |= u8::from(v.is_finite()) << i;
-        }
+        let finite = finite_mask(y);
         self.learn(y, used & finite, used & finite, 1);
     }
 
@@ -673,19 +676,6 @@ impl<const N: usize> RelCal<N> {
             (self.lag[i], self.lag_ms[i], self.over[i]) = (0.0, 0.0, 0);
             (self.blk_sum[i], self.blk_sq[i], self.blk_n[i]) = (0.0, 0.0, 0);
             self.drifting &= !(1 << i);
-        }
-    }
-
-    /// Chips whose calibration is outside the bounds ([`CalConfig`]): read
-    /// as they are, kept out of the calibration's reference, and flagged
-    /// by the pipeline (`pipeline::flag::CAL_BOUND`). Only ever a minority
-    /// of the started chips: the bounds are against the median chip, so
-    /// when half or more read outside, it is the consensus that moved.
-    pub fn out_of_bounds(&self) -> u8 {
-        if 2 * self.wild.count_ones() < self.started.count_ones() {
-            self.wild
-        } else {
-            0
         }
     }
 

@@ -7,7 +7,7 @@
 
 use super::frozen::frozen_check;
 use super::gate::{first_gate, first_gate_any, regate, warm_up_gate, Gate};
-use super::{full, has, mean_of, put, weighted, AdaptiveConfig, AxisState, Fused};
+use super::{each_pair, full, has, mean_of, put, weighted, AdaptiveConfig, AxisState, Fused};
 use crate::algo::math::at_least;
 
 /// The adaptive method over `valid`, into `out`; false if nothing fused.
@@ -623,8 +623,8 @@ pub(super) fn rise<const N: usize>(st: &mut AxisState<N>, set: u8, alpha: f32) {
 /// Learn each pair's squared difference among the gyros that learn this
 /// sample: the good ones, and the active ones still warming up (a chip
 /// the warm-up gate left out still warms up, with its difference capped).
-/// Once both are warm, Huber's cap at c² = 4 times the pair's mean, times
-/// κ, keeps a chip's spikes from inflating its pairs.
+/// Once both are warm, Huber's cap at [`PAIR_HUBER_C2`] = 9 times the
+/// pair's mean, times κ, keeps a chip's spikes from inflating its pairs.
 #[inline(always)]
 fn pairwise_update<const N: usize>(
     c: &AdaptiveConfig,
@@ -656,30 +656,22 @@ fn pairwise_update<const N: usize>(
         return;
     }
     let stride = if all_warm { PAIR_STRIDE as f32 } else { 1.0 };
-    for i in 0..N {
-        if !has(learn, i) {
-            continue;
+    each_pair::<N>(learn, |i, j| {
+        let d = y[i] - y[j];
+        let mut d2 = d * d;
+        let p = st.pd[i][j];
+        if has(was_warm, i) && has(was_warm, j) && p > 0.0 {
+            let cap = PAIR_HUBER_C2 * p;
+            d2 = if d2 > cap { cap } else { d2 } * PAIR_HUBER_KAPPA;
+        } else if d2 > 4.0 * warm_cap {
+            // Each is within √cap of the median while warming up.
+            d2 = 4.0 * warm_cap;
         }
-        for j in (i + 1)..N {
-            if !has(learn, j) {
-                continue;
-            }
-            let d = y[i] - y[j];
-            let mut d2 = d * d;
-            let p = st.pd[i][j];
-            if has(was_warm, i) && has(was_warm, j) && p > 0.0 {
-                let cap = PAIR_HUBER_C2 * p;
-                d2 = if d2 > cap { cap } else { d2 } * PAIR_HUBER_KAPPA;
-            } else if d2 > 4.0 * warm_cap {
-                // Each is within √cap of the median while warming up.
-                d2 = 4.0 * warm_cap;
-            }
-            let n = st.n_pair[i].min(st.n_pair[j]).max(1);
-            let a = at_least(stride / n as f32, stride * NOISE_ALPHA);
-            let a = if a < 1.0 { a } else { 1.0 };
-            st.pd[i][j] = p + a * (d2 - p);
-        }
-    }
+        let n = st.n_pair[i].min(st.n_pair[j]).max(1);
+        let a = at_least(stride / n as f32, stride * NOISE_ALPHA);
+        let a = if a < 1.0 { a } else { 1.0 };
+        st.pd[i][j] = p + a * (d2 - p);
+    });
 }
 
 /// Each gyro's noise variance in `set` from the pairs: the N-cornered
@@ -709,14 +701,10 @@ pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
         return;
     }
     let mut r = [0.0f32; N];
-    for i in 0..N {
-        for j in (i + 1)..N {
-            if has(set, i) && has(set, j) {
-                r[i] += st.pd[i][j];
-                r[j] += st.pd[i][j];
-            }
-        }
-    }
+    each_pair::<N>(set, |i, j| {
+        r[i] += st.pd[i][j];
+        r[j] += st.pd[i][j];
+    });
     let nf = n as f32;
     let mut total = 0.0;
     for i in 0..N {
@@ -793,20 +781,16 @@ pub(super) fn attribute<const N: usize>(st: &mut AxisState<N>, set: u8) {
 fn reweighted<const N: usize>(pd: &[[f32; N]; N], h: &[f32; N], set: u8) -> Option<[f32; N]> {
     let mut a = [[0.0f32; N]; N];
     let mut b = [0.0f32; N];
-    for i in 0..N {
-        for j in (i + 1)..N {
-            if has(set, i) && has(set, j) {
-                let p = at_least(h[i] + h[j], f32::MIN_POSITIVE);
-                let w = 1.0 / (p * p);
-                a[i][i] += w;
-                a[j][j] += w;
-                a[i][j] = w;
-                a[j][i] = w;
-                b[i] += w * pd[i][j];
-                b[j] += w * pd[i][j];
-            }
-        }
-    }
+    each_pair::<N>(set, |i, j| {
+        let p = at_least(h[i] + h[j], f32::MIN_POSITIVE);
+        let w = 1.0 / (p * p);
+        a[i][i] += w;
+        a[j][j] += w;
+        a[i][j] = w;
+        a[j][i] = w;
+        b[i] += w * pd[i][j];
+        b[j] += w * pd[i][j];
+    });
     // Outside the set: the identity, so the elimination runs over 0..N.
     for i in 0..N {
         if !has(set, i) {

@@ -172,8 +172,9 @@ pub struct AxisState<const N: usize> {
     /// = σᵢ² + σⱼ² for independent errors, the N-cornered hat's input
     /// (`adaptive::attribute`).
     pd: [[f32; N]; N],
-    /// Per gyro, pair updates counted up to 1/[`adaptive::NOISE_ALPHA`]
-    /// (the growing window before the slow mean takes over).
+    /// Per gyro, samples it learnt on, counted up to
+    /// 1/[`adaptive::NOISE_ALPHA`]: the growing window of its pairs and
+    /// of its drift watch's means before their slow factors take over.
     n_pair: [u16; N],
     /// The set `var` was last attributed over.
     solved: u8,
@@ -302,13 +303,6 @@ impl<const N: usize> AxisState<N> {
     /// range).
     pub fn noise_var(&self, i: usize) -> f32 {
         self.own.get(i).copied().unwrap_or(0.0)
-    }
-
-    /// The variance gyro `i` is weighed by, (°/s)²: its own, raised by
-    /// any error the chips share and by the shrinkage towards equal
-    /// weights (equal among three chips without priors).
-    pub fn weighing_var(&self, i: usize) -> f32 {
-        self.var.get(i).copied().unwrap_or(0.0)
     }
 
     /// Current noise standard deviation estimates of the adaptive method,

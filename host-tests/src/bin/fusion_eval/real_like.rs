@@ -69,10 +69,6 @@ struct One {
     adev: Option<(f64, f64, f64)>,
 }
 
-fn rms_vs_truth(x: &[f64], truth: &[f64]) -> f64 {
-    assess::rms_demeaned(x, truth)
-}
-
 fn judge(chips: &[Vec<f64>], truth: &[f64], sigma: &[f64], tau0: f64) -> One {
     let k = chips.len();
     let n = truth.len();
@@ -106,9 +102,9 @@ fn judge(chips: &[Vec<f64>], truth: &[f64], sigma: &[f64], tau0: f64) -> One {
         (worst, lo, hi)
     });
     One {
-        fused: rms_vs_truth(&r.fused, truth),
-        mean: rms_vs_truth(&mean, truth),
-        oracle: rms_vs_truth(&oracle, truth),
+        fused: assess::rms_demeaned(&r.fused, truth),
+        mean: assess::rms_demeaned(&mean, truth),
+        oracle: assess::rms_demeaned(&oracle, truth),
         loo: [sq(&|c| c.fused), sq(&|c| c.mean), sq(&|c| c.fixed_iv)],
         one_chip: a.one_chip_share,
         adev,
