@@ -10,7 +10,14 @@
 //!   plain mean of the others and for fixed inverse-variance weights with
 //!   each chip's noise estimated from the whole log (the N-cornered hat:
 //!   least squares of Var(yᵢ − yⱼ) = σᵢ² + σⱼ² over every pair), what
-//!   knowing the chips' noise in advance is worth.
+//!   knowing the chips' noise in advance is worth. Those fixed weights
+//!   come from every chip, the one left out too; so does the fourth
+//!   figure, the whole fusion's own weights sample by sample, renormalised
+//!   over the others: the two compare like with like (what the board
+//!   learns from all its chips against what knowing their noise in advance
+//!   gives), where the fusion of the others alone has one chip fewer to
+//!   learn from (three chips cannot tell a noisier chip from two that
+//!   share an error, and are weighed equally).
 //! - **The weights' spread**: each chip's mean weight and its standard
 //!   deviation over the samples it was offered, and the share of samples
 //!   with three or more chips fused where one chip holds over 0.9.
@@ -23,7 +30,7 @@
 //! method can say which chip is noisier, and the hat says so
 //! ([`Assessment::shared_error`]).
 
-use crate::replay::{replay, Replay};
+use crate::replay::{replay, Replay, MAX_CHIPS};
 use crate::Res;
 
 /// Leave-one-out of one chip.
@@ -35,6 +42,10 @@ pub struct LooChip {
     pub mean: f64,
     /// The same for fixed inverse-variance weights (the whole log's hat).
     pub fixed_iv: f64,
+    /// The same for the whole fusion's own weights, renormalised over the
+    /// others ([`renormalised`]): the weights learnt with every chip, as
+    /// the fixed weights' hat is.
+    pub own: f64,
 }
 
 /// One chip's weight over the log.
@@ -84,6 +95,10 @@ impl Assessment {
     /// The same for the fixed inverse-variance weights.
     pub fn fixed_iv_ratio(&self) -> f64 {
         ratio(&self.loo, |c| c.fixed_iv)
+    }
+    /// The same for the whole fusion's own weights.
+    pub fn own_ratio(&self) -> f64 {
+        ratio(&self.loo, |c| c.own)
     }
     /// The hat has a variance below zero: some chips share an error, and
     /// no fusion that weighs by second moments can attribute it.
@@ -183,6 +198,37 @@ fn fixed(chips: &[&Vec<f64>], w: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Each sample, the chips but `skip` weighted by the whole fusion's own
+/// weights `w` renormalised over them (each chip's mean taken out first, the
+/// stand-in for the calibration's offsets): how well the weights the
+/// fusion learnt from every chip predict the one left out.
+fn renormalised(chips: &[Vec<f64>], w: &[[f32; MAX_CHIPS]], skip: usize) -> Vec<f64> {
+    let means: Vec<f64> = chips
+        .iter()
+        .map(|c| {
+            let f: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
+            f.iter().sum::<f64>() / f.len().max(1) as f64
+        })
+        .collect();
+    (0..chips[0].len())
+        .map(|i| {
+            let (mut s, mut sw) = (0.0, 0.0);
+            for (c, chip) in chips.iter().enumerate() {
+                let wc = f64::from(w[i][c]);
+                if c != skip && chip[i].is_finite() && wc > 0.0 {
+                    s += wc * (chip[i] - means[c]);
+                    sw += wc;
+                }
+            }
+            if sw > 0.0 {
+                s / sw
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
 /// Measure the replay `r` of `chips` (sampled every `tau0` s) without a
 /// truth: leave-one-out runs the firmware's fusion once per chip.
 pub fn assess(chips: &[Vec<f64>], r: &Replay, tau0: f64) -> Res<Assessment> {
@@ -211,6 +257,7 @@ pub fn assess(chips: &[Vec<f64>], r: &Replay, tau0: f64) -> Res<Assessment> {
                 fused: rms_demeaned(&fused, &chips[i]),
                 mean: rms_demeaned(&fixed(&refs, &ones), &chips[i]),
                 fixed_iv: rms_demeaned(&fixed(&refs, &w), &chips[i]),
+                own: rms_demeaned(&renormalised(chips, &r.weights, i), &chips[i]),
             });
         }
     }

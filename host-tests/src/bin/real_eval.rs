@@ -1,7 +1,11 @@
 //! The board's fusion on real multi-IMU recordings made by others, judged
 //! without a truth (`gyro_tool::assess`): leave-one-out against the plain
 //! mean and against fixed inverse-variance weights from the whole log, the
-//! weights' spread, and on static logs the Allan ratios.
+//! weights' spread, and on static logs the Allan ratios. Leave-one-out
+//! twice: the firmware fusing the others (`loo`: three chips, weighed
+//! equally without priors) and the whole fusion's own weights renormalised
+//! over the others (`own`: what the board learns from all four, compared
+//! like with like with the fixed weights, which come from all four too).
 //!
 //! `cargo run -p host-tests --profile host --bin real-eval -- [--dir D] [--no-align]`
 //!
@@ -62,12 +66,13 @@ fn main() {
         }
     );
     println!(
-        "{:<9} {:>2} {:>6} {:>8} {:>8} {:>8} {:>8} {:>9}  weights mean (sd)",
-        "log", "ax", "n", "loo", "fixedIV", "vs IV", "1>0.9 %", "shared"
+        "{:<9} {:>2} {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}  weights mean (sd)",
+        "log", "ax", "n", "loo", "own", "fixedIV", "own/IV", "1>0.9 %", "shared"
     );
-    let (mut worst_loo, mut worst_iv, mut worst_one) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut lose, mut off_iv, mut rows) = (0, 0, 0);
-    let (mut sum_loo, mut sum_iv) = (0.0, 0.0);
+    let (mut worst_loo, mut worst_own, mut worst_iv, mut worst_one) =
+        (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let (mut lose, mut lose_own, mut off_iv, mut off_shared, mut rows) = (0, 0, 0, 0, 0);
+    let (mut sum_loo, mut sum_own, mut sum_iv) = (0.0, 0.0, 0.0);
     for log in &mut logs {
         if !cli.no_align {
             let lags = align(log);
@@ -89,42 +94,52 @@ fn main() {
                     std::process::exit(2);
                 }
             };
-            let (l, iv) = (a.loo_ratio(), a.fixed_iv_ratio());
+            let (l, own, iv) = (a.loo_ratio(), a.own_ratio(), a.fixed_iv_ratio());
             let w: Vec<String> = a
                 .spread
                 .iter()
                 .map(|s| format!("{:.2}({:.2})", s.mean, s.sd))
                 .collect();
             println!(
-                "{:<9} {:>2} {:>6} {:>8.3} {:>8.3} {:>8.3} {:>8.2} {:>9}  {}",
+                "{:<9} {:>2} {:>6} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.2} {:>9}  {}",
                 log.name,
                 ["x", "y", "z"][ax],
                 chips[0].len(),
                 l,
+                own,
                 iv,
-                l / iv,
+                own / iv,
                 100.0 * a.one_chip_share,
                 if a.shared_error() { "yes" } else { "no" },
                 w.join(" ")
             );
             worst_loo = worst_loo.max(l);
-            worst_iv = worst_iv.max(l / iv);
+            worst_own = worst_own.max(own);
+            worst_iv = worst_iv.max(own / iv);
             worst_one = worst_one.max(a.one_chip_share);
             lose += usize::from(l > 1.0);
-            off_iv += usize::from(l > 1.03 * iv);
+            lose_own += usize::from(own > 1.0);
+            off_iv += usize::from(own > 1.03 * iv);
+            off_shared += usize::from(own > 1.03 * iv && a.shared_error());
             rows += 1;
             sum_loo += l;
+            sum_own += own;
             sum_iv += iv;
         }
     }
     println!();
     println!(
-        "leave-one-out, fused / plain mean: mean {:.3}, worst {:.3}; axes above 1.00: {lose} of {rows}",
+        "leave-one-out, the fusion of the others / plain mean: mean {:.3}, worst {:.3}; axes above 1.00: {lose} of {rows}",
         sum_loo / rows as f64,
         worst_loo
     );
     println!(
-        "fixed inverse-variance weights (the whole log's hat): mean {:.3}; axes where the fusion is over 1.03x it: {off_iv} of {rows} (worst {:.3}x)",
+        "leave-one-out, the whole fusion's weights / plain mean: mean {:.3}, worst {:.3}; axes above 1.00: {lose_own} of {rows} (target 0)",
+        sum_own / rows as f64,
+        worst_own
+    );
+    println!(
+        "fixed inverse-variance weights (the whole log's hat): mean {:.3}; axes where the whole fusion's weights are over 1.03x it: {off_iv} of {rows} (worst {:.3}x), {off_shared} of them where the hat reads a shared error (the fixed weights then give one chip the whole weight)",
         sum_iv / rows as f64,
         worst_iv
     );
@@ -132,13 +147,13 @@ fn main() {
         "one chip above 0.9 of the weight: worst {:.2} % of the samples (target <= 1 %)",
         100.0 * worst_one
     );
-    // The targets this binary can fail: never worse than the mean (its
-    // RMS's own 0.5 % of slack: the warm-up's median output and the
-    // calibration move a three-chip fusion off the exact mean), and never
-    // one chip at 0.9. The fixed weights' figure is printed, not required:
-    // each three chips' own hat, known in advance, loses to the mean on
-    // these flights (docs/fusion.md).
-    let ok = worst_loo <= 1.005 && worst_one <= 0.01;
+    // The targets this binary can fail: the weights the board learns
+    // never worse than the mean; the firmware fusing three chips within
+    // 2 % of it (the warm-up's median output, the gate and the
+    // calibration move it off the exact mean: docs/fusion.md); never one
+    // chip at 0.9. Within 3 % of the fixed weights is printed, not
+    // required: measured, not met on every axis.
+    let ok = worst_own <= 1.0 && worst_loo <= 1.02 && worst_one <= 0.01;
     println!("targets: {}", if ok { "met" } else { "MISSED" });
     std::process::exit(i32::from(!ok));
 }

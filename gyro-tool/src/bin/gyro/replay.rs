@@ -167,17 +167,18 @@ pub fn run(a: Args) -> Res<bool> {
 fn print_assessment(a: &assess::Assessment, names: &[String]) {
     if !a.loo.is_empty() {
         println!(
-            "  leave-one-out (fuse the others, RMS against the chip, means out), fused / plain mean / fixed inverse-variance:"
+            "  leave-one-out (RMS against the chip left out, means out): the fusion of the others / the whole fusion's weights over the others / plain mean / fixed inverse-variance:"
         );
         for (c, l) in a.loo.iter().enumerate() {
             println!(
-                "    {:<10} {:>12.6} {:>12.6} {:>12.6}   hat variance {:.4e}",
-                names[c], l.fused, l.mean, l.fixed_iv, a.hat[c]
+                "    {:<10} {:>12.6} {:>12.6} {:>12.6} {:>12.6}   hat variance {:.4e}",
+                names[c], l.fused, l.own, l.mean, l.fixed_iv, a.hat[c]
             );
         }
         println!(
-            "    over the chips: fused {:.3}x the plain mean, fixed inverse-variance {:.3}x{}",
+            "    over the chips, against the plain mean: the fusion of the others {:.3}x, the whole fusion's weights {:.3}x, fixed inverse-variance {:.3}x{}",
             a.loo_ratio(),
+            a.own_ratio(),
             a.fixed_iv_ratio(),
             if a.shared_error() {
                 " (the hat reads a variance below 0: some chips share an error)"
