@@ -23,6 +23,14 @@ pub mod flag {
     /// chip failing slowly. Read and watched, not fused, not learnt from;
     /// cleared when it is back within its part's allowance.
     pub const CAL_DRIFT: u8 = 1 << 5;
+    /// Its scale or bias against the median chip is outside what its part
+    /// can have (`algo::calib::RelCal::out_of_bounds`, on any axis): a
+    /// wrong range, a chip gone bad. Read and learnt from, not fused;
+    /// cleared when its calibration is back inside the bounds or starts
+    /// over after a restart.
+    pub const CAL_BOUNDS: u8 = 1 << 6;
+    /// The calibration's verdicts, which only the calibration clears.
+    pub const CALIBRATION: u8 = CAL_DRIFT | CAL_BOUNDS;
 }
 
 /// Counters of one gyro since start.
@@ -159,7 +167,7 @@ impl<const N: usize> Pipeline<N> {
                 }
                 // Configured and verified just now: it rejoins after a run
                 // as long as the stuck check needs, not recover_after.
-                h.flags = flag::READ_ERROR | (h.flags & flag::CAL_DRIFT);
+                h.flags = flag::READ_ERROR | (h.flags & flag::CALIBRATION);
                 h.need = cfg.stuck_after;
                 h.good_run = 0;
                 h.bad_run = 0;
@@ -236,7 +244,7 @@ impl<const N: usize> Pipeline<N> {
         };
         if h.good_run >= h.need {
             // (The calibration's verdict is its own to clear.)
-            h.flags &= flag::CAL_DRIFT;
+            h.flags &= flag::CALIBRATION;
             h.need = self.cfg.recover_after;
         }
         if h.flags != 0 {

@@ -200,8 +200,8 @@ pub struct Pipeline<const N: usize> {
     /// The fastest die temperature change lately, °C/s (the calibration's
     /// drift allowance follows it).
     temp_rate: f32,
-    /// The chips flagged [`flag::CAL_DRIFT`].
-    drift_flagged: u8,
+    /// The chips flagged [`flag::CAL_DRIFT`] and [`flag::CAL_BOUNDS`].
+    cal_flagged: (u8, u8),
     seq: u32,
     overruns: u32,
     counters: [GyroCounters; N],
@@ -222,13 +222,13 @@ impl<const N: usize> Pipeline<N> {
             cfg,
             fusion: Fusion::new(method)?,
             axes: core::array::from_fn(AxisState::for_axis),
-            cal: core::array::from_fn(|a| RelCal::for_axis(CalConfig::default(), a)),
+            cal: core::array::from_fn(|a| RelCal::for_axis(CalConfig::board(), a)),
             static_cal: [ChipCal::IDENTITY; N],
             calibrated: false,
             temps: [None; N],
             temp_seq: [0; N],
             temp_rate: 0.0,
-            drift_flagged: 0,
+            cal_flagged: (0, 0),
             seq: 0,
             overruns: 0,
             counters: [GyroCounters::default(); N],
@@ -416,14 +416,17 @@ impl<const N: usize> Pipeline<N> {
         // returned: flagged after it, the loop copied it, 64 instructions a
         // sample on the Cortex-M4).
         let drifting = self.cal.iter().fold(0u8, |m, c| m | c.drifting());
-        if drifting != self.drift_flagged {
-            self.drift_flagged = drifting;
+        let bounds = self.cal.iter().fold(0u8, |m, c| m | c.out_of_bounds());
+        if (drifting, bounds) != self.cal_flagged {
+            self.cal_flagged = (drifting, bounds);
             for (i, h) in self.health.iter_mut().enumerate() {
                 let before = h.flags;
+                h.flags &= !flag::CALIBRATION;
                 if drifting & (1 << i) != 0 {
                     h.flags |= flag::CAL_DRIFT;
-                } else {
-                    h.flags &= !flag::CAL_DRIFT;
+                }
+                if bounds & (1 << i) != 0 {
+                    h.flags |= flag::CAL_BOUNDS;
                 }
                 if h.flags != before {
                     out.health_changed |= 1 << i;
