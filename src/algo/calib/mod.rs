@@ -383,6 +383,9 @@ impl<const N: usize> RelCal<N> {
     /// it has not yet): `st` is the axis state it was fused with.
     #[inline]
     pub fn finish(&mut self, st: &mut AxisState<N>) {
+        // Fusion's own learning first: the calibration's reads what it
+        // learnt (`forget_fresh` weighs its change against the noise).
+        st.learn_pending();
         if self.pending == Pending::None {
             return;
         }

@@ -443,23 +443,18 @@ pub(super) fn update_and_fuse<const N: usize>(
     // Three or more good gyros, no pair with priors: the pairwise model.
     let three = rest & rest.wrapping_sub(1) != 0;
     if three && pair_prior == 0.0 {
-        pairwise_update(c, st, y, active, good, warm_cap);
-        for i in 0..N {
-            if has(good, i) {
-                let e = y[i] - med;
-                let e2 = e * e;
-                let g = 1.0 / st.n_pair[i].max(1) as f32;
-                let (fast, slow) = (at_least(g, c.alpha), at_least(g, NOISE_ALPHA));
-                st.mf[i] += fast * (e - st.mf[i]);
-                st.ms[i] += slow * (e - st.ms[i]);
-                st.es[i] += slow * (e2 - st.es[i]);
-                st.ef[i] += at_least(g, GATE_ALPHA) * (e2 - st.ef[i]);
-            }
-        }
-        if active != st.solved || st.k.wrapping_add(st.slot).is_multiple_of(SOLVE_EVERY) {
-            attribute(st, active);
-            rise(st, active, c.alpha);
-        }
+        // What the sample teaches the noise model waits for
+        // [`AxisState::learn_pending`]: the fused value does not depend on
+        // it, and the board's loop runs it once the frame is on the wire.
+        st.pend = Some(PendLearn {
+            y: *y,
+            med,
+            active,
+            good,
+            warm_cap,
+            alpha: c.alpha,
+            warmup: c.warmup,
+        });
     } else if good & good.wrapping_sub(1) != 0 {
         // Two good gyros (or a pair with priors): the residual against the
         // other one, as below.
@@ -620,6 +615,44 @@ pub(super) fn rise<const N: usize>(st: &mut AxisState<N>, set: u8, alpha: f32) {
     }
 }
 
+/// A fused sample's learning for the pairwise model, kept until
+/// [`AxisState::learn_pending`] (see [`update_and_fuse`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PendLearn<const N: usize> {
+    y: [f32; N],
+    med: f32,
+    active: u8,
+    good: u8,
+    warm_cap: f32,
+    alpha: f32,
+    warmup: u16,
+}
+
+/// The pairwise model's learning from one fused sample `p`: the pairs,
+/// each chip's means about the median, and on its samples the attribution
+/// and the drift watch. Out of line: after the frame on the board.
+#[inline(never)]
+pub(super) fn learn<const N: usize>(st: &mut AxisState<N>, p: &PendLearn<N>) {
+    let (y, med, active, good) = (&p.y, p.med, p.active, p.good);
+    pairwise_update(p.warmup, st, y, active, good, p.warm_cap);
+    for i in 0..N {
+        if has(good, i) {
+            let e = y[i] - med;
+            let e2 = e * e;
+            let g = 1.0 / st.n_pair[i].max(1) as f32;
+            let (fast, slow) = (at_least(g, p.alpha), at_least(g, NOISE_ALPHA));
+            st.mf[i] += fast * (e - st.mf[i]);
+            st.ms[i] += slow * (e - st.ms[i]);
+            st.es[i] += slow * (e2 - st.es[i]);
+            st.ef[i] += at_least(g, GATE_ALPHA) * (e2 - st.ef[i]);
+        }
+    }
+    if active != st.solved || st.k.wrapping_add(st.slot).is_multiple_of(SOLVE_EVERY) {
+        attribute(st, active);
+        rise(st, active, p.alpha);
+    }
+}
+
 /// Learn each pair's squared difference among the gyros that learn this
 /// sample: the good ones, and the active ones still warming up (a chip
 /// the warm-up gate left out still warms up, with its difference capped).
@@ -627,7 +660,7 @@ pub(super) fn rise<const N: usize>(st: &mut AxisState<N>, set: u8, alpha: f32) {
 /// pair's mean, times κ, keeps a chip's spikes from inflating its pairs.
 #[inline(always)]
 fn pairwise_update<const N: usize>(
-    c: &AdaptiveConfig,
+    warmup: u16,
     st: &mut AxisState<N>,
     y: &[f32; N],
     active: u8,
@@ -641,7 +674,7 @@ fn pairwise_update<const N: usize>(
         if has(learn, i) {
             if !has(was_warm, i) {
                 st.n_upd[i] += 1;
-                st.warm |= ((st.n_upd[i] >= c.warmup) as u8) << i;
+                st.warm |= ((st.n_upd[i] >= warmup) as u8) << i;
             }
             st.n_pair[i] = (st.n_pair[i] + 1).min(full);
         }

@@ -201,6 +201,9 @@ pub struct AxisState<const N: usize> {
     /// Offset of the sample count at which the attribution is solved
     /// ([`AxisState::for_axis`]).
     slot: u32,
+    /// The last fused sample's learning, if not yet done
+    /// ([`AxisState::learn_pending`]).
+    pend: Option<adaptive::PendLearn<N>>,
 }
 
 impl<const N: usize> Default for AxisState<N> {
@@ -232,6 +235,7 @@ impl<const N: usize> Default for AxisState<N> {
             ef: [0.0; N],
             four: 0,
             slot: 0,
+            pend: None,
         }
     }
 }
@@ -286,6 +290,19 @@ impl<const N: usize> AxisState<N> {
         Self {
             slot: (axis as u32 % 3) * 5,
             ..Self::default()
+        }
+    }
+
+    /// What the last fused sample teaches the adaptive method's noise
+    /// model (its pairs, the drift watch's means, the attribution), if it
+    /// has not been learnt yet: [`Fusion::fuse`] runs it first, so a
+    /// caller that never calls this sees every sample learnt in order; the
+    /// board's loop calls it (through `RelCal::finish`) once the frame is
+    /// sent, which takes it off the frame's path.
+    #[inline]
+    pub fn learn_pending(&mut self) {
+        if let Some(p) = self.pend.take() {
+            adaptive::learn(self, &p);
         }
     }
 
@@ -476,6 +493,7 @@ impl<const N: usize> Fusion<N> {
             valid |= u8::from(v.abs() <= RATE_LIMIT_DPS) << i;
         }
         let valid = valid & offered;
+        st.learn_pending();
         let mut out = Fused {
             rate_dps: f32::NAN,
             weights: [0.0; N],
