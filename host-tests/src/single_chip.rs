@@ -59,7 +59,7 @@ pub fn run(
     let mut r = Reads::default();
     let mut buf = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 16];
     for n in 0..ms {
         each(n, &bus);

@@ -20,10 +20,11 @@ use gyro_array::emu::rng::Rng;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuDelay, Icm42688Model, NoiseParams,
-    PathModel, RateProfile,
+    PathModel, RateProfile, RtcTick,
 };
 use gyro_array::pipeline::align::{Aligned, Aligner};
 use gyro_array::pipeline::clock::{ChipClock, Instant16};
+use gyro_array::pipeline::stamps::StampScale;
 use std::cell::RefCell;
 
 /// Chips in the array.
@@ -34,8 +35,9 @@ const WARM_MS: u32 = 600;
 /// How the array's chips keep time.
 #[derive(Clone, Copy, Debug)]
 pub enum Clocks {
-    /// Every chip on the board's CLKIN at 32 kHz.
-    ClkIn,
+    /// Every chip on the board's CLKIN at 32 kHz, its FIFO stamps counting
+    /// as the reading says (the sources leave it open).
+    ClkIn(RtcTick),
     /// Free-running: PLLs ±1 % with drift and wander, chip 3 fallen back
     /// to its RC oscillator (−7 %).
     Free,
@@ -148,11 +150,15 @@ fn timings(c: Clocks, vibration: Vibration, clock_seed: Option<u64>) -> [ChipTim
     core::array::from_fn(|i| ChipTiming {
         pll: match c {
             Clocks::Free => free[i],
-            Clocks::ClkIn => ClockParams::fixed(0.02),
+            Clocks::ClkIn(_) => ClockParams::fixed(0.02),
         },
         rc: ClockParams::fixed(rc),
         vibration,
         path: PathModel::Filters,
+        rtc_tick: match c {
+            Clocks::ClkIn(t) => t,
+            Clocks::Free => RtcTick::Microsecond,
+        },
     })
 }
 
@@ -333,7 +339,7 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
     });
     let cs: [CsLine; N] = Default::default();
     let bus = RefCell::new(EmuBus::new(chips, &cs));
-    if let Clocks::ClkIn = r.clocks {
+    if let Clocks::ClkIn(_) = r.clocks {
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
@@ -341,7 +347,7 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
         odr: r.odr,
         filter: r.filter,
         clock: match r.clocks {
-            Clocks::ClkIn => ClockInput::ClkIn,
+            Clocks::ClkIn(_) => ClockInput::ClkIn,
             Clocks::Free => ClockInput::Internal,
         },
         sampling: Sampling::Fifo,
@@ -366,12 +372,16 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
         gi.flush_fifo().expect("flush");
     }
     let mut clocks = [ChipClock::new(); N];
+    // The FIFO stamps' counts onto µs of each chip's clock, as the board's
+    // `TimedIcm` does.
+    let new_scale = || StampScale::new(cfg.clock, period_us.round() as u32);
+    let mut scales = [new_scale(); N];
     let mut align = [Aligner::<8>::new(per_ms); N];
     let mut fuser = Fuser::new();
     let mut last_stamp: [Option<u32>; N] = [None; N];
     let mut buf = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 16];
     let mut fused = Vec::new();
     // Chip 1's restart: the next step and the ms it is due.
@@ -386,6 +396,7 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
             clocks[1].reset();
             align[1].clear();
             last_stamp[1] = None;
+            scales[1] = new_scale();
         }
         with_bus(&bus, |b| b.advance(1e-3));
         let now_s = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0);
@@ -407,18 +418,28 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
             match g[i].read_fifo(&mut buf) {
                 Ok(f) if f.samples > 0 => {
                     let s = &buf[..f.samples];
-                    if let Some(c) = cap {
-                        clocks[i].observe(s[f.samples - 1].stamp_us, c);
-                    }
+                    let mut newest = 0;
                     for x in s {
-                        if let Some(l) = last_stamp[i] {
-                            let d = x.stamp_us.wrapping_sub(l) as f64;
+                        let us = scales[i].convert(x.stamp);
+                        // (Until the scale has decided what a count is, its
+                        // µs are a guess's.)
+                        if let (Some(l), true) = (last_stamp[i], scales[i].decided()) {
+                            let d = us.wrapping_sub(l) as f64;
                             if (d - period_us).abs() > 2.0 {
                                 out.repeats_or_skips += 1;
                             }
                         }
-                        last_stamp[i] = Some(x.stamp_us);
-                        align[i].push(x.stamp_us, x.raw);
+                        last_stamp[i] = Some(us);
+                        align[i].push(us, x.raw);
+                        newest = us;
+                    }
+                    if scales[i].take_changed() {
+                        clocks[i].reset();
+                        align[i].clear();
+                        last_stamp[i] = None;
+                    }
+                    if let Some(c) = cap {
+                        clocks[i].observe(newest, c);
                     }
                 }
                 Ok(_) => {}

@@ -13,7 +13,7 @@ use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay, Fault,
-    RateProfile,
+    RateProfile, RtcTick,
 };
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
@@ -36,6 +36,8 @@ pub struct Timing {
     pub pll: [ClockParams; N],
     /// Out-of-band vibration at the chips' dies.
     pub vibration: Vibration,
+    /// What a FIFO stamp count is on CLKIN (open in the sources).
+    pub rtc_tick: RtcTick,
 }
 
 /// What the harness hands each sample's callback.
@@ -58,6 +60,8 @@ pub struct Ran {
     pub timing: [gyro_array::pipeline::timed::TimingCounters; N],
     /// Where each chip takes its clock from at the end.
     pub clock_inputs: [ClockInput; N],
+    /// Each chip's clock error as its tracker reports it at the end, ppm.
+    pub clock_ppm: [f32; N],
 }
 
 /// Run `samples` pipeline steps. `stall(n)` > 0 before step `n` makes the
@@ -78,6 +82,7 @@ pub fn run(
         core::array::from_fn(|i| ChipTiming {
             pll: timing.pll[i],
             vibration: timing.vibration,
+            rtc_tick: timing.rtc_tick,
             ..ChipTiming::pll(0.0)
         }),
     );
@@ -162,5 +167,6 @@ pub fn run(
     Ran {
         timing: core::array::from_fn(|i| t[i].counters),
         clock_inputs: core::array::from_fn(|i| t[i].clock_input()),
+        clock_ppm: core::array::from_fn(|i| t[i].clock().error_ppm()),
     }
 }

@@ -17,10 +17,16 @@ fn fifo_config(filter: Filter, clock: ClockInput) -> Config {
     }
 }
 
-fn stamps_step_by(r: &Reads, us: u32) -> bool {
+/// A FIFO stamp count on the chip's own clock, µs: 32/30 (TDK's driver,
+/// `PLL_SCALE_FACTOR_Q24`; PX4's `FIFO_TIMESTAMP_SCALING`).
+const US_PER_COUNT: f64 = 32.0 / 30.0;
+
+/// Whether every step between consecutive stamps is one 1 kHz sample of
+/// the chip's clock: 937.5 counts, so 937 or 938.
+fn stamps_step_one_ms(r: &Reads) -> bool {
     r.samples
         .windows(2)
-        .all(|w| w[1].stamp_us.wrapping_sub(w[0].stamp_us) == us)
+        .all(|w| matches!(w[1].stamp.wrapping_sub(w[0].stamp), 937 | 938))
 }
 
 #[test]
@@ -45,10 +51,21 @@ fn fifo_loses_and_repeats_nothing_on_a_fast_or_slow_clock() {
             |_| false,
         );
         // Every sample made after the start-up flush came out once, in
-        // order (its stamps 1 000 µs of chip time apart).
+        // order (its stamps 1 000 µs of chip time apart, 937.5 counts).
         let flushed = r.made - r.samples.len() as u64;
         assert!(flushed <= 50, "offset {offset}: {flushed} not read");
-        assert!(stamps_step_by(&r, 1000), "offset {offset}");
+        assert!(stamps_step_one_ms(&r), "offset {offset}");
+        let span = r
+            .samples
+            .last()
+            .unwrap()
+            .stamp
+            .wrapping_sub(r.samples[0].stamp);
+        let per = f64::from(span) * US_PER_COUNT / (r.samples.len() - 1) as f64;
+        assert!(
+            (per - 1000.0).abs() < 0.01,
+            "offset {offset}: {per} µs a sample"
+        );
         assert_eq!((r.overflows, r.other_errors), (0, 0));
         let rate = r.samples.len() as f64 / 10.0;
         let e = t.pll.error_at(5.0);
@@ -82,7 +99,7 @@ fn a_stalled_bus_overflows_and_the_driver_says_so() {
     let gap = r
         .samples
         .windows(2)
-        .filter(|w| w[1].stamp_us.wrapping_sub(w[0].stamp_us) != 1000)
+        .filter(|w| !matches!(w[1].stamp.wrapping_sub(w[0].stamp), 937 | 938))
         .count();
     assert_eq!(gap, 1);
 }
@@ -259,7 +276,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
     let err = |lag: f64| {
         let mut e = 0.0;
         for s in &r.samples[100..] {
-            let t = r.origin_s + s.stamp_us as f64 * 1e-6 - lag;
+            let t = r.origin_s + s.stamp as f64 * US_PER_COUNT * 1e-6 - lag;
             let truth = 60.0 * (2.0 * std::f64::consts::PI * 5.0 * t).sin();
             e += (s.raw[0] as f64 / 131.0 - truth).powi(2);
         }
@@ -359,7 +376,7 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
         assert!(f.samples.len() > 1100, "{}", f.samples.len());
         let mut worst = 0.0f64;
         for (a, b) in f.samples.iter().zip(&d.samples).skip(100) {
-            assert_eq!(a.stamp_us, b.stamp_us);
+            assert_eq!(a.stamp, b.stamp);
             for k in 0..3 {
                 worst = worst.max((a.raw[k] as f64 - b.raw[k] as f64).abs() / 131.0);
             }

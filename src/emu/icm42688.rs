@@ -34,6 +34,31 @@ pub struct ChipTiming {
     pub vibration: Vibration,
     /// How the signal path is modelled.
     pub path: PathModel,
+    /// What a timestamp count is on CLKIN with TMST_RES = 0, which the
+    /// public sources leave open.
+    pub rtc_tick: RtcTick,
+}
+
+/// What one FIFO timestamp count is with RTC_MODE on CLKIN and TMST_RES =
+/// 0. TDK's register map says "1 µs resolution" for TMST_RES = 0 and "1
+/// RTC clock period" for TMST_RES = 1 with RTC on; PX4 scales CLKIN stamps
+/// by the input's period; on the chip's own clock TDK's driver
+/// (`PLL_SCALE_FACTOR_Q24`) and PX4 (`FIFO_TIMESTAMP_SCALING = 16 · 32/30`
+/// for 16 µs counts) scale a count by 32/30. Each reading is a case the
+/// evaluations run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RtcTick {
+    /// A µs of the CLKIN-derived grid: 31.25 counts per period at 32 kHz.
+    Microsecond,
+    /// A µs scaled by 32/30 as on the chip's own clock: 29.3 a period.
+    Scaled,
+    /// One CLKIN period.
+    Period,
+}
+
+impl RtcTick {
+    /// Every reading.
+    pub const ALL: [RtcTick; 3] = [RtcTick::Microsecond, RtcTick::Scaled, RtcTick::Period];
 }
 
 /// How an emulated ICM-42688-P's signal path is modelled.
@@ -61,6 +86,7 @@ impl ChipTiming {
             rc: ClockParams::fixed(0.05),
             vibration: Vibration::NONE,
             path: PathModel::Filters,
+            rtc_tick: RtcTick::Microsecond,
         }
     }
 }
@@ -650,11 +676,21 @@ impl Icm42688Model {
             0
         } else {
             let rtc = t.clock == Some(ClockUse::ClkIn);
-            // 31.25 µs per internal tick of the chip's own clock.
+            // An internal tick is 31.25 µs of the grid's nominal rate; on
+            // the chip's own clock a count is 32/30 of a µs (TDK's driver,
+            // PLL_SCALE_FACTOR_Q24; PX4's FIFO_TIMESTAMP_SCALING), so a
+            // tick is 31.25 · 30/32 = 1875/64 counts (16 µs counts:
+            // 1875/1024); on CLKIN, 1 RTC period at TMST_RES = 1 (TDK's
+            // register map) and the open reading at 0 (`RtcTick`).
             let counts = match (tmst & bits::TMST_RES != 0, rtc) {
                 (true, true) => t.ticks,
-                (true, false) => t.ticks * 125 / 64,
-                (false, _) => t.ticks * 125 / 4,
+                (true, false) => t.ticks * 1875 / 1024,
+                (false, false) => t.ticks * 1875 / 64,
+                (false, true) => match t.timing.rtc_tick {
+                    RtcTick::Microsecond => t.ticks * 125 / 4,
+                    RtcTick::Scaled => t.ticks * 1875 / 64,
+                    RtcTick::Period => t.ticks,
+                },
             };
             counts as u16
         };

@@ -23,7 +23,7 @@ use embedded_hal::spi::{ErrorKind, ErrorType, SpiBus};
 
 pub use adxrs453::{AdxTiming, Adxrs453Model};
 pub use board::{board_drivers, emu_device, BoardDrivers, EmuDevice};
-pub use icm42688::{ChipTiming, Icm42688Model, PathModel};
+pub use icm42688::{ChipTiming, Icm42688Model, PathModel, RtcTick};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;

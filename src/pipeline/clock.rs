@@ -62,6 +62,9 @@ const ACQUIRE_US: i32 = 10_000;
 /// A baseline longer than this is not one count of stamps (a flush or a
 /// restart came between): acquisition starts again.
 const ACQUIRE_MAX_US: i32 = 1_000_000;
+/// The shortest baseline, chip µs, that the ratio learns from: a quarter
+/// of the fastest sample period (4 kHz).
+const MIN_BASELINE_US: f32 = 62.5;
 /// Gain on the anchor.
 const K_ANCHOR: f32 = 1.0 / 16.0;
 /// Gain on the ratio (per µs of baseline).
@@ -230,7 +233,10 @@ impl ChipClock {
                     return;
                 }
                 self.jumps_in_row = 0;
-                if d > 0.0 {
+                // A baseline of a few µs says nothing of the ratio (one
+                // capture seen twice, its stamps a rounding apart, moved it
+                // by 0.6 %).
+                if d >= MIN_BASELINE_US {
                     self.ratio += K_RATIO * e / d;
                 }
                 self.advance_anchor(stamp, d, K_ANCHOR * e);

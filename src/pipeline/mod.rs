@@ -21,6 +21,7 @@ pub mod align;
 pub mod clock;
 mod health;
 pub mod selftest;
+pub mod stamps;
 pub mod startup;
 pub mod timed;
 pub mod tracker;

@@ -19,6 +19,7 @@ use embedded_hal::spi::SpiDevice;
 
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
+use super::stamps::StampScale;
 use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, FIFO_PACKET, MAX_PER_READ};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
@@ -148,9 +149,11 @@ pub struct TimedIcm<SPI, C> {
     /// Reads with samples still to come before the aligner answers again
     /// after a gap (see [`REJOIN_READS`]).
     rejoin: u8,
-    /// Added to the driver's stamps: after a flush the driver extends them
-    /// from 16 bits again, from a base of its own; this puts them back on
-    /// the tracked clock's count (see [`TimedIcm::rebase`]).
+    /// The chip's stamp counts onto µs of its nominal clock.
+    scale: StampScale,
+    /// Added to the stamps' µs: after a flush the count's high bits are
+    /// lost, and the µs off by whole wraps of it; this puts them back on
+    /// the tracked clock's (see [`TimedIcm::rebase`]).
     stamp_offset: u32,
     /// The next samples need [`Self::stamp_offset`] found again.
     rebase: bool,
@@ -185,6 +188,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             last_raw: [0; 3],
             dry: 0,
             rejoin: REJOIN_READS,
+            scale: StampScale::new(cfg.clock, libm::roundf(1e6 / cfg.odr.hz()) as u32),
             stamp_offset: 0,
             rebase: false,
             spike: SpikeCheck::new(),
@@ -218,6 +222,8 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     fn forget(&mut self) {
         self.clock.reset();
         self.gap();
+        let cfg = self.g.config();
+        self.scale = StampScale::new(cfg.clock, self.period_us);
         self.stamp_offset = 0;
         self.rebase = false;
     }
@@ -236,21 +242,25 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         }
     }
 
-    /// The driver's stamps restart their high bits after a flush (a 16-bit
-    /// stamp wraps every 65 ms, and a gap can be longer): the tracked clock
-    /// predicts the newest sample's stamp from its capture well within
-    /// that (tens of µs after a gap of seconds), which fixes the high bits.
+    /// The stamps' high bits are lost over a flush (a 16-bit count wraps
+    /// every 70 ms on the chip's own clock, and a gap can be longer), so
+    /// their µs after it are off by whole wraps ([`StampScale::wrap_us`]):
+    /// the tracked clock predicts the newest sample's stamp from its
+    /// capture well within a wrap (tens of µs after a gap of seconds),
+    /// which tells how many.
     fn rebase(&mut self, newest: u32, capture_us: u32) {
         if let Some(pred) = self.clock.stamp_at(capture_us) {
-            let near =
-                pred.wrapping_add((newest as u16).wrapping_sub(pred as u16) as i16 as i32 as u32);
-            self.stamp_offset = near.wrapping_sub(newest);
+            let cur = newest.wrapping_add(self.stamp_offset);
+            let w = self.scale.wrap_us() as f32;
+            let j = libm::roundf(pred.wrapping_sub(cur) as i32 as f32 / w);
+            self.stamp_offset = self.stamp_offset.wrapping_add((j * w) as i32 as u32);
         }
         self.rebase = false;
     }
 
     /// The clock's observation for one FIFO read: the newest sample's
-    /// stamp (driver count) and the INT1 capture after it.
+    /// stamp (µs of the chip's clock, [`StampScale`]) and the INT1 capture
+    /// after it.
     fn observe(&mut self, newest: u32, capture: Option<u32>) {
         let Some(c) = capture else {
             return;
@@ -340,11 +350,16 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 align,
                 spike,
                 counters,
+                scale,
                 ..
             } = self;
+            let mut newest = 0;
             let r = g.read_fifo_with(MAX_PER_READ, |x| {
+                // Every sample through the scale, spikes too: its µs follow
+                // the count's steps.
+                newest = scale.convert(x.stamp);
                 if spike.pass(x.raw, lim) {
-                    align.push(x.stamp_us, x.raw);
+                    align.push(newest, x.raw);
                 } else {
                     spiked = true;
                     counters.spikes = counters.spikes.wrapping_add(1);
@@ -357,7 +372,13 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                     self.counters.samples = self.counters.samples.wrapping_add(f.samples as u32);
                     if let Some(x) = f.last {
                         self.last_raw = x.raw;
-                        self.observe(x.stamp_us, capture);
+                        if self.scale.take_changed() {
+                            // The unit was decided other than guessed: the
+                            // µs so far do not join the next.
+                            self.clock.reset();
+                            self.gap();
+                        }
+                        self.observe(newest, capture);
                     }
                     if f.left == 0 {
                         break;

@@ -423,6 +423,8 @@ fn draw_timed(
         wander: 1e-3 * rng.uniform() as f64,
         wander_period_s: 2.0 + 10.0 * rng.uniform() as f64,
     });
+    // Every reading of what a CLKIN stamp count is (the sources leave it
+    // open), drawn after the rest so the earlier draws stay as they were.
     let mut ev = Vec::new();
     for _ in 0..1 + (rng.next_u32() % 2) {
         let start = 300 + rng.next_u32() % (samples / 2);
@@ -443,12 +445,14 @@ fn draw_timed(
             end,
         });
     }
+    let rtc_tick = gyro_array::emu::RtcTick::ALL[(rng.next_u32() % 3) as usize];
     (
         profile,
         host_tests::timed_board::Timing {
             clkin,
             pll,
             vibration: gyro_array::emu::timing::Vibration::NONE,
+            rtc_tick,
         },
         inj,
         ev,

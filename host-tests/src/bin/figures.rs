@@ -32,7 +32,7 @@ use gyro_array::algo::davar::{Davar, DavarConfig};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
 use gyro_array::checks::run_board_array_from;
 use gyro_array::emu::noise::{quantise, AxisNoise};
-use gyro_array::emu::{with_bus, Fault, NoiseParams, RateProfile, Rng};
+use gyro_array::emu::{with_bus, Fault, NoiseParams, RateProfile, Rng, RtcTick};
 use gyro_tool::surface;
 use host_tests::motion::{self, Run};
 use plotters::prelude::*;
@@ -744,7 +744,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
             clock_seed: None,
         })
     };
-    let (free, clkin) = (run(Clocks::Free), run(Clocks::ClkIn));
+    let (free, clkin) = (run(Clocks::Free), run(Clocks::ClkIn(RtcTick::Microsecond)));
     let path = out.join("timing.svg");
     let root = SVGBackend::new(&path, (1100, 480)).into_drawing_area();
     root.fill(&WHITE)?;

@@ -197,6 +197,7 @@ fn board_run_to(
     let plan = if faulty { faults(ms) } else { vec![] };
     let timing = Timing {
         clkin: false,
+        rtc_tick: gyro_array::emu::RtcTick::Microsecond,
         pll: [0.004, -0.007, 0.002, -0.01].map(|o| ClockParams {
             offset: o,
             drift_per_s: 1e-5,

@@ -20,7 +20,7 @@
 
 use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR};
 use gyro_array::emu::timing::{ClockParams, Vibration};
-use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile};
+use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile, RtcTick};
 use host_tests::single_chip::{chip, run, Reads};
 use host_tests::timed_array::{self, Clocks};
 
@@ -100,7 +100,7 @@ fn output(r: &Reads, n: usize) -> Vec<(f64, f64)> {
         .chunks_exact(n)
         .map(|c| {
             let v = c.iter().map(|s| s.raw[0] as f64 / 131.0).sum::<f64>() / n as f64;
-            let t = c.iter().map(|s| s.stamp_us as f64).sum::<f64>() / n as f64;
+            let t = c.iter().map(|s| s.stamp as f64).sum::<f64>() / n as f64;
             (v, t)
         })
         .collect()
@@ -217,7 +217,7 @@ fn fusion_table(
         delay_us
     );
     println!(
-        "{:<36} {:<8} {:>22} {:>30} {:>6} {:>6}",
+        "{:<36} {:<22} {:>22} {:>30} {:>6} {:>6}",
         "motion", "clocks", "ratio x / y / z", "lag error ± its sd, µs x/y/z", "short", "rep"
     );
     let mut lines = Vec::new();
@@ -296,7 +296,21 @@ fn fusion_table(
     let mut unmeasured = 0;
     for (name, profile, scale_errors, vibration) in classes {
         for (cname, clocks, restart) in [
-            ("CLKIN", Clocks::ClkIn, None),
+            (
+                "CLKIN, count 1 µs",
+                Clocks::ClkIn(RtcTick::Microsecond),
+                None,
+            ),
+            (
+                "CLKIN, count 32/30 µs",
+                Clocks::ClkIn(RtcTick::Scaled),
+                None,
+            ),
+            (
+                "CLKIN, count a period",
+                Clocks::ClkIn(RtcTick::Period),
+                None,
+            ),
             ("free", Clocks::Free, None),
             ("restart", Clocks::Free, Some(seconds * 500)),
         ] {
@@ -345,7 +359,7 @@ fn fusion_table(
                 }
             }
             println!(
-                "{:<36} {:<8} {:>22} {:>30} {:>6} {:>6}",
+                "{:<36} {:<22} {:>22} {:>30} {:>6} {:>6}",
                 name,
                 cname,
                 format!("{:.3} / {:.3} / {:.3}", ratio[0], ratio[1], ratio[2]),

@@ -61,7 +61,7 @@ pub(super) fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
             let r = if fifo_only {
                 let mut buf = [gyro_array::drivers::icm42688::FifoSample {
                     raw: [0; 3],
-                    stamp_us: 0,
+                    stamp: 0,
                 }; 4];
                 black_box(timed_g.driver().read_fifo(&mut buf))
                     .map(|_| ())

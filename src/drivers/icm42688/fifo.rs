@@ -9,9 +9,10 @@ use super::*;
 pub struct FifoSample {
     /// Raw counts per axis.
     pub raw: [i16; 3],
-    /// The chip's timestamp of the sample, µs of its own clock (TMST_RES
-    /// = 0), extended past the packet's 16 bits.
-    pub stamp_us: u32,
+    /// The chip's timestamp of the sample in its counts (TMST_RES = 0: on
+    /// its own clock 32/30 µs a count, on CLKIN open:
+    /// `pipeline::stamps`), extended past the packet's 16 bits.
+    pub stamp: u32,
 }
 
 /// What one FIFO read found.
@@ -67,14 +68,14 @@ pub(super) fn parse_packets<E>(
         }
         let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
         let stamp16 = u16::from_be_bytes([p[14], p[15]]);
-        let stamp_us = match st {
+        let stamp = match st {
             Some(prev) => prev.wrapping_add(stamp16.wrapping_sub(prev as u16) as u32),
             None => stamp16 as u32,
         };
-        st = Some(stamp_us);
+        st = Some(stamp);
         let x = FifoSample {
             raw: [w(7), w(9), w(11)],
-            stamp_us,
+            stamp,
         };
         last = Some(x);
         each(x);

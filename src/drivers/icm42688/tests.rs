@@ -318,17 +318,17 @@ fn fifo_reads_one_packet_in_one_transaction_and_more_in_a_second() {
     let (mut spi, mut g) = fifo_driver(&s);
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 4];
     let r = g.read_fifo(&mut out).unwrap();
     assert_eq!((r.samples, r.left, r.status), (1, 0, 0x08));
     assert_eq!(out[0].raw, [1, -2, 3]);
-    assert_eq!(out[0].stamp_us, 0xFFF0);
+    assert_eq!(out[0].stamp, 0xFFF0);
     let r = g.read_fifo(&mut out).unwrap();
     assert_eq!((r.samples, r.left), (2, 0));
     assert_eq!(out[0].raw, [4, 5, 6]);
-    assert_eq!(out[0].stamp_us, 0xFFF0 + 1000);
-    assert_eq!(out[1].stamp_us, 0xFFF0 + 2000);
+    assert_eq!(out[0].stamp, 0xFFF0 + 1000);
+    assert_eq!(out[1].stamp, 0xFFF0 + 2000);
     assert_eq!(g.read_fifo(&mut out).unwrap().samples, 0);
     spi.done();
 }
@@ -356,14 +356,14 @@ fn at_2_khz_one_burst_holds_two_packets_and_the_rest_comes_in_one_more() {
     g.per_read = g.config.per_read();
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 8];
     assert_eq!(g.read_fifo(&mut out).unwrap().samples, 2);
     assert_eq!(out[1].raw, [2, 2, 2]);
     assert_eq!(g.read_fifo(&mut out).unwrap().samples, 1);
     assert_eq!(g.read_fifo(&mut out).unwrap().samples, 4);
     assert_eq!(out[3].raw, [7, 7, 7]);
-    assert_eq!(out[3].stamp_us, 3100);
+    assert_eq!(out[3].stamp, 3100);
     spi.done();
 }
 
@@ -375,7 +375,7 @@ fn fifo_leaves_what_the_buffer_cannot_hold() {
     let (mut spi, mut g) = fifo_driver(&s);
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 2];
     let r = g.read_fifo(&mut out).unwrap();
     assert_eq!((r.samples, r.left), (2, 1));
@@ -401,7 +401,7 @@ fn fifo_overflow_bad_header_short_fifo_and_reset_are_typed_errors() {
     let (mut spi, mut g) = fifo_driver(&s);
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 2];
     assert_eq!(g.read_fifo(&mut out), Err(Error::FifoOverflow));
     assert_eq!(g.read_fifo(&mut out), Err(Error::FifoBadHeader(0x28)));
@@ -425,7 +425,7 @@ fn fifo_full_beside_a_count_no_full_fifo_has_is_a_bad_status_and_flushes_nothing
     let (mut spi, mut g) = fifo_driver(&s);
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 2];
     assert_eq!(g.read_fifo(&mut out), Err(Error::FifoBadStatus(0x0A)));
     let r = g.read_fifo(&mut out).unwrap();
@@ -440,7 +440,7 @@ fn fifo_read_without_fifo_sampling_is_refused() {
     g.config.sampling = Sampling::Registers;
     let mut out = [FifoSample {
         raw: [0; 3],
-        stamp_us: 0,
+        stamp: 0,
     }; 1];
     assert_eq!(g.read_fifo(&mut out), Err(Error::NotFifo));
     spi.done();
