@@ -21,9 +21,12 @@ pub struct RealLike {
     pub fused: f64,
     pub mean: f64,
     pub oracle: f64,
-    /// Leave-one-out over the plain mean's, and fixed inverse-variance
-    /// weights' over the plain mean's (root of summed squares over seeds).
+    /// Leave-one-out over the plain mean's: the firmware fusing the
+    /// others, the whole fusion's weights renormalised over the others
+    /// (`assess::LooChip::own`), and fixed inverse-variance weights (root
+    /// of summed squares over seeds).
     pub loo: f64,
+    pub own: f64,
     pub fixed_iv: f64,
     /// Worst share of samples with one chip above 0.9 of the weight.
     pub one_chip: f64,
@@ -64,7 +67,7 @@ struct One {
     fused: f64,
     mean: f64,
     oracle: f64,
-    loo: [f64; 3],
+    loo: [f64; 4],
     one_chip: f64,
     adev: Option<(f64, f64, f64)>,
 }
@@ -105,7 +108,12 @@ fn judge(chips: &[Vec<f64>], truth: &[f64], sigma: &[f64], tau0: f64) -> One {
         fused: assess::rms_demeaned(&r.fused, truth),
         mean: assess::rms_demeaned(&mean, truth),
         oracle: assess::rms_demeaned(&oracle, truth),
-        loo: [sq(&|c| c.fused), sq(&|c| c.mean), sq(&|c| c.fixed_iv)],
+        loo: [
+            sq(&|c| c.fused),
+            sq(&|c| c.mean),
+            sq(&|c| c.fixed_iv),
+            sq(&|c| c.own),
+        ],
         one_chip: a.one_chip_share,
         adev,
     }
@@ -131,6 +139,7 @@ fn pool(name: String, ones: &[One]) -> RealLike {
         oracle: avg(&|o| o.oracle),
         loo: (sum(0) / sum(1)).sqrt(),
         fixed_iv: (sum(2) / sum(1)).sqrt(),
+        own: (sum(3) / sum(1)).sqrt(),
         one_chip: ones.iter().map(|o| o.one_chip).fold(0.0, f64::max),
         adev,
     }
@@ -291,11 +300,12 @@ pub fn real_like_classes(seed: u64) -> Vec<RealLike> {
     for c in &out {
         println!("  {}", c.name);
         println!(
-            "    truth RMS: fused {:.5}, mean {:.5}, true-noise weights {:.5}; leave-one-out {:.3}x the mean (fixed weights {:.3}x); one chip > 0.9 on {:.2} %{}",
+            "    truth RMS: fused {:.5}, mean {:.5}, true-noise weights {:.5}; leave-one-out {:.3}x the mean (the whole fusion's weights {:.3}x, fixed weights {:.3}x); one chip > 0.9 on {:.2} %{}",
             c.fused,
             c.mean,
             c.oracle,
             c.loo,
+            c.own,
             c.fixed_iv,
             100.0 * c.one_chip,
             c.adev.map_or(String::new(), |(w, lo, hi)| format!(
