@@ -643,7 +643,26 @@ impl Icm42688Model {
             }
             self.bank0[reg::INT_STATUS as usize] |= bits::DATA_RDY;
             if self.int1_drdy() {
-                t.int1_s = Some(next);
+                // A new rising edge only once the last pulse (100 µs, or
+                // 8 µs with INT_TPULSE_DURATION) and the minimum
+                // de-assertion after it (100 µs, none with
+                // INT_TDEASSERT_DISABLE) are over (datasheet,
+                // INT_CONFIG1); a data ready within them is no edge the
+                // board's timer can capture.
+                let c1 = self.bank0[reg::INT_CONFIG1 as usize];
+                let pulse = if c1 & bits::INT_TPULSE_DURATION != 0 {
+                    8e-6
+                } else {
+                    100e-6
+                };
+                let gap = if c1 & bits::INT_TDEASSERT_DISABLE != 0 {
+                    0.0
+                } else {
+                    100e-6
+                };
+                if t.int1_s.is_none_or(|l| next - l >= pulse + gap) {
+                    t.int1_s = Some(next);
+                }
             }
             self.push_packet(&mut t, out);
         }

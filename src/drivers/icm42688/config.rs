@@ -121,11 +121,20 @@ impl Config {
     /// INT_CONFIG, INT_CONFIG1 and INT_SOURCE0: with the FIFO, a pulse on
     /// INT1 at every sample (the board captures its time: the instant each
     /// sample was made, on the board's clock); otherwise their reset values.
+    /// From 4 kHz the short pulse and no minimum de-assertion, as the
+    /// datasheet requires: with the 100 µs pulse and 100 µs de-assertion a
+    /// pulse cannot follow one less than 200 µs before, and at 8 kHz every
+    /// other sample's edge was lost.
     pub(super) fn int1(&self) -> [u8; 3] {
+        let fast = if self.odr.hz() >= 4000.0 {
+            bits::INT_TPULSE_DURATION | bits::INT_TDEASSERT_DISABLE
+        } else {
+            0
+        };
         match self.sampling {
             Sampling::Fifo => [
                 bits::INT1_PUSH_PULL_HIGH,
-                reset::INT_CONFIG1 & !bits::INT_ASYNC_RESET,
+                (reset::INT_CONFIG1 & !bits::INT_ASYNC_RESET) | fast,
                 bits::UI_DRDY_INT1_EN,
             ],
             Sampling::Registers => [0, reset::INT_CONFIG1, reset::INT_SOURCE0],

@@ -88,6 +88,12 @@ pub mod bits {
     /// INT_CONFIG1.INT_ASYNC_RESET (bit 4): must be cleared for the INT
     /// pins to work (datasheet 14.x; PX4 clears it).
     pub const INT_ASYNC_RESET: u8 = 1 << 4;
+    /// INT_CONFIG1.INT_TPULSE_DURATION (bit 6): an 8 µs interrupt pulse
+    /// instead of 100 µs, and INT_TDEASSERT_DISABLE (bit 5): no 100 µs
+    /// minimum de-assertion; both "required if ODR ≥ 4 kHz" (datasheet,
+    /// INT_CONFIG1; PX4 and TDK's examples set them).
+    pub const INT_TPULSE_DURATION: u8 = 1 << 6;
+    pub const INT_TDEASSERT_DISABLE: u8 = 1 << 5;
     /// INT_SOURCE0.UI_DRDY_INT1_EN: data ready on INT1.
     pub const UI_DRDY_INT1_EN: u8 = 1 << 3;
     /// Bank 1 GYRO_CONFIG_STATIC2.
