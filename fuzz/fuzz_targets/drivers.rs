@@ -63,7 +63,7 @@ fuzz_target!(|data: &[u8]| {
         let _ = g.init(&mut NoDelay, cfg);
         let mut buf = [FifoSample {
             raw: [0; 3],
-            stamp_us: 0,
+            stamp: 0,
         }; 4];
         for _ in 0..6 {
             if let Ok(r) = g.read_fifo(&mut buf) {
