@@ -41,14 +41,17 @@ const VOTE_WITHIN: f64 = 0.15;
 pub struct StampScale {
     /// Nominal chip µs between samples.
     period_us: u32,
-    /// µs per count × 2³² (1.6·10⁻¹¹ of a 32/30 µs count: no drift a
-    /// clock tracker would see).
-    k32: u64,
+    /// µs per count × 2¹⁶ (within 10⁻⁶ of the unit: a clock error of
+    /// 1 ppm, which the tracker measures with the rest). A step times it
+    /// is one 32 × 32 → 64-bit multiply on the Cortex-M4 (with 2³² it was
+    /// a 64-bit multiply by call, some 640 instructions a sample on the
+    /// board's frame path).
+    k16: u32,
     /// The last count's low 16 bits, and the µs it stands for (with the
-    /// remainder of the product, 2⁻³² µs).
+    /// remainder of the product, 2⁻¹⁶ µs).
     last: Option<u16>,
     us: u32,
-    rem: u64,
+    rem: u32,
     /// While learning on CLKIN: each reading's votes.
     votes: [u16; 3],
     decided: bool,
@@ -56,9 +59,9 @@ pub struct StampScale {
     changed: bool,
 }
 
-fn k32_of(us_per_count: f64) -> u64 {
-    // (f64: the product needs more than f32's 24 bits; once a decision.)
-    libm::round(us_per_count * 4_294_967_296.0) as u64
+fn k16_of(us_per_count: f64) -> u32 {
+    // (Once a decision.)
+    libm::round(us_per_count * 65_536.0) as u32
 }
 
 impl StampScale {
@@ -70,7 +73,7 @@ impl StampScale {
         };
         Self {
             period_us,
-            k32: k32_of(guess),
+            k16: k16_of(guess),
             last: None,
             us: 0,
             rem: 0,
@@ -83,13 +86,13 @@ impl StampScale {
 
     /// µs of the chip's nominal clock per count.
     pub fn us_per_count(&self) -> f32 {
-        (self.k32 as f64 / 4_294_967_296.0) as f32
+        self.k16 as f32 / 65_536.0
     }
 
     /// One wrap of the 16-bit count, µs: what a count of unknown high bits
     /// (after a flush) may be off by.
     pub fn wrap_us(&self) -> u32 {
-        (self.k32 >> 16) as u32
+        self.k16
     }
 
     /// Whether the unit has been decided.
@@ -109,13 +112,13 @@ impl StampScale {
             if !self.decided {
                 self.learn(d);
             }
-            let acc = u64::from(d) * self.k32 + self.rem;
-            self.us = self.us.wrapping_add((acc >> 32) as u32);
-            self.rem = acc & 0xFFFF_FFFF;
+            let acc = u64::from(d) * u64::from(self.k16) + u64::from(self.rem);
+            self.us = self.us.wrapping_add((acc >> 16) as u32);
+            self.rem = (acc & 0xFFFF) as u32;
         } else {
-            let acc = u64::from(c) * self.k32;
-            self.us = (acc >> 32) as u32;
-            self.rem = acc & 0xFFFF_FFFF;
+            let acc = u64::from(c) * u64::from(self.k16);
+            self.us = (acc >> 16) as u32;
+            self.rem = (acc & 0xFFFF) as u32;
         }
         self.last = Some(c);
         self.us
@@ -140,9 +143,9 @@ impl StampScale {
         };
         self.votes[k] += 1;
         if self.votes[k] >= LEARN_SAMPLES {
-            let k32 = k32_of(CLKIN_US_PER_COUNT[k]);
-            self.changed = k32 != self.k32;
-            self.k32 = k32;
+            let k16 = k16_of(CLKIN_US_PER_COUNT[k]);
+            self.changed = k16 != self.k16;
+            self.k16 = k16;
             self.decided = true;
         }
     }
@@ -160,9 +163,9 @@ mod tests {
     use super::*;
 
     /// Stamps of a chip on its PLL at 1 kHz, a count 32/30 µs: 937.5
-    /// counts a sample. The µs come out 1 000 a sample to within the
-    /// rounding of one count, for 10⁵ samples (past the 16-bit wrap many
-    /// times and the 2³² count too).
+    /// counts a sample. The µs come out 1 000 a sample (times the unit's
+    /// rounding, 1 ppm) to within the rounding of one count, for 10⁵
+    /// samples (past the 16-bit wrap many times and the 2³² count too).
     #[test]
     fn pll_counts_come_out_as_microseconds() {
         let mut s = StampScale::new(ClockInput::Internal, 1000);
@@ -171,7 +174,7 @@ mod tests {
             let count = (k * 9375 / 10 + 4_294_000_000) as u32;
             let us = s.convert(count);
             let f = *first.get_or_insert(us);
-            let want = (k * 1000) as i64;
+            let want = (k as f64 * 937.5 * f64::from(s.us_per_count())).round() as i64;
             let got = us.wrapping_sub(f) as i64;
             assert!((got - want).abs() <= 2, "sample {k}: {got} vs {want}");
         }
