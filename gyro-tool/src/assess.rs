@@ -176,55 +176,50 @@ pub fn is_static(chips: &[Vec<f64>], hat: &[f64]) -> bool {
     rms.is_finite() && noise.is_finite() && rms <= 3.0 * noise + 0.05
 }
 
+/// The weighted mean of the (value, weight) pairs whose value is finite
+/// and weight above 0 (NaN if none).
+fn weighted_mean(pairs: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (mut s, mut sw) = (0.0, 0.0);
+    for (v, w) in pairs {
+        if v.is_finite() && w > 0.0 {
+            s += w * v;
+            sw += w;
+        }
+    }
+    if sw > 0.0 {
+        s / sw
+    } else {
+        f64::NAN
+    }
+}
+
 /// Fuse `chips` with fixed weights `w` (renormalised over the finite
 /// ones each sample).
 fn fixed(chips: &[&Vec<f64>], w: &[f64]) -> Vec<f64> {
-    let n = chips[0].len();
-    (0..n)
-        .map(|i| {
-            let (mut s, mut sw) = (0.0, 0.0);
-            for (c, &wc) in chips.iter().zip(w) {
-                if c[i].is_finite() {
-                    s += wc * c[i];
-                    sw += wc;
-                }
-            }
-            if sw > 0.0 {
-                s / sw
-            } else {
-                f64::NAN
-            }
-        })
+    (0..chips[0].len())
+        .map(|i| weighted_mean(chips.iter().zip(w).map(|(c, &wc)| (c[i], wc))))
         .collect()
 }
 
 /// Each sample, the chips but `skip` weighted by the whole fusion's own
-/// weights `w` renormalised over them (each chip's mean taken out first, the
-/// stand-in for the calibration's offsets): how well the weights the
-/// fusion learnt from every chip predict the one left out.
-fn renormalised(chips: &[Vec<f64>], w: &[[f32; MAX_CHIPS]], skip: usize) -> Vec<f64> {
-    let means: Vec<f64> = chips
-        .iter()
-        .map(|c| {
-            let f: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
-            f.iter().sum::<f64>() / f.len().max(1) as f64
-        })
-        .collect();
+/// weights `w` renormalised over them, each chip's mean (`means`) taken out
+/// first, the stand-in for the calibration's offsets: how well the weights
+/// the fusion learnt from every chip predict the one left out.
+fn renormalised(
+    chips: &[Vec<f64>],
+    means: &[f64],
+    w: &[[f32; MAX_CHIPS]],
+    skip: usize,
+) -> Vec<f64> {
     (0..chips[0].len())
         .map(|i| {
-            let (mut s, mut sw) = (0.0, 0.0);
-            for (c, chip) in chips.iter().enumerate() {
-                let wc = f64::from(w[i][c]);
-                if c != skip && chip[i].is_finite() && wc > 0.0 {
-                    s += wc * (chip[i] - means[c]);
-                    sw += wc;
-                }
-            }
-            if sw > 0.0 {
-                s / sw
-            } else {
-                f64::NAN
-            }
+            weighted_mean(
+                chips
+                    .iter()
+                    .enumerate()
+                    .filter(|&(c, _)| c != skip)
+                    .map(|(c, chip)| (chip[i] - means[c], f64::from(w[i][c]))),
+            )
         })
         .collect()
 }
@@ -243,6 +238,14 @@ pub fn assess(chips: &[Vec<f64>], r: &Replay, tau0: f64) -> Res<Assessment> {
         .map(|&v| 1.0 / v.max(top * 1e-6).max(f64::MIN_POSITIVE))
         .collect();
     let mut loo = Vec::new();
+    // Each chip's mean over its finite samples, for `renormalised`.
+    let means: Vec<f64> = chips
+        .iter()
+        .map(|c| {
+            let f: Vec<f64> = c.iter().copied().filter(|v| v.is_finite()).collect();
+            f.iter().sum::<f64>() / f.len().max(1) as f64
+        })
+        .collect();
     if k >= 3 {
         for i in 0..k {
             let others: Vec<Vec<f64>> = (0..k)
@@ -257,7 +260,7 @@ pub fn assess(chips: &[Vec<f64>], r: &Replay, tau0: f64) -> Res<Assessment> {
                 fused: rms_demeaned(&fused, &chips[i]),
                 mean: rms_demeaned(&fixed(&refs, &ones), &chips[i]),
                 fixed_iv: rms_demeaned(&fixed(&refs, &w), &chips[i]),
-                own: rms_demeaned(&renormalised(chips, &r.weights, i), &chips[i]),
+                own: rms_demeaned(&renormalised(chips, &means, &r.weights, i), &chips[i]),
             });
         }
     }

@@ -174,13 +174,14 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// `cfg`, and the capture of its INT1.
     pub fn new(g: Icm42688<SPI>, capture: C) -> Self {
         let cfg = g.config();
+        let period_us = libm::roundf(1e6 / cfg.odr.hz()) as u32;
         Self {
             g,
             capture,
             clock: ChipClock::new(),
             align: Aligner::new(cfg.odr.per_ms() as u8),
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
-            period_us: libm::roundf(1e6 / cfg.odr.hz()) as u32,
+            period_us,
             dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
             spike_lsb: (SPIKE_DPS * cfg.full_scale.lsb_per_dps()) as u32,
             at: None,
@@ -188,7 +189,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             last_raw: [0; 3],
             dry: 0,
             rejoin: REJOIN_READS,
-            scale: StampScale::new(cfg.clock, libm::roundf(1e6 / cfg.odr.hz()) as u32),
+            scale: StampScale::new(cfg.clock, period_us),
             stamp_offset: 0,
             rebase: false,
             spike: SpikeCheck::new(),
