@@ -159,6 +159,8 @@ fn timings(c: Clocks, vibration: Vibration, clock_seed: Option<u64>) -> [ChipTim
             Clocks::ClkIn(t) => t,
             Clocks::Free => RtcTick::Microsecond,
         },
+        // Its bus takes no time a byte: nothing comes during a burst.
+        past_count: gyro_array::emu::PastCount::HandOver,
     })
 }
 

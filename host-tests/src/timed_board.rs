@@ -13,7 +13,7 @@ use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay, Fault,
-    RateProfile, RtcTick,
+    PastCount, RateProfile, RtcTick,
 };
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
@@ -38,6 +38,8 @@ pub struct Timing {
     pub vibration: Vibration,
     /// What a FIFO stamp count is on CLKIN (open in the sources).
     pub rtc_tick: RtcTick,
+    /// What a burst past the FIFO count gets (open in the datasheet).
+    pub past_count: PastCount,
 }
 
 /// What the harness hands each sample's callback.
@@ -62,6 +64,9 @@ pub struct Ran {
     pub clock_inputs: [ClockInput; N],
     /// Each chip's clock error as its tracker reports it at the end, ppm.
     pub clock_ppm: [f32; N],
+    /// FIFO packets each emulated chip's bus read out whole (the truth
+    /// [`Ran::timing`]'s samples are held to).
+    pub read_out: [u64; N],
 }
 
 /// Run `samples` pipeline steps. `stall(n)` > 0 before step `n` makes the
@@ -83,6 +88,7 @@ pub fn run(
             pll: timing.pll[i],
             vibration: timing.vibration,
             rtc_tick: timing.rtc_tick,
+            past_count: timing.past_count,
             ..ChipTiming::pll(0.0)
         }),
     );
@@ -91,6 +97,11 @@ pub fn run(
     }
     let cs: [CsLine; N] = Default::default();
     let bus: Bus = RefCell::new(EmuBus::new(chips, &cs));
+    // Each byte takes its time at the board's ICM-42688-P SPI clock: the
+    // chips sample while a burst is read, as on the board.
+    with_bus(&bus, |b| {
+        b.spi_byte_s = 8.0 / f64::from(timed::BOARD_SPI_ICM_HZ);
+    });
     if timing.clkin {
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
     }
@@ -168,5 +179,11 @@ pub fn run(
         timing: core::array::from_fn(|i| t[i].counters),
         clock_inputs: core::array::from_fn(|i| t[i].clock_input()),
         clock_ppm: core::array::from_fn(|i| t[i].clock().error_ppm()),
+        read_out: core::array::from_fn(|i| {
+            with_bus(&bus, |b| {
+                b.chips[i].icm().map_or(0, |c| c.packets_read_out())
+            })
+            .unwrap_or(0)
+        }),
     }
 }

@@ -3,8 +3,8 @@
 use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::timing::{
-    aaf_hz, ui_divisor, ClockParams, ClockUse, Fifo, PathSettings, Pushed, SignalPath, Vibration,
-    AFSR_FREEZE_S, AFSR_SWITCH_DPS, ICM_INTERNAL_HZ,
+    aaf_hz, ui_divisor, ClockParams, ClockUse, Fifo, PastCount, PathSettings, Pushed, SignalPath,
+    Vibration, AFSR_FREEZE_S, AFSR_SWITCH_DPS, ICM_INTERNAL_HZ,
 };
 use super::{corrupt, Fault, Rng};
 use crate::drivers::icm42688::{
@@ -37,6 +37,9 @@ pub struct ChipTiming {
     /// What a timestamp count is on CLKIN with TMST_RES = 0, which the
     /// public sources leave open.
     pub rtc_tick: RtcTick,
+    /// What a burst past the FIFO count gets, which the datasheet leaves
+    /// open.
+    pub past_count: PastCount,
 }
 
 /// What one FIFO timestamp count is with RTC_MODE on CLKIN and TMST_RES =
@@ -87,6 +90,7 @@ impl ChipTiming {
             vibration: Vibration::NONE,
             path: PathModel::Filters,
             rtc_tick: RtcTick::Microsecond,
+            past_count: PastCount::HandOver,
         }
     }
 }
@@ -144,7 +148,7 @@ impl Timed {
             made: 0,
             int1_s: None,
             paths: [path; 3],
-            fifo: Fifo::default(),
+            fifo: Fifo::reading(timing.past_count),
             afsr_hold: [0; 3],
             last_dps: [0.0; 3],
             last_out: [0; 3],
@@ -154,9 +158,11 @@ impl Timed {
     /// After a reset: a new phase from now, empty FIFO, filters restart.
     fn restart(&mut self) {
         let t = Self::new(self.timing, self.now_s);
-        let failed = self.pll_failed;
+        let (failed, read_out) = (self.pll_failed, self.fifo.read_out);
         *self = t;
         self.pll_failed = failed;
+        // A new FIFO (new serials): what it hands over counts on.
+        self.fifo.read_out = read_out;
     }
 }
 
@@ -229,6 +235,12 @@ impl Icm42688Model {
     /// on its own clock (`None` for the lockstep sampler).
     pub fn clock_origin_s(&self) -> Option<f64> {
         self.timed.as_ref().map(|t| t.origin_s)
+    }
+
+    /// Distinct FIFO packets handed over whole on the bus (every reset
+    /// included; [`super::timing::Fifo`]).
+    pub fn packets_read_out(&self) -> u64 {
+        self.timed.as_ref().map_or(0, |t| t.fifo.read_out)
     }
 
     /// Output samples made since the last reset.
@@ -421,8 +433,13 @@ impl Icm42688Model {
                 // byte is the FIFO's next (as PX4 reads INT_STATUS, the
                 // count and the packets in one transaction).
                 self.phase = Phase::Read(if fifo { a } else { a.wrapping_add(1) & 0x7F });
+                let count = (a == reg::FIFO_COUNTH || a == reg::FIFO_COUNTL) && self.bank() == 0;
                 let v = match self.timed.as_mut() {
                     Some(t) if fifo && self.fault != Fault::PoweredOff => t.fifo.read_byte(),
+                    Some(t) if count => {
+                        t.fifo.latch();
+                        self.read_reg(a)
+                    }
                     _ => self.read_reg(a),
                 };
                 // INT_STATUS clears on read (datasheet 14.x).

@@ -27,6 +27,7 @@ pub use icm42688::{ChipTiming, Icm42688Model, PathModel, RtcTick};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;
+pub use timing::PastCount;
 
 /// A fault the emulated chip injects on demand.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -272,6 +273,21 @@ pub struct EmuBus<'a, const N: usize> {
     pub clock: Option<fn() -> u64>,
     /// What [`EmuBus::clock`] measured.
     pub meter: Meter,
+    /// Each byte on the bus takes this long, s (0: a transaction takes no
+    /// time). With it, chips sample while a burst is read (a sample can
+    /// land between a FIFO count's read and the capture read after the
+    /// burst); [`EmuBus::advance`] then advances by what is left of its
+    /// step, so a loop that steps by its period keeps it.
+    pub spi_byte_s: f64,
+    /// Time the bytes advanced since the last [`EmuBus::advance`].
+    spi_ahead_s: f64,
+    /// Chip `i`'s next transaction of more than `cut[i]` bytes loses its
+    /// chip select after that many (a glitch on the line): the chip sees
+    /// its frame end there, and the rest of the bytes read the idle
+    /// line's 0xFF.
+    pub cut: [Option<u32>; N],
+    /// Bytes of each chip's current frame.
+    frame_bytes: [u32; N],
 }
 
 /// Time inside the emulated bus's operations, in the clock's units, and
@@ -297,6 +313,10 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             bytes: 0,
             clock: None,
             meter: Meter::default(),
+            spi_byte_s: 0.0,
+            spi_ahead_s: 0.0,
+            cut: [None; N],
+            frame_bytes: [0; N],
         }
     }
 
@@ -313,12 +333,32 @@ impl<'a, const N: usize> EmuBus<'a, N> {
         r
     }
 
-    /// Advance every chip by one sample period.
+    /// Advance every chip by one sample period (less the time the bus's
+    /// bytes took since the last, [`EmuBus::spi_byte_s`]).
     pub fn advance(&mut self, dt_s: f32) {
-        self.t_s += dt_s;
-        self.t64_s += dt_s as f64;
+        if self.spi_ahead_s == 0.0 {
+            self.t_s += dt_s;
+            self.t64_s += dt_s as f64;
+            for c in self.chips.iter_mut() {
+                c.advance(self.t_s, dt_s, self.t64_s, self.clkin_hz);
+            }
+            return;
+        }
+        let d = f64::from(dt_s) - self.spi_ahead_s;
+        self.spi_ahead_s = 0.0;
+        if d > 0.0 {
+            self.advance_by(d);
+        } else {
+            self.spi_ahead_s = -d;
+        }
+    }
+
+    /// Advance every chip by `d_s`, f64 (a byte's time).
+    fn advance_by(&mut self, d_s: f64) {
+        self.t64_s += d_s;
+        self.t_s = self.t64_s as f32;
         for c in self.chips.iter_mut() {
-            c.advance(self.t_s, dt_s, self.t64_s, self.clkin_hz);
+            c.advance(self.t_s, d_s as f32, self.t64_s, self.clkin_hz);
         }
     }
 
@@ -369,9 +409,28 @@ impl<'a, const N: usize> EmuBus<'a, N> {
         let edges = self.cs[i].edges.get();
         if edges != self.seen[i] {
             self.seen[i] = edges;
+            self.frame_bytes[i] = 0;
             self.chips[i].begin_frame();
         }
-        Ok(self.chips[i].exchange(mosi))
+        let n = self.frame_bytes[i];
+        self.frame_bytes[i] = n.saturating_add(1);
+        let miso = match self.cut[i] {
+            Some(k) if n >= k => {
+                if n == k {
+                    // One glitch: the next transaction is whole.
+                    self.cut[i] = None;
+                    self.frame_bytes[i] = u32::MAX;
+                }
+                0xFF
+            }
+            _ if self.frame_bytes[i] == u32::MAX => 0xFF,
+            _ => self.chips[i].exchange(mosi),
+        };
+        if self.spi_byte_s > 0.0 {
+            self.advance_by(self.spi_byte_s);
+            self.spi_ahead_s += self.spi_byte_s;
+        }
+        Ok(miso)
     }
 }
 

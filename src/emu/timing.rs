@@ -307,6 +307,42 @@ pub struct Fifo {
     pub packet_len: usize,
     /// Packets dropped for want of room since the last flush.
     pub dropped: u32,
+    /// What a read past the count gives.
+    pub past: PastCount,
+    /// Bytes held when this transaction read the count (none read yet).
+    latched: Option<usize>,
+    /// Whole packets this transaction read out.
+    served: usize,
+    /// Bytes handed over past the count and kept ([`PastCount::Resend`]).
+    peek: usize,
+    /// Distinct packets handed over whole since the FIFO was made (what a
+    /// driver must hand on once each: the fault campaign's count of lost
+    /// and doubled samples); one sent again counts once.
+    pub read_out: u64,
+    /// Packets stored since the FIFO was made: the serial of the next.
+    pushed: u64,
+    /// The serial after the newest packet handed over whole.
+    next_unhanded: u64,
+}
+
+/// What a burst that reads on past the FIFO count it read gets, which
+/// the datasheet leaves open (it asks for the count's bytes to be read,
+/// section 6.2, and says nothing of more). PX4 and TDK's driver size
+/// their reads by the count and never see it; a board that reads a fixed
+/// burst does. Each reading is a case the evaluations run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PastCount {
+    /// A packet that came during the burst, which leaves the FIFO with it.
+    HandOver,
+    /// The empty marker (0x80), whatever came since: the packet stays.
+    Marker,
+    /// The packet, which also stays and is sent again by the next read.
+    Resend,
+}
+
+impl PastCount {
+    /// Every reading.
+    pub const ALL: [PastCount; 3] = [PastCount::HandOver, PastCount::Marker, PastCount::Resend];
 }
 
 impl Default for Fifo {
@@ -318,6 +354,13 @@ impl Default for Fifo {
             read_in_packet: 0,
             packet_len: 16,
             dropped: 0,
+            past: PastCount::HandOver,
+            latched: None,
+            served: 0,
+            peek: 0,
+            read_out: 0,
+            pushed: 0,
+            next_unhanded: 0,
         }
     }
 }
@@ -334,22 +377,43 @@ pub enum Pushed {
 }
 
 impl Fifo {
+    /// An empty FIFO whose reads past the count get `past`.
+    pub fn reading(past: PastCount) -> Self {
+        Self {
+            past,
+            ..Self::default()
+        }
+    }
+
     /// Empty it (SIGNAL_PATH_RESET.FIFO_FLUSH, a reset).
     pub fn flush(&mut self) {
         self.head = 0;
         self.len = 0;
         self.read_in_packet = 0;
         self.dropped = 0;
+        self.latched = None;
+        self.served = 0;
+        self.peek = 0;
     }
 
-    /// Bytes held (whole packets, the partly read one included).
+    /// Bytes held (whole packets, the partly read one included); in a
+    /// transaction that read the count, as it was then: the emulator takes
+    /// the count's first byte to latch both, as the InvenSense parts
+    /// before it document for their FIFO_COUNTH.
     pub fn bytes(&self) -> usize {
-        self.len
+        self.latched.unwrap_or(self.len)
     }
 
-    /// Packets held.
+    /// Packets held (as [`Fifo::bytes`]).
     pub fn records(&self) -> usize {
-        self.len / self.packet_len.max(1)
+        self.bytes() / self.packet_len.max(1)
+    }
+
+    /// The count is read: what a read past it gets starts after it.
+    pub fn latch(&mut self) {
+        if self.latched.is_none() {
+            self.latched = Some(self.len);
+        }
     }
 
     /// Add one packet; `stop_on_full` chooses what goes when there is no
@@ -377,6 +441,7 @@ impl Fifo {
             self.buf[(self.head + self.len + i) % FIFO_BYTES] = *b;
         }
         self.len += p.len();
+        self.pushed += 1;
         r
     }
 
@@ -388,25 +453,64 @@ impl Fifo {
     }
 
     /// One byte of FIFO_DATA: the next byte of the oldest packet, or 0x80
-    /// when empty.
+    /// when empty; past the count this transaction read, as
+    /// [`Fifo::past`] says.
     pub fn read_byte(&mut self) -> u8 {
+        let plen = self.packet_len.max(1);
+        let beyond = matches!(self.latched, Some(l) if self.served >= l / plen);
+        if beyond {
+            match self.past {
+                PastCount::HandOver => {}
+                PastCount::Marker => return 0x80,
+                PastCount::Resend => {
+                    if self.peek >= self.len {
+                        return 0x80;
+                    }
+                    let b = self.buf[(self.head + self.peek) % FIFO_BYTES];
+                    self.peek += 1;
+                    if self.peek.is_multiple_of(plen) {
+                        self.handed(self.head_serial() + (self.peek / plen - 1) as u64);
+                    }
+                    return b;
+                }
+            }
+        }
         if self.len == 0 {
             return 0x80;
         }
         let b = self.buf[(self.head + self.read_in_packet) % FIFO_BYTES];
         self.read_in_packet += 1;
         if self.read_in_packet >= self.packet_len {
+            self.handed(self.head_serial());
             self.pop_packet();
+            self.served += 1;
         }
         b
     }
 
+    /// The serial of the oldest packet held.
+    fn head_serial(&self) -> u64 {
+        self.pushed - (self.len / self.packet_len.max(1)) as u64
+    }
+
+    /// Packet `serial` was handed over whole.
+    fn handed(&mut self, serial: u64) {
+        if serial >= self.next_unhanded {
+            self.read_out += 1;
+            self.next_unhanded = serial + 1;
+        }
+    }
+
     /// A new transaction begins: a packet read in part is read again from
-    /// its start unless partial reads resume.
+    /// its start unless partial reads resume (datasheet 6.2,
+    /// FIFO_RESUME_PARTIAL_RD); the count is not yet read.
     pub fn begin_transaction(&mut self, resume_partial: bool) {
         if !resume_partial {
             self.read_in_packet = 0;
         }
+        self.latched = None;
+        self.served = 0;
+        self.peek = 0;
     }
 }
 

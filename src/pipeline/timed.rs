@@ -20,7 +20,9 @@ use embedded_hal::spi::SpiDevice;
 use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
 use super::stamps::StampScale;
-use crate::drivers::icm42688::{ClockInput, Config, Error, Icm42688, FIFO_PACKET, MAX_PER_READ};
+use crate::drivers::icm42688::{
+    ClockInput, Config, Error, FifoRead, Icm42688, FIFO_PACKET, FIFO_RECORDS, MAX_PER_READ,
+};
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
 /// Samples kept per chip: 8 ms at 4 kHz, room for an instant up to 7 ms
@@ -52,6 +54,15 @@ pub struct TimingCounters {
     pub clkin_lost: u32,
     /// Samples left out as spikes (see [`SPIKE_DPS`]).
     pub spikes: u32,
+    /// FIFO reads that found the stream out of step (a bad header, a
+    /// count the FIFO did not hold, a garbled status): a gap.
+    pub bad_fifo: u32,
+    /// Packets the chip sent again after handing them over past a burst's
+    /// count, dropped.
+    pub resent: u32,
+    /// Bursts cut inside a packet (chip select lost), the packet read
+    /// again whole.
+    pub cuts: u32,
 }
 
 /// A step between two of a chip's samples (0.25 ms apart at 4 kHz) larger
@@ -259,28 +270,60 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.rebase = false;
     }
 
-    /// The clock's observation for one FIFO read: the newest sample's
-    /// stamp (µs of the chip's clock, [`StampScale`]) and the INT1 capture
-    /// after it.
-    fn observe(&mut self, newest: u32, capture: Option<u32>) {
-        let Some(c) = capture else {
-            return;
-        };
+    /// A sample of burst `f` (its samples' µs in `burst`) and its INT1
+    /// capture, from the captures before and after the burst. The burst
+    /// reads the FIFO's count before its packets, so the newest sample
+    /// counted is the one whose pulse came last before the count was read:
+    /// the capture before the burst, unless a pulse came during it. Such a
+    /// pulse may have come before the count or after it (a window of a
+    /// byte or two, where a chip on CLKIN can keep its phase for seconds,
+    /// and the emulator's per-byte bus time shows it): its sample was
+    /// either counted, or handed over past the count, or left in the FIFO;
+    /// what the burst handed over and, failing that, a second read of the
+    /// count say which. Paired by time alone (the capture after the burst
+    /// with the newest sample), a chip whose pulse fell in that window on
+    /// every read was tracked a sample period off for good.
+    fn pair(
+        &mut self,
+        f: &FifoRead,
+        burst: &[u32; MAX_PER_READ],
+        before: Option<u32>,
+        after: Option<u32>,
+    ) -> Option<(u32, u32)> {
+        if f.left > 0 || f.cut {
+            // Not the newest: the rest is read next.
+            return None;
+        }
+        let at = |i: usize| burst.get(i).copied();
+        let counted = f.counted.checked_sub(1).and_then(at);
+        match after {
+            Some(a) if after != before => {
+                if f.samples > f.counted {
+                    // The pulse's sample came past the count.
+                    Some((at(f.samples - 1)?, a))
+                } else {
+                    match self.g.fifo_count() {
+                        Ok(0) => Some((counted?, a)),
+                        Ok(_) => Some((counted?, before?)),
+                        Err(_) => None,
+                    }
+                }
+            }
+            _ => Some((counted?, before?)),
+        }
+    }
+
+    /// The clock's observation for one FIFO read: a sample's stamp (µs of
+    /// the chip's clock, [`StampScale`]) and its INT1 capture
+    /// ([`TimedIcm::pair`]).
+    fn observe(&mut self, newest: u32, c: u32) {
         if self.rebase {
             self.rebase(newest, c);
             self.clock
                 .reanchor(newest.wrapping_add(self.stamp_offset), c);
             return;
         }
-        // The capture is of the newest sample read, or of one that came
-        // after the FIFO's count was latched: the tracked clock tells.
-        let mut stamp = newest.wrapping_add(self.stamp_offset);
-        if let Some(p) = self.clock.expected_us(stamp) {
-            let ahead = c.wrapping_sub(p) as i32;
-            if ahead > (self.period_us / 2) as i32 {
-                stamp = stamp.wrapping_add(self.period_us);
-            }
-        }
+        let stamp = newest.wrapping_add(self.stamp_offset);
         let jumps = self.clock.jumps;
         self.clock.observe(stamp, c);
         self.counters.jumps = self
@@ -342,10 +385,15 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         // A spike was left out in this read.
         let mut spiked = false;
         let lim = self.spike_lsb;
-        loop {
+        // Bursts until the FIFO is read down: a full FIFO is
+        // FIFO_RECORDS / MAX_PER_READ of them; more is a chip that keeps
+        // cutting its bursts, whose samples wait for the next read.
+        for _ in 0..=FIFO_RECORDS / MAX_PER_READ {
             // Each sample goes to the aligner as it is parsed, on the
             // driver's stamps: the clock is needed only for the instant a
-            // read asks for.
+            // read asks for. The capture before the burst and after it:
+            // which sample the capture is of (see [`TimedIcm::pair`]).
+            let before = self.capture.last_us();
             let Self {
                 g,
                 align,
@@ -354,11 +402,17 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 scale,
                 ..
             } = self;
-            let mut newest = 0;
+            // The burst's samples' µs, in order (at most MAX_PER_READ).
+            let mut burst = [0u32; MAX_PER_READ];
+            let mut nb = 0;
             let r = g.read_fifo_with(MAX_PER_READ, |x| {
                 // Every sample through the scale, spikes too: its µs follow
                 // the count's steps.
-                newest = scale.convert(x.stamp);
+                let newest = scale.convert(x.stamp);
+                if let Some(slot) = burst.get_mut(nb) {
+                    *slot = newest;
+                }
+                nb += 1;
                 if spike.pass(x.raw, lim) {
                     align.push(newest, x.raw);
                 } else {
@@ -366,10 +420,12 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                     counters.spikes = counters.spikes.wrapping_add(1);
                 }
             });
-            let capture = self.capture.last_us();
+            let after = self.capture.last_us();
             match r {
                 Ok(f) => {
                     fresh |= f.samples > 0;
+                    self.counters.resent = self.counters.resent.wrapping_add(f.resent as u32);
+                    self.counters.cuts = self.counters.cuts.wrapping_add(u32::from(f.cut));
                     self.counters.samples = self.counters.samples.wrapping_add(f.samples as u32);
                     if let Some(x) = f.last {
                         self.last_raw = x.raw;
@@ -379,7 +435,9 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                             self.clock.reset();
                             self.gap();
                         }
-                        self.observe(newest, capture);
+                        if let Some((stamp, capture)) = self.pair(&f, &burst, before, after) {
+                            self.observe(stamp, capture);
+                        }
                     }
                     if f.left == 0 {
                         break;
@@ -397,6 +455,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                     // step (flushed); the samples around it are gone. A
                     // garbled status is the chip's own read error too (a
                     // shared stall is FIFO_FULL with a full count, above).
+                    self.counters.bad_fifo = self.counters.bad_fifo.wrapping_add(1);
                     self.gap();
                     return Err(ReadFault::BadResponse);
                 }

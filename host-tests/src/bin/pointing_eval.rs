@@ -198,6 +198,9 @@ fn board_run_to(
     let timing = Timing {
         clkin: false,
         rtc_tick: gyro_array::emu::RtcTick::Microsecond,
+        // One reading of what comes past a burst's count; the timed fault
+        // campaign and the timed tests run every one.
+        past_count: gyro_array::emu::PastCount::HandOver,
         pll: [0.004, -0.007, 0.002, -0.01].map(|o| ClockParams {
             offset: o,
             drift_per_s: 1e-5,

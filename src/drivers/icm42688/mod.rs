@@ -228,6 +228,9 @@ pub struct Icm42688<SPI> {
     check_group: u8,
     /// The last FIFO timestamp (16 bits) and its extension.
     stamp: Option<u32>,
+    /// The last step between two FIFO timestamps, counts (0: none since
+    /// the stream began).
+    step: u16,
     /// RESET_DONE was seen by a read that could not report it.
     reset_seen: bool,
     /// [`Gyro::delay_us`] for the configuration set (worked out when it is
@@ -253,6 +256,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             },
             check_group: 0,
             stamp: None,
+            step: 0,
             reset_seen: false,
             delay_us: 0,
             per_read: 1,
@@ -318,6 +322,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write_checked(reg::INTF_CONFIG1, cfg.intf_config1())?;
         self.write_checked(reg::GYRO_CONFIG1, cfg.gyro_config1())?;
         self.write_checked(reg::GYRO_ACCEL_CONFIG0, cfg.gyro_accel_config0())?;
+        // A new clock (RTC_MODE) steps its stamps by another count.
+        self.step = 0;
         Ok(())
     }
 
@@ -583,6 +589,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                 // for the gyro's start-up.
                 self.full_scale = cfg.full_scale;
                 self.stamp = None;
+                self.step = 0;
                 self.read(reg::INT_STATUS).map_err(bus)?;
                 again(RESTART_FLUSH, 45_000)
             }

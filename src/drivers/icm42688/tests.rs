@@ -367,6 +367,49 @@ fn at_2_khz_one_burst_holds_two_packets_and_the_rest_comes_in_one_more() {
     spi.done();
 }
 
+/// A burst cut inside its last packet (chip select lost: the tail reads
+/// the idle line's 0xFF) leaves that packet, which the chip sends again
+/// whole; a packet handed over past the count and sent again is known by
+/// its stamp. Each sample is handed on once.
+#[test]
+fn a_cut_packet_is_read_again_and_a_packet_sent_again_is_dropped() {
+    let mut s = Vec::new();
+    // Two counted, the second cut after its gyro bytes.
+    let mut cut = vec![0x08, 0x00, 0x02];
+    cut.extend(packet([1, 1, 1], 1000));
+    let mut tail = packet([2, 2, 2], 1234);
+    tail[13..].fill(0xFF);
+    cut.extend(tail);
+    cut.extend([0xFF; 32]);
+    // The next burst: the cut packet whole, one more counted, one past
+    // the count handed over.
+    let mut again = vec![0x08, 0x00, 0x02];
+    again.extend(packet([2, 2, 2], 1234));
+    again.extend(packet([3, 3, 3], 1468));
+    again.extend(packet([4, 4, 4], 1702));
+    again.extend([0x80; 16]);
+    // The packet handed over past the count, sent again, and one more.
+    let mut resent = vec![0x08, 0x00, 0x02];
+    resent.extend(packet([4, 4, 4], 1702));
+    resent.extend(packet([5, 5, 5], 1936));
+    resent.extend([0x80; 32]);
+    s.extend(rd(0x2D, &cut));
+    s.extend(rd(0x2D, &again));
+    s.extend(rd(0x2D, &resent));
+    let (mut spi, mut g) = fifo_driver(&s);
+    g.per_read = 4;
+    let mut got = Vec::new();
+    let r = g.read_fifo_with(8, |x| got.push(x.stamp)).unwrap();
+    assert!(r.cut);
+    assert_eq!((r.samples, r.left), (1, 1));
+    let r = g.read_fifo_with(8, |x| got.push(x.stamp)).unwrap();
+    assert_eq!((r.samples, r.counted, r.left, r.cut), (3, 2, 0, false));
+    let r = g.read_fifo_with(8, |x| got.push(x.stamp)).unwrap();
+    assert_eq!((r.samples, r.resent), (1, 1));
+    assert_eq!(got, [1000, 1234, 1468, 1702, 1936]);
+    spi.done();
+}
+
 #[test]
 fn fifo_leaves_what_the_buffer_cannot_hold() {
     let mut s = Vec::new();
