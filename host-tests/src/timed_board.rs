@@ -40,6 +40,10 @@ pub struct Timing {
     pub rtc_tick: RtcTick,
     /// What a burst past the FIFO count gets (open in the datasheet).
     pub past_count: PastCount,
+    /// Bus time before the board powers the chips up and starts its loop,
+    /// s: where the loop's reads fall against CLKIN's edges and the chips'
+    /// sample grids.
+    pub power_up_s: f64,
 }
 
 /// What the harness hands each sample's callback.
@@ -104,6 +108,9 @@ pub fn run(
     });
     if timing.clkin {
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
+    }
+    if timing.power_up_s > 0.0 {
+        with_bus(&bus, |b| b.advance(timing.power_up_s as f32));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let cfg = Config::board_fifo(if timing.clkin {
@@ -185,5 +192,75 @@ pub fn run(
             })
             .unwrap_or(0)
         }),
+    }
+}
+
+/// One power-up of the phase sweep ([`power_up`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PowerUp {
+    /// Each chip's lag against the truth at the stated instant, µs
+    /// (positive: its rate is older than stated), fitted over the
+    /// measured part of the run on every axis: the rate's error against
+    /// the truth's slope.
+    pub lag_us: [f64; N],
+    /// Each chip's reads in the measured part, and of those, late ones.
+    pub reads: [u32; N],
+    /// See [`PowerUp::reads`].
+    pub late: [u32; N],
+    /// What each chip's timing layer counted over the whole run.
+    pub timing: [gyro_array::pipeline::timed::TimingCounters; N],
+}
+
+/// Power the timed board up with `timing` (its phase in
+/// [`Timing::power_up_s`]) on `profile` for `ms` ms; from `warm_ms` on,
+/// fit each chip's lag at the stated instant and count its late reads.
+/// A chip tracked a sample period off (250 µs at 4 kHz) reads as a lag of
+/// that size.
+pub fn power_up(profile: RateProfile, seed: u64, timing: Timing, ms: u32, warm_ms: u32) -> PowerUp {
+    let mut num = [0.0f64; N];
+    let mut den = [0.0f64; N];
+    let mut at_warm = None;
+    let mut last = None;
+    let ran = run(
+        profile,
+        seed,
+        ms,
+        timing,
+        [Fault::None; N],
+        |_| 0,
+        |smp| {
+            if smp.n == warm_ms {
+                at_warm = Some(*smp.pipe.counters());
+            }
+            last = Some(*smp.pipe.counters());
+            if smp.n < warm_ms {
+                return;
+            }
+            let h = 1e-6;
+            let truth = profile.at_f64(smp.stated_s);
+            let ahead = profile.at_f64(smp.stated_s + h);
+            for (i, rates) in smp.out.rate_dps.iter().enumerate() {
+                for a in 0..3 {
+                    let r = f64::from(rates[a]);
+                    if !r.is_finite() {
+                        continue;
+                    }
+                    let slope = (ahead[a] - truth[a]) / h;
+                    // A rate `lag` old is truth − lag · slope.
+                    num[i] -= (r - truth[a]) * slope;
+                    den[i] += slope * slope;
+                }
+            }
+        },
+    );
+    let (w, l) = (at_warm.expect("warm-up inside the run"), last.expect("ran"));
+    PowerUp {
+        lag_us: core::array::from_fn(|i| num[i] / den[i].max(1e-30) * 1e6),
+        reads: core::array::from_fn(|i| {
+            let f = |c: &gyro_array::pipeline::GyroCounters| c.reads + c.errors + c.late;
+            f(&l[i]) - f(&w[i])
+        }),
+        late: core::array::from_fn(|i| l[i].late - w[i].late),
+        timing: ran.timing,
     }
 }

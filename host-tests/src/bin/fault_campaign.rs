@@ -473,6 +473,7 @@ fn draw_timed(
             vibration: gyro_array::emu::timing::Vibration::NONE,
             rtc_tick,
             past_count,
+            power_up_s: 0.0,
         },
         inj,
         ev,

@@ -201,6 +201,7 @@ fn board_run_to(
         // One reading of what comes past a burst's count; the timed fault
         // campaign and the timed tests run every one.
         past_count: gyro_array::emu::PastCount::HandOver,
+        power_up_s: 0.0,
         pll: [0.004, -0.007, 0.002, -0.01].map(|o| ClockParams {
             offset: o,
             drift_per_s: 1e-5,
