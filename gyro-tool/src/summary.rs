@@ -267,10 +267,17 @@ pub fn status_line(st: &Status) -> String {
     let clocks: Vec<String> = st
         .gyros
         .iter()
-        .map(|g| match g.clock {
-            ClockSource::Polled => "polled".to_string(),
-            ClockSource::Own => format!("own {:+}ppm late {}", g.clock_ppm, g.late),
-            ClockSource::ClkIn => format!("clkin {:+}ppm late {}", g.clock_ppm, g.late),
+        .map(|g| {
+            let f = g.fifo;
+            let fifo = format!(
+                "fifo overflows {} bad {} cuts {} resent {}",
+                f.overflows, f.bad, f.cuts, f.resent
+            );
+            match g.clock {
+                ClockSource::Polled => "polled".to_string(),
+                ClockSource::Own => format!("own {:+}ppm late {} {fifo}", g.clock_ppm, g.late),
+                ClockSource::ClkIn => format!("clkin {:+}ppm late {} {fifo}", g.clock_ppm, g.late),
+            }
         })
         .collect();
     format!(

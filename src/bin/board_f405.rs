@@ -59,8 +59,8 @@ use gyro_array::board::{idle, persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
-use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
-use gyro_array::link::port::{timed_clock, Port};
+use gyro_array::link::msg::Settings;
+use gyro_array::link::port::{timed_clock, ChipTime, Port};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
@@ -382,7 +382,7 @@ fn main() -> ! {
     let mut g4 = AtInstant::new(g4, BOARD_DELAY_US);
     // What the status frames say of each chip's clock.
     let clocks = |t: [&TimedIcm<_, _>; 4]| {
-        let mut c = [(LinkClock::Polled, 0i32); 5];
+        let mut c = [ChipTime::default(); 5];
         for (slot, t) in c.iter_mut().zip(t) {
             *slot = timed_clock(t);
         }

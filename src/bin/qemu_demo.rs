@@ -53,8 +53,8 @@ use gyro_array::emu::{
     board_array, board_drivers, mounted_board, with_bus, BoardDrivers, Chip, ChipTiming, CsLine,
     EmuBus, EmuCapture, EmuDelay, Fault, PathModel, RateProfile, TempProfile,
 };
-use gyro_array::link::msg::{ClockSource as LinkClock, Settings};
-use gyro_array::link::port::{timed_clock, Port};
+use gyro_array::link::msg::Settings;
+use gyro_array::link::port::{timed_clock, ChipTime, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
@@ -197,7 +197,7 @@ fn main() -> ! {
     let mut g4 = AtInstant::new(g4, BOARD_DELAY_US);
     // What the status frames say of each chip's clock.
     let clocks = |t: [&TimedIcm<_, _>; 4]| {
-        let mut c = [(LinkClock::Polled, 0i32); 5];
+        let mut c = [ChipTime::default(); 5];
         for (slot, t) in c.iter_mut().zip(t) {
             *slot = timed_clock(t);
         }

@@ -164,6 +164,26 @@ pub struct GyroStatus {
     pub clock_ppm: i32,
     /// Samples in which the chip had nothing yet for the stated instant.
     pub late: u32,
+    /// What its FIFO reads met (0 for a polled chip).
+    pub fifo: FifoAnomalies,
+}
+
+/// What a timed chip's FIFO reads met, counted since boot
+/// (`pipeline::timed::TimingCounters`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FifoAnomalies {
+    /// Overflows: FIFO_FULL, the FIFO flushed and its samples lost.
+    pub overflows: u32,
+    /// Reads that found the stream out of step (a bad header, a count the
+    /// FIFO did not hold, a garbled status): flushed, a gap.
+    pub bad: u32,
+    /// Bursts cut inside a packet (chip select lost), the packet read
+    /// again whole: nothing lost.
+    pub cuts: u32,
+    /// Packets the chip sent again after handing them over past a burst's
+    /// count, dropped: nothing counted twice.
+    pub resent: u32,
 }
 
 /// Where a chip's samples take their time from.

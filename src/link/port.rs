@@ -13,8 +13,8 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, ClockSource, Command, Compensation, Frame, FrameRef, FusionMethod, GyroStatus,
-    LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
+    Ack, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
+    GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
     MAX_HORIZON_US,
 };
 use super::ring::ByteRing;
@@ -94,10 +94,20 @@ pub const SAMPLE_FRAME_MAX: u32 = 80;
 /// queued and are not on it. `link::tests` checks the sum.
 pub const LOOP_US: u32 = 170;
 
-/// What a status frame says of a timed chip's clock ([`Port::status`]'s
-/// `clocks`): its source, and its error in ppm once the tracker follows it
-/// (0 before).
-pub fn timed_clock<SPI, C>(t: &crate::pipeline::timed::TimedIcm<SPI, C>) -> (ClockSource, i32)
+/// What a status frame says of a chip's time ([`Port::status`]'s
+/// `clocks`; the default: a polled chip).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ChipTime {
+    /// Where its samples take their time from.
+    pub source: ClockSource,
+    /// Its clock's error, ppm, once the tracker follows it (0 before).
+    pub ppm: i32,
+    /// What its FIFO reads met.
+    pub fifo: FifoAnomalies,
+}
+
+/// [`ChipTime`] of a timed chip.
+pub fn timed_clock<SPI, C>(t: &crate::pipeline::timed::TimedIcm<SPI, C>) -> ChipTime
 where
     SPI: embedded_hal::spi::SpiDevice,
     C: crate::drivers::SampleCapture,
@@ -111,7 +121,17 @@ where
     } else {
         0
     };
-    (src, ppm)
+    let c = &t.counters;
+    ChipTime {
+        source: src,
+        ppm,
+        fifo: FifoAnomalies {
+            overflows: c.overflows,
+            bad: c.bad_fifo,
+            cuts: c.cuts,
+            resent: c.resent,
+        },
+    }
 }
 
 impl FusionMethod {
@@ -407,8 +427,9 @@ impl<const TX: usize> Port<TX> {
     }
 
     /// The status frame: settings, the link's and the pipeline's counters,
-    /// and each chip's clock (`clocks[i]`: its source and its error
-    /// against the board's clock, ppm; missing entries read as polled).
+    /// and each chip's time (`clocks[i]`: its clock's source and error
+    /// against the board's, ppm, and its FIFO's anomalies; missing entries
+    /// read as polled).
     #[allow(clippy::too_many_arguments)]
     pub fn status<const N: usize>(
         &self,
@@ -418,7 +439,7 @@ impl<const TX: usize> Port<TX> {
         noise_tau: [u16; 3],
         sample_us: u32,
         stack_peak: u32,
-        clocks: &[(ClockSource, i32)],
+        clocks: &[ChipTime],
     ) -> Frame {
         let mut gyros = Vec::<GyroStatus, MAX_GYROS>::new();
         let cal = pipe.calibration();
@@ -447,9 +468,10 @@ impl<const TX: usize> Port<TX> {
                 restarted: c.restarted,
                 scale_ppm,
                 bias_mdps,
-                clock: clocks.get(i).map_or(ClockSource::Polled, |c| c.0),
-                clock_ppm: clocks.get(i).map_or(0, |c| c.1),
+                clock: clocks.get(i).map_or(ClockSource::Polled, |c| c.source),
+                clock_ppm: clocks.get(i).map_or(0, |c| c.ppm),
                 late: c.late,
+                fifo: clocks.get(i).map_or(FifoAnomalies::default(), |c| c.fifo),
             });
         }
         Frame::Status(Status {

@@ -85,6 +85,12 @@ fn big_status(n: usize) -> Frame {
                 clock: ClockSource::ClkIn,
                 clock_ppm: i32::MIN,
                 late: u32::MAX,
+                fifo: FifoAnomalies {
+                    overflows: u32::MAX,
+                    bad: u32::MAX,
+                    cuts: u32::MAX,
+                    resent: u32::MAX,
+                },
             },
             n,
         ),
@@ -525,7 +531,7 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x02, 0x05, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x7a, 0x51, 0x00]
+        [0x02, 0x06, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0xf8, 0x89, 0x00]
     );
     let n = encode(
         5,
@@ -538,7 +544,7 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x03, 0x05, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0xc6, 0x3a, 0x00]
+        [0x03, 0x06, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x09, 0x8b, 0x00]
     );
 }
 

@@ -20,7 +20,7 @@ use super::VERSION;
 
 /// Longest payload (version to CRC) either side sends; longer frames are
 /// rejected as [`FrameError::TooLong`].
-pub const MAX_PAYLOAD: usize = 640;
+pub const MAX_PAYLOAD: usize = 768;
 /// Longest frame on the wire: COBS adds one byte per 254, plus the 0x00.
 pub const MAX_FRAME: usize = MAX_PAYLOAD + MAX_PAYLOAD / 254 + 2;
 
