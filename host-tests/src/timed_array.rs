@@ -161,6 +161,7 @@ fn timings(c: Clocks, vibration: Vibration, clock_seed: Option<u64>) -> [ChipTim
         },
         // Its bus takes no time a byte: nothing comes during a burst.
         past_count: gyro_array::emu::PastCount::HandOver,
+        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
     })
 }
 

@@ -13,7 +13,7 @@ use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
     emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay, Fault,
-    PastCount, RateProfile, RtcTick,
+    PastCount, PathReading, RateProfile, RtcTick,
 };
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
@@ -40,6 +40,8 @@ pub struct Timing {
     pub rtc_tick: RtcTick,
     /// What a burst past the FIFO count gets (open in the datasheet).
     pub past_count: PastCount,
+    /// The filters' shapes (open in the datasheet).
+    pub path_reading: PathReading,
     /// Bus time before the board powers the chips up and starts its loop,
     /// s: where the loop's reads fall against CLKIN's edges and the chips'
     /// sample grids.
@@ -93,6 +95,7 @@ pub fn run(
             vibration: timing.vibration,
             rtc_tick: timing.rtc_tick,
             past_count: timing.past_count,
+            path_reading: timing.path_reading,
             ..ChipTiming::pll(0.0)
         }),
     );

@@ -269,6 +269,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
         let s = PathSettings {
             aaf_hz: Some(585.0),
             ui: Some((2, 250.0)),
+            reading: Default::default(),
             odr_hz: 1000.0,
         };
         s.group_delay_s()

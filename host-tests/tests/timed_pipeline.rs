@@ -103,6 +103,7 @@ fn run_timed_on(
         rtc_tick,
         past_count,
         power_up_s: 0.0,
+        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
         pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
             offset,
             drift_per_s: 1e-5,
@@ -521,6 +522,7 @@ fn every_power_up_phase_states_the_instant() {
             rtc_tick: RtcTick::ALL[k as usize % 3],
             past_count: PastCount::ALL[(k as usize / 3) % 3],
             power_up_s: f64::from(k) * 250e-6 / 96.0,
+            path_reading: gyro_array::emu::PathReading::DOCUMENTED,
             vibration: Vibration::NONE,
             pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
                 offset,

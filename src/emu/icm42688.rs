@@ -3,8 +3,8 @@
 use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::timing::{
-    aaf_hz, ui_divisor, ClockParams, ClockUse, Fifo, PastCount, PathSettings, Pushed, SignalPath,
-    Vibration, AFSR_FREEZE_S, AFSR_SWITCH_DPS, ICM_INTERNAL_HZ,
+    aaf_hz, ui_divisor, ClockParams, ClockUse, Fifo, PastCount, PathReading, PathSettings, Pushed,
+    SignalPath, Vibration, AFSR_FREEZE_S, AFSR_SWITCH_DPS, ICM_INTERNAL_HZ,
 };
 use super::{corrupt, Fault, Rng};
 use crate::drivers::icm42688::{
@@ -40,6 +40,8 @@ pub struct ChipTiming {
     /// What a burst past the FIFO count gets, which the datasheet leaves
     /// open.
     pub past_count: PastCount,
+    /// What the datasheet leaves open about the filters' shapes.
+    pub path_reading: PathReading,
 }
 
 /// What one FIFO timestamp count is with RTC_MODE on CLKIN and TMST_RES =
@@ -91,6 +93,7 @@ impl ChipTiming {
             path: PathModel::Filters,
             rtc_tick: RtcTick::Microsecond,
             past_count: PastCount::HandOver,
+            path_reading: PathReading::DOCUMENTED,
         }
     }
 }
@@ -133,6 +136,7 @@ impl Timed {
                 aaf_hz: None,
                 ui: None,
                 odr_hz: 1000.0,
+                reading: timing.path_reading,
             },
             ICM_INTERNAL_HZ,
         );
@@ -293,6 +297,7 @@ impl Icm42688Model {
             aaf_hz: aaf,
             ui,
             odr_hz: odr,
+            reading: PathReading::DOCUMENTED,
         }
     }
 
@@ -568,7 +573,10 @@ impl Icm42688Model {
             self.timed = Some(t);
             return;
         }
-        let settings = self.path_settings();
+        let settings = PathSettings {
+            reading: t.timing.path_reading,
+            ..self.path_settings()
+        };
         if t.paths[0].settings != settings {
             t.paths = [SignalPath::new(settings, ICM_INTERNAL_HZ); 3];
         }

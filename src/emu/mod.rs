@@ -27,7 +27,7 @@ pub use icm42688::{ChipTiming, Icm42688Model, PathModel, RtcTick};
 pub use mount::{Mount, TempProfile};
 pub use noise::{NoiseParams, RateProfile};
 pub use rng::Rng;
-pub use timing::PastCount;
+pub use timing::{PastCount, PathReading};
 
 /// A fault the emulated chip injects on demand.
 #[derive(Clone, Copy, Debug, PartialEq)]

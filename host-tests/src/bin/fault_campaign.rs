@@ -474,6 +474,7 @@ fn draw_timed(
             rtc_tick,
             past_count,
             power_up_s: 0.0,
+            path_reading: gyro_array::emu::PathReading::DOCUMENTED,
         },
         inj,
         ev,

@@ -202,6 +202,7 @@ fn board_run_to(
         // campaign and the timed tests run every one.
         past_count: gyro_array::emu::PastCount::HandOver,
         power_up_s: 0.0,
+        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
         pll: [0.004, -0.007, 0.002, -0.01].map(|o| ClockParams {
             offset: o,
             drift_per_s: 1e-5,
