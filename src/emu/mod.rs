@@ -288,6 +288,8 @@ pub struct EmuBus<'a, const N: usize> {
     pub cut: [Option<u32>; N],
     /// Bytes of each chip's current frame.
     frame_bytes: [u32; N],
+    /// The bus time each chip was last advanced to ([`EmuBus::catch_up`]).
+    synced_s: [f64; N],
 }
 
 /// Time inside the emulated bus's operations, in the clock's units, and
@@ -317,6 +319,7 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             spi_ahead_s: 0.0,
             cut: [None; N],
             frame_bytes: [0; N],
+            synced_s: [0.0; N],
         }
     }
 
@@ -342,23 +345,32 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             for c in self.chips.iter_mut() {
                 c.advance(self.t_s, dt_s, self.t64_s, self.clkin_hz);
             }
+            self.synced_s = [self.t64_s; N];
             return;
         }
         let d = f64::from(dt_s) - self.spi_ahead_s;
         self.spi_ahead_s = 0.0;
         if d > 0.0 {
-            self.advance_by(d);
+            self.t64_s += d;
+            self.t_s = self.t64_s as f32;
         } else {
             self.spi_ahead_s = -d;
         }
+        for i in 0..N {
+            self.catch_up(i);
+        }
     }
 
-    /// Advance every chip by `d_s`, f64 (a byte's time).
-    fn advance_by(&mut self, d_s: f64) {
-        self.t64_s += d_s;
-        self.t_s = self.t64_s as f32;
-        for c in self.chips.iter_mut() {
-            c.advance(self.t_s, d_s as f32, self.t64_s, self.clkin_hz);
+    /// Advance chip `i` to the bus's time. The bytes of a burst move the
+    /// bus's time only; each chip is brought up to it when it is next
+    /// selected or its INT1 captured (the chips do not interact, so this is
+    /// the same as advancing all of them every byte, at a fraction of the
+    /// emulator's cost).
+    fn catch_up(&mut self, i: usize) {
+        let dt = self.t64_s - self.synced_s[i];
+        if dt > 0.0 {
+            self.synced_s[i] = self.t64_s;
+            self.chips[i].advance(self.t_s, dt as f32, self.t64_s, self.clkin_hz);
         }
     }
 
@@ -373,6 +385,9 @@ impl<'a, const N: usize> EmuBus<'a, N> {
     /// (Metered like a bus operation: on the board it is a register read
     /// of a few instructions; here it is the model's f64 arithmetic.)
     pub fn int1_capture_us(&mut self, i: usize) -> Option<u32> {
+        if i < N {
+            self.catch_up(i);
+        }
         self.metered(|b| match b.chips.get(i)? {
             Chip::Icm(c) => c.int1_at_s().map(|t| (t * 1e6) as u64 as u32),
             Chip::Adx(_) => None,
@@ -412,6 +427,7 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             self.frame_bytes[i] = 0;
             self.chips[i].begin_frame();
         }
+        self.catch_up(i);
         let n = self.frame_bytes[i];
         self.frame_bytes[i] = n.saturating_add(1);
         let miso = match self.cut[i] {
@@ -427,7 +443,8 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             _ => self.chips[i].exchange(mosi),
         };
         if self.spi_byte_s > 0.0 {
-            self.advance_by(self.spi_byte_s);
+            self.t64_s += self.spi_byte_s;
+            self.t_s = self.t64_s as f32;
             self.spi_ahead_s += self.spi_byte_s;
         }
         Ok(miso)

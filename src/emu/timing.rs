@@ -662,7 +662,10 @@ mod tests {
                 odr_hz: 1000.0,
             };
             let g = gain(s, 585.0);
-            assert!((g - core::f64::consts::FRAC_1_SQRT_2).abs() < 0.01, "{reading:?}: {g}");
+            assert!(
+                (g - core::f64::consts::FRAC_1_SQRT_2).abs() < 0.01,
+                "{reading:?}: {g}"
+            );
         }
     }
 
