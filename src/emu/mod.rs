@@ -281,11 +281,15 @@ pub struct EmuBus<'a, const N: usize> {
     pub spi_byte_s: f64,
     /// Time the bytes advanced since the last [`EmuBus::advance`].
     spi_ahead_s: f64,
-    /// Chip `i`'s next transaction of more than `cut[i]` bytes loses its
-    /// chip select after that many (a glitch on the line): the chip sees
-    /// its frame end there, and the rest of the bytes read the idle
-    /// line's 0xFF.
+    /// Chip `i`'s next FIFO read (a read burst from INT_STATUS or
+    /// FIFO_DATA) of more than `cut[i]` bytes loses its chip select after
+    /// that many (a glitch on the line): the chip sees its frame end
+    /// there, and the rest of the bytes read the idle line's 0xFF. (A
+    /// glitch in a register read-back is a configuration fault, the
+    /// campaign's own kind.)
     pub cut: [Option<u32>; N],
+    /// Whether each chip's current frame is a FIFO read.
+    fifo_frame: [bool; N],
     /// Bytes of each chip's current frame.
     frame_bytes: [u32; N],
     /// The bus time each chip was last advanced to ([`EmuBus::catch_up`]).
@@ -318,6 +322,7 @@ impl<'a, const N: usize> EmuBus<'a, N> {
             spi_byte_s: 0.0,
             spi_ahead_s: 0.0,
             cut: [None; N],
+            fifo_frame: [false; N],
             frame_bytes: [0; N],
             synced_s: [0.0; N],
         }
@@ -430,8 +435,13 @@ impl<'a, const N: usize> EmuBus<'a, N> {
         self.catch_up(i);
         let n = self.frame_bytes[i];
         self.frame_bytes[i] = n.saturating_add(1);
+        if n == 0 {
+            let (read, a) = (mosi & 0x80 != 0, mosi & 0x7F);
+            use crate::drivers::icm42688::reg;
+            self.fifo_frame[i] = read && (a == reg::INT_STATUS || a == reg::FIFO_DATA);
+        }
         let miso = match self.cut[i] {
-            Some(k) if n >= k => {
+            Some(k) if n >= k && self.fifo_frame[i] => {
                 if n == k {
                     // One glitch: the next transaction is whole.
                     self.cut[i] = None;

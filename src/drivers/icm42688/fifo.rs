@@ -106,27 +106,27 @@ pub(super) fn parse_packets<E>(
         }
         let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
         let stamp16 = u16::from_be_bytes([p[14], p[15]]);
+        // The stamp is the packet's last two bytes: a cut anywhere in it
+        // leaves at least the last at 0xFF, and the next packet's header
+        // at 0xFF too (one that is not says the line was whole).
+        let next = bytes.get((j + 1) * FIFO_PACKET).copied();
+        let line = p[15] == 0xFF && next.is_none_or(|b| b == 0xFF);
         let stamp = match st {
             Some(prev) => {
                 let d = stamp16.wrapping_sub(prev as u16);
-                // The stamp is the packet's last two bytes: a cut anywhere
-                // in it leaves at least the last at 0xFF. Such a stamp off
-                // the stream's step by more than a count or two (a PLL or
-                // CLKIN moves no more in one sample), or before a step is
-                // known beyond `lim`, is the line's, not the chip's, if the
-                // line stays at 0xFF after it. A clock failing over to its RC
-                // oscillator (5–8 %) steps once: its packet is taken unless
-                // its stamp ends in 0xFF (1 in 256) and it ends the burst, and
-                // then it is lost (the chip sent it whole).
+                // Such a stamp off the stream's step by more than a count
+                // or two (a PLL or CLKIN moves no more in one sample), or
+                // before a step is known beyond `lim`, is the line's, not
+                // the chip's. A clock failing over to its RC oscillator
+                // (5–8 %) steps once: its packet is taken unless its stamp
+                // ends in 0xFF (1 in 256) and it ends the burst, and then it
+                // is lost (the chip sent it whole).
                 let off = if sp == 0 {
                     d > lim
                 } else {
                     d.abs_diff(sp) > (sp / 32).max(2)
                 };
-                // After a cut the next packet's header reads 0xFF too; one
-                // that does not says the line was whole.
-                let next = bytes.get((j + 1) * FIFO_PACKET).copied();
-                if p[15] == 0xFF && off && next.is_none_or(|b| b == 0xFF) {
+                if line && off {
                     stop = Some(Stop::Cut);
                     break;
                 }
@@ -141,6 +141,14 @@ pub(super) fn parse_packets<E>(
                 }
                 sp = d;
                 prev.wrapping_add(u32::from(d))
+            }
+            // The first packet of a stream (after a flush) has nothing to
+            // be checked against but the line: a stamp of 0xFFFF with the
+            // line at 0xFF after it is a cut (a true 0xFFFF there, 1 in
+            // 65 536, loses that one sample).
+            None if line && p[14] == 0xFF => {
+                stop = Some(Stop::Cut);
+                break;
             }
             None => u32::from(stamp16),
         };
