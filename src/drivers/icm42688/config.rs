@@ -183,6 +183,13 @@ impl Config {
         self.odr.per_ms().min(MAX_PER_READ)
     }
 
+    /// The largest step between two FIFO stamps this rate allows, counts:
+    /// a sample period in µs (a count is 1 µs or more in every reading of
+    /// the unit, `pipeline::stamps`), half as much again for a slow clock.
+    pub fn stamp_step_max(&self) -> u16 {
+        (1.5e6 / self.odr.hz()) as u16
+    }
+
     /// Write `i` of the checked writes a restart makes, in order, as
     /// (bank, register, value): bank 1 (the AAF, pin 9), then
     /// INTF_CONFIG1, the UI filter, range and rate, the FIFO and INT1, and

@@ -277,10 +277,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             self.flush_fifo()?;
             return Err(Error::FifoOverflow);
         }
-        // A step between two stamps is at most a sample period in µs (a
-        // count is 1 µs or more in every reading of the unit,
-        // `pipeline::stamps`), half as much again for a slow clock.
-        let lim = (1.5e6 / self.config.odr.hz()) as u16;
+        let lim = self.stamp_lim;
         let want = count.min(max);
         let mut read = FifoRead {
             status,
@@ -313,8 +310,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // samples were lost (16 % on one fallen back to its RC
         // oscillator). Past the count nothing was promised: a bad header
         // there is no error.
+        read.counted = read.samples;
         if stop.is_none() && want == in_first {
-            read.counted = read.samples;
             let mut at = 3 + FIFO_PACKET * in_first;
             let end = 3 + FIFO_PACKET * k;
             while read.samples < max {
@@ -360,7 +357,8 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             taken += t;
             stop = s;
         }
-        if want > in_first || stop.is_some() {
+        if want > in_first {
+            // Every packet came within the count, over more bursts.
             read.counted = read.samples;
         }
         match stop {

@@ -239,6 +239,9 @@ pub struct Icm42688<SPI> {
     /// FIFO packets the first burst of a read makes room for (see
     /// [`Self::read_fifo`]), worked out when the configuration is set.
     per_read: usize,
+    /// [`Config::stamp_step_max`] for the configuration set (worked out
+    /// when it is set, not on every read).
+    stamp_lim: u16,
     /// The FIFO bursts' buffer: kept, so a read does not zero 67 bytes
     /// first (some 45 instructions a read on the Cortex-M4).
     fifo_buf: [u8; 3 + FIFO_PACKET * MAX_PER_READ],
@@ -260,6 +263,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             reset_seen: false,
             delay_us: 0,
             per_read: 1,
+            stamp_lim: Config::default().stamp_step_max(),
             fifo_buf: [0; 3 + FIFO_PACKET * MAX_PER_READ],
         }
     }
@@ -287,6 +291,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // configuration too (the FIFO, the clock), not the last one.
         self.config = cfg;
         self.per_read = cfg.per_read();
+        self.stamp_lim = cfg.stamp_step_max();
         self.write(reg::DEVICE_CONFIG, SOFT_RESET)?;
         delay.delay_ms(1); // datasheet: wait 1 ms after a soft reset
         self.write(reg::REG_BANK_SEL, 0)?;
@@ -378,6 +383,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.config = cfg;
         self.delay_us = cfg.polled_delay_us();
         self.per_read = cfg.per_read();
+        self.stamp_lim = cfg.stamp_step_max();
         Ok(())
     }
 

@@ -110,6 +110,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.config = saved.config;
         self.delay_us = saved.config.polled_delay_us();
         self.per_read = saved.config.per_read();
+        self.stamp_lim = saved.config.stamp_step_max();
 
         let mut st = SelfTest {
             response_lsb,

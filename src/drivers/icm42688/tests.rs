@@ -354,6 +354,7 @@ fn at_2_khz_one_burst_holds_two_packets_and_the_rest_comes_in_one_more() {
     let (mut spi, mut g) = fifo_driver(&s);
     g.config.odr = Odr::Hz2000;
     g.per_read = g.config.per_read();
+    g.stamp_lim = g.config.stamp_step_max();
     let mut out = [FifoSample {
         raw: [0; 3],
         stamp: 0,
