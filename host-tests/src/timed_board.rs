@@ -48,6 +48,59 @@ pub struct Timing {
     pub power_up_s: f64,
 }
 
+/// The four chips' PLL errors the timed tests and the power-up sweep run
+/// with (within ±1 %, as the board's crystals and the parts' spread
+/// allow): offsets, a drift of 10 ppm a second and a slow wander.
+pub const PLL_OFFSETS: [f64; N] = [0.009, -0.01, 0.002, -0.004];
+
+/// [`PLL_OFFSETS`] as clock parameters.
+pub fn plls() -> [ClockParams; N] {
+    PLL_OFFSETS.map(|offset| ClockParams {
+        offset,
+        drift_per_s: 1e-5,
+        wander: 2e-4,
+        wander_period_s: 9.0,
+    })
+}
+
+impl Timing {
+    /// A power-up of the sweep ([`power_up`]): the chips on [`plls`],
+    /// no vibration, started `power_up_s` into the bus's time.
+    pub fn sweep(
+        clkin: bool,
+        rtc_tick: RtcTick,
+        past_count: PastCount,
+        path_reading: PathReading,
+        power_up_s: f64,
+    ) -> Self {
+        Self {
+            clkin,
+            pll: plls(),
+            vibration: Vibration::NONE,
+            rtc_tick,
+            past_count,
+            power_up_s,
+            path_reading,
+        }
+    }
+}
+
+/// `f` over `items` on every core, in order (the evaluations' and tests'
+/// sweeps of independent emulated runs).
+pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let f = &f;
+    std::thread::scope(|s| {
+        let jobs: Vec<_> = items
+            .chunks(items.len().div_ceil(threads).max(1))
+            .map(|c| s.spawn(move || c.iter().map(f).collect::<Vec<_>>()))
+            .collect();
+        jobs.into_iter()
+            .flat_map(|j| j.join().expect("a run panicked"))
+            .collect()
+    })
+}
+
 /// What the harness hands each sample's callback.
 pub struct Sample<'a, 'b> {
     /// Pipeline steps so far (this one included: 0 for the first).

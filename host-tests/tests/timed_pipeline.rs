@@ -8,7 +8,7 @@
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688, Odr};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::{ClockParams, Tone, Vibration};
+use gyro_array::emu::timing::{Tone, Vibration};
 use gyro_array::emu::{
     emu_device, with_bus, Chip, CsLine, EmuBus, EmuDelay, Fault, Icm42688Model, NoiseParams,
     PastCount, RateProfile, RtcTick,
@@ -104,12 +104,7 @@ fn run_timed_on(
         past_count,
         power_up_s: 0.0,
         path_reading: gyro_array::emu::PathReading::DOCUMENTED,
-        pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
-            offset,
-            drift_per_s: 1e-5,
-            wander: 2e-4,
-            wander_period_s: 9.0,
-        }),
+        pll: timed_board::plls(),
     };
     let mut sq = [0.0f64; 3];
     let mut count = 0u32;
@@ -246,7 +241,6 @@ fn run_lockstep(ms: u32) -> [f64; 3] {
 #[test]
 fn every_reading_of_the_stamps_states_the_instant_and_the_clock_error() {
     let lock = run_lockstep(3000);
-    let plls = [0.009, -0.01, 0.002, -0.004];
     let runs = [(false, RtcTick::Microsecond)]
         .into_iter()
         .chain(RtcTick::ALL.map(|t| (true, t)));
@@ -269,7 +263,7 @@ fn every_reading_of_the_stamps_states_the_instant_and_the_clock_error() {
             );
         }
         assert_eq!(r.flags_seen, [0; N], "{what}: flagged");
-        for (i, &offset) in plls.iter().enumerate() {
+        for (i, pll) in timed_board::plls().iter().enumerate() {
             assert!(
                 r.counters[i].late < 100,
                 "{what}, chip {i}: {} late",
@@ -277,12 +271,6 @@ fn every_reading_of_the_stamps_states_the_instant_and_the_clock_error() {
             );
             // The PLL's error at the end (its offset, drift and wander,
             // as `run_timed_on` sets them).
-            let pll = ClockParams {
-                offset,
-                drift_per_s: 1e-5,
-                wander: 2e-4,
-                wander_period_s: 9.0,
-            };
             let truth = if clkin { 0.0 } else { pll.error_at(3.0) * 1e6 };
             let got = f64::from(r.clock_ppm[i]);
             assert!(
@@ -516,21 +504,14 @@ fn vibration_is_no_spike_and_a_spiking_chip_is_flagged() {
 #[test]
 fn every_power_up_phase_states_the_instant() {
     let runs: Vec<(u32, bool)> = (0..96u32).flat_map(|k| [(k, true), (k, false)]).collect();
-    let one = |&(k, clkin): &(u32, bool)| {
-        let timing = timed_board::Timing {
+    let worst = timed_board::par_map(&runs, |&(k, clkin)| {
+        let timing = timed_board::Timing::sweep(
             clkin,
-            rtc_tick: RtcTick::ALL[k as usize % 3],
-            past_count: PastCount::ALL[(k as usize / 3) % 3],
-            power_up_s: f64::from(k) * 250e-6 / 96.0,
-            path_reading: gyro_array::emu::PathReading::DOCUMENTED,
-            vibration: Vibration::NONE,
-            pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
-                offset,
-                drift_per_s: 1e-5,
-                wander: 2e-4,
-                wander_period_s: 9.0,
-            }),
-        };
+            RtcTick::ALL[k as usize % 3],
+            PastCount::ALL[(k as usize / 3) % 3],
+            gyro_array::emu::PathReading::DOCUMENTED,
+            f64::from(k) * 250e-6 / 96.0,
+        );
         let r = timed_board::power_up(sway(), 40 + u64::from(k), timing, 900, 400);
         for i in 0..N {
             let what = format!("phase {k}/96, clkin {clkin}, chip {i}: {r:?}");
@@ -538,16 +519,8 @@ fn every_power_up_phase_states_the_instant() {
             assert!(r.late[i] * 100 <= r.reads[i], "{what}");
         }
         r.lag_us.iter().fold(0.0f64, |m, l| m.max(l.abs()))
-    };
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let worst = std::thread::scope(|s| {
-        let jobs: Vec<_> = runs
-            .chunks(runs.len().div_ceil(threads))
-            .map(|c| s.spawn(move || c.iter().map(one).fold(0.0f64, f64::max)))
-            .collect();
-        jobs.into_iter()
-            .map(|j| j.join().expect("a power-up failed"))
-            .fold(0.0f64, f64::max)
-    });
+    })
+    .into_iter()
+    .fold(0.0f64, f64::max);
     println!("worst lag over 192 power-ups: {worst:.1} µs");
 }

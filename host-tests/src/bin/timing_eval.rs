@@ -666,7 +666,7 @@ fn main() {
 fn power_up_sweep(seed: u64) {
     use gyro_array::emu::timing::PathSettings;
     use gyro_array::emu::{PastCount, PathReading};
-    use host_tests::timed_board::{power_up, PowerUp, Timing};
+    use host_tests::timed_board::{par_map, power_up, PowerUp, Timing};
     const PHASES: u32 = 96;
     let profile = RateProfile {
         base_dps: [0.0; 3],
@@ -683,32 +683,10 @@ fn power_up_sweep(seed: u64) {
             ]
         })
         .collect();
-    let one = |&(k, clkin, rtc_tick, past_count): &(u32, bool, RtcTick, PastCount)| {
-        let timing = Timing {
-            clkin,
-            rtc_tick,
-            past_count,
-            power_up_s: f64::from(k) * 250e-6 / f64::from(PHASES),
-            path_reading: gyro_array::emu::PathReading::DOCUMENTED,
-            vibration: Vibration::NONE,
-            pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
-                offset,
-                drift_per_s: 1e-5,
-                wander: 2e-4,
-                wander_period_s: 9.0,
-            }),
-        };
+    let out: Vec<PowerUp> = par_map(&runs, |&(k, clkin, rtc_tick, past_count)| {
+        let up = f64::from(k) * 250e-6 / f64::from(PHASES);
+        let timing = Timing::sweep(clkin, rtc_tick, past_count, PathReading::DOCUMENTED, up);
         power_up(profile, seed + u64::from(k), timing, 900, 400)
-    };
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let out: Vec<PowerUp> = std::thread::scope(|s| {
-        let jobs: Vec<_> = runs
-            .chunks(runs.len().div_ceil(threads))
-            .map(|c| s.spawn(move || c.iter().map(one).collect::<Vec<_>>()))
-            .collect();
-        jobs.into_iter()
-            .flat_map(|j| j.join().expect("a power-up"))
-            .collect()
     });
     println!();
     println!(
@@ -805,31 +783,16 @@ fn power_up_sweep(seed: u64) {
         ("both", PathReading::BOTH),
     ] {
         let runs: Vec<(u32, bool)> = (0..24u32).flat_map(|k| [(k, true), (k, false)]).collect();
-        let one = |&(k, clkin): &(u32, bool)| {
-            let timing = Timing {
+        let out: Vec<PowerUp> = par_map(&runs, |&(k, clkin)| {
+            let up = f64::from(k) * 250e-6 / 24.0;
+            let timing = Timing::sweep(
                 clkin,
-                rtc_tick: RtcTick::Microsecond,
-                past_count: PastCount::HandOver,
-                power_up_s: f64::from(k) * 250e-6 / 24.0,
-                path_reading: reading,
-                vibration: Vibration::NONE,
-                pll: [0.009, -0.01, 0.002, -0.004].map(|offset| ClockParams {
-                    offset,
-                    drift_per_s: 1e-5,
-                    wander: 2e-4,
-                    wander_period_s: 9.0,
-                }),
-            };
+                RtcTick::Microsecond,
+                PastCount::HandOver,
+                reading,
+                up,
+            );
             power_up(profile, seed + u64::from(k), timing, 900, 400)
-        };
-        let out: Vec<PowerUp> = std::thread::scope(|s| {
-            let jobs: Vec<_> = runs
-                .chunks(runs.len().div_ceil(threads))
-                .map(|c| s.spawn(move || c.iter().map(one).collect::<Vec<_>>()))
-                .collect();
-            jobs.into_iter()
-                .flat_map(|j| j.join().expect("a power-up"))
-                .collect()
         });
         let lags: Vec<f64> = out.iter().flat_map(|r| r.lag_us).collect();
         let mean = lags.iter().sum::<f64>() / lags.len() as f64;
