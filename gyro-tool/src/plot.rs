@@ -1,7 +1,7 @@
 //! `gyro allan --svg`: the deviation curves on log–log axes, each point's
 //! marker hollow where it averages fewer than 16 clusters, and the fitted
-//! IEEE 952 model (with `--fit`) as a line per column, its five terms'
-//! asymptotes dashed.
+//! noise model (with `--fit`) as a line per column, each of its terms
+//! dashed.
 
 use plotters::prelude::*;
 
@@ -28,15 +28,10 @@ pub const COLOURS: [RGBColor; 8] = [
     RGBColor(227, 119, 194),
 ];
 
-fn model(t: &Terms, tau: f64) -> [f64; 5] {
-    let [q, n, b, k, r] = t.value;
-    [
-        3.0 * q * q / (tau * tau),
-        n * n / tau,
-        2.0 * std::f64::consts::LN_2 / std::f64::consts::PI * b * b,
-        k * k * tau / 3.0,
-        r * r * tau * tau / 2.0,
-    ]
+/// The model's σ² at τ, term by term (power-law terms, then each
+/// Gauss–Markov process).
+fn model(t: &Terms, tau: f64) -> Vec<f64> {
+    t.parts(tau / t.tau0)
 }
 
 /// Draw `curves` (and `fits`: (label, terms)) into `path`.
@@ -116,10 +111,17 @@ pub fn draw(
                     .map(|&tau| (tau, model(t, tau).iter().sum::<f64>().sqrt())),
                 BLACK.mix(0.8).stroke_width(1),
             ))?
-            .label(format!("{label}: IEEE 952 fit"))
+            .label(format!(
+                "{label}: noise model fit ({})",
+                if t.fits {
+                    "describes the curve"
+                } else {
+                    "does not describe the curve"
+                }
+            ))
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.8)));
-        for k in 0..5 {
-            if t.value[k] <= 0.0 {
+        for k in 0..model(t, t.tau0).len() {
+            if model(t, t.tau_max_s)[k] <= 0.0 {
                 continue;
             }
             // Dashes: every other segment of the asymptote.

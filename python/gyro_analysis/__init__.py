@@ -147,12 +147,16 @@ def deviation(data, kind="oadev", rate=1.0, data_type="phase", taus=None, confid
 
 
 def noise_fit(data, rate=1.0, data_type="freq"):
-    """The IEEE Std 952 gyro noise model fitted to the data's Allan variance.
+    """The gyro noise model fitted to the data's Allan variance, as ``gyro allan --fit``.
 
-    sigma^2(tau) = 3 Q^2 / tau^2 + N^2 / tau + (2 ln 2 / pi) B^2 + K^2 tau / 3
-    + R^2 tau^2 / 2, fitted by weighted least squares (each point weighted by
-    its EDF, non-negative terms, iteratively reweighted) to the overlapping
-    Allan deviation at 8 tau per decade, as ``gyro allan --fit``.
+    IEEE Std 952's terms (Q quantisation, N angle random walk, B flicker bias
+    instability, K rate random walk, R rate ramp) and up to two first-order
+    Gauss-Markov processes, each as the discrete process a sampled gyro
+    produces, fitted to the overlapping Allan variance at 8 tau per decade by
+    generalised least squares: the weights are the inverse of the estimates'
+    covariance under the fitted model (the EDF of the noise present at each
+    tau and the correlation between neighbouring tau), refitted until it
+    settles. A chi-square test says whether the model describes the curve.
 
     Parameters
     ----------
@@ -165,41 +169,68 @@ def noise_fit(data, rate=1.0, data_type="freq"):
     Returns
     -------
     dict
-        ``terms`` ("Q", "N", "B", "K", "R"); ``value`` and ``sd`` (numpy,
-        in the data's rate unit: Q in unit*s, N in unit*sqrt(s), B in unit,
-        K in unit/sqrt(s), R in unit/s; 0 and NaN for a term the fit leaves
-        out); ``tangent`` (the IEEE 952 tangent reading of each term, an upper
-        bound); ``visible`` (the term carries at least half the fitted
-        variance somewhere and is over twice its sd); ``points`` (Allan
-        points fitted). For degrees per second, N * 60 is deg/sqrt(h) and
-        B * 3600 deg/h.
+        ``terms`` ("Q", "N", "B", "K", "R"); ``value``, ``sd``, ``ci`` (95 %
+        interval, shape (5, 2)), ``tangent`` (the IEEE 952 tangent reading,
+        an upper bound), ``visible`` (the fit passes, the term is resolved by
+        a chi-square test and carries a tenth of the model somewhere), all in
+        the data's rate unit (Q in unit*s, N in unit*sqrt(s), B in unit, K in
+        unit/sqrt(s), R in unit/s); ``gm`` (a list of dicts: ``sigma``,
+        ``sigma_ci``, ``tau_c_s``, ``tau_c_ci``, ``visible``); ``arw`` and
+        ``arw_ci`` (N with the sample-scale correlation folded in);
+        ``bias_instability`` (IEEE 952: the model's flat level / 0.664, or
+        None) and its ``bias_instability_tau_s``; ``chi2``, ``dof``,
+        ``p_value``, ``outside`` and ``fits`` (the test's verdict);
+        ``points``, ``tau0``, ``tau_max_s``. For degrees per second, N * 60 is
+        deg/sqrt(h) and B * 3600 deg/h.
 
     Raises
     ------
     ValueError
-        Too few samples for two points of 8 clusters, a sample that is not
+        Too few samples for three points of 8 clusters, a sample that is not
         finite, a non-positive rate.
     """
-    value, sd, tangent, visible, points = _native.noise_fit(_series(data), float(rate), data_type)
-    return {
-        "terms": TERMS,
-        "value": value,
-        "sd": sd,
-        "tangent": tangent,
-        "visible": list(visible),
-        "points": points,
-    }
+    import json
+
+    t = json.loads(_native.noise_fit(_series(data), float(rate), data_type))
+    out = dict(t)
+    out["terms"] = TERMS
+    # JSON carries NaN (a term out of the fit) as null: numpy reads it back.
+    for k in ("value", "sd", "tangent", "ci", "arw_ci"):
+        out[k] = _np.array(t[k], dtype=float)
+    return out
 
 
-def kalibr_yaml(data, rate=1.0, data_type="freq", topic="/imu0"):
-    """Kalibr's ``imu.yaml`` text for the gyro terms of :func:`noise_fit`.
+def kalibr_yaml(data, rate=1.0, data_type="freq", topic="/imu0", accel=None):
+    """Kalibr's ``imu.yaml`` text, as ``gyro allan --kalibr`` writes it.
 
-    ``gyroscope_noise_density`` (N, rad/s/sqrt(Hz)) and
-    ``gyroscope_random_walk`` (K, rad/s^2/sqrt(Hz)) from a rate in deg/s,
-    as ``gyro allan --kalibr`` writes them; the accelerometer fields are not
-    measured here and are left out, with a comment saying so.
+    Parameters
+    ----------
+    data : array_like, 1-D or 2-D
+        The gyro's rate in deg/s: one axis, or axes as columns (N, 3).
+    accel : array_like, 1-D or 2-D, optional
+        The accelerometer in m/s^2, one axis or axes as columns. Without it
+        the accelerometer keys are stated absent in a comment (Kalibr needs
+        them: add your own).
+
+    Each key is the largest over the axes of the fitted value (its 95 %
+    upper bound where the term is not resolved): ``gyroscope_noise_density``
+    (rad/s/sqrt(Hz)), ``gyroscope_random_walk`` (rad/s^2/sqrt(Hz)),
+    ``accelerometer_noise_density`` (m/s^2/sqrt(Hz)),
+    ``accelerometer_random_walk`` (m/s^3/sqrt(Hz)); every value a positive
+    number that PyYAML reads as a float.
     """
-    return _native.kalibr_yaml(_series(data), float(rate), data_type, str(topic))
+
+    def axes(a, what):
+        arr = _np.asarray(a, dtype=_np.float64)
+        if arr.ndim == 1:
+            return [_series(arr)]
+        if arr.ndim == 2:
+            return [_series(_np.ascontiguousarray(arr[:, j])) for j in range(arr.shape[1])]
+        raise ValueError(f"{what} must be 1-D or 2-D (samples x axes), not of shape {arr.shape}")
+
+    g = axes(data, "data")
+    a = [] if accel is None else axes(accel, "accel")
+    return _native.kalibr_yaml(g, a, float(rate), data_type, str(topic))
 
 
 def davar_surface(data, rate=1.0, lambda2=1024):

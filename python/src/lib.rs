@@ -339,32 +339,19 @@ fn until_interrupted<T: Send>(
     })
 }
 
-/// The IEEE 952 fit of the data's overlapping Allan deviation at 8 τ per
-/// decade, as `gyro allan --fit` makes it: (value, sd, tangent, visible,
-/// points), each of the first four over Q, N, B, K, R.
+/// The noise model fitted to the data's overlapping Allan deviation at 8 τ
+/// per decade, as `gyro allan --fit` makes it: `gyro_tool::fit::Terms` as
+/// JSON (the Python side turns it into a dict).
 #[pyfunction]
 #[pyo3(signature = (data, rate = 1.0, data_type = "freq"))]
-#[allow(clippy::type_complexity)]
-fn noise_fit<'py>(
-    py: Python<'py>,
-    data: PyReadonlyArray1<'py, f64>,
+fn noise_fit(
+    py: Python<'_>,
+    data: PyReadonlyArray1<'_, f64>,
     rate: f64,
     data_type: &str,
-) -> PyResult<(
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Vec<bool>,
-    usize,
-)> {
+) -> PyResult<String> {
     let t = terms_of(py, data, rate, data_type)?;
-    Ok((
-        t.value.to_vec().into_pyarray(py),
-        t.sd.to_vec().into_pyarray(py),
-        t.tangent.to_vec().into_pyarray(py),
-        t.visible.to_vec(),
-        t.points,
-    ))
+    serde_json::to_string(&t).map_err(value_error)
 }
 
 fn terms_of(
@@ -378,19 +365,29 @@ fn terms_of(
     py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)
 }
 
-/// Kalibr's `imu.yaml` for the gyro terms of the data's fit, as `gyro
-/// allan --kalibr` writes it.
+/// Kalibr's `imu.yaml` from the fits of the gyro axes (°/s) and the
+/// accelerometer axes (m/s², may be none), as `gyro allan --kalibr`
+/// writes it.
 #[pyfunction]
-#[pyo3(signature = (data, rate = 1.0, data_type = "freq", topic = "/imu0"))]
+#[pyo3(signature = (gyro, accel, rate = 1.0, data_type = "freq", topic = "/imu0"))]
 fn kalibr_yaml(
     py: Python<'_>,
-    data: PyReadonlyArray1<'_, f64>,
+    gyro: Vec<PyReadonlyArray1<'_, f64>>,
+    accel: Vec<PyReadonlyArray1<'_, f64>>,
     rate: f64,
     data_type: &str,
     topic: &str,
 ) -> PyResult<String> {
-    let t = terms_of(py, data, rate, data_type)?;
-    Ok(fit::kalibr_yaml(&t, gyro_tool::short(rate), topic))
+    let g = gyro
+        .into_iter()
+        .map(|d| terms_of(py, d, rate, data_type))
+        .collect::<PyResult<Vec<_>>>()?;
+    let a = accel
+        .into_iter()
+        .map(|d| terms_of(py, d, rate, data_type))
+        .collect::<PyResult<Vec<_>>>()?;
+    fit::kalibr_yaml(&g, &a, gyro_tool::short(rate), topic)
+        .ok_or_else(|| pyo3::exceptions::PyValueError::new_err("no gyro axis to fit"))
 }
 
 /// The tool's error, as it crosses back from the analysis thread: None

@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 import pytest
+import yaml
 
 import gyro_analysis as ga
 
@@ -40,7 +41,10 @@ def test_noise_fit_reads_white_and_random_walk_noise():
     n, k = f["value"][1], f["value"][3]
     assert abs(n / 0.01 - 1) < 0.03, n
     assert abs(k / 2e-4 - 1) < 0.25, k
-    assert f["visible"][1] and f["visible"][3]
+    # N is resolved; K (crossing N at 87 s of a 4 000 s record) is read
+    # within its interval but not resolved at the fit's 4-sigma standard.
+    assert f["fits"] and f["visible"][1]
+    assert f["ci"][3][0] <= 2e-4 <= f["ci"][3][1]
     assert f["sd"][1] < 0.05 * n and f["points"] > 10
     # The tangent reading is an upper bound of each term.
     assert f["tangent"][1] >= n * 0.97
@@ -49,13 +53,43 @@ def test_noise_fit_reads_white_and_random_walk_noise():
 def test_kalibr_yaml_carries_the_fit_in_radians():
     y = white_and_walk(100_000, 200.0, n_arw=0.02, k_rrw=0.0, seed=8)
     text = ga.kalibr_yaml(y, rate=200.0, topic="/imu/gyro")
-    fields = dict(line.split(":", 1) for line in text.splitlines() if line and not line.startswith("#"))
-    assert fields["rostopic"].strip() == "/imu/gyro"
-    assert float(fields["update_rate"]) == 200.0
-    nd = float(fields["gyroscope_noise_density"].split("#")[0])
-    n = ga.noise_fit(y, rate=200.0)["value"][1]
+    assert text.endswith("\n")
+    fields = yaml.safe_load(text)
+    assert fields["rostopic"] == "/imu/gyro"
+    assert fields["update_rate"] == 200.0
+    nd = fields["gyroscope_noise_density"]
+    n = ga.noise_fit(y, rate=200.0)["arw"]
     assert nd == pytest.approx(n * np.pi / 180.0, rel=1e-6)
     assert abs(nd / (0.02 * np.pi / 180.0) - 1) < 0.05
+    # Without accelerometer data its keys are stated absent, not invented.
+    assert "accelerometer_noise_density" not in fields
+    assert "accelerometer_noise_density, accelerometer_random_walk: absent" in text
+
+
+# The keys Kalibr's ImuParameters reads (kalibr_common/ConfigReader.py); it
+# refuses any density that is not above 0.
+KALIBR_KEYS = (
+    "rostopic",
+    "update_rate",
+    "accelerometer_noise_density",
+    "accelerometer_random_walk",
+    "gyroscope_noise_density",
+    "gyroscope_random_walk",
+)
+
+
+def test_kalibr_yaml_loads_with_every_key_a_positive_number():
+    rate = 100.0
+    rng = np.random.default_rng(11)
+    gyro = np.column_stack([white_and_walk(60_000, rate, n_arw=0.01, k_rrw=0.0, seed=s) for s in (1, 2, 3)])
+    # Accelerometer axes in m/s^2: white noise on gravity; no random walk
+    # in the record, so its key is an upper bound, never 0.
+    accel = 9.81 + 0.002 * np.sqrt(rate) * rng.standard_normal((60_000, 3))
+    fields = yaml.safe_load(ga.kalibr_yaml(gyro, rate=rate, accel=accel))
+    assert set(KALIBR_KEYS) <= set(fields)
+    for k in KALIBR_KEYS[1:]:
+        assert isinstance(fields[k], float) and fields[k] > 0.0, (k, fields[k])
+    assert fields["accelerometer_noise_density"] == pytest.approx(0.002, rel=0.05)
 
 
 def test_davar_surface_follows_a_variance_step():

@@ -31,14 +31,19 @@ pub struct Args {
     /// Write here instead of standard output.
     #[arg(short, long)]
     out: Option<PathBuf>,
-    /// Also fit the IEEE 952 noise model (Q, N, B, K, R with standard
-    /// errors, next to the tangent readings) to each column's OADEV.
+    /// Also fit the noise model (IEEE 952's Q, N, B, K, R and up to two
+    /// Gauss–Markov processes, with 95 % intervals, a χ² test of the fit
+    /// and the tangent readings) to each column's OADEV.
     #[arg(long)]
     fit: bool,
-    /// Write a Kalibr imu.yaml (gyroscope_noise_density,
-    /// gyroscope_random_walk) from the first column's fit.
+    /// Write a Kalibr imu.yaml from the fits: the gyroscope keys from the
+    /// rate columns (the largest over the axes), the accelerometer keys
+    /// from `--accel` columns (stated absent without them).
     #[arg(long)]
     kalibr: Option<PathBuf>,
+    /// Accelerometer columns, m/s² (repeat), for `--kalibr`.
+    #[arg(long = "accel")]
+    accel: Vec<String>,
     /// Draw the curves (and the fits) as SVG.
     #[arg(long)]
     svg: Option<PathBuf>,
@@ -104,6 +109,7 @@ pub fn run(a: Args) -> Res<bool> {
         out,
         fit: want_fit,
         kalibr,
+        accel,
         svg,
         confidence: cf,
         chi2,
@@ -162,10 +168,26 @@ pub fn run(a: Args) -> Res<bool> {
         }
     }
     if let Some(path) = &kalibr {
-        let Some((_, t)) = fits.first() else {
-            return Err("no fit for a Kalibr file".into());
-        };
-        std::fs::write(path, fit::kalibr_yaml(t, short(1.0 / s.tau0), "/imu0"))?;
+        let mut accel_fits = Vec::new();
+        if !accel.is_empty() {
+            // Read as they are (m/s²): no rate unit applies.
+            let a = table::read(file, &accel, time, tau0, table::Unit::Dps, None)?;
+            for (name, r) in a.names.iter().zip(&a.rates) {
+                let x = dev::phase_from_rate(r, a.tau0)?;
+                match fit::fit_phase(&x, a.tau0) {
+                    Ok(t) => accel_fits.push(t),
+                    Err(e) => return Err(format!("{name}: {e}").into()),
+                }
+            }
+        }
+        let gyro_fits: Vec<fit::Terms> = fits
+            .iter()
+            .filter(|(n, _)| !accel.contains(n))
+            .map(|(_, t)| t.clone())
+            .collect();
+        let text = fit::kalibr_yaml(&gyro_fits, &accel_fits, short(1.0 / s.tau0), "/imu0")
+            .ok_or("no gyro fit for a Kalibr file")?;
+        std::fs::write(path, text)?;
     }
     if let Some(path) = &svg {
         let cs: Vec<plot::Curve> = curves
@@ -291,35 +313,8 @@ pub fn run(a: Args) -> Res<bool> {
                     )?;
                 }
             }
-            // The terms in the units gyro datasheets use.
-            let units = [
-                ("Q", 1.0, "deg"),
-                ("N", 60.0, "deg/sqrt(h)"),
-                ("B", 3600.0, "deg/h"),
-                ("K", 3600.0 * 60.0, "deg/h/sqrt(h)"),
-                ("R", 3600.0 * 3600.0, "deg/h^2"),
-            ];
             for (name, t) in &fits {
-                writeln!(
-                    w,
-                    "{name}: IEEE 952 model, weighted least squares over {} OADEV points",
-                    t.points
-                )?;
-                writeln!(
-                    w,
-                    "{:>4} {:>14} {:>12} {:>16}  unit",
-                    "term", "fit", "+- sd", "IEEE 952 tangent"
-                )?;
-                for (i, (n, k, u)) in units.iter().enumerate() {
-                    writeln!(
-                        w,
-                        "{n:>4} {:>14.6e} {:>12.3e} {:>16.6e}  {u}{}",
-                        t.value[i] * k,
-                        t.sd[i] * k,
-                        t.tangent[i] * k,
-                        if t.visible[i] { "  visible" } else { "" }
-                    )?;
-                }
+                write_fit(&mut w, name, t)?;
             }
         }
     }
@@ -332,4 +327,86 @@ pub fn run(a: Args) -> Res<bool> {
         peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
     );
     Ok(true)
+}
+
+/// The fit as a table, in the units gyro datasheets use.
+fn write_fit(w: &mut dyn Write, name: &str, t: &fit::Terms) -> std::io::Result<()> {
+    let units = [
+        ("Q", 1.0, "deg"),
+        ("N", 60.0, "deg/sqrt(h)"),
+        ("B", 3600.0, "deg/h"),
+        ("K", 3600.0 * 60.0, "deg/h/sqrt(h)"),
+        ("R", 3600.0 * 3600.0, "deg/h^2"),
+    ];
+    writeln!(
+        w,
+        "{name}: noise model over {} OADEV points (tau {} to {} s): chi2 {:.1} on {} dof, p = {:.3}, {} well-resolved points outside their 99.9 % interval: {}",
+        t.points,
+        short(t.tau0),
+        short(t.tau_max_s),
+        t.chi2,
+        t.dof,
+        t.p_value,
+        t.outside,
+        if t.fits {
+            "the model describes the curve"
+        } else {
+            "the model does NOT describe the curve (no term is called visible)"
+        }
+    )?;
+    writeln!(
+        w,
+        "{:>4} {:>14} {:>29} {:>16}  unit",
+        "term", "fit", "95 % interval", "IEEE 952 tangent"
+    )?;
+    for (i, (n, k, u)) in units.iter().enumerate() {
+        writeln!(
+            w,
+            "{n:>4} {:>14.6e} [{:>12.4e}, {:>12.4e}] {:>16.6e}  {u}{}",
+            t.value[i] * k,
+            t.ci[i][0] * k,
+            t.ci[i][1] * k,
+            t.tangent[i] * k,
+            if t.visible[i] { "  visible" } else { "" }
+        )?;
+    }
+    for g in &t.gm {
+        writeln!(
+            w,
+            "  GM sigma {:.4e} deg/h [{:.3e}, {:.3e}], tau_c {:.4e} s [{:.3e}, {:.3e}]{}",
+            g.sigma * 3600.0,
+            g.sigma_ci[0] * 3600.0,
+            g.sigma_ci[1] * 3600.0,
+            g.tau_c_s,
+            g.tau_c_ci[0],
+            g.tau_c_ci[1],
+            if g.visible { "  visible" } else { "" }
+        )?;
+    }
+    writeln!(
+        w,
+        "  angle random walk beyond the sample-scale correlation (N and processes of tau_c < 3 tau0): {:.4e} deg/sqrt(h) [{:.3e}, {:.3e}]",
+        t.arw * 60.0,
+        t.arw_ci[0] * 60.0,
+        t.arw_ci[1] * 60.0
+    )?;
+    match (t.bias_instability, t.bias_instability_tau_s) {
+        (Some(b), Some(at)) => writeln!(
+            w,
+            "  bias instability (IEEE 952: the model's flat level / 0.664): {:.4e} deg/h at {} s",
+            b * 3600.0,
+            short(at)
+        )?,
+        _ => writeln!(
+            w,
+            "  bias instability: no flat region (the model still falls at the longest tau)"
+        )?,
+    }
+    if t.visible[3] {
+        writeln!(
+            w,
+            "  K is a rate random walk or a Gauss-Markov bias whose tau_c lies beyond the longest tau (K = sigma sqrt(2/tau_c)): this record cannot tell them apart"
+        )?;
+    }
+    Ok(())
 }
