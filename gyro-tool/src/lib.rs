@@ -49,10 +49,21 @@ pub const STOP_EVERY: usize = 1 << 16;
 /// Every decoder result of a recording, and the decoder with its counts.
 pub type Recording = (Vec<Result<Decoded<Frame>, FrameError>>, Decoder<MAX_FRAME>);
 
-/// Decode every frame of a recording.
+/// Decode every frame of a recording; an error where not one frame
+/// decodes (an empty file, a CSV, any file that is not a recording of the
+/// board's link), rather than an empty recording.
 pub fn read_recording(file: &Path) -> Res<Recording> {
     let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
     let mut dec = Decoder::<MAX_FRAME>::new();
-    let frames = bytes.iter().filter_map(|&b| dec.feed::<Frame>(b)).collect();
+    let frames: Vec<_> = bytes.iter().filter_map(|&b| dec.feed::<Frame>(b)).collect();
+    if !frames.iter().any(|f| f.is_ok()) {
+        return Err(format!(
+            "{}: not a recording of the board's link: no frame decodes in its {} bytes ({} frames refused)",
+            file.display(),
+            bytes.len(),
+            frames.len()
+        )
+        .into());
+    }
     Ok((frames, dec))
 }

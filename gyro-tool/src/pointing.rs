@@ -118,6 +118,9 @@ impl Series {
 /// millisecond, from the score's start) and the motion.
 pub struct Report {
     pub frames: usize,
+    /// Times the board's clock went back (a reset): only the longest
+    /// stretch of rising time is run through the loop.
+    pub restarts: usize,
     pub predicted: usize,
     pub flagged: usize,
     pub after_us: f64,
@@ -196,6 +199,24 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
             _ => {}
         }
     }
+    // A board reset starts t_us again: the loop runs over the longest
+    // stretch of rising board time, and the report says how many restarts
+    // it left out.
+    let mut restarts = 0usize;
+    let (mut best, mut start) = ((0usize, 0usize), 0usize);
+    for i in 1..=fr.len() {
+        if i == fr.len() || fr[i].t_us <= fr[i - 1].t_us {
+            if i < fr.len() {
+                restarts += 1;
+            }
+            if i - start > best.1 - best.0 {
+                best = (start, i);
+            }
+            start = i;
+        }
+    }
+    fr.truncate(best.1);
+    fr.drain(..best.0);
     if fr.len() < 100 {
         return None;
     }
@@ -207,7 +228,7 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
     let lp = Loop::new(LoopParams::VEHICLE);
     let t0 = fr[0].t_us as f64;
     let arrive: Vec<f64> = fr.iter().map(|f| f.t_us as f64 + after_us).collect();
-    let ms = ((fr.last().map_or(0, |f| f.t_us) - fr[0].t_us) / 1000) as usize;
+    let ms = (fr.last().map_or(0, |f| f.t_us).saturating_sub(fr[0].t_us) / 1000) as usize;
     // Scored after the loops settle (2 s).
     let skip = 2000usize.min(ms / 2);
     // The recorded motion: each frame's rates at the instants they describe.
@@ -221,6 +242,7 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
     };
     let mut r = Report {
         frames: fr.len(),
+        restarts,
         predicted: fr.iter().filter(|f| f.predicted.is_some()).count(),
         flagged: fr.iter().filter(|f| f.flagged).count(),
         after_us,
@@ -339,6 +361,13 @@ pub fn run(file: &std::path::Path, truth: Option<&PathBuf>, svg: Option<&PathBuf
         return Ok(false);
     };
     let p = LoopParams::VEHICLE;
+    if r.restarts > 0 {
+        println!(
+            "{}: the board's time went back {} times (a reset): the longest stretch of rising time is analysed",
+            file.display(),
+            r.restarts
+        );
+    }
     println!(
         "{}: {} sample frames ({} predicted by the board, {} with a gyro flagged); reference loop {} Hz rate loop, {} Hz tracking; frames at the antenna {:.0} µs after t_us; scored from {:.1} s; against {}",
         file.display(),
@@ -534,6 +563,19 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    /// A board reset mid-recording (its time starts again): the longest
+    /// stretch of rising time is analysed and the restart counted, where
+    /// the span from the first frame to the last once underflowed into an
+    /// allocation of 1.5e17 bytes.
+    #[test]
+    fn a_reset_mid_recording_is_counted_not_a_crash() {
+        let mut f = frames(30.0, 2.0, 2000, 6, 1.0, 0.0, 0.0);
+        f.extend(frames(30.0, 2.0, 2000, 4, 1.0, 0.0, 0.0));
+        let r = analyse(&f, None).expect("enough frames");
+        assert_eq!(r.restarts, 1);
+        assert_eq!(r.frames, 6000);
     }
 
     #[test]

@@ -171,6 +171,14 @@ def test_a_damaged_recording_is_counted_not_guessed():
     assert c["samples_missing"] >= 1 or c["link_frames_missing"] >= 1
 
 
+def test_a_file_that_is_not_a_recording_is_an_error(tmp_path):
+    for name, text in (("log.csv", "t,z\n0,1\n1,2\n"), ("empty.glk", "")):
+        p = tmp_path / name
+        p.write_text(text)
+        with pytest.raises(OSError, match="not a recording"):
+            ga.read_recording(p)
+
+
 def test_recording_dataframe():
     pd = pytest.importorskip("pandas")
     df = ga.recording_dataframe(RECORDING)

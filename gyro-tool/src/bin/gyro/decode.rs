@@ -179,6 +179,21 @@ pub fn run(a: Args) -> Res<bool> {
         }
     }
     w.flush()?;
+    drop(w);
+    if !header_done {
+        // A CSV without even a header is no table: say why instead, and
+        // leave no empty file behind.
+        if let Some(p) = &out {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(format!(
+            "{}: no {} frames in this recording ({} frames of other kinds)",
+            file.display(),
+            format!("{what:?}").to_lowercase(),
+            frames.iter().flatten().count()
+        )
+        .into());
+    }
     let st = dec.stats();
     if st.frames != frames.len() as u64 {
         eprintln!(

@@ -102,9 +102,49 @@ enum Cmd {
     Replay(replay::Args),
 }
 
+/// A panic of `print!` on a closed pipe (`gyro … | head`): the reader has
+/// what it wanted; the tool stops quietly, as Unix tools do.
+fn broken_pipe(payload: &(dyn std::any::Any + Send)) -> bool {
+    let msg = payload
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| payload.downcast_ref::<&str>().copied())
+        .unwrap_or("");
+    msg.contains("failed printing to stdout") && msg.contains("Broken pipe")
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let r = match cli.cmd {
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !broken_pipe(info.payload()) {
+            default_hook(info)
+        }
+    }));
+    let r = match std::panic::catch_unwind(|| run(cli)) {
+        Ok(r) => r,
+        Err(p) if broken_pipe(&*p) => return ExitCode::SUCCESS,
+        Err(p) => std::panic::resume_unwind(p),
+    };
+    match r {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        // A closed pipe met through a writer: the same quiet end.
+        Err(e)
+            if e.downcast_ref::<std::io::Error>()
+                .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe) =>
+        {
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("gyro: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(cli: Cli) -> gyro_tool::Res<bool> {
+    match cli.cmd {
         Cmd::Record { link, out } => link::stream(&link, Some(out)),
         Cmd::Watch { link } => link::stream(&link, None),
         Cmd::Check(a) => check::run(a),
@@ -115,13 +155,5 @@ fn main() -> ExitCode {
         Cmd::Emulate(a) => emulate::run(a),
         Cmd::Davar(a) => davar::run(a),
         Cmd::Replay(a) => replay::run(a),
-    };
-    match r {
-        Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::FAILURE,
-        Err(e) => {
-            eprintln!("gyro: {e}");
-            ExitCode::from(2)
-        }
     }
 }

@@ -1,0 +1,108 @@
+//! The `gyro` tool on bad input and closed pipes: a clear error and exit
+//! status 2, never a panic, an abort or a silent wrong result.
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+fn gyro() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_gyro"))
+}
+
+fn temp(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("gyro-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::File::create(&p)
+        .unwrap()
+        .write_all(text.as_bytes())
+        .unwrap();
+    p
+}
+
+/// Exit status and standard error of `gyro args`.
+fn fails(args: &[&str], file: &std::path::Path) -> (i32, String) {
+    let o = gyro().args(args).arg(file).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    (o.status.code().unwrap_or(-1), err)
+}
+
+fn noise(n: usize) -> String {
+    let mut s = String::from("z\n");
+    let mut x: u64 = 1;
+    for _ in 0..n {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        s.push_str(&format!(
+            "{}\n",
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        ));
+    }
+    s
+}
+
+#[test]
+fn a_file_that_is_not_a_recording_is_refused_by_name() {
+    for (name, text) in [("empty.glk", ""), ("log.csv", "t,z\n0,1\n1,2\n")] {
+        let p = temp(name, text);
+        for cmd in ["decode", "check", "analyse", "pointing"] {
+            let (code, err) = fails(&[cmd], &p);
+            assert_eq!(code, 2, "{cmd} {name}: {err}");
+            assert!(err.contains("not a recording"), "{cmd} {name}: {err}");
+        }
+    }
+}
+
+#[test]
+fn numbers_f64_cannot_carry_are_an_error_not_a_result() {
+    let mut big = String::from("z\n");
+    for i in 0..400 {
+        big.push_str(if i % 2 == 0 { "1e308\n" } else { "-1e308\n" });
+    }
+    let (code, err) = fails(&["allan", "--tau0", "1"], &temp("big.csv", &big));
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("inf"), "{err}");
+    let (code, err) = fails(&["allan", "--tau0", "1e-300"], &temp("n.csv", &noise(300)));
+    assert_eq!(code, 2, "{err}");
+    let (code, err) = fails(
+        &["allan", "--tau0", "1", "--fit", "--format", "csv"],
+        &temp("n2.csv", &noise(300)),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--fit"), "{err}");
+}
+
+/// `gyro … | head`: the reader goes away before the tool writes; the tool
+/// ends quietly with status 0.
+#[test]
+fn a_closed_pipe_ends_the_output_quietly() {
+    let p = temp("long.csv", &noise(200_000));
+    let mut chips = String::from("a,b,c\n");
+    for line in noise(60_000).lines().skip(1) {
+        chips.push_str(&format!("{line},{line},{line}\n"));
+    }
+    let c = temp("chips.csv", &chips);
+    let svg = std::env::temp_dir().join(format!("gyro-cli-{}/replay.svg", std::process::id()));
+    let svg = svg.to_str().unwrap();
+    for (args, file) in [
+        (vec!["allan", "--tau0", "0.001", "--grid", "all"], &p),
+        (vec!["replay", "--tau0", "0.001", "--svg", svg], &c),
+    ] {
+        let mut child = gyro()
+            .args(&args)
+            .arg(file)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !err.contains("panicked") && !err.contains("Broken pipe"),
+            "{args:?}: {err}"
+        );
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+    }
+}
