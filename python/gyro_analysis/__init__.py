@@ -239,8 +239,8 @@ def davar_surface(data, rate=1.0, lambda2=1024):
     The segmented window (lambda1 = lambda2 / 2) publishes one estimate per
     32-sample hop; each describes the time ``t`` and its window
     ``[start, end)``. The rates are quantised as the board's tracker does,
-    with the smallest power-of-two step ``lsb`` that keeps them in range (it
-    adds lsb^2 / 6 to sigma^2(tau0)).
+    with the smallest power-of-two step ``lsb`` that keeps them in range and
+    still resolves their noise (it adds lsb^2 / 6 to sigma^2(tau0)).
 
     Parameters
     ----------
@@ -256,7 +256,8 @@ def davar_surface(data, rate=1.0, lambda2=1024):
     dict
         ``t``, ``start``, ``end`` (s from the first sample, one per
         estimate), ``taus`` (s, octaves from 1 / rate), ``adev`` (estimates x
-        taus, in the rate's unit) and ``lsb``.
+        taus, in the rate's unit), ``lsb`` and ``clipped`` (samples beyond the
+        range at that step, clipped as a saturating sensor would).
 
     Raises
     ------
@@ -266,8 +267,12 @@ def davar_surface(data, rate=1.0, lambda2=1024):
     KeyboardInterrupt
         On Ctrl-C (the computation runs without the GIL).
     """
-    t, start, end, taus, adev, lsb = _native.davar_surface(_series(data), float(rate), int(lambda2))
-    return {"t": t, "start": start, "end": end, "taus": taus, "adev": adev, "lsb": lsb}
+    y = _series(data)
+    t, start, end, taus, adev, lsb = _native.davar_surface(y, float(rate), int(lambda2))
+    # The step resolves the noise even when one sample is wild; samples
+    # beyond the E-DAVAR's range (2^20 - 1 steps) at it are clipped.
+    clipped = int(_np.count_nonzero(_np.round(_np.abs(y) / lsb) > (1 << 20) - 1))
+    return {"t": t, "start": start, "end": end, "taus": taus, "adev": adev, "lsb": lsb, "clipped": clipped}
 
 
 def replay(chips):

@@ -171,6 +171,14 @@ def test_a_damaged_recording_is_counted_not_guessed():
     assert c["samples_missing"] >= 1 or c["link_frames_missing"] >= 1
 
 
+def test_one_wild_sample_does_not_zero_the_surface():
+    y = 0.01 * np.random.default_rng(3).standard_normal(50_000)
+    y[25_000] = 1e6
+    s = ga.davar_surface(y, rate=1000.0)
+    assert s["clipped"] == 1
+    assert abs(s["adev"][len(s["t"]) // 10, 0] / 0.01 - 1) < 0.2
+
+
 def test_a_file_that_is_not_a_recording_is_an_error(tmp_path):
     for name, text in (("log.csv", "t,z\n0,1\n1,2\n"), ("empty.glk", "")):
         p = tmp_path / name

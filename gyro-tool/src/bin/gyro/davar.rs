@@ -47,6 +47,13 @@ pub fn run(a: Args) -> Res<bool> {
         rows.len(),
         lsb * lsb / 6.0
     );
+    let clipped = surface::clipped(rate, lsb);
+    if clipped > 0 {
+        println!(
+            "{column}: {clipped} samples beyond the E-DAVAR's range at that step were clipped to +-{:e} (a saturating sensor's reading)",
+            lsb * gyro_array::algo::allan::stream::SAMPLE_MAX as f64
+        );
+    }
     if let Some(p) = csv_out {
         let mut w = csv::Writer::from_path(p)?;
         let taus = rows.first().map_or(0, |r| r.adev.len());
