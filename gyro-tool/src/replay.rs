@@ -47,6 +47,9 @@ pub struct Replay {
     pub used: Vec<usize>,
 }
 
+/// The largest rate a replay takes, °/s.
+pub const RATE_MAX_DPS: f64 = 1e6;
+
 /// Fuse `chips` (one rate series each, same length, ≤ [`MAX_CHIPS`]).
 pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
     replay_until(chips, &AtomicBool::new(false))
@@ -66,6 +69,18 @@ pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
             chips[c].len()
         )
         .into());
+    }
+    // The fusion squares rates in f32 (variances, weights): a rate beyond
+    // 1e6 °/s, far past any gyro's full scale (the board's chips: ±2000),
+    // overflows it and every sample is refused without a word. Say so.
+    for (c, col) in chips.iter().enumerate() {
+        if let Some(i) = col.iter().position(|v| v.abs() > RATE_MAX_DPS) {
+            return Err(format!(
+                "chip column {c}, sample {i}: {:e} deg/s is beyond +-{RATE_MAX_DPS:e} deg/s, no gyro's rate (check the unit)",
+                col[i]
+            )
+            .into());
+        }
     }
     let fusion = Fusion::<MAX_CHIPS>::new(Method::Adaptive(AdaptiveConfig::default()))
         .map_err(|e| format!("fusion: {e:?}"))?;

@@ -73,6 +73,21 @@ fn numbers_f64_cannot_carry_are_an_error_not_a_result() {
     assert!(err.contains("--fit"), "{err}");
 }
 
+#[test]
+fn rates_no_gyro_gives_are_refused_with_the_reason() {
+    let mut chips = String::from("a,b,c\n");
+    for _ in 0..3000 {
+        chips.push_str("1e30,1e30,1e30\n");
+    }
+    let svg = std::env::temp_dir().join(format!("gyro-cli-{}/r.svg", std::process::id()));
+    let (code, err) = fails(
+        &["replay", "--tau0", "0.001", "--svg", svg.to_str().unwrap()],
+        &temp("huge.csv", &chips),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("check the unit"), "{err}");
+}
+
 /// `gyro … | head`: the reader goes away before the tool writes; the tool
 /// ends quietly with status 0.
 #[test]
