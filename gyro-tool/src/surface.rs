@@ -84,7 +84,7 @@ fn run<const CAP: usize, const FRAMES: usize, const T: usize>(
 /// saturating sensor does ([`clipped`] counts them).
 pub fn step_for(rate: &[f64]) -> f64 {
     let peak = rate.iter().fold(0.0f64, |m, r| m.max(r.abs()));
-    if !(peak > 0.0) {
+    if peak.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return 1.0;
     }
     let pow2_ceil = |v: f64| 2f64.powi(v.log2().ceil() as i32);

@@ -88,6 +88,40 @@ fn rates_no_gyro_gives_are_refused_with_the_reason() {
     assert!(err.contains("check the unit"), "{err}");
 }
 
+/// The ICM-42688-P's start-up value in the first 32 samples is left out
+/// and said; a step makes the log "NOT a static log", and --static
+/// analyses the quiet stretch before it.
+#[test]
+fn a_log_is_checked_before_it_is_believed() {
+    let body = noise(20_000);
+    let mut text = String::from("z\n");
+    for (i, line) in body.lines().skip(1).enumerate() {
+        let v: f64 = line.parse().unwrap();
+        let v = if i < 32 {
+            -250.0
+        } else if i >= 15_000 {
+            v + 5.0
+        } else {
+            v
+        };
+        text.push_str(&format!("{v}\n"));
+    }
+    let p = temp("startup.csv", &text);
+    let o = gyro()
+        .args(["allan", "--tau0", "0.001", "--static"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("first 32 samples read -250"), "{err}");
+    assert!(err.contains("NOT a static log: 1 step(s)"), "{err}");
+    assert!(err.contains("analysed alone"), "{err}");
+    // The quiet stretch: from sample 32 to the block edge before the step.
+    assert!(out.contains("14763 samples at tau0"), "{out}");
+}
+
 /// `gyro … | head`: the reader goes away before the tool writes; the tool
 /// ends quietly with status 0.
 #[test]

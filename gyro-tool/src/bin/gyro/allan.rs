@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::ValueEnum;
-use gyro_tool::{dev, edf, fit, plot, short, table, Res};
+use gyro_tool::{dev, edf, fit, plot, screen, short, table, Res};
 use indicatif::ProgressBar;
 
 use crate::log_args::LogArgs;
@@ -44,6 +44,10 @@ pub struct Args {
     /// Accelerometer columns, m/s² (repeat), for `--kalibr`.
     #[arg(long = "accel")]
     accel: Vec<String>,
+    /// Analyse only each column's longest stretch without steps or motion
+    /// (the check runs always and reports what it finds).
+    #[arg(long = "static")]
+    only_static: bool,
     /// Draw the curves (and the fits) as SVG.
     #[arg(long)]
     svg: Option<PathBuf>,
@@ -110,6 +114,7 @@ pub fn run(a: Args) -> Res<bool> {
         fit: want_fit,
         kalibr,
         accel,
+        only_static,
         svg,
         confidence: cf,
         chi2,
@@ -136,13 +141,59 @@ pub fn run(a: Args) -> Res<bool> {
         ProgressBar::hidden()
     };
     let mut curves = Vec::new();
+    // Each column checked before it is believed (`gyro_tool::screen`): a
+    // chip's start-up value is left out; steps and motion are said, and
+    // with --static only the longest quiet stretch is analysed.
+    let mut used: Vec<&[f64]> = Vec::new();
+    for (name, rate) in s.names.iter().zip(&s.rates) {
+        let sc = screen::screen(rate, s.tau0);
+        if sc.no_data_later > 0 {
+            return Err(format!(
+                "{name}: the start-up value {} recurs at {} samples after the start: a chip that stopped converting; cut the log where it did",
+                sc.startup_value.unwrap_or(f64::NAN),
+                sc.no_data_later
+            )
+            .into());
+        }
+        if sc.startup > 0 {
+            eprintln!(
+                "gyro: {name}: the first {} samples read {} (a chip's start-up value, not a rate): left out",
+                sc.startup,
+                sc.startup_value.unwrap_or(f64::NAN)
+            );
+        }
+        let (a, b) = sc.quiet;
+        if !sc.is_static() {
+            let what = if sc.moving {
+                "it moves (neighbouring 1 s means differ by over ten times the noise)".to_string()
+            } else {
+                let at: Vec<String> = sc
+                    .steps
+                    .iter()
+                    .map(|(i, d)| format!("{d:+.3e} at {} s", short(*i as f64 * s.tau0)))
+                    .collect();
+                format!("{} step(s): {}", sc.steps.len(), at.join(", "))
+            };
+            eprintln!(
+                "gyro: {name}: NOT a static log: {what}; its noise figures mix in the motion. The longest quiet stretch is {} to {} s ({} samples){}",
+                short(a as f64 * s.tau0),
+                short(b as f64 * s.tau0),
+                b - a,
+                if only_static { ": analysed alone (--static)" } else { "; --static analyses only it" }
+            );
+        }
+        used.push(if only_static {
+            &rate[a..b]
+        } else {
+            &rate[sc.startup..]
+        });
+    }
     // Each column's phase, once: the curves and the fit both read it.
-    let phases = s
-        .rates
+    let phases = used
         .iter()
         .map(|rate| dev::phase_from_rate(rate, s.tau0))
         .collect::<Result<Vec<_>, _>>()?;
-    for ((name, rate), x) in s.names.iter().zip(&s.rates).zip(&phases) {
+    for ((name, rate), x) in s.names.iter().zip(&used).zip(&phases) {
         let mut alphas = dev::Alphas::new();
         for &k in kinds {
             let points = dev::curve_with(k, x, s.tau0, grid, (cf, chi2), &mut alphas)?;
