@@ -27,6 +27,10 @@ pub struct Summary {
     pub sample_gaps: u64,
     /// Samples missing in those gaps.
     pub samples_missing: u64,
+    /// Sample frames that repeat the previous one's sequence number.
+    pub duplicates: u64,
+    /// Places where the sample sequence number went back (a board reset).
+    pub seq_back: u64,
     pub first_seq: Option<u32>,
     pub last_seq: Option<u32>,
     pub last_sample: Option<Sample>,
@@ -57,6 +61,8 @@ impl Default for Summary {
             link_restarts: 0,
             sample_gaps: 0,
             samples_missing: 0,
+            duplicates: 0,
+            seq_back: 0,
             first_seq: None,
             last_seq: None,
             last_sample: None,
@@ -132,7 +138,11 @@ impl Summary {
             .map_or(1, |s| u32::from(s.settings.divider.max(1)));
         if let Some(last) = self.last_seq {
             let step = seq.wrapping_sub(last);
-            if step != div && step < u32::MAX / 2 {
+            if step == 0 {
+                self.duplicates += 1;
+            } else if step >= u32::MAX / 2 {
+                self.seq_back += 1;
+            } else if step != div {
                 self.sample_gaps += 1;
                 self.samples_missing += u64::from(step.saturating_sub(div) / div);
             }

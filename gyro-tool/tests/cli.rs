@@ -122,6 +122,46 @@ fn a_log_is_checked_before_it_is_believed() {
     assert!(out.contains("14763 samples at tau0"), "{out}");
 }
 
+/// `gyro check` on the committed demo recording cut inside its last frame,
+/// and with one frame sent twice: each named, where both passed.
+#[test]
+fn check_names_a_cut_frame_and_a_repeated_sample() {
+    let rec = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../python/tests/data/highway.glk"
+    );
+    let bytes = std::fs::read(rec).unwrap();
+    let good = gyro().arg("check").arg(rec).output().unwrap();
+    assert!(good.status.success());
+    let cut = temp("cut.glk", "");
+    std::fs::write(&cut, &bytes[..bytes.len() - 7]).unwrap();
+    let o = gyro().arg("check").arg(&cut).output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        !o.status.success() && out.contains("ends inside a frame"),
+        "{out}"
+    );
+    // Frames end at each 0x00: repeat the one in the middle.
+    let ends: Vec<usize> = bytes
+        .iter()
+        .enumerate()
+        .filter(|(_, &b)| b == 0)
+        .map(|(i, _)| i)
+        .collect();
+    let (a, b) = (ends[ends.len() / 2] + 1, ends[ends.len() / 2 + 1] + 1);
+    let mut twice = bytes[..b].to_vec();
+    twice.extend_from_slice(&bytes[a..]);
+    let dup = temp("dup.glk", "");
+    std::fs::write(&dup, &twice).unwrap();
+    let o = gyro().arg("check").arg(&dup).output().unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(!o.status.success(), "{out}");
+    assert!(
+        out.contains("1 sample frames repeat the previous sequence number"),
+        "{out}"
+    );
+}
+
 /// `gyro … | head`: the reader goes away before the tool writes; the tool
 /// ends quietly with status 0.
 #[test]

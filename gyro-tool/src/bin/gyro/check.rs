@@ -85,6 +85,24 @@ pub fn run(a: Args) -> Res<bool> {
     if sum.sample_gaps > 0 {
         fails.push("gaps in the sample sequence numbers".into());
     }
+    if sum.duplicates > 0 {
+        fails.push(format!(
+            "{} sample frames repeat the previous sequence number",
+            sum.duplicates
+        ));
+    }
+    if sum.seq_back > 0 {
+        fails.push(format!(
+            "the sample sequence number went back {} times",
+            sum.seq_back
+        ));
+    }
+    if dec.pending() > 0 {
+        fails.push(format!(
+            "the recording ends inside a frame ({} bytes after the last delimiter): cut short",
+            dec.pending()
+        ));
+    }
     if let Some(n) = samples {
         if sum.samples != n {
             fails.push(format!("{} sample frames, expected {n}", sum.samples));
