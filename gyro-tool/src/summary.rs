@@ -13,6 +13,14 @@ pub fn tau0_s(s: &Status) -> f64 {
     f64::from(s.sample_us) * 1e-6 * f64::from(s.settings.divider.max(1))
 }
 
+/// The τ of the board's noise records, samples, as its tracker sends them
+/// by default (2^LINK_TAUS): what a recording without a status frame is
+/// read with.
+pub const DEFAULT_NOISE_TAU: [u16; 3] = {
+    let t = gyro_array::pipeline::tracker::LINK_TAUS;
+    [1 << t[0], 1 << t[1], 1 << t[2]]
+};
+
 /// Running summary of decoded frames.
 pub struct Summary {
     pub samples: u64,
@@ -307,4 +315,12 @@ pub fn status_line(st: &Status) -> String {
         cal.join(" "),
         clocks.join(", ")
     )
+}
+
+#[cfg(test)]
+mod default_tau_tests {
+    #[test]
+    fn the_default_noise_tau_is_what_the_board_sends() {
+        assert_eq!(super::DEFAULT_NOISE_TAU, [1, 16, 256]);
+    }
 }

@@ -533,7 +533,8 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
             Frame::Ack(_) => {}
         }
     }
-    let (tau0_s, noise_tau) = first_status.unwrap_or((f64::NAN, [1, 8, 64]));
+    let (tau0_s, noise_tau) =
+        first_status.unwrap_or((f64::NAN, gyro_tool::summary::DEFAULT_NOISE_TAU));
     let stats = dec.stats();
     let out = PyDict::new(py);
     out.set_item("samples", s.into_dict(py, gyros)?)?;
