@@ -56,6 +56,7 @@ __all__ = [
     "deviation",
     "noise_fit",
     "kalibr_yaml",
+    "screen",
     "davar_surface",
     "replay",
     "read_recording",
@@ -198,6 +199,20 @@ def noise_fit(data, rate=1.0, data_type="freq"):
     for k in ("value", "sd", "tangent", "ci", "arw_ci"):
         out[k] = _np.array(t[k], dtype=float)
     return out
+
+
+def screen(data, rate=1.0):
+    """The check ``gyro allan`` runs on a rate log before believing its noise.
+
+    Returns a dict: ``startup`` (leading samples at a chip's start-up value,
+    left out by :func:`noise_fit`) and ``startup_value``; ``no_data_later``
+    (that value later in the log); ``steps`` (``[index, size]`` pairs);
+    ``moving``; ``quiet`` (the longest stretch without a step or motion,
+    ``[start, end)``); ``block`` (samples a block); ``static``.
+    """
+    import json
+
+    return json.loads(_native.screen(_series(data), float(rate)))
 
 
 def kalibr_yaml(data, rate=1.0, data_type="freq", topic="/imu0", accel=None):

@@ -360,9 +360,36 @@ fn terms_of(
     rate: f64,
     data_type: &str,
 ) -> PyResult<fit::Terms> {
-    let x = phase_of(data.as_slice()?, rate, data_type)?;
+    let mut y = data.as_slice()?;
+    // As `gyro allan`: a chip's start-up value is never fitted as a rate.
+    if data_type == "freq" && rate.is_finite() && rate > 0.0 {
+        let sc = gyro_tool::screen::screen(y, 1.0 / rate);
+        if sc.no_data_later > 0 {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "the start-up value {} recurs at {} samples after the start: a chip that stopped converting",
+                sc.startup_value.unwrap_or(f64::NAN),
+                sc.no_data_later
+            )));
+        }
+        y = &y[sc.startup..];
+    }
+    let x = phase_of(y, rate, data_type)?;
     let tau0 = 1.0 / rate;
     py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)
+}
+
+/// The check `gyro allan` runs before believing a rate log
+/// (`gyro_tool::screen`), as JSON.
+#[pyfunction]
+#[pyo3(signature = (data, rate = 1.0))]
+fn screen(data: PyReadonlyArray1<'_, f64>, rate: f64) -> PyResult<String> {
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(value_error(DevError::Tau0));
+    }
+    let sc = gyro_tool::screen::screen(data.as_slice()?, 1.0 / rate);
+    let mut v = serde_json::to_value(&sc).map_err(value_error)?;
+    v["static"] = serde_json::Value::Bool(sc.is_static());
+    serde_json::to_string(&v).map_err(value_error)
 }
 
 /// Kalibr's `imu.yaml` from the fits of the gyro axes (°/s) and the
@@ -703,6 +730,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;
+    m.add_function(wrap_pyfunction!(screen, m)?)?;
     m.add_function(wrap_pyfunction!(davar_surface, m)?)?;
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(read_recording, m)?)?;

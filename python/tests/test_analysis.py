@@ -171,6 +171,20 @@ def test_a_damaged_recording_is_counted_not_guessed():
     assert c["samples_missing"] >= 1 or c["link_frames_missing"] >= 1
 
 
+def test_a_start_up_value_is_never_fitted_and_a_step_is_found():
+    rate = 100.0
+    y = white_and_walk(200_000, rate, n_arw=0.01, k_rrw=0.0, seed=4)
+    clean = ga.noise_fit(y, rate=rate)["arw"]
+    y[:32] = -250.0  # the ICM-42688-P's -32768 counts at +-250 deg/s
+    s = ga.screen(y, rate=rate)
+    assert s["startup"] == 32 and s["static"]
+    assert ga.noise_fit(y, rate=rate)["arw"] == pytest.approx(clean, rel=0.01)
+    y[150_000:] += 1.0
+    s = ga.screen(y, rate=rate)
+    assert not s["static"] and len(s["steps"]) == 1
+    assert abs(s["steps"][0][0] - 150_000) <= s["block"]
+
+
 def test_one_wild_sample_does_not_zero_the_surface():
     y = 0.01 * np.random.default_rng(3).standard_normal(50_000)
     y[25_000] = 1e6
