@@ -35,6 +35,10 @@ pub enum DevError {
     TooShort,
     /// The averaging factor is 0.
     Factor,
+    /// The deviation at this factor came out infinite or NaN from finite
+    /// input: values or a τ0 beyond what f64 carries through the sums
+    /// (samples near ±1e308, a τ0 of 1e-300).
+    Overflow(usize),
 }
 
 impl fmt::Display for DevError {
@@ -44,6 +48,10 @@ impl fmt::Display for DevError {
             DevError::NonFinite(i) => write!(f, "sample {i} is not finite"),
             DevError::TooShort => write!(f, "too few samples for this tau"),
             DevError::Factor => write!(f, "the averaging factor must be at least 1"),
+            DevError::Overflow(m) => write!(
+                f,
+                "the deviation at factor {m} is not finite: the values or tau0 are beyond what f64 carries through the sums"
+            ),
         }
     }
 }
@@ -168,6 +176,19 @@ pub fn deviations(
 /// built by a running sum that ended finite), without the pass that
 /// checks it; a bad `tau0` is still an error.
 pub fn deviations_of_finite(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    factors: &[usize],
+) -> Result<Vec<Option<Point>>, DevError> {
+    let out = deviations_unchecked(kind, x, tau0, factors)?;
+    match out.iter().flatten().find(|p| !p.dev.is_finite()) {
+        Some(p) => Err(DevError::Overflow(p.m)),
+        None => Ok(out),
+    }
+}
+
+fn deviations_unchecked(
     kind: Kind,
     x: &[f64],
     tau0: f64,
@@ -503,7 +524,7 @@ pub fn curve_at(
 ) -> Result<Vec<Point>, DevError> {
     check(x, tau0)?;
     let mut last_alpha = None;
-    factors
+    let points: Vec<Point> = factors
         .iter()
         .map(|&m| {
             deviation_checked(kind, x, tau0, m).map(|p| {
@@ -528,7 +549,11 @@ pub fn curve_at(
                 }
             })
         })
-        .collect()
+        .collect::<Result<_, _>>()?;
+    match points.iter().find(|p| !p.dev.is_finite()) {
+        Some(p) => Err(DevError::Overflow(p.m)),
+        None => Ok(points),
+    }
 }
 
 /// Power-law noise type α (frequency PSD ∝ f^α: 2 white PM, 1 flicker PM,

@@ -386,7 +386,11 @@ fn screen(data: PyReadonlyArray1<'_, f64>, rate: f64) -> PyResult<String> {
     if !(rate.is_finite() && rate > 0.0) {
         return Err(value_error(DevError::Tau0));
     }
-    let sc = gyro_tool::screen::screen(data.as_slice()?, 1.0 / rate);
+    let y = data.as_slice()?;
+    if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+        return Err(value_error(DevError::NonFinite(i)));
+    }
+    let sc = gyro_tool::screen::screen(y, 1.0 / rate);
     let mut v = serde_json::to_value(&sc).map_err(value_error)?;
     v["static"] = serde_json::Value::Bool(sc.is_static());
     serde_json::to_string(&v).map_err(value_error)
