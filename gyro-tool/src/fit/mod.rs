@@ -604,7 +604,24 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
         let sd = sd_of(col);
         let sd_ln: f64 = sd_of(col + 1);
         let tc = c.tau_c[j];
-        let tau_c_ci = [tc * (-1.96 * sd_ln).exp(), tc * (1.96 * sd_ln).exp()];
+        let mut tau_c_ci = [tc * (-1.96 * sd_ln).exp(), tc * (1.96 * sd_ln).exp()];
+        let mut sigma_ci = [(a - 1.96 * sd).max(0.0).sqrt(), (a + 1.96 * sd).sqrt()];
+        // The χ² profile over τc (the amplitudes refitted at each): τc
+        // and σ trade along a ridge the linearisation sees as narrower
+        // than it is. Each interval is the union of both readings.
+        let allow = 3.84 * scale;
+        for step in -60..=60 {
+            let t_try = tc * (f64::from(step) * 0.05).exp();
+            let mut tcs = c.tau_c.clone();
+            tcs[j] = t_try;
+            let cols: Vec<DVector<f64>> = tcs.iter().map(|&t| w.whiten(&d.gm_column(t))).collect();
+            let fitted = solve_with(w, &cols, &tcs);
+            if fitted.chi2 <= c.chi2 + allow {
+                let amp = fitted.theta[POWER + j];
+                tau_c_ci = [tau_c_ci[0].min(t_try), tau_c_ci[1].max(t_try)];
+                sigma_ci = [sigma_ci[0].min(amp.sqrt()), sigma_ci[1].max(amp.sqrt())];
+            }
+        }
         let inside = tau_c_ci[0] >= d.tau0 && tau_c_ci[1] <= d.taus[p - 1];
         let part = |i: usize| a * gm_avar(d.ms[i], d.tau0, tc);
         let others: Vec<usize> = (0..g).filter(|&o| o != j).collect();
@@ -619,7 +636,7 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
         let resolved = without.chi2 - c.chi2 >= DCHI2_GM;
         t.gm.push(GaussMarkov {
             sigma: a.sqrt(),
-            sigma_ci: [(a - 1.96 * sd).max(0.0).sqrt(), (a + 1.96 * sd).sqrt()],
+            sigma_ci,
             tau_c_s: tc,
             tau_c_ci,
             visible: fits && resolved && sd_ln.is_finite() && inside && carries(&part),
