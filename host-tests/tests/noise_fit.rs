@@ -83,26 +83,31 @@ fn adis_curves() -> Vec<(String, String, usize, Vec<Point>)> {
     out
 }
 
-/// On the six ADIS16405 records' x and y curves the fitted model lies
-/// within 15 % of the measured deviation at every τ of 30 clusters or
-/// more (the old IEEE 952 fit sat 1.9× above the curve at 80 s), and the
-/// χ² test says where the model does not describe the curve.
-/// The z axis carries a periodic disturbance (its deviation at 20 ms equals
-/// that at 10 ms, and rises again at 70 ms), which the model has no term
-/// for: its test fails there, as it must.
+/// On the six ADIS16405 records' x and y curves the model describes the
+/// curve (its χ² test passes) from a few tens of milliseconds on on at
+/// least 10 of 12, the angle random walk visible on at least 9; where it passes, it
+/// lies within 13 % of the measured deviation at every fitted τ of 30
+/// clusters or more (the IEEE 952 fit before sat 1.9× above at 80 s). The z
+/// axes carry a periodic disturbance (σ(20 ms) = σ(10 ms), rising again at
+/// 70 ms) no term describes: their test fails, or passes only from τ
+/// beyond the tone's reach.
 #[test]
 fn the_model_follows_real_static_gyro_curves() {
-    let mut worst = 0.0f64;
+    let (mut worst, mut passing, mut arw_seen) = (0.0f64, 0, 0);
     for (rec, col, n, pts) in adis_curves().iter().filter(|c| c.1.starts_with('g')) {
         let t = fit(pts, *n).unwrap();
         let mut dev_worst = 0.0f64;
-        for p in pts.iter().filter(|p| n / p.m >= SOLID_CLUSTERS) {
+        for p in pts
+            .iter()
+            .filter(|p| n / p.m >= SOLID_CLUSTERS && p.tau >= t.tau_min_s)
+        {
             let r = (t.avar(p.tau).sqrt() / p.dev - 1.0).abs();
             dev_worst = dev_worst.max(r);
         }
         println!(
-            "record {rec} {col}: fits {} (chi2 {:.1}/{}, p {:.3}, outside {}), worst at 30 clusters or more {:.1} %, ARW {:.3} deg/rt h, B(IEEE) {:?} deg/h, visible {:?}, gm {:?}",
+            "record {rec} {col}: fits {} from tau {} s (chi2 {:.1}/{}, p {:.3}, outside {}), worst at 30 clusters or more {:.1} %, ARW {:.3} deg/rt h, B(IEEE) {:?} deg/h, visible {:?}, gm {:?}",
             t.fits,
+            t.tau_min_s,
             t.chi2,
             t.dof,
             t.p_value,
@@ -114,13 +119,24 @@ fn the_model_follows_real_static_gyro_curves() {
             t.gm.iter().map(|g| (g.sigma * 3600.0, g.tau_c_s, g.visible)).collect::<Vec<_>>()
         );
         if col == "gz" {
-            assert!(!t.fits, "record {rec} gz: the tone is not in the model");
+            // The tone is in no term: the model describes z only beyond it.
+            assert!(
+                !t.fits || t.tau_min_s >= 0.1,
+                "record {rec} gz from {}",
+                t.tau_min_s
+            );
             continue;
         }
-        worst = worst.max(dev_worst);
-        assert!(t.fits || t.outside > 0 || t.p_value < 0.01);
+        if t.fits {
+            passing += 1;
+            arw_seen += usize::from(t.visible[1]);
+            worst = worst.max(dev_worst);
+        }
     }
-    // Measured 12.5 % (record 2 y at 316 s, 31 clusters, where the point's
-    // own 1-sigma is 13 %); the target of 10 % is not met on every curve.
-    assert!(worst < 0.15, "worst {worst}");
+    println!(
+        "x and y curves the model describes: {passing} of 12, N visible on {arw_seen}; worst gap {:.1} %",
+        100.0 * worst
+    );
+    assert!(passing >= 10 && arw_seen >= 9, "{passing} {arw_seen}");
+    assert!(worst < 0.13, "worst {worst}");
 }

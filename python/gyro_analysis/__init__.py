@@ -181,7 +181,9 @@ def noise_fit(data, rate=1.0, data_type="freq"):
         ``bias_instability`` (IEEE 952: the model's flat level / 0.664, or
         None) and its ``bias_instability_tau_s``; ``chi2``, ``dof``,
         ``p_value``, ``outside`` and ``fits`` (the test's verdict);
-        ``points``, ``tau0``, ``tau_max_s``. For degrees per second, N * 60 is
+        ``points``, ``tau0``, ``tau_min_s``, ``tau_max_s`` (the fitted tau)
+        and ``short_left_out`` (shortest points left out so that the model
+        describes the rest: an output filter or a tone shapes them). For degrees per second, N * 60 is
         deg/sqrt(h) and B * 3600 deg/h.
 
     Raises

@@ -124,6 +124,11 @@ pub struct Terms {
     pub arw_ci: [f64; 2],
     /// Sample interval, s.
     pub tau0: f64,
+    /// Points left out at the short end for the model to describe the
+    /// rest (see [`fit`]); 0 when it describes every point.
+    pub short_left_out: usize,
+    /// The shortest τ fitted, s.
+    pub tau_min_s: f64,
     /// The longest τ fitted, s. A Gauss–Markov process whose Allan peak
     /// (at 1.89 τc) lies beyond it is a rising slope here: the fit reads it
     /// as K (and a ramp R), which it cannot be told from.
@@ -304,9 +309,14 @@ fn solve_without(
     }
 }
 
-/// The correlation-time grid: from τ0 to three times the longest fitted τ.
+/// The shortest correlation time searched, in τ0: a process correlated
+/// over less than two samples is white noise to every τ (collinear with N,
+/// it left both unresolved on real records).
+const TAU_C_MIN: f64 = 2.0;
+
+/// The correlation-time grid: from 2 τ0 to three times the longest fitted τ.
 fn tau_c_grid(d: &Data) -> Vec<f64> {
-    let lo = d.tau0;
+    let lo = TAU_C_MIN * d.tau0;
     let hi = 3.0 * d.taus.last().copied().unwrap_or(d.tau0);
     let n = ((hi / lo).log10() * GRID_PER_DECADE).ceil().max(1.0) as usize;
     (0..=n)
@@ -348,7 +358,11 @@ fn best_with(d: &Data, w: &Whitened, grid: &[f64], cols: &[DVector<f64>], g: usi
                     tc.iter().map(|&t| w.whiten(&d.gm_column(t))).collect();
                 solve_with(w, &gcols, &tc)
             };
-            let (mut a, mut b) = (best.tau_c[k].ln() - step, best.tau_c[k].ln() + step);
+            let floor = (TAU_C_MIN * d.tau0).ln();
+            let (mut a, mut b) = (
+                (best.tau_c[k].ln() - step).max(floor),
+                best.tau_c[k].ln() + step,
+            );
             let r = 0.618_033_988_749_895;
             for _ in 0..24 {
                 let x1 = b - r * (b - a);
@@ -426,11 +440,43 @@ fn covariance(d: &Data, c: &Candidate, diag_floor: &[f64]) -> DMatrix<f64> {
 
 /// Fit the model to an overlapping Allan deviation curve of `n` phase
 /// points (rate samples + 1). None if fewer than three usable points.
+///
+/// Where the model does not describe the whole curve, the shortest τ are
+/// left out one at a time (up to a decade of them, keeping at least ten
+/// points) until it does: a sensor's output filter, or a tone from its
+/// drive, shapes the first milliseconds in ways no noise term describes,
+/// and those points, whose EDF is the largest, would otherwise bend the
+/// fit everywhere else. The fit says how many it left out
+/// ([`Terms::short_left_out`]); if none of those fits passes, the fit over
+/// every point is returned, failing its test.
 pub fn fit(curve: &[Point], n: usize) -> Option<Terms> {
     let pts: Vec<&Point> = curve
         .iter()
         .filter(|p| n / p.m.max(1) >= FIT_CLUSTERS && p.dev > 0.0 && p.dev.is_finite())
         .collect();
+    let whole = fit_points(&pts, n)?;
+    if whole.fits {
+        return Some(whole);
+    }
+    let decade = pts
+        .iter()
+        .take_while(|p| p.tau < 100.0 * pts[0].tau)
+        .count();
+    for k in 1..=decade {
+        if pts.len() - k < 10 {
+            break;
+        }
+        if let Some(mut t) = fit_points(&pts[k..], n) {
+            if t.fits {
+                t.short_left_out = k;
+                return Some(t);
+            }
+        }
+    }
+    Some(whole)
+}
+
+fn fit_points(pts: &[&Point], n: usize) -> Option<Terms> {
     if pts.len() < 3 {
         return None;
     }
@@ -484,11 +530,12 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
     let g = c.tau_c.len();
     // Columns of the whitened Jacobian for the active parameters.
     let mut jac: Vec<DVector<f64>> = Vec::new();
-    let mut which: Vec<(usize, bool)> = Vec::new(); // (parameter, is ln τc)
-                                                    // Every power-law term, also those the fit holds at 0: the
-                                                    // constraint is no information, and the intervals of the terms in the
-                                                    // fit must allow for those at the boundary (without them, N's interval
-                                                    // covered its truth on 84 % of runs with flicker, 95 % with).
+    // (parameter, is ln τc)
+    let mut which: Vec<(usize, bool)> = Vec::new();
+    // Every power-law term, also those the fit holds at 0: the
+    // constraint is no information, and the intervals of the terms in the
+    // fit must allow for those at the boundary (without them, N's interval
+    // covered its truth on 84 % of runs with flicker, 95 % with).
     for k in 0..POWER {
         jac.push(w.power[k].clone());
         which.push((k, false));
@@ -571,6 +618,7 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
         fits,
         tau0: d.tau0,
         tau_max_s: d.taus[p - 1],
+        tau_min_s: d.taus[0],
         sd: [f64::NAN; POWER],
         ..Terms::default()
     };
@@ -612,6 +660,9 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
         let allow = 3.84 * scale;
         for step in -60..=60 {
             let t_try = tc * (f64::from(step) * 0.05).exp();
+            if t_try < TAU_C_MIN * d.tau0 {
+                continue;
+            }
             let mut tcs = c.tau_c.clone();
             tcs[j] = t_try;
             let cols: Vec<DVector<f64>> = tcs.iter().map(|&t| w.whiten(&d.gm_column(t))).collect();

@@ -396,7 +396,7 @@ fn write_fit(w: &mut dyn Write, name: &str, t: &fit::Terms) -> std::io::Result<(
         w,
         "{name}: noise model over {} OADEV points (tau {} to {} s): chi2 {:.1} on {} dof, p = {:.3}, {} well-resolved points outside their 99.9 % interval: {}",
         t.points,
-        short(t.tau0),
+        short(t.tau_min_s),
         short(t.tau_max_s),
         t.chi2,
         t.dof,
@@ -408,6 +408,14 @@ fn write_fit(w: &mut dyn Write, name: &str, t: &fit::Terms) -> std::io::Result<(
             "the model does NOT describe the curve (no term is called visible)"
         }
     )?;
+    if t.short_left_out > 0 {
+        writeln!(
+            w,
+            "  the model describes the curve from tau = {} s on: the {} shorter points (a sensor's output filter or a tone) were left out of the fit",
+            short(t.tau_min_s),
+            t.short_left_out
+        )?;
+    }
     writeln!(
         w,
         "{:>4} {:>14} {:>29} {:>16}  unit",
