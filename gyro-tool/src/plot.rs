@@ -105,9 +105,17 @@ pub fn draw(
         .collect();
     for (i, (label, t)) in fits.iter().enumerate() {
         let col = COLOURS[i % COLOURS.len()].mix(0.7);
+        // The model where it was fitted: below `tau_min_s` the fit left
+        // the shortest points out (see `fit::fit`), and says so.
+        let fitted: Vec<f64> = taus
+            .iter()
+            .copied()
+            .filter(|&tau| tau >= t.tau_min_s * (1.0 - 1e-9))
+            .collect();
         chart
             .draw_series(LineSeries::new(
-                taus.iter()
+                fitted
+                    .iter()
                     .map(|&tau| (tau, model(t, tau).iter().sum::<f64>().sqrt())),
                 BLACK.mix(0.8).stroke_width(1),
             ))?
@@ -125,7 +133,7 @@ pub fn draw(
                 continue;
             }
             // Dashes: every other segment of the asymptote.
-            let seg: Vec<(f64, f64)> = taus
+            let seg: Vec<(f64, f64)> = fitted
                 .iter()
                 .map(|&tau| (tau, model(t, tau)[k].sqrt()))
                 .filter(|&(_, v)| v >= lo / 3.0 && v <= hi * 3.0)

@@ -606,7 +606,7 @@ fn summarise(d: &Data, w: &Whitened, c: &Candidate, n: usize) -> Terms {
     // A term carries a tenth of the model at some solid point.
     let carries = |part: &dyn Fn(usize) -> f64| {
         (0..p)
-            .filter(|&i| n / d.ms[i] >= SOLID_CLUSTERS.min(FIT_CLUSTERS * 2))
+            .filter(|&i| n / d.ms[i] >= crate::dev::MIN_CLUSTERS)
             .any(|i| part(i) >= 0.1 * model[i])
     };
     let mut t = Terms {
