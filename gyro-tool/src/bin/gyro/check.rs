@@ -98,10 +98,12 @@ pub fn run(a: Args) -> Res<bool> {
         ));
     }
     if dec.pending() > 0 {
-        fails.push(format!(
-            "the recording ends inside a frame ({} bytes after the last delimiter): cut short",
+        // Named, not failed: a live recording stopped mid-stream (the
+        // recorder's end, QEMU's) ends inside a frame too.
+        println!(
+            "note: the recording ends inside a frame ({} bytes after the last delimiter): its last frame is cut short and not counted",
             dec.pending()
-        ));
+        );
     }
     if let Some(n) = samples {
         if sum.samples != n {
