@@ -28,12 +28,19 @@ pub const POWER: usize = 5;
 /// B² (flicker), K² (rate random walk, increments of K²τ0) and R² (a rate
 /// ramp R·t).
 pub fn power_avar(m: usize, tau0: f64) -> [f64; POWER] {
-    let tau = m as f64 * tau0;
+    power_avar_at(m as f64, tau0)
+}
+
+/// [`power_avar`] at a real averaging factor: the same discrete forms,
+/// exact at integer m and continuous in τ between (flicker at the nearest
+/// integer m, its curve being flat to within 0.1 % a step there).
+pub fn power_avar_at(m: f64, tau0: f64) -> [f64; POWER] {
+    let tau = m * tau0;
     [
         // Var(x_{k+2m} − 2x_{k+m} + x_k) / (2τ²) with x white: 6Q²/(2τ²).
         3.0 / (tau * tau),
         1.0 / tau,
-        flicker_avar(m),
+        flicker_avar(m.max(1.0).round() as usize),
         // Discrete random walk: K²τ0 (2m² + 1)/(6m) = K²τ/3 + K²τ0²/(6τ).
         tau / 3.0 + tau0 * tau0 / (6.0 * tau),
         tau * tau / 2.0,

@@ -125,46 +125,9 @@ fn main() {
     let x = gyro_tool::dev::phase_from_rate(&rate, tau0).expect("finite, checked above");
     match gyro_tool::fit::fit_phase(&x, tau0) {
         Ok(t) => {
-            println!(
-                "noise model fit (gyro allan --fit): chi2 {:.1} on {} dof, p = {:.3}: {}",
-                t.chi2,
-                t.dof,
-                t.p_value,
-                if t.fits {
-                    "describes the curve"
-                } else {
-                    "does NOT describe the curve"
-                }
-            );
-            let units = [1.0, 60.0, 3600.0, 216_000.0, 12_960_000.0];
-            for (k, u) in units.iter().enumerate() {
-                println!(
-                    "  {} {:>12.4} [{:.4}, {:.4}]{}",
-                    gyro_tool::fit::POWER_NAMES[k],
-                    t.value[k] * u,
-                    t.ci[k][0] * u,
-                    t.ci[k][1] * u,
-                    if t.visible[k] { "  visible" } else { "" }
-                );
-            }
-            for g in &t.gm {
-                println!(
-                    "  Gauss-Markov sigma {:.3} deg/h [{:.3}, {:.3}], tau_c {:.3e} s [{:.3e}, {:.3e}]{}",
-                    g.sigma * 3600.0,
-                    g.sigma_ci[0] * 3600.0,
-                    g.sigma_ci[1] * 3600.0,
-                    g.tau_c_s,
-                    g.tau_c_ci[0],
-                    g.tau_c_ci[1],
-                    if g.visible { "  visible" } else { "" }
-                );
-            }
-            if let Some(b) = t.bias_instability {
-                println!(
-                    "  bias instability (IEEE 952 floor / 0.664) {:.3} deg/h",
-                    b * 3600.0
-                );
-            }
+            let mut out = std::io::stdout().lock();
+            gyro_tool::fit::write_table(&mut out, "noise model fit (gyro allan --fit)", &t)
+                .expect("stdout");
         }
         Err(e) => println!("noise model fit: {e}"),
     }
