@@ -5,8 +5,26 @@
 //! PB1, PC4); SPI2 (PB13 SCK, PB14 MISO, PB15 MOSI, mode 0, 5.25 MHz: rated
 //! to 8 MHz) to one ADXRS453 on the z axis (CS on PC5). The output link
 //! (`gyro_array::link`, `docs/link.md`) is USART1 (PA9 TX, PA10 RX) at
-//! 6 Mbaud, 8N1 (`link::BAUD`). SysTick paces sampling at 1 kHz; a tick that comes
-//! before the previous sample is done is counted as an overrun.
+//! 6 Mbaud, 8N1 (`link::BAUD`).
+//!
+//! The application is RTIC 2 (as quartiq's stabilizer runs its sample
+//! path): three priorities on the NVIC, each lock a BASEPRI ceiling.
+//!
+//! | priority | task | does |
+//! |---|---|---|
+//! | 3 | `uart` (USART1) | the link's bytes in (RXNE, into a queue) and out (TXE, from a queue); shares nothing, so no lock holds it off |
+//! | 2 | `sample` (SysTick, 1 kHz) | reads the chips at the stated instant, fuses, queues the frame, the calibration's learning (deterministic: every sample, in order) |
+//! | 1 | `background` (async, fed by a channel) | the E-DAVARs, status frames, commands, logs, the stack meter |
+//!
+//! `idle` sleeps. The sample task never waits for the background: the
+//! E-DAVARs' newest estimates reach it as a copy (`NoiseSnapshot`), and a
+//! background that falls behind loses probes (counted, bridged by the
+//! E-DAVAR) rather than delaying a frame. The locks the background still
+//! takes over the sample task's resources (the port and the pipeline, to
+//! build a status frame or apply a command) are the sample task's only
+//! blocking. Every time the board states is TIM5's µs count (the frames'
+//! `t_us`, the chips' instants); a sample that starts more than half a
+//! period late counts the periods it missed as overruns.
 //!
 //! Time (`docs/timing.md`): TIM3 CH1 on PC6 drives every ICM-42688-P's
 //! CLKIN (pin 9) at 32 kHz; each chip's INT1 pulses at every sample into
@@ -18,7 +36,7 @@
 //! loses CLKIN moves to its own clock, tracked. The status frames carry
 //! each chip's clock and its error. The ADXRS453's reading is older than
 //! that instant (3.9 ms): read and watched, not fused (`AtInstant`).
-//! Logs go out over RTT (defmt); flash and run with `cargo flash`.
+//! Logs go out over RTT (defmt); flash and run with `cargo run-board`.
 //!
 //! Clocks (`board::f405::start_clocks`): the 8 MHz crystal and the PLL to
 //! 168 MHz; if the crystal does not start, the internal oscillator with
@@ -30,21 +48,22 @@
 //! fault is recorded in RAM kept across the reset and reported at the next
 //! boot; an MPU guard under the flip-link stack turns an overflow into a
 //! hard fault; the independent watchdog (IWDG, LSI ≈ 32 kHz) resets the
-//! core if the main loop stops completing samples: 2 s while the array
+//! core if the sample task stops completing samples: 2 s while the array
 //! starts and self-tests, then 100 ms nominal (68–188 ms over the LSI's
 //! 17–47 kHz datasheet range) against a 1 ms sample period.
 #![no_std]
 #![no_main]
 
 use core::cell::RefCell;
-
-use cortex_m_rt::entry;
 use defmt_rtt as _;
-use embedded_hal_bus::spi::RefCellDevice;
+
+use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
+use heapless::spsc::{Consumer, Producer, Queue};
 use stm32f4xx_hal::{
+    gpio::{ErasedPin, Output},
     pac,
     prelude::*,
-    serial::{config::Config as SerialConfig, Serial},
+    serial::{config::Config as SerialConfig, Serial, Tx},
     spi::{Mode, Phase, Polarity, Spi},
     time::Hertz,
     watchdog::IndependentWatchdog,
@@ -53,14 +72,14 @@ use stm32f4xx_hal::{
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::mounting::{self, CalRecord};
 use gyro_array::algo::qualify::QualifyError;
-use gyro_array::board::f405::{self, ClockSource, CycleDelay, RxQueue};
+use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
-use gyro_array::board::{idle, persist, stack};
+use gyro_array::board::{persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::Settings;
-use gyro_array::link::port::{timed_clock, ChipTime, Port};
+use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
@@ -142,379 +161,666 @@ fn give_up(what: &str) -> ! {
     persist::record_and_reset(Cause::Requested)
 }
 
-#[entry]
-fn main() -> ! {
-    let record = persist::take();
-    stack::guard_stack();
-    let (Some(dp), Some(cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
-        give_up("peripherals taken twice")
-    };
-    // What ended the last run: our own record, else the reset flags.
-    let csr = dp.RCC.csr().read();
-    match record {
-        Some(r) => defmt::warn!("last run ended by {} (reset {} since power-up)", r, r.boots),
-        None if csr.wdgrstf().bit_is_set() => defmt::warn!("last run ended by the watchdog"),
-        None => defmt::info!("cold start"),
-    }
-    if let Some(msg) = persist::panic_message() {
-        defmt::warn!("last panic: {=[u8]:a}", msg);
-    }
-    dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
-    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-    watchdog.start(2000.millis());
-    let (mut rcc, clock) = f405::start_clocks(dp.RCC);
-    let core_hz = rcc.clocks.sysclk().raw();
-    match clock {
-        ClockSource::HsePll => defmt::info!("clock: crystal and PLL, {} Hz", core_hz),
-        ClockSource::HsiPll => defmt::warn!(
-            "clock: the crystal did not start; internal oscillator and PLL, {} Hz (±1 %)",
-            core_hz
-        ),
-        ClockSource::Hsi => defmt::error!(
-            "clock: neither the crystal nor the PLL started; internal oscillator alone, {} Hz",
-            core_hz
-        ),
-    }
-    let _systick = f405::start_ticks(cp.SYST, core_hz, FS_HZ);
-    let mut delay = CycleDelay::new(core_hz);
+/// The link's bytes the USART1 interrupt writes in one turn at most
+/// (a UART that takes bytes as fast as they come, as QEMU's does, would
+/// otherwise keep it for the whole queue).
+const TX_TURN: usize = 64;
 
-    let gpioa = dp.GPIOA.split(&mut rcc);
-    let gpiob = dp.GPIOB.split(&mut rcc);
-    let gpioc = dp.GPIOC.split(&mut rcc);
-    // The chips' clock (TIM3 CH1, PC6) and their INT1 captures (TIM5
-    // CH1-4, PA0-PA3), before anything else takes the pins.
-    let clkin = f405::start_clkin(dp.TIM3, gpioc.pc6.into_alternate(), &mut rcc);
-    match clkin {
-        Some(hz) => defmt::info!("CLKIN {} Hz on PC6 (TIM3 CH1)", hz),
-        None => defmt::warn!(
-            "CLKIN: the timer clock does not divide to 32 kHz; the chips keep their own clocks"
-        ),
+/// Bytes between the port and the UART's interrupt.
+type TxBytes = Queue<u8, 2048>;
+
+/// The sample task's jobs for the background, in sample order.
+const JOBS: usize = 8;
+
+/// What the sample task hands the background.
+pub enum Job {
+    /// A sample's noise probe for the E-DAVARs, with what its logs need.
+    Sample {
+        probe: Probe,
+        /// Gyros whose health flags changed with this sample.
+        health_changed: u8,
+        /// Each axis's fused rate and weights (for the periodic log).
+        fused: [Option<(f32, [f32; 5])>; 3],
+    },
+    /// A status frame is due with sample `seq` read at `t_us`; the chips'
+    /// clocks as the sample task's timed reads see them.
+    Status {
+        seq: u32,
+        t_us: u64,
+        clocks: [ChipTime; 5],
+    },
+}
+
+type Spi1Bus = RefCell<Spi<pac::SPI1>>;
+type Spi2Bus = RefCell<Spi<pac::SPI2>>;
+type Cs = ErasedPin<Output>;
+type IcmDev = RefCellDevice<'static, Spi<pac::SPI1>, Cs, NoDelay>;
+type AdxDev = RefCellDevice<'static, Spi<pac::SPI2>, Cs, NoDelay>;
+type Timed = TimedIcm<IcmDev, Int1Capture<'static>>;
+
+/// Every chip, as the sample task owns them after start-up.
+pub struct Chips {
+    timed: [Timed; 4],
+    adx: AtInstant<Adxrs453<AdxDev>>,
+}
+
+// SAFETY: the devices borrow the two buses' RefCells (`init`'s 'static
+// locals), which nothing else names; all five move together from `init`
+// to the sample task, so no two contexts ever reach one bus. (The RefCells
+// are what make the devices !Send; the shared-bus devices that are Send
+// have error types defmt cannot print.)
+#[allow(unsafe_code)]
+unsafe impl Send for Chips {}
+
+/// The link as the sample task and the background share it: the port
+/// (frames, settings, commands) and the producer of the bytes the UART's
+/// interrupt sends, which owns the consumer alone, so that nothing it
+/// does waits for a lock.
+pub struct Link {
+    port: &'static mut Port<2048>,
+    out: Producer<'static, u8>,
+}
+
+impl Link {
+    /// Move the port's queued bytes to the UART's queue, as many as fit,
+    /// and wake the interrupt.
+    fn flush(&mut self) {
+        self.port.drain(&mut ToQueue(&mut self.out));
+        rtic::pend(pac::Interrupt::USART1);
     }
-    let Some(captures) = f405::Int1Captures::start(
-        dp.TIM5,
-        (
-            gpioa.pa0.into_alternate(),
-            gpioa.pa1.into_alternate(),
-            gpioa.pa2.into_alternate(),
-            gpioa.pa3.into_alternate(),
-        ),
-        &mut rcc,
-    ) else {
-        // Both of the board's clock trees (the PLL's 84 MHz APB1 timers,
-        // the internal oscillator's 16 MHz) are whole MHz.
-        give_up("TIM5 at 1 MHz")
-    };
-    let mode = Mode {
-        polarity: Polarity::IdleLow,
-        phase: Phase::CaptureOnFirstTransition,
-    };
-    let (icm_hz, adx_hz) = (
-        spi_clock(rcc.clocks.pclk2(), ICM_SPI_MAX_HZ),
-        spi_clock(rcc.clocks.pclk1(), ADX_SPI_MAX_HZ),
-    );
-    defmt::info!(
-        "SPI1 (ICM-42688-P) {} Hz, SPI2 (ADXRS453) {} Hz",
-        icm_hz.raw(),
-        adx_hz.raw()
-    );
-    let spi1 = Spi::new(
-        dp.SPI1,
-        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
-        mode,
-        icm_hz,
-        &mut rcc,
-    );
-    let spi2 = Spi::new(
-        dp.SPI2,
-        (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
-        mode,
-        adx_hz,
-        &mut rcc,
-    );
-    // USART1 reaches pclk2 / 8 (oversampling by 8): the link's rate on the
-    // PLL's 84 MHz; on the internal oscillator alone (16 MHz: the crystal
-    // and the PLL failed) the fallback rate, logged, so the board still
-    // talks to a controller that can follow it.
-    let baud = if rcc.clocks.pclk2().raw() / 8 >= BAUD {
-        BAUD
-    } else {
-        defmt::error!(
-            "link: pclk2 {} Hz cannot make {} baud; {} baud instead",
-            rcc.clocks.pclk2().raw(),
-            BAUD,
-            FALLBACK_BAUD
-        );
-        FALLBACK_BAUD
-    };
-    let Ok(serial) = Serial::new(
-        dp.USART1,
-        (gpioa.pa9, gpioa.pa10),
-        SerialConfig::default().baudrate(baud.bps()),
-        &mut rcc,
-    ) else {
-        give_up("USART1 at the link's baud rate")
-    };
-    let (mut tx, rx) = serial.split();
-    let mut rx = RxQueue::start(rx);
-    let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(Settings::default())) else {
-        give_up("link port taken twice")
-    };
-    // The delay compensation predicts each frame's rates to its last byte
-    // at the rate the link runs.
-    port.set_timing(baud, 1_000_000 / FS_HZ);
-    let bus = RefCell::new(spi1);
-    let bus2 = RefCell::new(spi2);
+}
 
-    let cs0 = gpioa.pa4.into_push_pull_output().erase();
-    let cs1 = gpiob.pb0.into_push_pull_output().erase();
-    let cs2 = gpiob.pb1.into_push_pull_output().erase();
-    let cs3 = gpioc.pc4.into_push_pull_output().erase();
-    let cs4 = gpioc.pc5.into_push_pull_output().erase();
-    let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (
-        RefCellDevice::new_no_delay(&bus, cs0),
-        RefCellDevice::new_no_delay(&bus, cs1),
-        RefCellDevice::new_no_delay(&bus, cs2),
-        RefCellDevice::new_no_delay(&bus, cs3),
-        RefCellDevice::new_no_delay(&bus2, cs4),
-    );
-    let (mut g0, mut g1, mut g2, mut g3) = (
-        Icm42688::new(d0),
-        Icm42688::new(d1),
-        Icm42688::new(d2),
-        Icm42688::new(d3),
-    );
-    let mut g4 = Adxrs453::new(d4, 2);
+/// The UART's queue, written as a UART (full: it would block).
+struct ToQueue<'a>(&'a mut Producer<'static, u8>);
 
-    let Ok(mut pipe) = Pipeline::<5>::new(
-        PipelineConfig::default(),
-        Method::Adaptive(AdaptiveConfig::default()),
-    ) else {
-        give_up("pipeline configuration")
-    };
-    // The static calibration (mounting, scale, misalignment, bias and its
-    // temperature slope). Without a valid record the board runs
-    // uncalibrated and says so: here, and in every sample frame (bit 7 of
-    // `degraded`).
-    match pipe.set_calibration(CalRecord::decode(calib_bytes()).as_ref().map_err(|e| *e)) {
-        Ok(()) => defmt::info!("calibration record in use"),
-        Err(e) => defmt::warn!("calibration record: {}; running uncalibrated", e),
+impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
+    fn write(&mut self, b: u8) -> nb::Result<(), Self::Error> {
+        self.0.enqueue(b).map_err(|_| nb::Error::WouldBlock)
     }
-    let failed = start_array(
-        [&mut g0, &mut g1, &mut g2, &mut g3],
-        &mut g4,
-        &mut delay,
-        Some(200),
-        &mut pipe,
-    );
+    fn flush(&mut self) -> nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
 
-    // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
-    let Some(noise) = noise_tracker() else {
-        give_up("noise tracker configuration")
-    };
+#[rtic::app(device = stm32f4xx_hal::pac, peripherals = true, dispatchers = [EXTI0])]
+mod app {
+    use super::*;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
 
-    // Noise-health self-test: 2048 samples of every gyro at the sampling
-    // rate, then trend, Hurst and normality against the array's median.
-    // The blocks (40 KB) live in the core-coupled RAM, out of the stack.
-    // With no gyro running there is nothing to test (QEMU's STM32F405,
-    // which has no chips, has no core-coupled RAM either).
-    if failed == 0b1_1111 {
-        defmt::warn!("noise-health self-test skipped: no gyro started");
-    } else {
-        let blocks = selftest_blocks();
-        let mut results = [Err(QualifyError::TooShort); 5];
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let ok = selftest::run(
-            &mut gyros,
-            |_| 2, // z: every chip measures it, so each has four peers
-            |i, r| pipe.board_rates(i, r),
-            || {
-                let t = f405::ticks();
-                while f405::ticks() == t {
-                    idle::sleep_unless(|| f405::ticks() != t);
-                }
-                watchdog.feed();
-            },
-            blocks,
-            &mut results,
-        );
-        if ok {
-            defmt::info!("noise-health self-test: all gyros pass");
-        } else {
-            defmt::warn!("noise-health self-test: FAILED (see above)");
+    #[shared]
+    struct Shared {
+        pipe: Pipeline<5>,
+        link: Link,
+        /// The E-DAVARs' newest estimates, for the sample task's frames.
+        noise: NoiseSnapshot,
+    }
+
+    #[local]
+    struct Local {
+        chips: Chips,
+        captures: &'static Int1Captures,
+        watchdog: IndependentWatchdog,
+        jobs: Sender<'static, Job, JOBS>,
+        /// TIM5's count at the last sample and its 64-bit extension.
+        last_us: u32,
+        t_us: u64,
+        /// Whether idle sleeps.
+        sleep: bool,
+        /// A sample period in TIM5's µs, as measured at start-up.
+        period_us: u32,
+        /// Jobs the background had no room for.
+        lost: u32,
+        tx: Tx<pac::USART1>,
+        tx_bytes: Consumer<'static, u8>,
+        rx_feed: f405::RxFeed,
+        rx: f405::RxQueue,
+        tracker: &'static mut Tracker,
+        meter: stack::StackMeter,
+    }
+
+    #[init(local = [
+        bus1: Option<Spi1Bus> = None,
+        bus2: Option<Spi2Bus> = None,
+        captures_store: Option<Int1Captures> = None,
+        rx_bytes: f405::RxBytes = f405::RxBytes::new(),
+        tx_store: TxBytes = TxBytes::new(),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let record = persist::take();
+        stack::guard_stack();
+        let dp = cx.device;
+        // What ended the last run: our own record, else the reset flags.
+        let csr = dp.RCC.csr().read();
+        match record {
+            Some(r) => defmt::warn!("last run ended by {} (reset {} since power-up)", r, r.boots),
+            None if csr.wdgrstf().bit_is_set() => defmt::warn!("last run ended by the watchdog"),
+            None => defmt::info!("cold start"),
         }
-        // Each gyro's measured noise: fusion's priors for an axis left
-        // with two gyros.
-        pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
-    }
-
-    // The chips from their self-tests (data registers) to the board's
-    // sampling: FIFO at 4 kHz, each sample's INT1 captured, on CLKIN where
-    // the board drives it (`docs/timing.md`). A chip that failed before is
-    // set up too, so its restarts bring it back to this configuration.
-    let cfg = Config::board_fifo(if clkin.is_some() {
-        ClockInput::ClkIn
-    } else {
-        ClockInput::Internal
-    });
-    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-        if let Err(e) = g.init(&mut delay, cfg) {
-            if failed & (1 << i) == 0 {
-                defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
-            }
-            pipe.mark_init_failed(i);
+        if let Some(msg) = persist::panic_message() {
+            defmt::warn!("last panic: {=[u8]:a}", msg);
         }
-    }
-    // One start for all: a chip set up first samples through the others'
-    // set-up (46 ms each, the driver's reset and start-up waits), some 550
-    // records at 4 kHz against its FIFO's 128, and would start on an
-    // overflow.
-    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
-        let _ = g.flush_fifo();
-    }
-    let (mut t0, mut t1, mut t2, mut t3) = (
-        TimedIcm::new(g0, captures.channel(0)),
-        TimedIcm::new(g1, captures.channel(1)),
-        TimedIcm::new(g2, captures.channel(2)),
-        TimedIcm::new(g3, captures.channel(3)),
-    );
-    // The ADXRS453's reading is older than the array's instant: read and
-    // watched, not fused (z is the four ICM-42688-P's).
-    let mut g4 = AtInstant::new(g4, BOARD_DELAY_US);
-    // What the status frames say of each chip's clock.
-    let clocks = |t: [&TimedIcm<_, _>; 4]| {
-        let mut c = [ChipTime::default(); 5];
-        for (slot, t) in c.iter_mut().zip(t) {
-            *slot = timed_clock(t);
+        dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(2000.millis());
+        let (mut rcc, clock) = f405::start_clocks(dp.RCC);
+        let core_hz = rcc.clocks.sysclk().raw();
+        match clock {
+            ClockSource::HsePll => defmt::info!("clock: crystal and PLL, {} Hz", core_hz),
+            ClockSource::HsiPll => defmt::warn!(
+                "clock: the crystal did not start; internal oscillator and PLL, {} Hz (±1 %)",
+                core_hz
+            ),
+            ClockSource::Hsi => defmt::error!(
+                "clock: neither the crystal nor the PLL started; internal oscillator alone, {} Hz",
+                core_hz
+            ),
         }
-        c
-    };
+        let mut syst = f405::start_ticks(cx.core.SYST, core_hz, FS_HZ);
+        let mut delay = CycleDelay::new(core_hz);
 
-    let u = stack::stack_usage();
-    defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
-    watchdog.start(100.millis());
-    let mut meter = stack::StackMeter::new();
-    let mut status_for: Option<(u32, u64)> = None;
-    // The last sample's noise probe, for the E-DAVARs once its frame is out.
-    let mut probe: Option<Probe> = None;
-    let mut last = f405::ticks();
-    // Sample clock, µs (64-bit: the tick counter wraps after 49 days).
-    let mut t_us: u64 = 0;
-    loop {
-        // Idle time until the tick: the UART fed, then the calibration's
-        // learning and the E-DAVARs, then a status frame when one is due;
-        // commands read.
-        let now = loop {
-            let t = f405::ticks();
-            if t != last {
-                // Every sample reaches the calibration and the E-DAVARs,
-                // whatever is still queued when the next one is due.
-                if let Some(p) = probe.take() {
-                    pipe.after_frame(noise, p);
-                }
-                break t;
-            }
-            port.drain(&mut tx);
-            if port.queued() == 0 {
-                if let Some(p) = probe.take() {
-                    pipe.after_frame(noise, p);
-                } else if let Some((seq, t)) = status_for.take() {
-                    let st = port.status(
-                        &pipe,
-                        seq,
-                        t,
-                        [1, 16, 256],
-                        1_000_000 / FS_HZ,
-                        meter.peak(),
-                        &clocks([&t0, &t1, &t2, &t3]),
-                    );
-                    port.send(&st);
-                }
-            }
-            port.receive(&mut rx, &mut pipe);
-            idle::sleep_unless(|| {
-                f405::ticks() != last
-                    || port.queued() != 0
-                    || probe.is_some()
-                    || status_for.is_some()
-            });
+        let gpioa = dp.GPIOA.split(&mut rcc);
+        let gpiob = dp.GPIOB.split(&mut rcc);
+        let gpioc = dp.GPIOC.split(&mut rcc);
+        // The chips' clock (TIM3 CH1, PC6) and their INT1 captures (TIM5
+        // CH1-4, PA0-PA3), before anything else takes the pins.
+        let clkin = f405::start_clkin(dp.TIM3, gpioc.pc6.into_alternate(), &mut rcc);
+        match clkin {
+            Some(hz) => defmt::info!("CLKIN {} Hz on PC6 (TIM3 CH1)", hz),
+            None => defmt::warn!(
+                "CLKIN: the timer clock does not divide to 32 kHz; the chips keep their own clocks"
+            ),
+        }
+        let Some(captures) = Int1Captures::start(
+            dp.TIM5,
+            (
+                gpioa.pa0.into_alternate(),
+                gpioa.pa1.into_alternate(),
+                gpioa.pa2.into_alternate(),
+                gpioa.pa3.into_alternate(),
+            ),
+            &mut rcc,
+        ) else {
+            // Both of the board's clock trees (the PLL's 84 MHz APB1 timers,
+            // the internal oscillator's 16 MHz) are whole MHz.
+            give_up("TIM5 at 1 MHz")
         };
-        let elapsed = now.wrapping_sub(last);
-        last = now;
-        t_us += u64::from(elapsed) * u64::from(1_000_000 / FS_HZ);
-        if elapsed > 1 {
-            pipe.note_overrun(elapsed - 1);
-            defmt::warn!("overrun: {} period(s) missed", elapsed - 1);
+        let captures: &'static Int1Captures = cx.local.captures_store.insert(captures);
+        // TIM5's count over eight SysTick periods: 8 000 µs where both
+        // run from the one oscillator, as on the board. QEMU's
+        // netduinoplus2 clocks its timers and SysTick apart from the RCC it
+        // reads as 0, so the firmware measures the period it counts
+        // overruns against rather than assume it.
+        f405::wait_tick(&mut syst);
+        let t0 = captures.micros();
+        for _ in 0..8 {
+            f405::wait_tick(&mut syst);
         }
-        // One instant for the array, a fixed delay behind the read, on
-        // TIM5's µs (the captures' clock), in 1/16 µs.
-        let at = timed::array_instant(captures.micros(), BOARD_DELAY_US);
-        for t in [&mut t0, &mut t1, &mut t2, &mut t3] {
-            t.set_instant(at, BOARD_DELAY_US);
-        }
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut t0, &mut t1, &mut t2, &mut t3, &mut g4];
-        let out = pipe.read_and_fuse(&mut gyros);
-        pipe.log_health_changes(&out);
-        // The frame first, with the E-DAVARs' estimate of the samples
-        // before this one: the antenna waits for the frame, and the
-        // calibration and the E-DAVARs take this sample in the idle time
-        // once it is out.
-        port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
-        probe = Some(Probe::from(&out));
-        meter.step(64);
-        // A status frame is built in the idle time that follows, not in
-        // the sample's own time.
-        if port.status_due(out.seq) {
-            status_for = Some((out.seq, t_us));
-        }
-        // A completed sample is the only thing that feeds the watchdog.
-        watchdog.feed();
-        if out.seq % 10_000 == 0 {
-            let l = port.counters();
-            defmt::info!(
-                "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
-                out.seq,
-                meter.peak(),
-                l.sent,
-                l.dropped,
-                l.accepted,
-                l.rejected,
-                rx.errors()
+        let period_us = (captures.micros().wrapping_sub(t0) / 8).max(1);
+        let nominal = 1_000_000 / FS_HZ;
+        // Idle sleeps (WFI) where the clocks agree. Where they do not
+        // (QEMU), it spins: under QEMU's `-icount sleep=off` a WFI let only
+        // every other SysTick through, measured (each sample a period
+        // late), bare or with PRIMASK set.
+        let sleep = period_us.abs_diff(nominal) <= nominal / 100;
+        if !sleep {
+            defmt::warn!(
+                "TIM5 counts {} us a sample period, not {}: the timers' and the core's clocks disagree (an emulator?); idle spins",
+                period_us,
+                nominal
             );
         }
-        if out.seq % 1000 == 0 {
-            for (a, cal) in pipe.calibration().iter().enumerate() {
-                defmt::info!(
-                    "seq {} axis {}: relative calibration scale {} bias {} dps",
-                    out.seq,
-                    a,
-                    cal.scale(),
-                    cal.bias()
-                );
+        let mode = Mode {
+            polarity: Polarity::IdleLow,
+            phase: Phase::CaptureOnFirstTransition,
+        };
+        let (icm_hz, adx_hz) = (
+            spi_clock(rcc.clocks.pclk2(), ICM_SPI_MAX_HZ),
+            spi_clock(rcc.clocks.pclk1(), ADX_SPI_MAX_HZ),
+        );
+        defmt::info!(
+            "SPI1 (ICM-42688-P) {} Hz, SPI2 (ADXRS453) {} Hz",
+            icm_hz.raw(),
+            adx_hz.raw()
+        );
+        let spi1 = Spi::new(
+            dp.SPI1,
+            (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+            mode,
+            icm_hz,
+            &mut rcc,
+        );
+        let spi2 = Spi::new(
+            dp.SPI2,
+            (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
+            mode,
+            adx_hz,
+            &mut rcc,
+        );
+        // USART1 reaches pclk2 / 8 (oversampling by 8): the link's rate on the
+        // PLL's 84 MHz; on the internal oscillator alone (16 MHz: the crystal
+        // and the PLL failed) the fallback rate, logged, so the board still
+        // talks to a controller that can follow it.
+        let baud = if rcc.clocks.pclk2().raw() / 8 >= BAUD {
+            BAUD
+        } else {
+            defmt::error!(
+                "link: pclk2 {} Hz cannot make {} baud; {} baud instead",
+                rcc.clocks.pclk2().raw(),
+                BAUD,
+                FALLBACK_BAUD
+            );
+            FALLBACK_BAUD
+        };
+        let Ok(serial) = Serial::new(
+            dp.USART1,
+            (gpioa.pa9, gpioa.pa10),
+            SerialConfig::default().baudrate(baud.bps()),
+            &mut rcc,
+        ) else {
+            give_up("USART1 at the link's baud rate")
+        };
+        let (tx, rx) = serial.split();
+        let (rx_feed, rx) = f405::rx_queue(rx, cx.local.rx_bytes);
+        let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(Settings::default())) else {
+            give_up("link port taken twice")
+        };
+        // The delay compensation predicts each frame's rates to its last byte
+        // at the rate the link runs.
+        port.set_timing(baud, 1_000_000 / FS_HZ);
+        port.set_core_hz(core_hz);
+        let bus: &'static Spi1Bus = cx.local.bus1.insert(RefCell::new(spi1));
+        let bus2: &'static Spi2Bus = cx.local.bus2.insert(RefCell::new(spi2));
+
+        let cs0 = gpioa.pa4.into_push_pull_output().erase();
+        let cs1 = gpiob.pb0.into_push_pull_output().erase();
+        let cs2 = gpiob.pb1.into_push_pull_output().erase();
+        let cs3 = gpioc.pc4.into_push_pull_output().erase();
+        let cs4 = gpioc.pc5.into_push_pull_output().erase();
+        let (Ok(d0), Ok(d1), Ok(d2), Ok(d3), Ok(d4)) = (
+            RefCellDevice::new_no_delay(bus, cs0),
+            RefCellDevice::new_no_delay(bus, cs1),
+            RefCellDevice::new_no_delay(bus, cs2),
+            RefCellDevice::new_no_delay(bus, cs3),
+            RefCellDevice::new_no_delay(bus2, cs4),
+        );
+        let (mut g0, mut g1, mut g2, mut g3) = (
+            Icm42688::new(d0),
+            Icm42688::new(d1),
+            Icm42688::new(d2),
+            Icm42688::new(d3),
+        );
+        let mut g4 = Adxrs453::new(d4, 2);
+
+        let Ok(mut pipe) = Pipeline::<5>::new(
+            PipelineConfig::default(),
+            Method::Adaptive(AdaptiveConfig::default()),
+        ) else {
+            give_up("pipeline configuration")
+        };
+        // The static calibration (mounting, scale, misalignment, bias and its
+        // temperature slope). Without a valid record the board runs
+        // uncalibrated and says so: here, and in every sample frame (bit 7 of
+        // `degraded`).
+        match pipe.set_calibration(CalRecord::decode(calib_bytes()).as_ref().map_err(|e| *e)) {
+            Ok(()) => defmt::info!("calibration record in use"),
+            Err(e) => defmt::warn!("calibration record: {}; running uncalibrated", e),
+        }
+        let failed = start_array(
+            [&mut g0, &mut g1, &mut g2, &mut g3],
+            &mut g4,
+            &mut delay,
+            Some(200),
+            &mut pipe,
+        );
+
+        // E-DAVAR per fused axis: λ2 = 1024 samples (1 s), τ = 1 … 256 ms.
+        let Some(tracker) = noise_tracker() else {
+            give_up("noise tracker configuration")
+        };
+
+        // Noise-health self-test: 2048 samples of every gyro at the sampling
+        // rate, then trend, Hurst and normality against the array's median.
+        // The blocks (40 KB) live in the core-coupled RAM, out of the stack.
+        // With no gyro running there is nothing to test (QEMU's STM32F405,
+        // which has no chips, has no core-coupled RAM either).
+        if failed == 0b1_1111 {
+            defmt::warn!("noise-health self-test skipped: no gyro started");
+        } else {
+            let blocks = selftest_blocks();
+            let mut results = [Err(QualifyError::TooShort); 5];
+            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+            let ok = selftest::run(
+                &mut gyros,
+                |_| 2, // z: every chip measures it, so each has four peers
+                |i, r| pipe.board_rates(i, r),
+                || {
+                    f405::wait_tick(&mut syst);
+                    watchdog.feed();
+                },
+                blocks,
+                &mut results,
+            );
+            if ok {
+                defmt::info!("noise-health self-test: all gyros pass");
+            } else {
+                defmt::warn!("noise-health self-test: FAILED (see above)");
             }
-            for f in out.fused.iter().flatten() {
-                defmt::info!(
-                    "seq {}: fused {=f32} dps, weights {}",
-                    out.seq,
-                    f.rate_dps,
-                    f.weights
-                );
-            }
-            for a in 0..3 {
-                if let Some(d) = noise.estimate(a) {
-                    let e = d.step;
-                    defmt::info!(
-                        "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
-                        out.seq,
-                        a,
-                        d.seq,
-                        e.len,
-                        d.bridged,
-                        e.score,
-                        tracker::sigma_dps(&e, 0),
-                        tracker::sigma_dps(&e, 4),
-                        tracker::sigma_dps(&e, 8)
-                    );
+            // Each gyro's measured noise: fusion's priors for an axis left
+            // with two gyros.
+            pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
+        }
+
+        // The chips from their self-tests (data registers) to the board's
+        // sampling: FIFO at 4 kHz, each sample's INT1 captured, on CLKIN where
+        // the board drives it (`docs/timing.md`). A chip that failed before is
+        // set up too, so its restarts bring it back to this configuration.
+        let cfg = Config::board_fifo(if clkin.is_some() {
+            ClockInput::ClkIn
+        } else {
+            ClockInput::Internal
+        });
+        for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+            if let Err(e) = g.init(&mut delay, cfg) {
+                if failed & (1 << i) == 0 {
+                    defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
                 }
+                pipe.mark_init_failed(i);
+            }
+        }
+        // One start for all: a chip set up first samples through the others'
+        // set-up (46 ms each, the driver's reset and start-up waits), some 550
+        // records at 4 kHz against its FIFO's 128, and would start on an
+        // overflow.
+        for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
+            let _ = g.flush_fifo();
+        }
+        let chips = Chips {
+            timed: [
+                TimedIcm::new(g0, captures.channel(0)),
+                TimedIcm::new(g1, captures.channel(1)),
+                TimedIcm::new(g2, captures.channel(2)),
+                TimedIcm::new(g3, captures.channel(3)),
+            ],
+            // The ADXRS453's reading is older than the array's instant: read
+            // and watched, not fused (z is the four ICM-42688-P's).
+            adx: AtInstant::new(g4, BOARD_DELAY_US),
+        };
+
+        let u = stack::stack_usage();
+        defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
+        let meter = stack::StackMeter::new();
+        watchdog.start(100.millis());
+        let (jobs, inbox) = make_channel!(Job, JOBS);
+        if background::spawn(inbox).is_err() {
+            give_up("background task spawned twice");
+        }
+        // The sample task from here: SysTick's exception on (taken once
+        // init returns and interrupts are enabled).
+        syst.clear_current();
+        syst.enable_interrupt();
+        let now = captures.micros();
+        let (out, tx_bytes) = cx.local.tx_store.split();
+        (
+            Shared {
+                pipe,
+                link: Link { port, out },
+                noise: NoiseSnapshot::default(),
+            },
+            Local {
+                chips,
+                captures,
+                watchdog,
+                jobs,
+                last_us: now,
+                period_us,
+                sleep,
+                t_us: u64::from(now),
+                lost: 0,
+                tx,
+                tx_bytes,
+                rx_feed,
+                rx,
+                tracker,
+                meter,
+            },
+        )
+    }
+
+    #[idle(local = [sleep])]
+    fn idle(cx: idle::Context) -> ! {
+        let sleep = *cx.local.sleep;
+        loop {
+            if sleep {
+                cortex_m::asm::wfi();
+            } else {
+                cortex_m::asm::nop();
+            }
+        }
+    }
+
+    /// One sample: the array read at one instant, fused, its frame queued
+    /// and the UART woken; the calibration learns from it; the background
+    /// gets its probe.
+    #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
+           local = [chips, captures, watchdog, jobs, last_us, period_us, t_us, lost])]
+    fn sample(mut cx: sample::Context) {
+        let l = cx.local;
+        // One clock: TIM5's µs at the read, for the instant and the frame.
+        let now = l.captures.micros();
+        let elapsed = now.wrapping_sub(*l.last_us);
+        *l.last_us = now;
+        *l.t_us += u64::from(elapsed);
+        let t_us = *l.t_us;
+        let period = *l.period_us;
+        // Periods that passed without a sample (the task held off longer
+        // than half a period past its tick).
+        let missed = (elapsed + period / 2) / period;
+        let at = timed::array_instant(now, BOARD_DELAY_US);
+        for t in l.chips.timed.iter_mut() {
+            t.set_instant(at, BOARD_DELAY_US);
+        }
+        let Chips { timed, adx } = l.chips;
+        let [c0, c1, c2, c3] = timed;
+        let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
+        let noise = cx.shared.noise.lock(|n| *n);
+        let (out, status_due) = (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
+            if missed > 1 {
+                pipe.note_overrun(missed - 1);
+            }
+            let out = pipe.read_and_fuse(&mut gyros);
+            // The frame first: the antenna waits for it.
+            link.port.publish(&out, t_us, pipe, &noise);
+            link.flush();
+            // The calibration learns from every sample, in order.
+            pipe.finish();
+            (out, link.port.status_due(out.seq))
+        });
+        let mut fused = [None; 3];
+        for (f, o) in fused.iter_mut().zip(out.fused.iter()) {
+            *f = o.map(|o| (o.rate_dps, o.weights));
+        }
+        let job = Job::Sample {
+            probe: Probe::from(&out),
+            health_changed: out.health_changed,
+            fused,
+        };
+        if l.jobs.try_send(job).is_err() {
+            *l.lost = l.lost.wrapping_add(1);
+        }
+        if status_due {
+            let mut clocks = [ChipTime::default(); 5];
+            for (slot, t) in clocks.iter_mut().zip(l.chips.timed.iter()) {
+                *slot = timed_clock(t);
+            }
+            let job = Job::Status {
+                seq: out.seq,
+                t_us,
+                clocks,
+            };
+            if l.jobs.try_send(job).is_err() {
+                *l.lost = l.lost.wrapping_add(1);
+            }
+        }
+        // A completed sample is the only thing that feeds the watchdog.
+        l.watchdog.feed();
+    }
+
+    /// The link's bytes: received into the background's queue, sent from
+    /// the UART's queue while the UART takes them. Above the sample task
+    /// and sharing nothing: at 6 Mbaud a byte arrives every 1.7 µs and the
+    /// USART holds one, so no lock may hold this task off.
+    #[task(binds = USART1, priority = 3, local = [tx, tx_bytes, rx_feed])]
+    fn uart(cx: uart::Context) {
+        use embedded_hal_nb::serial::Write;
+        use stm32f4xx_hal::serial::TxListen;
+        let l = cx.local;
+        l.rx_feed.on_interrupt();
+        for _ in 0..TX_TURN {
+            let Some(&b) = l.tx_bytes.peek() else { break };
+            if l.tx.write(b).is_err() {
+                break;
+            }
+            l.tx_bytes.dequeue();
+        }
+        // TXE stays set while the data register is empty: listening while
+        // bytes wait brings this task back for the next.
+        if l.tx_bytes.ready() {
+            l.tx.listen();
+        } else {
+            l.tx.unlisten();
+        }
+    }
+
+    /// Everything that does not have to be done within the sample: the
+    /// E-DAVARs, status frames, commands, logs, the stack meter.
+    #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter])]
+    async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Job, JOBS>) {
+        let l = cx.local;
+        while let Ok(job) = inbox.recv().await {
+            l.meter.step(64);
+            match job {
+                Job::Sample {
+                    probe,
+                    health_changed,
+                    fused,
+                } => {
+                    l.tracker.push_probe(probe);
+                    let snap = NoiseSnapshot::of(&l.tracker.at_taus(NOISE_TAU));
+                    cx.shared.noise.lock(|n| *n = snap);
+                    if health_changed != 0 {
+                        log_health(&mut cx.shared.pipe, probe.seq, health_changed);
+                    }
+                    if probe.seq % 1000 == 0 {
+                        log_periodic(&mut cx.shared.pipe, l.tracker, probe.seq, &fused);
+                    }
+                    if probe.seq % 10_000 == 0 {
+                        let c = cx.shared.link.lock(|l| l.port.counters());
+                        defmt::info!(
+                            "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
+                            probe.seq,
+                            l.meter.peak(),
+                            c.sent,
+                            c.dropped,
+                            c.accepted,
+                            c.rejected,
+                            l.rx.errors()
+                        );
+                    }
+                }
+                Job::Status { seq, t_us, clocks } => {
+                    let peak = l.meter.peak();
+                    (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
+                        let st = link.port.status(
+                            pipe,
+                            seq,
+                            t_us,
+                            [1, 16, 256],
+                            1_000_000 / FS_HZ,
+                            peak,
+                            &clocks,
+                        );
+                        link.port.send(&st);
+                        link.flush();
+                    });
+                }
+            }
+            if l.rx.waiting() {
+                let rx = &mut *l.rx;
+                (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
+                    link.port.receive(rx, pipe);
+                    link.flush();
+                });
+            }
+        }
+    }
+
+    /// The health flags that changed with sample `seq`, copied out under
+    /// the lock and logged after it.
+    fn log_health(pipe: &mut impl rtic::Mutex<T = Pipeline<5>>, seq: u32, changed: u8) {
+        for i in 0..5 {
+            if changed & (1 << i) == 0 {
+                continue;
+            }
+            let (h, c) = pipe.lock(|p| (p.health()[i], p.counters()[i]));
+            defmt::warn!(
+                "seq {}: gyro {} health flags now {=u8:#07b} ({}; resets {}, restarts {}, restarted {})",
+                seq,
+                i,
+                h.flags,
+                h.recovery,
+                c.resets,
+                c.restarts,
+                c.restarted
+            );
+        }
+    }
+
+    /// Once a second: the calibration, the fused rates, the E-DAVARs.
+    fn log_periodic(
+        pipe: &mut impl rtic::Mutex<T = Pipeline<5>>,
+        tracker: &Tracker,
+        seq: u32,
+        fused: &[Option<(f32, [f32; 5])>; 3],
+    ) {
+        let cal = pipe.lock(|p| {
+            let mut c = [([0.0f32; 5], [0.0f32; 5]); 3];
+            for (slot, cal) in c.iter_mut().zip(p.calibration().iter()) {
+                *slot = (cal.scale(), cal.bias());
+            }
+            c
+        });
+        for (a, (scale, bias)) in cal.iter().enumerate() {
+            defmt::info!(
+                "seq {} axis {}: relative calibration scale {} bias {} dps",
+                seq,
+                a,
+                scale,
+                bias
+            );
+        }
+        for (rate, weights) in fused.iter().flatten() {
+            defmt::info!("seq {}: fused {=f32} dps, weights {}", seq, rate, weights);
+        }
+        for a in 0..3 {
+            if let Some(d) = tracker.estimate(a) {
+                let e = d.step;
+                defmt::info!(
+                    "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} sigma(1/16/256 ms) = {=f32} {=f32} {=f32} dps",
+                    seq,
+                    a,
+                    d.seq,
+                    e.len,
+                    d.bridged,
+                    e.score,
+                    tracker::sigma_dps(&e, 0),
+                    tracker::sigma_dps(&e, 4),
+                    tracker::sigma_dps(&e, 8)
+                );
             }
         }
     }

@@ -1,18 +1,17 @@
 //! STM32F405 bring-up that does not depend on any one part working:
 //! clocks with fallbacks, a cycle-count delay, SysTick sample pacing and an
-//! interrupt-fed receive queue for the link's commands. The same code runs
+//! interrupt-fed receive queue for the link's commands (the interrupts
+//! themselves are the application's tasks, `src/bin/board_f405.rs`). The same code runs
 //! on the board and on QEMU's `netduinoplus2` (whose RCC reads 0: no
 //! crystal, no PLL lock), where it takes the last fallback.
 
-use core::cell::RefCell;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
-use critical_section::Mutex;
 use embedded_hal_nb::nb;
-use heapless::Deque;
-use stm32f4xx_hal::pac::{self, interrupt, USART1};
+use heapless::spsc::{Consumer, Producer, Queue};
+use stm32f4xx_hal::pac::{self, USART1};
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::rcc::{Config as RccConfig, Rcc};
 use stm32f4xx_hal::serial::Rx;
@@ -108,48 +107,49 @@ impl embedded_hal::delay::DelayNs for CycleDelay {
     }
 }
 
-/// Sample ticks since [`start_ticks`].
-static TICKS: AtomicU32 = AtomicU32::new(0);
-
-#[cortex_m_rt::exception]
-fn SysTick() {
-    TICKS.fetch_add(1, Ordering::Release);
-}
-
-/// Tick at `rate_hz` from a core clock of `core_hz` (SysTick reload ≤ 2²⁴).
+/// Tick at `rate_hz` from a core clock of `core_hz` (SysTick reload ≤ 2²⁴),
+/// its exception left off: the application turns it on once the array
+/// has started ([`wait_tick`] paces the start-up until then).
 pub fn start_ticks(mut syst: SYST, core_hz: u32, rate_hz: u32) -> SYST {
     syst.disable_counter();
+    syst.disable_interrupt();
     syst.set_clock_source(SystClkSource::Core);
     syst.set_reload((core_hz / rate_hz.max(1)).clamp(2, 1 << 24) - 1);
     syst.clear_current();
-    syst.enable_interrupt();
     syst.enable_counter();
     syst
 }
 
-/// Sample ticks so far.
-pub fn ticks() -> u32 {
-    TICKS.load(Ordering::Acquire)
+/// Wait for the next SysTick wrap, polled (COUNTFLAG; ARMv7-M ARM
+/// B3.3.3): the start-up's pacing, before the sample task owns the tick.
+pub fn wait_tick(syst: &mut SYST) {
+    while !syst.has_wrapped() {
+        core::hint::spin_loop();
+    }
 }
 
-/// Bytes received on USART1 and not yet read, filled by its interrupt so
-/// that none is lost while the main loop works (the USART holds one).
-static RX: Mutex<RefCell<Option<Rx<USART1>>>> = Mutex::new(RefCell::new(None));
-static RX_QUEUE: Mutex<RefCell<Deque<u8, 128>>> = Mutex::new(RefCell::new(Deque::new()));
+/// The link's received bytes, queued by USART1's interrupt so that none
+/// is lost while the background is busy (the USART holds one byte).
+pub type RxBytes = Queue<u8, 256>;
+
 /// Receive errors (overrun, framing, noise, parity) and queue overflows.
 static RX_ERRORS: AtomicU32 = AtomicU32::new(0);
 
-#[interrupt]
-fn USART1() {
-    critical_section::with(|cs| {
-        let mut rx = RX.borrow_ref_mut(cs);
-        let mut q = RX_QUEUE.borrow_ref_mut(cs);
-        let Some(rx) = rx.as_mut() else { return };
-        // Bounded: the USART holds one byte; errors clear on read.
+/// The interrupt's side of the receive queue: USART1's receiver and the
+/// queue's producer.
+pub struct RxFeed {
+    rx: Rx<USART1>,
+    queue: Producer<'static, u8>,
+}
+
+impl RxFeed {
+    /// Take what the receiver holds (from USART1's interrupt). Bounded:
+    /// the USART holds one byte; errors clear on read.
+    pub fn on_interrupt(&mut self) {
         for _ in 0..4 {
-            match embedded_hal_nb::serial::Read::read(rx) {
+            match embedded_hal_nb::serial::Read::read(&mut self.rx) {
                 Ok(b) => {
-                    if q.push_back(b).is_err() {
+                    if self.queue.enqueue(b).is_err() {
                         RX_ERRORS.fetch_add(1, Ordering::Relaxed);
                     }
                 }
@@ -159,23 +159,19 @@ fn USART1() {
                 }
             }
         }
-    });
+    }
 }
 
-/// The receive side of the link: USART1's bytes, through its interrupt.
-pub struct RxQueue(());
+/// The receive side of the link as the background reads it: the queue's
+/// consumer.
+pub struct RxQueue {
+    queue: Consumer<'static, u8>,
+}
 
 impl RxQueue {
-    /// Hand `rx` to the interrupt and unmask it. Call once.
-    #[allow(unsafe_code)]
-    pub fn start(mut rx: Rx<USART1>) -> Self {
-        use stm32f4xx_hal::serial::RxListen;
-        rx.listen();
-        critical_section::with(|cs| *RX.borrow_ref_mut(cs) = Some(rx));
-        // SAFETY: the handler only touches the statics above, through
-        // critical sections.
-        unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::USART1) };
-        Self(())
+    /// Bytes waiting.
+    pub fn waiting(&self) -> bool {
+        self.queue.ready()
     }
 
     /// Receive errors and dropped bytes so far.
@@ -184,14 +180,23 @@ impl RxQueue {
     }
 }
 
+/// Split USART1's receiver into the interrupt's feed and the background's
+/// queue over `store`, its RXNE interrupt on. Unmasking USART1 in the
+/// NVIC is the application's (its task binds it).
+pub fn rx_queue(mut rx: Rx<USART1>, store: &'static mut RxBytes) -> (RxFeed, RxQueue) {
+    use stm32f4xx_hal::serial::RxListen;
+    rx.listen();
+    let (p, c) = store.split();
+    (RxFeed { rx, queue: p }, RxQueue { queue: c })
+}
+
 impl embedded_hal_nb::serial::ErrorType for RxQueue {
     type Error = core::convert::Infallible;
 }
 
 impl embedded_hal_nb::serial::Read<u8> for RxQueue {
     fn read(&mut self) -> nb::Result<u8, Self::Error> {
-        critical_section::with(|cs| RX_QUEUE.borrow_ref_mut(cs).pop_front())
-            .ok_or(nb::Error::WouldBlock)
+        self.queue.dequeue().ok_or(nb::Error::WouldBlock)
     }
 }
 
@@ -241,6 +246,13 @@ pub struct Int1Captures {
     tim: pac::TIM5,
 }
 
+// SAFETY: shared only for reads of CNT and the capture registers (one
+// 32-bit load each) and, per channel, the write of SR that clears that
+// channel's overcapture flag alone (rc_w0: 1 leaves the other flags); no
+// read-modify-write of a register two channels share.
+#[allow(unsafe_code)]
+unsafe impl Sync for Int1Captures {}
+
 /// The INT1 pins, in chip order.
 pub type Int1Pins = (
     stm32f4xx_hal::gpio::Pin<'A', 0, stm32f4xx_hal::gpio::Alternate<2>>,
@@ -285,7 +297,7 @@ impl Int1Captures {
     /// Chip `ch`'s capture (0..=3).
     pub fn channel(&self, ch: usize) -> Int1Capture<'_> {
         Int1Capture {
-            tim: &self.tim,
+            tim: self,
             ch: ch.min(3),
             last: None,
         }
@@ -294,7 +306,7 @@ impl Int1Captures {
 
 /// One chip's INT1 capture ([`crate::drivers::SampleCapture`]).
 pub struct Int1Capture<'a> {
-    tim: &'a pac::TIM5,
+    tim: &'a Int1Captures,
     ch: usize,
     last: Option<u32>,
 }
@@ -302,17 +314,18 @@ pub struct Int1Capture<'a> {
 impl crate::drivers::SampleCapture for Int1Capture<'_> {
     #[allow(unsafe_code)]
     fn last_us(&mut self) -> Option<u32> {
-        let sr = self.tim.sr().read().bits();
+        let sr = self.tim.tim.sr().read().bits();
         if sr & (1 << (1 + self.ch)) != 0 {
             // Reading CCRx clears CCxIF (RM0090 18.4.5). A pulse captured
             // over an unread one sets CCxOF: the register holds the newer,
             // which is the one wanted; the flag is cleared by writing 0 to
             // it and 1 elsewhere (rc_w0: the other channels' flags are
             // left as they are).
-            self.last = Some(self.tim.ccr(self.ch).read().bits());
+            self.last = Some(self.tim.tim.ccr(self.ch).read().bits());
             if sr & (1 << (9 + self.ch)) != 0 {
                 // SAFETY: SR's flags are rc_w0; writing 1 leaves them.
                 self.tim
+                    .tim
                     .sr()
                     .write(|w| unsafe { w.bits(!(1 << (9 + self.ch))) });
             }

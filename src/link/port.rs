@@ -46,6 +46,40 @@ impl NoiseSource for () {
     }
 }
 
+/// Each axis's newest estimate, copied out of a [`NoiseSource`] for a
+/// reader that must not wait for the tracker: on the board the
+/// background owns the E-DAVARs and leaves this copy for the sample task
+/// after each update (copying it is the only time the two share).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NoiseSnapshot {
+    described: [Option<u32>; 3],
+    noise: [Option<Noise>; 3],
+}
+
+impl NoiseSnapshot {
+    /// The estimates `src` holds now.
+    pub fn of(src: &impl NoiseSource) -> Self {
+        let mut s = Self::default();
+        for a in 0..3 {
+            s.described[a] = src.described(a);
+            if s.described[a].is_some() {
+                s.noise[a] = src.noise(a);
+            }
+        }
+        s
+    }
+}
+
+impl NoiseSource for NoiseSnapshot {
+    fn described(&self, axis: usize) -> Option<u32> {
+        self.described.get(axis).copied().flatten()
+    }
+
+    fn noise(&self, axis: usize) -> Option<Noise> {
+        self.noise.get(axis).copied().flatten()
+    }
+}
+
 /// The pipeline's noise tracker, each axis's newest estimate as a frame's
 /// noise record.
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
@@ -88,11 +122,19 @@ pub const SAMPLE_FRAME_MAX: u32 = 80;
 /// The loop's time from the sample's read (`t_us`) to its frame being
 /// queued, µs, that [`Compensation::ToFrame`] allows for: the SPI
 /// transfers of the board's reads (`pipeline::timed::board_spi_us`, 110 µs
-/// at its 4 kHz FIFO sampling) and the frame's path through the loop, its
-/// 10 000-instruction budget at the STM32F405's 168 MHz (60 µs; `cargo
+/// at its 4 kHz FIFO sampling) and the frame's path, its
+/// [`FRAME_PATH_INSTRUCTIONS`] at the STM32F405's 168 MHz (60 µs; `cargo
 /// xtask bench-loop` counts it). The E-DAVARs run after the frame is
-/// queued and are not on it. `link::tests` checks the sum.
+/// queued and are not on it. `link::tests` checks the sum. A board on
+/// another core clock says so ([`Port::set_core_hz`]).
 pub const LOOP_US: u32 = 170;
+
+/// The SPI part of [`LOOP_US`], µs: the bus's time, whatever the core's.
+const LOOP_SPI_US: u32 = 110;
+
+/// The frame path's budget, instructions (taken as cycles: the Cortex-M4
+/// at 168 MHz with flash wait states runs about one an instruction).
+pub const FRAME_PATH_INSTRUCTIONS: u32 = 10_000;
 
 /// What a status frame says of a chip's time ([`Port::status`]'s
 /// `clocks`; the default: a polled chip).
@@ -167,6 +209,8 @@ pub struct Port<const TX: usize> {
     baud: u32,
     /// 1 / the sample period, 1/µs.
     per_sample: f32,
+    /// The sample's read to its frame queued, µs ([`LOOP_US`] at 168 MHz).
+    loop_us: u32,
     /// [`Self::horizon_us`], worked out when the settings or the timing
     /// change, not each sample.
     horizon: Option<u16>,
@@ -191,6 +235,7 @@ impl<const TX: usize> Port<TX> {
             predictor_seq: None,
             baud: super::BAUD,
             per_sample: 1e-3,
+            loop_us: LOOP_US,
             horizon: None,
             last_rates: None,
         };
@@ -212,12 +257,22 @@ impl<const TX: usize> Port<TX> {
         self.retime();
     }
 
+    /// The core clock the frame path runs at, Hz: the horizon's loop part
+    /// scales with it (the board's fallback on its internal oscillator
+    /// runs at 16 MHz, where the frame path takes 625 µs, not 60).
+    pub fn set_core_hz(&mut self, core_hz: u32) {
+        let path =
+            (u64::from(FRAME_PATH_INSTRUCTIONS) * 1_000_000).div_ceil(u64::from(core_hz.max(1)));
+        self.loop_us = LOOP_SPI_US.saturating_add(path.min(u64::from(u32::MAX)) as u32);
+        self.retime();
+    }
+
     fn retime(&mut self) {
         self.horizon = match self.settings.compensation {
             Compensation::Off => None,
             Compensation::ToFrame => {
                 let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud);
-                Some((LOOP_US + wire).min(u16::MAX as u32) as u16)
+                Some((self.loop_us + wire).min(u16::MAX as u32) as u16)
             }
             Compensation::Horizon(h) => Some(h),
         };

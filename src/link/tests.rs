@@ -651,3 +651,20 @@ fn the_horizon_allows_for_the_boards_spi_reads_and_its_loop() {
     let got = super::port::LOOP_US as f32;
     assert!(got >= want && got < want + 1.0, "{got} against {want}");
 }
+
+#[test]
+fn the_horizon_follows_the_core_clock() {
+    use super::msg::Compensation;
+    let mut port = Port::<512>::new(Settings {
+        compensation: Compensation::ToFrame,
+        ..Settings::default()
+    });
+    port.set_timing(super::BAUD, 1000);
+    let at_168 = port.horizon_us().unwrap();
+    port.set_core_hz(168_000_000);
+    assert_eq!(port.horizon_us().unwrap(), at_168);
+    // The internal oscillator alone: the frame path's 10 000 instructions
+    // take 625 µs, not 60.
+    port.set_core_hz(16_000_000);
+    assert_eq!(port.horizon_us().unwrap(), at_168 + 625 - 60);
+}
