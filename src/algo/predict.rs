@@ -57,7 +57,9 @@ impl<const K: usize> Predictor<K> {
         if j >= K {
             j -= K;
         }
-        self.ring[j] = y;
+        if let Some(slot) = self.ring.get_mut(j) {
+            *slot = y;
+        }
         if self.len < K {
             self.len += 1;
         } else {
@@ -78,7 +80,7 @@ impl<const K: usize> Predictor<K> {
         let mut i = self.head;
         for j in 0..K {
             let dx = j as f32 - Self::MEAN_X;
-            let s = &self.ring[i];
+            let Some(s) = self.ring.get(i) else { break };
             for a in 0..3 {
                 sum[a] += s[a];
                 sxy[a] += dx * s[a];

@@ -701,7 +701,12 @@ mod app {
     #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter])]
     async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Job, JOBS>) {
         let l = cx.local;
-        while let Ok(job) = inbox.recv().await {
+        loop {
+            // The sender lives in the sample task for good: the channel
+            // never closes, and this task never ends.
+            let Ok(job) = inbox.recv().await else {
+                continue;
+            };
             l.meter.step(64);
             match job {
                 Job::Sample {

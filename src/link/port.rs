@@ -271,7 +271,12 @@ impl<const TX: usize> Port<TX> {
         self.horizon = match self.settings.compensation {
             Compensation::Off => None,
             Compensation::ToFrame => {
-                let wire = (SAMPLE_FRAME_MAX * 10 * 1_000_000).div_ceil(self.baud);
+                // (baud ≥ 1: set_timing keeps it so.)
+                let bits = SAMPLE_FRAME_MAX * 10 * 1_000_000;
+                let wire = bits
+                    .checked_div(self.baud)
+                    .zip(bits.checked_rem(self.baud))
+                    .map_or(u32::MAX, |(q, r)| q + u32::from(r != 0));
                 Some((self.loop_us + wire).min(u16::MAX as u32) as u16)
             }
             Compensation::Horizon(h) => Some(h),

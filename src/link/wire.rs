@@ -186,7 +186,7 @@ pub fn encode_in_place<T: Serialize>(
     }
     let buf = room.get_mut(..k + 2).ok_or(EncodeError::TooLong)?;
     let (code0, rest) = buf.split_first_mut().ok_or(EncodeError::TooLong)?;
-    let (data, tail) = rest.split_at_mut(n);
+    let (data, tail) = rest.split_at_mut_checked(n).ok_or(EncodeError::TooLong)?;
     let (crc_lo, tail) = tail.split_first_mut().ok_or(EncodeError::TooLong)?;
     let (crc_hi, end) = tail.split_first_mut().ok_or(EncodeError::TooLong)?;
     // The open run's code byte, and the run's length so far: a zero

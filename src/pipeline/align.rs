@@ -157,7 +157,9 @@ impl<const CAP: usize> Aligner<CAP> {
         let t = self.sample(k).0;
         let behind = t.wrapping_mul(n).wrapping_sub(stamps);
         (
-            t.wrapping_mul(16).wrapping_sub(behind.wrapping_mul(16) / n),
+            // (n ≥ 1: a window holds its sample.)
+            t.wrapping_mul(16)
+                .wrapping_sub(behind.wrapping_mul(16).checked_div(n).unwrap_or(0)),
             sum,
         )
     }

@@ -80,6 +80,21 @@ fn ensure_tools() {
             "install qemu-system-arm",
         );
     }
+    // llvm-objdump and llvm-addr2line: the panic-site check.
+    if have("llvm-objdump", "--version").is_none() || have("llvm-addr2line", "--version").is_none()
+    {
+        let sudo = if have("id", "-u").is_some_and(|u| u.trim() != "0") {
+            "sudo "
+        } else {
+            ""
+        };
+        must(
+            run(Command::new("sh").arg("-c").arg(format!(
+                "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq llvm"
+            ))),
+            "install llvm (llvm-objdump, llvm-addr2line)",
+        );
+    }
     // flip-link has no --version: ask cargo what it installed.
     let v = Command::new("cargo")
         .args(["install", "--list"])
@@ -590,6 +605,14 @@ fn main() {
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
             must(board_qemu(10), "board-f405 on QEMU netduinoplus2");
+            // The board firmware panics in no code of its own: each site
+            // is a bounds or divisor check the compiler could not drop, a
+            // reset waiting to happen in the field.
+            let ours = panics(&build_board());
+            must(
+                ours == 0,
+                "no panic call site from this crate in the board ELF (cargo xtask panics)",
+            );
             must(
                 python_package(),
                 "the Python package (python/) and its tests",

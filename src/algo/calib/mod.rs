@@ -815,13 +815,19 @@ impl<const N: usize> RelCal<N> {
     #[inline(never)]
     fn standard_errors(&self, i: usize) -> (f32, f32) {
         let r = self.cfg.ridge_dps2;
-        let resid = at_least(
-            self.var_y[i] - self.cov[i] * self.cov[i] / at_least(self.var_c[i], f32::MIN_POSITIVE),
-            0.0,
-        );
-        let n = at_least(self.n[i].min(self.grow) as f32 / LEARN_STRIDE as f32, 1.0);
-        let se_s2 = resid / (n * (self.var_c[i] + r));
-        let m = self.mean_c[i];
+        // (No chip i: nothing is known of it.)
+        let (Some(&var_y), Some(&cov), Some(&var_c), Some(&count), Some(&m)) = (
+            self.var_y.get(i),
+            self.cov.get(i),
+            self.var_c.get(i),
+            self.n.get(i),
+            self.mean_c.get(i),
+        ) else {
+            return (f32::INFINITY, f32::INFINITY);
+        };
+        let resid = at_least(var_y - cov * cov / at_least(var_c, f32::MIN_POSITIVE), 0.0);
+        let n = at_least(count.min(self.grow) as f32 / LEARN_STRIDE as f32, 1.0);
+        let se_s2 = resid / (n * (var_c + r));
         (se_s2, resid / n + se_s2 * m * m)
     }
 

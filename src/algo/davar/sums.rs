@@ -71,12 +71,15 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             let i = n.trailing_zeros() as usize;
             let oct = self.cfg.tau_octaves as usize;
             if i.is_multiple_of(oct) {
-                if let Some(b) = self.first_b.get_mut(i / oct) {
+                if let Some(b) = i.checked_div(oct).and_then(|k| self.first_b.get_mut(k)) {
                     *b = self.prefix;
                 }
             }
-            if let Some(e) = i.checked_sub(1).filter(|e| e.is_multiple_of(oct)) {
-                let j = e / oct;
+            if let Some(j) = i
+                .checked_sub(1)
+                .filter(|e| e.is_multiple_of(oct))
+                .and_then(|e| e.checked_div(oct))
+            {
                 if let (Some(a), Some(&b)) = (self.first_a.get_mut(j), self.first_b.get(j)) {
                     *a = self.prefix.wrapping_sub(b);
                 }

@@ -318,7 +318,9 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
                 while at < end && self.fifo_buf[at] == EMPTY_MARKER {
                     at += 1;
                 }
-                let p = &self.fifo_buf[at..(at + FIFO_PACKET).min(end)];
+                let Some(p) = self.fifo_buf.get(at..(at + FIFO_PACKET).min(end)) else {
+                    break;
+                };
                 if p.len() < FIFO_PACKET || p[0] & HEADER_MASK != HEADER_EXPECTED {
                     break;
                 }
