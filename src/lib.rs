@@ -26,6 +26,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod algo;
+pub mod app;
 pub mod board;
 pub mod checks;
 pub mod drivers;

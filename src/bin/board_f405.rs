@@ -72,6 +72,7 @@ use stm32f4xx_hal::{
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::mounting::{self, CalRecord};
 use gyro_array::algo::qualify::QualifyError;
+use gyro_array::app::{self as schedule, SampleClock};
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
@@ -84,7 +85,7 @@ use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
-use gyro_array::pipeline::tracker::{self, NoiseTracker, Probe};
+use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 const FS_HZ: u32 = 1000;
@@ -172,23 +173,14 @@ type TxBytes = Queue<u8, 2048>;
 /// The sample task's jobs for the background, in sample order.
 const JOBS: usize = 8;
 
-/// What the sample task hands the background.
-pub enum Job {
-    /// A sample's noise probe for the E-DAVARs, with what its logs need.
-    Sample {
-        probe: Probe,
-        /// Gyros whose health flags changed with this sample.
-        health_changed: u8,
-        /// Each axis's fused rate and weights (for the periodic log).
-        fused: [Option<(f32, [f32; 5])>; 3],
-    },
-    /// A status frame is due with sample `seq` read at `t_us`; the chips'
-    /// clocks as the sample task's timed reads see them.
-    Status {
-        seq: u32,
-        t_us: u64,
-        clocks: [ChipTime; 5],
-    },
+/// What the sample task hands the background: the schedule's job, with
+/// what the board's logs need of its sample.
+pub struct Work {
+    job: schedule::Job<5>,
+    /// Gyros whose health flags changed with the sample.
+    health_changed: u8,
+    /// Each axis's fused rate and weights (for the periodic log).
+    fused: [Option<(f32, [f32; 5])>; 3],
 }
 
 type Spi1Bus = RefCell<Spi<pac::SPI1>>;
@@ -221,7 +213,11 @@ pub struct Link {
     out: Producer<'static, u8>,
 }
 
-impl Link {
+impl schedule::Link<2048> for Link {
+    fn port(&mut self) -> &mut Port<2048> {
+        self.port
+    }
+
     /// Move the port's queued bytes to the UART's queue, as many as fit,
     /// and wake the interrupt.
     fn flush(&mut self) {
@@ -265,14 +261,11 @@ mod app {
         chips: Chips,
         captures: &'static Int1Captures,
         watchdog: IndependentWatchdog,
-        jobs: Sender<'static, Job, JOBS>,
-        /// TIM5's count at the last sample and its 64-bit extension.
-        last_us: u32,
-        t_us: u64,
+        jobs: Sender<'static, Work, JOBS>,
+        /// The samples' time: TIM5 against a period measured at start-up.
+        clock: SampleClock,
         /// Whether idle sleeps.
         sleep: bool,
-        /// A sample period in TIM5's µs, as measured at start-up.
-        period_us: u32,
         /// Jobs the background had no room for.
         lost: u32,
         tx: Tx<pac::USART1>,
@@ -555,7 +548,7 @@ mod app {
         defmt::info!("stack after start-up: {} of {} bytes", u.peak, u.size);
         let meter = stack::StackMeter::new();
         watchdog.start(100.millis());
-        let (jobs, inbox) = make_channel!(Job, JOBS);
+        let (jobs, inbox) = make_channel!(Work, JOBS);
         if background::spawn(inbox).is_err() {
             give_up("background task spawned twice");
         }
@@ -576,10 +569,8 @@ mod app {
                 captures,
                 watchdog,
                 jobs,
-                last_us: now,
-                period_us,
+                clock: SampleClock::new(now, period_us),
                 sleep,
-                t_us: u64::from(now),
                 lost: 0,
                 tx,
                 tx_bytes,
@@ -605,21 +596,14 @@ mod app {
 
     /// One sample: the array read at one instant, fused, its frame queued
     /// and the UART woken; the calibration learns from it; the background
-    /// gets its probe.
+    /// gets its probe (`gyro_array::app::sample`).
     #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
-           local = [chips, captures, watchdog, jobs, last_us, period_us, t_us, lost])]
+           local = [chips, captures, watchdog, jobs, clock, lost])]
     fn sample(mut cx: sample::Context) {
         let l = cx.local;
         // One clock: TIM5's µs at the read, for the instant and the frame.
         let now = l.captures.micros();
-        let elapsed = now.wrapping_sub(*l.last_us);
-        *l.last_us = now;
-        *l.t_us += u64::from(elapsed);
-        let t_us = *l.t_us;
-        let period = *l.period_us;
-        // Periods that passed without a sample (the task held off longer
-        // than half a period past its tick).
-        let missed = (elapsed + period / 2) / period;
+        let (t_us, missed) = l.clock.tick(now);
         let at = timed::array_instant(now, BOARD_DELAY_US);
         for t in l.chips.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
@@ -627,42 +611,41 @@ mod app {
         let Chips { timed, adx } = l.chips;
         let [c0, c1, c2, c3] = timed;
         let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
-        let noise = cx.shared.noise.lock(|n| *n);
-        let (out, status_due) = (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
-            if missed > 1 {
-                pipe.note_overrun(missed - 1);
-            }
-            let out = pipe.read_and_fuse(&mut gyros);
-            // The frame first: the antenna waits for it.
-            link.port.publish(&out, t_us, pipe, &noise);
-            link.flush();
-            // The calibration learns from every sample, in order.
-            pipe.finish();
-            (out, link.port.status_due(out.seq))
-        });
-        let mut fused = [None; 3];
-        for (f, o) in fused.iter_mut().zip(out.fused.iter()) {
-            *f = o.map(|o| (o.rate_dps, o.weights));
-        }
-        let job = Job::Sample {
-            probe: Probe::from(&out),
-            health_changed: out.health_changed,
-            fused,
-        };
-        if l.jobs.try_send(job).is_err() {
-            *l.lost = l.lost.wrapping_add(1);
-        }
-        if status_due {
+        let s = schedule::sample(
+            &mut cx.shared.pipe,
+            &mut cx.shared.link,
+            &mut cx.shared.noise,
+            &mut gyros,
+            t_us,
+            missed,
+        );
+        let (probe, status) = schedule::jobs(&s, t_us, || {
             let mut clocks = [ChipTime::default(); 5];
             for (slot, t) in clocks.iter_mut().zip(l.chips.timed.iter()) {
                 *slot = timed_clock(t);
             }
-            let job = Job::Status {
-                seq: out.seq,
-                t_us,
-                clocks,
-            };
-            if l.jobs.try_send(job).is_err() {
+            clocks
+        });
+        let mut fused = [None; 3];
+        for (f, o) in fused.iter_mut().zip(s.out.fused.iter()) {
+            *f = o.map(|o| (o.rate_dps, o.weights));
+        }
+        let work = [
+            Some(Work {
+                job: probe,
+                health_changed: s.out.health_changed,
+                fused,
+            }),
+            status.map(|job| Work {
+                job,
+                health_changed: 0,
+                fused: [None; 3],
+            }),
+        ];
+        for w in work.into_iter().flatten() {
+            // A background this far behind loses the job (the E-DAVAR
+            // bridges a lost probe), never the sample task's time.
+            if l.jobs.try_send(w).is_err() {
                 *l.lost = l.lost.wrapping_add(1);
             }
         }
@@ -696,70 +679,54 @@ mod app {
         }
     }
 
-    /// Everything that does not have to be done within the sample: the
-    /// E-DAVARs, status frames, commands, logs, the stack meter.
+    /// Everything that does not have to be done within the sample
+    /// (`gyro_array::app::Background`): the E-DAVARs, status frames,
+    /// commands; and the logs, the stack meter.
     #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter])]
-    async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Job, JOBS>) {
+    async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Work, JOBS>) {
         let l = cx.local;
+        let mut bg = schedule::Background {
+            tracker: l.tracker,
+            taus: NOISE_TAU,
+            sample_us: 1_000_000 / FS_HZ,
+        };
         loop {
             // The sender lives in the sample task for good: the channel
             // never closes, and this task never ends.
-            let Ok(job) = inbox.recv().await else {
+            let Ok(w) = inbox.recv().await else {
                 continue;
             };
             l.meter.step(64);
-            match job {
-                Job::Sample {
-                    probe,
-                    health_changed,
-                    fused,
-                } => {
-                    l.tracker.push_probe(probe);
-                    let snap = NoiseSnapshot::of(&l.tracker.at_taus(NOISE_TAU));
-                    cx.shared.noise.lock(|n| *n = snap);
-                    if health_changed != 0 {
-                        log_health(&mut cx.shared.pipe, probe.seq, health_changed);
-                    }
-                    if probe.seq % 1000 == 0 {
-                        log_periodic(&mut cx.shared.pipe, l.tracker, probe.seq, &fused);
-                    }
-                    if probe.seq % 10_000 == 0 {
-                        let c = cx.shared.link.lock(|l| l.port.counters());
-                        defmt::info!(
-                            "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
-                            probe.seq,
-                            l.meter.peak(),
-                            c.sent,
-                            c.dropped,
-                            c.accepted,
-                            c.rejected,
-                            l.rx.errors()
-                        );
-                    }
+            bg.run(
+                w.job,
+                &mut cx.shared.pipe,
+                &mut cx.shared.link,
+                &mut cx.shared.noise,
+                l.meter.peak(),
+            );
+            if let schedule::Job::Sample(probe) = w.job {
+                if w.health_changed != 0 {
+                    log_health(&mut cx.shared.pipe, probe.seq, w.health_changed);
                 }
-                Job::Status { seq, t_us, clocks } => {
-                    let peak = l.meter.peak();
-                    (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
-                        let st = link.port.status(
-                            pipe,
-                            seq,
-                            t_us,
-                            [1, 16, 256],
-                            1_000_000 / FS_HZ,
-                            peak,
-                            &clocks,
-                        );
-                        link.port.send(&st);
-                        link.flush();
-                    });
+                if probe.seq % 1000 == 0 {
+                    log_periodic(&mut cx.shared.pipe, bg.tracker, probe.seq, &w.fused);
+                }
+                if probe.seq % 10_000 == 0 {
+                    let c = cx.shared.link.lock(|l| l.port.counters());
+                    defmt::info!(
+                        "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
+                        probe.seq,
+                        l.meter.peak(),
+                        c.sent,
+                        c.dropped,
+                        c.accepted,
+                        c.rejected,
+                        l.rx.errors()
+                    );
                 }
             }
             if l.rx.waiting() {
-                let rx = &mut *l.rx;
-                (&mut cx.shared.pipe, &mut cx.shared.link).lock(|pipe, link| {
-                    link.port.receive(rx, pipe);
-                    link.flush();
-                });
+                schedule::receive(&mut *l.rx, &mut cx.shared.pipe, &mut cx.shared.link);
             }
         }
     }

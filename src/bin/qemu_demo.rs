@@ -43,6 +43,7 @@ use defmt_semihosting as _;
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::mounting::CalRecord;
 use gyro_array::algo::qualify::QualifyError;
+use gyro_array::app as schedule;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
 use gyro_array::board::{idle, stack};
@@ -54,12 +55,13 @@ use gyro_array::emu::{
     EmuBus, EmuCapture, EmuDelay, Fault, PathModel, RateProfile, TempProfile,
 };
 use gyro_array::link::msg::Settings;
-use gyro_array::link::port::{timed_clock, ChipTime, Port};
+use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
-use gyro_array::pipeline::tracker::{self, NoiseTracker, Probe};
+use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use rtic_core::Exclusive;
 
 const FS_HZ: u32 = 1000;
 /// The board's calibration record, as the procedure wrote it.
@@ -228,9 +230,19 @@ fn main() -> ! {
     let mut digest = crc32.digest();
     let mut sample_frames = 0u32;
 
-    let mut status_for: Option<(u32, u64)> = None;
-    // The last sample's noise probe, for the E-DAVARs once its frame is out.
-    let mut probe: Option<Probe> = None;
+    // The schedule (`gyro_array::app`) as one loop runs it: the sample
+    // task's work at each tick, the background's in the idle time after,
+    // every piece borrowed in turn (`Exclusive`).
+    let mut snapshot = NoiseSnapshot::default();
+    let mut bg = schedule::Background {
+        tracker: &mut noise,
+        taus: NOISE_TAU,
+        sample_us: 1_000_000 / FS_HZ,
+    };
+    // The jobs the last sample handed on: its probe, and a status frame
+    // when one was due.
+    let mut probe: Option<schedule::Job<5>> = None;
+    let mut status_for: Option<schedule::Job<5>> = None;
     let mut last_tick = TICKS.load(Ordering::Acquire);
     let mut stuck_at = None;
     let mut excluded_at = None;
@@ -243,32 +255,37 @@ fn main() -> ! {
         let now = loop {
             let t = TICKS.load(Ordering::Acquire);
             if t != last_tick {
-                // Every sample reaches the calibration and the E-DAVARs,
-                // whatever is still queued when the next one is due.
-                if let Some(p) = probe.take() {
-                    pipe.after_frame(&mut noise, p);
+                // Every sample reaches the E-DAVARs, whatever is still
+                // queued when the next one is due.
+                if let Some(j) = probe.take() {
+                    bg.run(
+                        j,
+                        &mut Exclusive(&mut pipe),
+                        &mut Exclusive(&mut port),
+                        &mut Exclusive(&mut snapshot),
+                        0,
+                    );
                 }
                 break t;
             }
             port.drain(&mut uart);
             if port.queued() == 0 {
-                if let Some(p) = probe.take() {
-                    pipe.after_frame(&mut noise, p);
-                } else if let Some((seq, t)) = status_for.take() {
+                if let Some(j) = probe.take().or_else(|| status_for.take()) {
                     let peak = stack::stack_usage().peak;
-                    let st = port.status(
-                        &pipe,
-                        seq,
-                        t,
-                        [1, 8, 64],
-                        1_000_000 / FS_HZ,
+                    bg.run(
+                        j,
+                        &mut Exclusive(&mut pipe),
+                        &mut Exclusive(&mut port),
+                        &mut Exclusive(&mut snapshot),
                         peak,
-                        &clocks([&g0, &g1, &g2, &g3]),
                     );
-                    port.send(&st);
                 }
             }
-            port.receive(&mut uart, &mut pipe);
+            schedule::receive(
+                &mut uart,
+                &mut Exclusive(&mut pipe),
+                &mut Exclusive(&mut port),
+            );
             // Sleep only if the tick has still not come, checked with
             // interrupts masked: a tick taken between the check above and
             // the WFI would otherwise be slept through, a missed sample
@@ -282,7 +299,6 @@ fn main() -> ! {
         };
         let missed = now.wrapping_sub(last_tick).saturating_sub(1);
         if missed > 0 {
-            pipe.note_overrun(missed);
             defmt::warn!("overrun: {} sample(s) missed before sample {}", missed, n);
         }
         last_tick = now;
@@ -326,31 +342,35 @@ fn main() -> ! {
             t.set_instant(at, BOARD_DELAY_US);
         }
 
+        let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
         let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let out = pipe.read_and_fuse(&mut gyros);
+        let sampled = schedule::sample(
+            &mut Exclusive(&mut pipe),
+            &mut Exclusive(&mut port),
+            &mut Exclusive(&mut snapshot),
+            &mut gyros,
+            t_us,
+            missed,
+        );
+        let out = sampled.out;
         pipe.log_health_changes(&out);
         if let (Some(_), None) = (stuck_at, excluded_at) {
             if out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
                 excluded_at = Some(n);
             }
         }
-        let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
-        let before = port.counters().sent;
-        // The frame first, as on the board (the calibration and the
-        // E-DAVARs take this sample once it is out).
-        port.publish(&out, t_us, &pipe, &noise.at_taus(NOISE_TAU));
-        probe = Some(Probe::from(&out));
-        if port.counters().sent != before {
+        let (p, st) = schedule::jobs(&sampled, t_us, || clocks([&g0, &g1, &g2, &g3]));
+        probe = Some(p);
+        if st.is_some() {
+            status_for = st;
+        }
+        if sampled.sent {
             sample_frames += 1;
             // What the frame carried (the rates predicted to its last byte:
             // the link's delay compensation).
             for r in port.last_sample_rates().unwrap_or([f32::NAN; 3]) {
                 digest.update(&r.to_le_bytes());
             }
-        }
-        // Built in the idle time that follows, as on the board.
-        if port.status_due(out.seq) {
-            status_for = Some((out.seq, t_us));
         }
         let log_now = if n < 3000 {
             n % 500 == 499
@@ -359,7 +379,9 @@ fn main() -> ! {
         };
         if log_now {
             for a in 0..3 {
-                let Some(d) = noise.estimate(a) else { continue };
+                let Some(d) = bg.tracker.estimate(a) else {
+                    continue;
+                };
                 let e = d.step;
                 defmt::info!(
                     "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
@@ -405,8 +427,14 @@ fn main() -> ! {
         }
     }
 
-    if let Some(p) = probe.take() {
-        pipe.after_frame(&mut noise, p);
+    if let Some(j) = probe.take() {
+        bg.run(
+            j,
+            &mut Exclusive(&mut pipe),
+            &mut Exclusive(&mut port),
+            &mut Exclusive(&mut snapshot),
+            0,
+        );
     }
     // Send what is still queued (bounded: the UART takes a byte at a time).
     for _ in 0..100_000 {
@@ -492,8 +520,8 @@ fn main() -> ! {
     defmt::info!(
         "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts, {} missing samples bridged",
         sigma_x_1ms,
-        noise.restarts(),
-        noise.bridged()
+        bg.tracker.restarts(),
+        bg.tracker.bridged()
     );
     pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
     defmt::info!(
