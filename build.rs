@@ -16,5 +16,12 @@ fn main() {
     if qemu {
         // memory.x reads this symbol to place FLASH at 0x0 on mps2-an386.
         println!("cargo:rustc-link-arg-bins=--defsym=__qemu_layout=1");
+        // The interrupt handlers' defaults (src/board/an386.rs), as the
+        // `device.x` cortex-m-rt's link.x includes.
+        println!("cargo:rerun-if-changed=src/board/an386.x");
+        let out = std::path::PathBuf::from(std::env::var_os("OUT_DIR").unwrap_or_default());
+        if std::fs::copy("src/board/an386.x", out.join("device.x")).is_ok() {
+            println!("cargo:rustc-link-search={}", out.display());
+        }
     }
 }

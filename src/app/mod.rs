@@ -107,7 +107,9 @@ pub struct Sampled<const N: usize> {
 /// the last: the chips read through `gyros` (already set to the tick's
 /// instant), fused, the frame queued with the newest noise estimate, the
 /// calibration's learning. The pipeline and the link are held for all of
-/// it: everything else that takes them runs below this task.
+/// it: everything else that takes them runs below this task. `queued`
+/// runs the moment the frame is queued (where a measurement of the
+/// response reads its clock).
 pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
     pipe: &mut impl Mutex<T = Pipeline<N>>,
     link: &mut impl Mutex<T = L>,
@@ -115,6 +117,7 @@ pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
     gyros: &mut [&mut dyn Gyro; N],
     t_us: u64,
     missed: u32,
+    queued: impl FnOnce(),
 ) -> Sampled<N> {
     let estimates = noise.lock(|n| *n);
     (pipe, link).lock(|pipe, link| {
@@ -129,6 +132,7 @@ pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
         let sent = port.counters().sent != before;
         let status_due = port.status_due(out.seq);
         link.flush();
+        queued();
         // The calibration learns from every sample, in order.
         pipe.finish();
         Sampled {

@@ -618,6 +618,7 @@ mod app {
             &mut gyros,
             t_us,
             missed,
+            || {},
         );
         let (probe, status) = schedule::jobs(&s, t_us, || {
             let mut clocks = [ChipTime::default(); 5];

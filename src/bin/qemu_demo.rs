@@ -25,9 +25,22 @@
 //! Every sample goes out over UART0 as an output-link frame (`link`),
 //! with a status frame every second and an acknowledgement for every
 //! command received; the run lasts 60 s of emulated time.
+//!
+//! The application is RTIC 2, the board's schedule (`gyro_array::app`)
+//! on the board's priorities: the sample task on SysTick (priority 2),
+//! UART0's receive and transmit interrupts above it (3), the E-DAVARs,
+//! status frames, commands and logs in a background task (1). The run
+//! measures the schedule as it runs, on SysTick's count (QEMU's
+//! `-icount shift=0`: one count is 40 executed instructions, checked at
+//! start-up on a loop of known length): each tick to the sample task's
+//! start, to its frame queued and to each frame's first byte on the
+//! UART; the CPU's load (the instructions idle did not spin).
+//!
 //! The run fails (exit code 1) unless the stuck gyro is excluded within
 //! 20 samples, every bit error is caught, every sample is accounted for,
-//! no chip is flagged for its clock alone, no frame is dropped, and E-DAVAR's σ(1 ms) on x matches the fused noise
+//! no chip is flagged for its clock alone, no frame is dropped, no tick
+//! comes before the sample task is done with the last, the background
+//! loses no job, and E-DAVAR's σ(1 ms) on x matches the fused noise
 //! (0.02–0.1 °/s). It ends by logging the number of sample frames and a
 //! CRC-32 of their fused rates, which `cargo xtask test` compares with the
 //! host's recording of the UART.
@@ -35,10 +48,11 @@
 #![no_main]
 
 use core::cell::RefCell;
+use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
+use heapless::spsc::{Consumer, Producer, Queue};
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::mounting::CalRecord;
@@ -46,22 +60,22 @@ use gyro_array::algo::qualify::QualifyError;
 use gyro_array::app as schedule;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
-use gyro_array::board::{idle, stack};
+use gyro_array::board::stack;
+use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{ClockInput, Config};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::ClockParams;
 use gyro_array::emu::{
     board_array, board_drivers, mounted_board, with_bus, BoardDrivers, Chip, ChipTiming, CsLine,
-    EmuBus, EmuCapture, EmuDelay, Fault, PathModel, RateProfile, TempProfile,
+    EmuBus, EmuCapture, EmuDelay, EmuDevice, Fault, PathModel, RateProfile, TempProfile,
 };
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, TimingCounters, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
-use rtic_core::Exclusive;
 
 const FS_HZ: u32 = 1000;
 /// The board's calibration record, as the procedure wrote it.
@@ -72,29 +86,169 @@ const SAMPLES: u32 = 60_000;
 const NOISE_TAU: [usize; 3] = [0, 3, 6];
 /// mps2-an386 core clock.
 const CORE_HZ: u32 = 25_000_000;
+/// SysTick's reload: one sample period.
+const RELOAD: u32 = CORE_HZ / FS_HZ - 1;
+/// The sample task's jobs for the background.
+const JOBS: usize = 8;
 
 /// E-DAVAR per axis: λ2 = 512 samples, the link's τ alone (1, 8 and 64 ms:
 /// every third octave).
 type Tracker = NoiseTracker<512, 19, 3>;
 
-static TICKS: AtomicU32 = AtomicU32::new(0);
+type Bus = RefCell<EmuBus<'static, 5>>;
+type Dev = EmuDevice<'static, 'static>;
+type Timed = TimedIcm<Dev, EmuCapture<'static, 'static, 5>>;
 
-#[exception]
-fn SysTick() {
-    TICKS.fetch_add(1, Ordering::Release);
+/// Every chip and the emulated world they live in, as the sample task
+/// owns them after start-up.
+pub struct Chips {
+    timed: [Timed; 4],
+    adx: AtInstant<Adxrs453<Dev>>,
+    bus: &'static Bus,
 }
 
-#[entry]
-fn main() -> ! {
-    stack::guard_stack();
-    let cp = cortex_m::Peripherals::take().unwrap_or_else(|| exit(false));
+// SAFETY: the drivers, the captures and `bus` all reach the one emulated
+// bus (`init`'s 'static local), which nothing else names; they move
+// together from `init` to the sample task.
+#[allow(unsafe_code)]
+unsafe impl Send for Chips {}
+
+/// The link: the port and the producer of the UART's byte queue.
+pub struct Link {
+    port: &'static mut Port<1024>,
+    out: Producer<'static, u8>,
+}
+
+impl schedule::Link<1024> for Link {
+    fn port(&mut self) -> &mut Port<1024> {
+        self.port
+    }
+
+    fn flush(&mut self) {
+        self.port.drain(&mut ToQueue(&mut self.out));
+        rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
+    }
+}
+
+/// The UART's queue, written as a UART (full: it would block).
+struct ToQueue<'a>(&'a mut Producer<'static, u8>);
+
+impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
+    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        self.0
+            .enqueue(b)
+            .map_err(|_| embedded_hal_nb::nb::Error::WouldBlock)
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+/// Received bytes, read as a UART by the background.
+struct RxQueue(Consumer<'static, u8>);
+
+impl embedded_hal_nb::serial::ErrorType for RxQueue {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Read<u8> for RxQueue {
+    fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
+        self.0
+            .dequeue()
+            .ok_or(embedded_hal_nb::nb::Error::WouldBlock)
+    }
+}
+
+/// SysTick counts since the current period's tick: the counter reads 0
+/// at the tick, then RELOAD, RELOAD − 1, … (ARMv7-M ARM B3.3.1).
+fn since_tick() -> u32 {
+    (RELOAD + 1 - cortex_m::peripheral::SYST::get_current()) % (RELOAD + 1)
+}
+
+/// The emulated bus's clock for its meter: SysTick counts since the tick
+/// (the bus is read only inside the sample task, which ends within its
+/// period: a tick during it is counted late and fails the run).
+fn bus_clock() -> u64 {
+    u64::from(since_tick())
+}
+
+/// Worst SysTick counts from a tick to a frame's first byte on the UART.
+static FIRST_BYTE_WORST: AtomicU32 = AtomicU32::new(0);
+
+/// What the sample task hands the background.
+pub struct Work {
+    job: schedule::Job<5>,
+    /// The sample's number in the run.
+    n: u32,
+    /// Each axis's fused rate and weights, and the true rate (for the log).
+    fused: [Option<(f32, [f32; 5])>; 3],
+    truth: [f32; 3],
+    /// After the last sample: what the sample task found.
+    last: Option<Verdict>,
+}
+
+/// The sample task's findings at the end of the run.
+#[derive(Clone, Copy)]
+pub struct Verdict {
+    sample_frames: u32,
+    crc: u32,
+    stuck_at: Option<u32>,
+    excluded_at: Option<u32>,
+    fused_everywhere: bool,
+    timing: [(TimingCounters, f32); 4],
+    /// Ticks that came while the sample task still ran; jobs lost.
+    late: u32,
+    lost: u32,
+    /// Worst and mean SysTick counts from the tick to the task's start
+    /// and to its frame queued; the task's worst length.
+    start_worst: u32,
+    queued_worst: u32,
+    queued_sum: u64,
+    task_worst: u32,
+    /// The same less the emulated world's share (the chips' step and the
+    /// bus's operations): the firmware's own.
+    fw_queued_worst: u32,
+    fw_queued_sum: u64,
+    fw_task_worst: u32,
+    emu_sum: u64,
+}
+
+/// The sample task's measurements and the demo's checks.
+pub struct Run {
+    n: u32,
+    stuck_at: Option<u32>,
+    excluded_at: Option<u32>,
+    digest: crc::Digest<'static, u32>,
+    sample_frames: u32,
+    fused_everywhere: bool,
+    late: u32,
+    lost: u32,
+    start_worst: u32,
+    queued_worst: u32,
+    queued_sum: u64,
+    task_worst: u32,
+    fw_queued_worst: u32,
+    fw_queued_sum: u64,
+    fw_task_worst: u32,
+    emu_sum: u64,
+}
+
+static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// The emulated array on its bus, built in a frame of its own (the chips
+/// are some 18 KB, moved twice on the way into the bus). Called once.
+#[inline(never)]
+fn make_bus(slot: &'static mut Option<Bus>, cs: &'static [CsLine; 5]) -> &'static Bus {
     let profile = RateProfile {
         base_dps: [0.5, -0.2, 10.0],
         sine_dps: [0.0, 0.0, 20.0],
         sine_hz: 1.0,
         sine_start_s: 0.0,
     };
-    let cs: [CsLine; 5] = Default::default();
     // The chips are mounted as a real board's are (rotated, upside down,
     // misaligned; `emu::mounted_board`), their die warming from 20 to
     // 35 °C, and the board carries the record the calibration procedure
@@ -122,192 +276,264 @@ fn main() -> ! {
             }));
         }
     }
-    let bus = RefCell::new(EmuBus::new(chips, &cs));
-    let dt = 1.0 / FS_HZ as f32;
-    let mut delay = EmuDelay::new(&bus, dt);
+    slot.insert(RefCell::new(EmuBus::new(chips, cs)))
+}
 
-    let BoardDrivers {
-        icm: [mut g0, mut g1, mut g2, mut g3],
-        adx: mut g4,
-    } = board_drivers(&bus, &cs);
-
-    let mut pipe: Pipeline<5> = Pipeline::new(
-        PipelineConfig::default(),
-        Method::Adaptive(AdaptiveConfig::default()),
-    )
-    .unwrap_or_else(|_| exit(false));
-    let calibrated =
-        match pipe.set_calibration(CalRecord::decode(CALIBRATION).as_ref().map_err(|e| *e)) {
-            Ok(()) => {
-                defmt::info!("calibration record in use");
-                true
-            }
-            Err(e) => {
-                defmt::error!("calibration record: {}; running uncalibrated", e);
-                false
-            }
-        };
-    start_array(
-        [&mut g0, &mut g1, &mut g2, &mut g3],
-        &mut g4,
-        &mut delay,
-        Some(20),
-        &mut pipe,
-    );
-
+/// The noise-health self-test, its 40 KB of blocks in a frame of its own,
+/// gone before the application starts. Called once.
+#[inline(never)]
+fn self_test(
+    gyros: &mut [&mut dyn Gyro; 5],
+    pipe: &Pipeline<5>,
+    bus: &'static Bus,
+    dt: f32,
+) -> (bool, [Result<selftest::NoiseHealth, QualifyError>; 5]) {
     let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
     let mut results = [Err(QualifyError::TooShort); 5];
-    let self_test_ok = {
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        selftest::run(
-            &mut gyros,
-            |_| 2, // z: every chip measures it, so each has four peers
-            |i, r| pipe.board_rates(i, r),
-            || {
-                with_bus(&bus, |b| b.advance(dt));
-            },
-            &mut blocks,
-            &mut results,
-        )
-    };
-
-    // Each gyro's measured noise: fusion's priors for an axis left with
-    // two gyros.
-    pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
-
-    // From the self-tests (data registers) to the board's sampling, as
-    // `board-f405` does it: FIFO at 4 kHz on each chip's own clock, each
-    // sample's INT1 captured (QEMU's board has no CLKIN to drive).
-    let cfg = Config::board_fifo(ClockInput::Internal);
-    for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-        if let Err(e) = g.init(&mut delay, cfg) {
-            defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
-            pipe.mark_init_failed(i);
-        }
-    }
-    // One start for all (the chips set up first ran while the others were).
-    for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
-        let _ = g.flush_fifo();
-    }
-    let capture = |index: usize| EmuCapture { bus: &bus, index };
-    let (mut g0, mut g1, mut g2, mut g3) = (
-        TimedIcm::new(g0, capture(0)),
-        TimedIcm::new(g1, capture(1)),
-        TimedIcm::new(g2, capture(2)),
-        TimedIcm::new(g3, capture(3)),
+    let ok = selftest::run(
+        gyros,
+        |_| 2, // z: every chip measures it, so each has four peers
+        |i, r| pipe.board_rates(i, r),
+        || {
+            with_bus(bus, |b| b.advance(dt));
+        },
+        &mut blocks,
+        &mut results,
     );
-    let mut g4 = AtInstant::new(g4, BOARD_DELAY_US);
-    // What the status frames say of each chip's clock.
-    let clocks = |t: [&TimedIcm<_, _>; 4]| {
-        let mut c = [ChipTime::default(); 5];
-        for (slot, t) in c.iter_mut().zip(t) {
-            *slot = timed_clock(t);
-        }
-        c
-    };
-    let mut noise =
-        Tracker::new(tracker::config(512).with_tau_octaves(3)).unwrap_or_else(|_| exit(false));
-    noise.set_view(NOISE_TAU);
-    let mut sigma_x_1ms = f32::NAN;
+    (ok, results)
+}
 
-    let _ticks = {
-        let mut syst = cp.SYST;
+#[rtic::app(device = gyro_array::board::an386, peripherals = false, dispatchers = [SPI2, SPI34])]
+mod app {
+    use super::*;
+    use rtic::Mutex;
+    use rtic_sync::channel::{Receiver, Sender};
+    use rtic_sync::make_channel;
+
+    #[shared]
+    struct Shared {
+        pipe: Pipeline<5>,
+        link: Link,
+        noise: NoiseSnapshot,
+        uart: CmsdkUart,
+    }
+
+    #[local]
+    struct Local {
+        chips: Chips,
+        clock: schedule::SampleClock,
+        jobs: Sender<'static, Work, JOBS>,
+        run: Run,
+        tx: Consumer<'static, u8>,
+        rx_in: Producer<'static, u8>,
+        rx: RxQueue,
+        tracker: &'static mut Tracker,
+        /// Instructions a SysTick count, measured.
+        ipc: f32,
+        self_test_ok: bool,
+        calibrated: bool,
+        /// The last byte written was a frame's delimiter.
+        at_delimiter: bool,
+        idle_spins: &'static AtomicU32,
+    }
+
+    #[init(local = [
+        cs: [CsLine; 5] = [CsLine::new(), CsLine::new(), CsLine::new(), CsLine::new(), CsLine::new()],
+        bus_slot: Option<Bus> = None,
+        port_slot: Option<Port<1024>> = None,
+        tracker_slot: MaybeUninit<Tracker> = MaybeUninit::uninit(),
+        tx_store: Queue<u8, 2048> = Queue::new(),
+        rx_store: Queue<u8, 64> = Queue::new(),
+        spins: AtomicU32 = AtomicU32::new(0),
+    ])]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        stack::guard_stack();
+        let mut syst = cx.core.SYST;
         syst.set_clock_source(cortex_m::peripheral::syst::SystClkSource::Core);
-        syst.set_reload(CORE_HZ / FS_HZ - 1);
+        syst.set_reload(RELOAD);
+        syst.clear_current();
+        syst.enable_counter();
+        // Instructions a SysTick count: 20 000 of a loop of known length
+        // (`subs` + `bne`), well inside one period.
+        let ipc = {
+            while cortex_m::peripheral::SYST::get_current() < RELOAD / 2 {}
+            let c0 = cortex_m::peripheral::SYST::get_current();
+            #[allow(unsafe_code)]
+            // SAFETY: a register-only countdown loop.
+            unsafe {
+                core::arch::asm!("1:", "subs {n}, {n}, #1", "bne 1b", n = inout(reg) 10_000u32 => _, options(nomem, nostack));
+            }
+            let c1 = cortex_m::peripheral::SYST::get_current();
+            20_000.0 / c0.saturating_sub(c1).max(1) as f32
+        };
+        defmt::info!("SysTick: {=f32} instructions a count", ipc);
+
+        let cs: &'static [CsLine; 5] = cx.local.cs;
+        let bus = make_bus(cx.local.bus_slot, cs);
+        let dt = 1.0 / FS_HZ as f32;
+        let mut delay = EmuDelay::new(bus, dt);
+
+        let BoardDrivers {
+            icm: [mut g0, mut g1, mut g2, mut g3],
+            adx: mut g4,
+        } = board_drivers(bus, cs);
+
+        let mut pipe: Pipeline<5> = Pipeline::new(
+            PipelineConfig::default(),
+            Method::Adaptive(AdaptiveConfig::default()),
+        )
+        .unwrap_or_else(|_| exit(false));
+        let calibrated =
+            match pipe.set_calibration(CalRecord::decode(CALIBRATION).as_ref().map_err(|e| *e)) {
+                Ok(()) => {
+                    defmt::info!("calibration record in use");
+                    true
+                }
+                Err(e) => {
+                    defmt::error!("calibration record: {}; running uncalibrated", e);
+                    false
+                }
+            };
+        start_array(
+            [&mut g0, &mut g1, &mut g2, &mut g3],
+            &mut g4,
+            &mut delay,
+            Some(20),
+            &mut pipe,
+        );
+
+        let (self_test_ok, results) = {
+            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
+            self_test(&mut gyros, &pipe, bus, dt)
+        };
+
+        // Each gyro's measured noise: fusion's priors for an axis left with
+        // two gyros.
+        pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
+
+        // From the self-tests (data registers) to the board's sampling, as
+        // `board-f405` does it: FIFO at 4 kHz on each chip's own clock, each
+        // sample's INT1 captured (QEMU's board has no CLKIN to drive).
+        let cfg = Config::board_fifo(ClockInput::Internal);
+        for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
+            if let Err(e) = g.init(&mut delay, cfg) {
+                defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
+                pipe.mark_init_failed(i);
+            }
+        }
+        // One start for all (the chips set up first ran while the others were).
+        for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
+            let _ = g.flush_fifo();
+        }
+        let capture = |index: usize| EmuCapture { bus, index };
+        let chips = Chips {
+            timed: [
+                TimedIcm::new(g0, capture(0)),
+                TimedIcm::new(g1, capture(1)),
+                TimedIcm::new(g2, capture(2)),
+                TimedIcm::new(g3, capture(3)),
+            ],
+            adx: AtInstant::new(g4, BOARD_DELAY_US),
+            bus,
+        };
+        let Ok(tracker) = Tracker::init_in(
+            cx.local.tracker_slot,
+            tracker::config(512).with_tau_octaves(3),
+        ) else {
+            exit(false)
+        };
+        tracker.set_view(NOISE_TAU);
+
+        // SAFETY: UART0 is used by nothing else.
+        #[allow(unsafe_code)]
+        let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
+        uart.listen();
+        let port = cx.local.port_slot.insert(Port::new(Settings::default()));
+        let (out, tx) = cx.local.tx_store.split();
+        let (rx_in, rx) = cx.local.rx_store.split();
+        let (jobs, inbox) = make_channel!(Work, JOBS);
+        if background::spawn(inbox).is_err() {
+            exit(false)
+        }
+        let now_us = with_bus(bus, |b| {
+            b.clock = Some(bus_clock);
+            b.timer_us()
+        })
+        .unwrap_or(0);
+        // The sample task from here: SysTick's exception on (taken once
+        // init returns).
         syst.clear_current();
         syst.enable_interrupt();
-        syst.enable_counter();
-        syst
-    };
+        (
+            Shared {
+                pipe,
+                link: Link { port, out },
+                noise: NoiseSnapshot::default(),
+                uart,
+            },
+            Local {
+                chips,
+                clock: schedule::SampleClock::new(now_us, 1_000_000 / FS_HZ),
+                jobs,
+                run: Run {
+                    n: 0,
+                    stuck_at: None,
+                    excluded_at: None,
+                    digest: CRC32.digest(),
+                    sample_frames: 0,
+                    fused_everywhere: true,
+                    late: 0,
+                    lost: 0,
+                    start_worst: 0,
+                    queued_worst: 0,
+                    queued_sum: 0,
+                    task_worst: 0,
+                    fw_queued_worst: 0,
+                    fw_queued_sum: 0,
+                    fw_task_worst: 0,
+                    emu_sum: 0,
+                },
+                tx,
+                rx_in,
+                rx: RxQueue(rx),
+                tracker,
+                ipc,
+                self_test_ok,
+                calibrated,
+                at_delimiter: true,
+                idle_spins: cx.local.spins,
+            },
+        )
+    }
 
-    // SAFETY: UART0 is used by nothing else.
-    #[allow(unsafe_code)]
-    let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
-    let mut port = Port::<1024>::new(Settings::default());
-    // CRC-32 of the rates of every sample frame, as the firmware computed
-    // them (NaN where an axis has none, as the frame carries).
-    let crc32 = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-    let mut digest = crc32.digest();
-    let mut sample_frames = 0u32;
-
-    // The schedule (`gyro_array::app`) as one loop runs it: the sample
-    // task's work at each tick, the background's in the idle time after,
-    // every piece borrowed in turn (`Exclusive`).
-    let mut snapshot = NoiseSnapshot::default();
-    let mut bg = schedule::Background {
-        tracker: &mut noise,
-        taus: NOISE_TAU,
-        sample_us: 1_000_000 / FS_HZ,
-    };
-    // The jobs the last sample handed on: its probe, and a status frame
-    // when one was due.
-    let mut probe: Option<schedule::Job<5>> = None;
-    let mut status_for: Option<schedule::Job<5>> = None;
-    let mut last_tick = TICKS.load(Ordering::Acquire);
-    let mut stuck_at = None;
-    let mut excluded_at = None;
-    let mut pass = true;
-    for n in 0..SAMPLES {
-        // Wait for the sample tick; count periods we missed. Idle time
-        // feeds the UART, then runs the calibration's learning and the
-        // E-DAVARs, then builds a status
-        // frame when one is due, and reads commands.
-        let now = loop {
-            let t = TICKS.load(Ordering::Acquire);
-            if t != last_tick {
-                // Every sample reaches the E-DAVARs, whatever is still
-                // queued when the next one is due.
-                if let Some(j) = probe.take() {
-                    bg.run(
-                        j,
-                        &mut Exclusive(&mut pipe),
-                        &mut Exclusive(&mut port),
-                        &mut Exclusive(&mut snapshot),
-                        0,
-                    );
-                }
-                break t;
-            }
-            port.drain(&mut uart);
-            if port.queued() == 0 {
-                if let Some(j) = probe.take().or_else(|| status_for.take()) {
-                    let peak = stack::stack_usage().peak;
-                    bg.run(
-                        j,
-                        &mut Exclusive(&mut pipe),
-                        &mut Exclusive(&mut port),
-                        &mut Exclusive(&mut snapshot),
-                        peak,
-                    );
-                }
-            }
-            schedule::receive(
-                &mut uart,
-                &mut Exclusive(&mut pipe),
-                &mut Exclusive(&mut port),
-            );
-            // Sleep only if the tick has still not come, checked with
-            // interrupts masked: a tick taken between the check above and
-            // the WFI would otherwise be slept through, a missed sample
-            // (WFI still wakes on the pending interrupt).
-            idle::sleep_unless(|| {
-                TICKS.load(Ordering::Acquire) != last_tick
-                    || port.queued() != 0
-                    || probe.is_some()
-                    || status_for.is_some()
-            });
-        };
-        let missed = now.wrapping_sub(last_tick).saturating_sub(1);
-        if missed > 0 {
-            defmt::warn!("overrun: {} sample(s) missed before sample {}", missed, n);
+    /// Idle spins, counted: the CPU's load is what it did not spin.
+    #[idle(local = [idle_spins])]
+    fn idle(cx: idle::Context) -> ! {
+        loop {
+            cx.local.idle_spins.fetch_add(1, Ordering::Relaxed);
         }
-        last_tick = now;
+    }
 
-        with_bus(&bus, |b| {
+    /// One sample (`gyro_array::app::sample`), with the demo's faults and
+    /// checks, and the schedule's timing measured.
+    #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
+           local = [chips, clock, jobs, run])]
+    fn sample(mut cx: sample::Context) {
+        let start = since_tick();
+        let l = cx.local;
+        let r = &mut *l.run;
+        let n = r.n;
+        if n >= SAMPLES {
+            return;
+        }
+        r.n += 1;
+        let bus = l.chips.bus;
+        let step0 = since_tick();
+        with_bus(bus, |b| {
             match n {
                 1500 => {
                     b.chips[2].set_fault(Fault::Stuck);
-                    stuck_at = Some(n);
+                    r.stuck_at = Some(n);
                     defmt::warn!("t={}ms: injecting: gyro 2 stuck", n);
                 }
                 2000 => {
@@ -331,211 +557,411 @@ fn main() -> ! {
                 }
                 _ => {}
             }
-            b.advance(dt);
+            b.advance(1.0 / FS_HZ as f32);
         });
-        // One instant for the array, a fixed delay behind the read, on the
-        // captures' µs clock (the bus's here, TIM5's on the board), in
-        // 1/16 µs.
-        let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
+        let step = since_tick().saturating_sub(step0);
+        let ops0 = with_bus(bus, |b| b.meter.ticks).unwrap_or(0);
+        // One clock: the captures' µs (the bus's here, TIM5's on the
+        // board), for the instant and the frame.
+        let now_us = with_bus(bus, |b| b.timer_us()).unwrap_or(0);
+        let (t_us, missed) = l.clock.tick(now_us);
         let at = timed::array_instant(now_us, BOARD_DELAY_US);
-        for t in [&mut g0, &mut g1, &mut g2, &mut g3] {
+        for t in l.chips.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
         }
-
-        let t_us = u64::from(now) * u64::from(1_000_000 / FS_HZ);
-        let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-        let sampled = schedule::sample(
-            &mut Exclusive(&mut pipe),
-            &mut Exclusive(&mut port),
-            &mut Exclusive(&mut snapshot),
+        let Chips { timed, adx, .. } = l.chips;
+        let [c0, c1, c2, c3] = timed;
+        let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
+        let mut queued = 0;
+        let s = schedule::sample(
+            &mut cx.shared.pipe,
+            &mut cx.shared.link,
+            &mut cx.shared.noise,
             &mut gyros,
             t_us,
             missed,
+            || queued = since_tick(),
         );
-        let out = sampled.out;
-        pipe.log_health_changes(&out);
-        if let (Some(_), None) = (stuck_at, excluded_at) {
-            if out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
-                excluded_at = Some(n);
+        let ops = with_bus(bus, |b| b.meter.ticks)
+            .unwrap_or(0)
+            .wrapping_sub(ops0);
+        let emu = step.saturating_add(ops.min(u64::from(u32::MAX)) as u32);
+        r.emu_sum += u64::from(emu);
+        r.start_worst = r.start_worst.max(start);
+        r.queued_worst = r.queued_worst.max(queued);
+        r.queued_sum += u64::from(queued);
+        let fw_queued = queued.saturating_sub(emu);
+        r.fw_queued_worst = r.fw_queued_worst.max(fw_queued);
+        r.fw_queued_sum += u64::from(fw_queued);
+        if let (Some(_), None) = (r.stuck_at, r.excluded_at) {
+            if s.out.fused[0].is_some_and(|f| f.weights[2] == 0.0) {
+                r.excluded_at = Some(n);
             }
         }
-        let (p, st) = schedule::jobs(&sampled, t_us, || clocks([&g0, &g1, &g2, &g3]));
-        probe = Some(p);
-        if st.is_some() {
-            status_for = st;
-        }
-        if sampled.sent {
-            sample_frames += 1;
+        if s.sent {
+            r.sample_frames += 1;
             // What the frame carried (the rates predicted to its last byte:
             // the link's delay compensation).
-            for r in port.last_sample_rates().unwrap_or([f32::NAN; 3]) {
-                digest.update(&r.to_le_bytes());
+            let rates = cx.shared.link.lock(|l| l.port.last_sample_rates());
+            for v in rates.unwrap_or([f32::NAN; 3]) {
+                r.digest.update(&v.to_le_bytes());
             }
         }
-        let log_now = if n < 3000 {
+        let (probe, status) = schedule::jobs(&s, t_us, || {
+            let mut c = [ChipTime::default(); 5];
+            for (slot, t) in c.iter_mut().zip(l.chips.timed.iter()) {
+                *slot = timed_clock(t);
+            }
+            c
+        });
+        let log = if n < 3000 {
             n % 500 == 499
         } else {
             n % 10_000 == 9_999
         };
-        if log_now {
-            for a in 0..3 {
-                let Some(d) = bg.tracker.estimate(a) else {
-                    continue;
-                };
-                let e = d.step;
-                defmt::info!(
-                    "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
-                    out.seq,
-                    a,
-                    d.seq,
-                    e.len,
-                    d.bridged,
-                    e.score,
-                    e.threshold,
-                    tracker::sigma_dps(&e, 0),
-                    tracker::sigma_dps(&e, 3),
-                    tracker::sigma_dps(&e, 6)
-                );
-                if a == 0 {
-                    sigma_x_1ms = tracker::sigma_dps(&e, 0);
-                }
+        let mut fused = [None; 3];
+        let mut truth = [0.0; 3];
+        if log {
+            // Every axis fused at every logged sample.
+            if s.out.fused.iter().any(Option::is_none) {
+                defmt::error!("seq {}: an axis has no fused value", s.out.seq);
+                r.fused_everywhere = false;
             }
-            let cal = &pipe.calibration()[2];
-            defmt::info!(
-                "seq {} axis 2: relative calibration scale {} bias {} dps",
-                out.seq,
-                cal.scale(),
-                cal.bias()
+            for (f, o) in fused.iter_mut().zip(s.out.fused.iter()) {
+                *f = o.map(|o| (o.rate_dps, o.weights));
+            }
+            truth = with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
+        }
+        let last = n + 1 == SAMPLES;
+        // The task's length so far, and whether the next tick already came.
+        let length = since_tick().saturating_sub(start);
+        r.task_worst = r.task_worst.max(length);
+        r.fw_task_worst = r.fw_task_worst.max(length.saturating_sub(emu));
+        if cortex_m::peripheral::SCB::is_pendst_pending() {
+            r.late += 1;
+        }
+        let verdict = last.then(|| {
+            let mut timing = [(TimingCounters::default(), 0.0); 4];
+            for (slot, t) in timing.iter_mut().zip(l.chips.timed.iter()) {
+                *slot = (t.counters, t.clock().error_ppm());
+            }
+            Verdict {
+                sample_frames: r.sample_frames,
+                crc: r.digest.clone().finalize(),
+                stuck_at: r.stuck_at,
+                excluded_at: r.excluded_at,
+                fused_everywhere: r.fused_everywhere,
+                timing,
+                late: r.late,
+                lost: r.lost,
+                start_worst: r.start_worst,
+                queued_worst: r.queued_worst,
+                queued_sum: r.queued_sum,
+                task_worst: r.task_worst,
+                fw_queued_worst: r.fw_queued_worst,
+                fw_queued_sum: r.fw_queued_sum,
+                fw_task_worst: r.fw_task_worst,
+                emu_sum: r.emu_sum,
+            }
+        });
+        let work = [
+            Some(Work {
+                job: probe,
+                n,
+                fused,
+                truth,
+                last: None,
+            }),
+            status.map(|job| Work {
+                job,
+                n,
+                fused: [None; 3],
+                truth,
+                last: None,
+            }),
+        ];
+        for w in work.into_iter().flatten() {
+            if l.jobs.try_send(w).is_err() {
+                r.lost += 1;
+            }
+        }
+        if let Some(v) = verdict {
+            let w = Work {
+                job: probe,
+                n: SAMPLES,
+                fused: [None; 3],
+                truth,
+                last: Some(v),
+            };
+            if l.jobs.try_send(w).is_err() {
+                defmt::error!("the run's end did not reach the background");
+                exit(false);
+            }
+        }
+    }
+
+    /// UART0's transmit interrupt (a byte has gone out), or a kick from
+    /// whoever queued bytes: the next byte from the queue.
+    #[task(binds = UART0TX, priority = 3, shared = [uart], local = [tx, at_delimiter])]
+    fn uart_tx(mut cx: uart_tx::Context) {
+        use embedded_hal_nb::serial::Write;
+        let l = cx.local;
+        cx.shared.uart.lock(|u| {
+            u.clear_tx_interrupt();
+            // The UART holds one byte; QEMU sends it at once, and the
+            // interrupt that follows brings the next.
+            while let Some(&b) = l.tx.peek() {
+                if u.write(b).is_err() {
+                    break;
+                }
+                l.tx.dequeue();
+                if *l.at_delimiter {
+                    FIRST_BYTE_WORST.fetch_max(since_tick(), Ordering::Relaxed);
+                }
+                *l.at_delimiter = b == 0;
+            }
+        });
+    }
+
+    /// UART0's receive interrupt: the byte into the background's queue.
+    #[task(binds = UART0RX, priority = 3, shared = [uart], local = [rx_in])]
+    fn uart_rx(mut cx: uart_rx::Context) {
+        use embedded_hal_nb::serial::Read;
+        let q = cx.local.rx_in;
+        cx.shared.uart.lock(|u| {
+            u.clear_rx_interrupt();
+            while let Ok(b) = u.read() {
+                // A full queue loses the byte: the command fails its CRC
+                // and is not acknowledged.
+                let _ = q.enqueue(b);
+            }
+        });
+    }
+
+    /// The background (`gyro_array::app::Background`): the E-DAVARs,
+    /// status frames, commands, the logs, and the run's end.
+    #[task(priority = 1, shared = [pipe, link, noise, uart],
+           local = [rx, tracker, ipc, self_test_ok, calibrated])]
+    async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Work, JOBS>) {
+        let l = cx.local;
+        let mut bg = schedule::Background {
+            tracker: l.tracker,
+            taus: NOISE_TAU,
+            sample_us: 1_000_000 / FS_HZ,
+        };
+        let mut sigma_x_1ms = f32::NAN;
+        loop {
+            let Ok(w) = inbox.recv().await else {
+                continue;
+            };
+            if let Some(v) = w.last {
+                finish(
+                    &mut cx.shared,
+                    &v,
+                    &bg,
+                    sigma_x_1ms,
+                    *l.ipc,
+                    *l.self_test_ok,
+                    *l.calibrated,
+                );
+            }
+            let peak = stack::stack_usage().peak;
+            bg.run(
+                w.job,
+                &mut cx.shared.pipe,
+                &mut cx.shared.link,
+                &mut cx.shared.noise,
+                peak,
             );
-            let truth = with_bus(&bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
-            for (a, f) in out.fused.iter().enumerate() {
-                match f {
-                    Some(f) => defmt::info!(
-                        "seq {} axis {}: fused {=f32} dps (true {=f32}), weights {}",
-                        out.seq,
+            if w.fused.iter().any(Option::is_some) {
+                for a in 0..3 {
+                    let Some(d) = bg.tracker.estimate(a) else {
+                        continue;
+                    };
+                    let e = d.step;
+                    defmt::info!(
+                        "seq {} axis {}: E-DAVAR for seq {} L={} ({} bridged) score {=f32} (threshold {=f32}) sigma(1/8/64 ms) = {=f32} {=f32} {=f32} dps",
+                        w.n,
                         a,
-                        f.rate_dps,
-                        truth[a],
-                        f.weights
-                    ),
-                    None => {
-                        defmt::error!("seq {} axis {}: no fused value", out.seq, a);
-                        pass = false;
+                        d.seq,
+                        e.len,
+                        d.bridged,
+                        e.score,
+                        e.threshold,
+                        tracker::sigma_dps(&e, 0),
+                        tracker::sigma_dps(&e, 3),
+                        tracker::sigma_dps(&e, 6)
+                    );
+                    if a == 0 {
+                        sigma_x_1ms = tracker::sigma_dps(&e, 0);
+                    }
+                }
+                let (scale, bias) = cx
+                    .shared
+                    .pipe
+                    .lock(|p| (p.calibration()[2].scale(), p.calibration()[2].bias()));
+                defmt::info!(
+                    "seq {} axis 2: relative calibration scale {} bias {} dps",
+                    w.n,
+                    scale,
+                    bias
+                );
+                for (a, f) in w.fused.iter().enumerate() {
+                    if let Some((rate, weights)) = f {
+                        defmt::info!(
+                            "seq {} axis {}: fused {=f32} dps (true {=f32}), weights {}",
+                            w.n,
+                            a,
+                            rate,
+                            w.truth[a],
+                            weights
+                        );
                     }
                 }
             }
+            schedule::receive(&mut *l.rx, &mut cx.shared.pipe, &mut cx.shared.link);
         }
     }
 
-    if let Some(j) = probe.take() {
-        bg.run(
-            j,
-            &mut Exclusive(&mut pipe),
-            &mut Exclusive(&mut port),
-            &mut Exclusive(&mut snapshot),
-            0,
-        );
-    }
-    // Send what is still queued (bounded: the UART takes a byte at a time).
-    for _ in 0..100_000 {
-        if port.queued() == 0 {
-            break;
+    /// The run's end: the link drained, every check, the exit code.
+    fn finish(
+        shared: &mut background::SharedResources<'_>,
+        v: &Verdict,
+        bg: &schedule::Background<'_, 512, 19, 3>,
+        sigma_x_1ms: f32,
+        ipc: f32,
+        self_test_ok: bool,
+        calibrated: bool,
+    ) -> ! {
+        // Send what is still queued (bounded: the UART takes a byte at a time).
+        for _ in 0..100_000 {
+            let left = shared.link.lock(|l| {
+                schedule::Link::flush(l);
+                l.port.queued() + l.out.len()
+            });
+            if left == 0 {
+                break;
+            }
         }
-        port.drain(&mut uart);
-    }
-    let lc = port.counters();
-    defmt::info!(
-        "link: {} frames sent, {} dropped, {} left; commands {} accepted, {} rejected; rx overruns {}",
-        lc.sent,
-        lc.dropped,
-        port.queued(),
-        lc.accepted,
-        lc.rejected,
-        uart.rx_overruns()
-    );
-    defmt::info!(
-        "link: {} sample frames, fused-rate CRC-32 {=u32:#010x}",
-        sample_frames,
-        digest.finalize()
-    );
-    pass &= lc.dropped == 0 && port.queued() == 0 && sample_frames == SAMPLES;
-
-    let c = pipe.counters();
-    for (i, c) in c.iter().enumerate() {
+        let mut pass = self_test_ok && calibrated;
+        let (lc, left) = shared
+            .link
+            .lock(|l| (l.port.counters(), l.port.queued() + l.out.len()));
+        let rx_overruns = shared.uart.lock(|u| u.rx_overruns());
         defmt::info!(
-            "gyro {}: reads {} errors {} (parity {}, chip {}) not read (restarting) {} saturated {} excluded {}; restarts {}, completed {}",
-            i,
-            c.reads,
-            c.errors,
-            c.parity,
-            c.chip_faults,
-            c.not_read,
-            c.saturated,
-            c.excluded,
-            c.restarts,
-            c.restarted
+            "link: {} frames sent, {} dropped, {} left; commands {} accepted, {} rejected; rx overruns {}",
+            lc.sent,
+            lc.dropped,
+            left,
+            lc.accepted,
+            lc.rejected,
+            rx_overruns
         );
-    }
-    let accounted = c
-        .iter()
-        .all(|c| c.reads + c.errors + c.not_read + c.late == SAMPLES);
-    for (i, t) in [&g0, &g1, &g2, &g3].into_iter().enumerate() {
-        let k = &t.counters;
         defmt::info!(
-            "gyro {} timing: {} FIFO samples, late {} (acquiring {}), overflows {}, clock jumps {}, spikes {}; clock {=f32} ppm",
-            i,
-            k.samples,
-            k.late,
-            k.acquiring,
-            k.overflows,
-            k.jumps,
-            k.spikes,
-            t.clock().error_ppm()
+            "link: {} sample frames, fused-rate CRC-32 {=u32:#010x}",
+            v.sample_frames,
+            v.crc
         );
-    }
-    // The chips with no fault of their own (0, 1 and 3, whose clock fails
-    // over to its RC oscillator and back) are never flagged: out of fusion
-    // only while the array finds its clocks at boot.
-    let clock_alone_ok = [0, 1, 3]
-        .iter()
-        .all(|&i| c[i].errors == 0 && c[i].excluded <= 50);
-    defmt::info!(
-        "chips with no fault of their own never flagged: {}",
-        clock_alone_ok
-    );
-    pass &= clock_alone_ok;
-    defmt::info!(
-        "samples {} overruns {} accounted {}",
-        SAMPLES,
-        pipe.overruns(),
-        accounted
-    );
-    match (stuck_at, excluded_at) {
-        (Some(s), Some(e)) => {
-            defmt::info!("stuck gyro excluded {} samples after the fault", e - s);
-            pass &= e - s <= 20;
+        pass &= lc.dropped == 0 && left == 0 && v.sample_frames == SAMPLES && v.fused_everywhere;
+        let (c, overruns) = shared.pipe.lock(|p| (*p.counters(), p.overruns()));
+        for (i, c) in c.iter().enumerate() {
+            defmt::info!(
+                "gyro {}: reads {} errors {} (parity {}, chip {}) not read (restarting) {} saturated {} excluded {}; restarts {}, completed {}",
+                i,
+                c.reads,
+                c.errors,
+                c.parity,
+                c.chip_faults,
+                c.not_read,
+                c.saturated,
+                c.excluded,
+                c.restarts,
+                c.restarted
+            );
         }
-        _ => pass = false,
-    }
-    defmt::info!(
-        "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts, {} missing samples bridged",
-        sigma_x_1ms,
-        bg.tracker.restarts(),
-        bg.tracker.bridged()
-    );
-    pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
-    defmt::info!(
-        "noise-health self-test: {}",
-        if self_test_ok {
-            "all gyros pass"
-        } else {
-            "FAILED"
+        let accounted = c
+            .iter()
+            .all(|c| c.reads + c.errors + c.not_read + c.late == SAMPLES);
+        for (i, (k, ppm)) in v.timing.iter().enumerate() {
+            defmt::info!(
+                "gyro {} timing: {} FIFO samples, late {} (acquiring {}), overflows {}, clock jumps {}, spikes {}; clock {=f32} ppm",
+                i,
+                k.samples,
+                k.late,
+                k.acquiring,
+                k.overflows,
+                k.jumps,
+                k.spikes,
+                ppm
+            );
         }
-    );
-    pass &= self_test_ok && calibrated;
-    pass &= accounted && c[4].parity > 0 && pipe.overruns() == 0;
-    let u = stack::stack_usage();
-    defmt::info!("stack: peak {} of {} bytes", u.peak, u.size);
-    defmt::info!("demo {}", if pass { "PASS" } else { "FAIL" });
-    exit(pass)
+        // The chips with no fault of their own (0, 1 and 3, whose clock fails
+        // over to its RC oscillator and back) are never flagged: out of fusion
+        // only while the array finds its clocks at boot.
+        let clock_alone_ok = [0, 1, 3]
+            .iter()
+            .all(|&i| c[i].errors == 0 && c[i].excluded <= 50);
+        defmt::info!(
+            "chips with no fault of their own never flagged: {}",
+            clock_alone_ok
+        );
+        pass &= clock_alone_ok;
+        defmt::info!(
+            "samples {} overruns {} accounted {}",
+            SAMPLES,
+            overruns,
+            accounted
+        );
+        match (v.stuck_at, v.excluded_at) {
+            (Some(s), Some(e)) => {
+                defmt::info!("stuck gyro excluded {} samples after the fault", e - s);
+                pass &= e - s <= 20;
+            }
+            _ => pass = false,
+        }
+        defmt::info!(
+            "E-DAVAR: sigma(1 ms) on x = {=f32} dps, {} window restarts, {} missing samples bridged",
+            sigma_x_1ms,
+            bg.tracker.restarts(),
+            bg.tracker.bridged()
+        );
+        pass &= sigma_x_1ms > 0.02 && sigma_x_1ms < 0.1;
+        defmt::info!(
+            "noise-health self-test: {}",
+            if self_test_ok {
+                "all gyros pass"
+            } else {
+                "FAILED"
+            }
+        );
+        pass &= accounted && c[4].parity > 0 && overruns == 0;
+        // The schedule as it ran.
+        let ins = |counts: u32| (counts as f32 * ipc) as u32;
+        defmt::info!(
+            "schedule: tick to the sample task's start worst {} instructions; to its frame queued mean {} worst {}; the task's worst length {}; a frame's first byte on the UART worst {} instructions after its period's tick",
+            ins(v.start_worst),
+            ins((v.queued_sum / u64::from(SAMPLES)) as u32),
+            ins(v.queued_worst),
+            ins(v.task_worst),
+            ins(FIRST_BYTE_WORST.load(Ordering::Relaxed))
+        );
+        let mean = |sum: u64| ins((sum / u64::from(SAMPLES)) as u32);
+        defmt::info!(
+            "schedule, the firmware's own (the emulated world's step and bus operations, mean {} instructions a sample, taken out): tick to frame queued mean {} worst {}; the sample task's worst length {}",
+            mean(v.emu_sum),
+            mean(v.fw_queued_sum),
+            ins(v.fw_queued_worst),
+            ins(v.fw_task_worst)
+        );
+        defmt::info!(
+            "schedule: {} ticks came while the sample task still ran, {} jobs the background had no room for",
+            v.late,
+            v.lost
+        );
+        pass &= v.late == 0 && v.lost == 0;
+        let u = stack::stack_usage();
+        defmt::info!("stack: peak {} of {} bytes", u.peak, u.size);
+        defmt::info!("demo {}", if pass { "PASS" } else { "FAIL" });
+        exit(pass)
+    }
 }

@@ -4,8 +4,11 @@
 //!
 //! Registers: DATA (0x00), STATE (0x04: bit 0 TX buffer full, bit 1 RX
 //! buffer full, bits 2–3 TX/RX overrun, write 1 to clear), CTRL (0x08:
-//! bit 0 TX enable, bit 1 RX enable), BAUDDIV (0x10, at least 16). One
-//! byte of buffer each way, no FIFO.
+//! bit 0 TX enable, bit 1 RX enable, bit 2 TX interrupt enable, bit 3 RX
+//! interrupt enable), INTSTATUS/INTCLEAR (0x0C: bit 0 TX, bit 1 RX; write
+//! 1 to clear), BAUDDIV (0x10, at least 16). One byte of buffer each way,
+//! no FIFO. The TX interrupt comes when a byte has gone out, the RX one
+//! when a byte has come in (AN386: UART0 RX on IRQ 0, TX on IRQ 1).
 
 use core::convert::Infallible;
 
@@ -15,7 +18,10 @@ use embedded_hal_nb::serial::{ErrorType, Read, Write};
 const DATA: usize = 0x00;
 const STATE: usize = 0x04;
 const CTRL: usize = 0x08;
+const INTCLEAR: usize = 0x0C;
 const BAUDDIV: usize = 0x10;
+const TX_INT_EN: u32 = 1 << 2;
+const RX_INT_EN: u32 = 1 << 3;
 const TX_FULL: u32 = 1 << 0;
 const RX_FULL: u32 = 1 << 1;
 const RX_OVERRUN: u32 = 1 << 3;
@@ -45,6 +51,21 @@ impl CmsdkUart {
         u.write_reg(BAUDDIV, bauddiv.max(16));
         u.write_reg(CTRL, 0b11);
         u
+    }
+
+    /// Turn on the TX and RX interrupts.
+    pub fn listen(&mut self) {
+        self.write_reg(CTRL, 0b11 | TX_INT_EN | RX_INT_EN);
+    }
+
+    /// Acknowledge the TX interrupt (a byte has gone out).
+    pub fn clear_tx_interrupt(&mut self) {
+        self.write_reg(INTCLEAR, 1);
+    }
+
+    /// Acknowledge the RX interrupt (a byte has come in).
+    pub fn clear_rx_interrupt(&mut self) {
+        self.write_reg(INTCLEAR, 2);
     }
 
     /// Received bytes lost because the one-byte buffer was full.

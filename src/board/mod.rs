@@ -2,6 +2,8 @@
 //! STM32F405 board, and the fault containment both share.
 
 #[cfg(feature = "qemu")]
+pub mod an386;
+#[cfg(feature = "qemu")]
 pub mod cmsdk_uart;
 #[cfg(feature = "board")]
 pub mod f405;
