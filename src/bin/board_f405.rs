@@ -55,6 +55,7 @@
 #![no_main]
 
 use core::cell::RefCell;
+use core::sync::atomic::{AtomicU32, Ordering};
 use defmt_rtt as _;
 
 use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
@@ -173,10 +174,20 @@ type TxBytes = Queue<u8, 2048>;
 /// The sample task's jobs for the background, in sample order.
 const JOBS: usize = 8;
 
+/// What the status frames say of the schedule.
+const STATUS_VIEW: schedule::StatusView = schedule::StatusView {
+    taus: NOISE_TAU,
+    sample_us: 1_000_000 / FS_HZ,
+};
+
+/// The stack meter's deepest use so far (the background's meter, the
+/// sample task's status frames).
+static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
+
 /// What the sample task hands the background: the schedule's job, with
 /// what the board's logs need of its sample.
 pub struct Work {
-    job: schedule::Job<5>,
+    job: schedule::Job,
     /// Gyros whose health flags changed with the sample.
     health_changed: u8,
     /// Each axis's fused rate and weights (for the periodic log).
@@ -266,6 +277,8 @@ mod app {
         clock: SampleClock,
         /// Whether idle sleeps.
         sleep: bool,
+        /// Each chip's clock after the last sample, for the status frames.
+        clocks: [ChipTime; 5],
         /// Jobs the background had no room for.
         lost: u32,
         tx: Tx<pac::USART1>,
@@ -570,6 +583,7 @@ mod app {
                 watchdog,
                 jobs,
                 clock: SampleClock::new(now, period_us),
+                clocks: [ChipTime::default(); 5],
                 sleep,
                 lost: 0,
                 tx,
@@ -598,7 +612,7 @@ mod app {
     /// and the UART woken; the calibration learns from it; the background
     /// gets its probe (`gyro_array::app::sample`).
     #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
-           local = [chips, captures, watchdog, jobs, clock, lost])]
+           local = [chips, captures, watchdog, jobs, clock, clocks, lost])]
     fn sample(mut cx: sample::Context) {
         let l = cx.local;
         // One clock: TIM5's µs at the read, for the instant and the frame.
@@ -608,6 +622,7 @@ mod app {
         for t in l.chips.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
         }
+        let clocks = *l.clocks;
         let Chips { timed, adx } = l.chips;
         let [c0, c1, c2, c3] = timed;
         let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
@@ -616,39 +631,32 @@ mod app {
             &mut cx.shared.link,
             &mut cx.shared.noise,
             &mut gyros,
-            t_us,
-            missed,
+            (t_us, missed),
+            &STATUS_VIEW,
             || {},
+            || schedule::StatusFacts {
+                clocks,
+                stack_peak: STACK_PEAK.load(Ordering::Relaxed),
+            },
         );
-        let (probe, status) = schedule::jobs(&s, t_us, || {
-            let mut clocks = [ChipTime::default(); 5];
-            for (slot, t) in clocks.iter_mut().zip(l.chips.timed.iter()) {
-                *slot = timed_clock(t);
-            }
-            clocks
-        });
+        // The chips' clocks as this sample left them, for the next status
+        // frame (read after the frame is out, not before the read).
+        for (slot, t) in l.clocks.iter_mut().zip(l.chips.timed.iter()) {
+            *slot = timed_clock(t);
+        }
         let mut fused = [None; 3];
         for (f, o) in fused.iter_mut().zip(s.out.fused.iter()) {
             *f = o.map(|o| (o.rate_dps, o.weights));
         }
-        let work = [
-            Some(Work {
-                job: probe,
-                health_changed: s.out.health_changed,
-                fused,
-            }),
-            status.map(|job| Work {
-                job,
-                health_changed: 0,
-                fused: [None; 3],
-            }),
-        ];
-        for w in work.into_iter().flatten() {
-            // A background this far behind loses the job (the E-DAVAR
-            // bridges a lost probe), never the sample task's time.
-            if l.jobs.try_send(w).is_err() {
-                *l.lost = l.lost.wrapping_add(1);
-            }
+        let w = Work {
+            job: schedule::Job::from(&s.out),
+            health_changed: s.out.health_changed,
+            fused,
+        };
+        // A background this far behind loses the probe (the E-DAVAR
+        // bridges it), never the sample task's time.
+        if l.jobs.try_send(w).is_err() {
+            *l.lost = l.lost.wrapping_add(1);
         }
         // A completed sample is the only thing that feeds the watchdog.
         l.watchdog.feed();
@@ -681,15 +689,14 @@ mod app {
     }
 
     /// Everything that does not have to be done within the sample
-    /// (`gyro_array::app::Background`): the E-DAVARs, status frames,
-    /// commands; and the logs, the stack meter.
+    /// (`gyro_array::app::Background`): the E-DAVARs, commands; and the
+    /// logs, the stack meter.
     #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter])]
     async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Work, JOBS>) {
         let l = cx.local;
         let mut bg = schedule::Background {
             tracker: l.tracker,
             taus: NOISE_TAU,
-            sample_us: 1_000_000 / FS_HZ,
         };
         loop {
             // The sender lives in the sample task for good: the channel
@@ -698,14 +705,10 @@ mod app {
                 continue;
             };
             l.meter.step(64);
-            bg.run(
-                w.job,
-                &mut cx.shared.pipe,
-                &mut cx.shared.link,
-                &mut cx.shared.noise,
-                l.meter.peak(),
-            );
-            if let schedule::Job::Sample(probe) = w.job {
+            STACK_PEAK.store(l.meter.peak(), Ordering::Relaxed);
+            bg.run(w.job, &mut cx.shared.noise);
+            {
+                let probe = w.job;
                 if w.health_changed != 0 {
                     log_health(&mut cx.shared.pipe, probe.seq, w.health_changed);
                 }

@@ -27,9 +27,12 @@
 //! command received; the run lasts 60 s of emulated time.
 //!
 //! The application is RTIC 2, the board's schedule (`gyro_array::app`)
-//! on the board's priorities: the sample task on SysTick (priority 2),
-//! UART0's receive and transmit interrupts above it (3), the E-DAVARs,
-//! status frames, commands and logs in a background task (1). The run
+//! on the board's priorities: the sample task on SysTick (priority 2;
+//! it queues the sample's frame, then a status frame when one is due),
+//! UART0's receive interrupt above it (3) and its transmit interrupt
+//! beside it (2, a turn of 16 bytes), the E-DAVARs, commands and logs in a
+//! background task (1). With `--features demo-stress` the background is
+//! ten times slower and a status frame follows every sample. The run
 //! measures the schedule as it runs, on SysTick's count (QEMU's
 //! `-icount shift=0`: one count is 40 executed instructions, checked at
 //! start-up on a loop of known length): each tick to the sample task's
@@ -90,6 +93,48 @@ const CORE_HZ: u32 = 25_000_000;
 const RELOAD: u32 = CORE_HZ / FS_HZ - 1;
 /// The sample task's jobs for the background.
 const JOBS: usize = 8;
+/// The link's bytes the UART's task writes in one turn at most.
+const TX_TURN: usize = 16;
+/// What the status frames say of the schedule.
+const STATUS_VIEW: schedule::StatusView = schedule::StatusView {
+    taus: NOISE_TAU,
+    sample_us: 1_000_000 / FS_HZ,
+};
+/// The stack's deepest use, for the status frames (the background scans).
+static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
+/// The stress run (`--features demo-stress`): the background made ten
+/// times slower (each job followed by nine times its own length of busy
+/// work) and a status frame with every sample (built by the sample task
+/// behind its frame).
+const STRESS: bool = cfg!(feature = "demo-stress");
+
+/// Busy work of about `n` instructions (`subs` + `bne` a turn).
+fn burn(n: u32) {
+    let turns = (n / 2).max(1);
+    #[allow(unsafe_code)]
+    // SAFETY: a register-only countdown loop.
+    unsafe {
+        core::arch::asm!("1:", "subs {n}, {n}, #1", "bne 1b", n = inout(reg) turns => _, options(nomem, nostack));
+    }
+}
+
+/// SysTick counts from `from` (a [`since_tick`] reading) to now, across
+/// at most one tick.
+fn counts_since(from: u32) -> u32 {
+    let now = since_tick();
+    if now >= from {
+        now - from
+    } else {
+        now + RELOAD + 1 - from
+    }
+}
+
+/// The background's time in its jobs, SysTick counts (preemption
+/// included), and the jobs.
+static BG_COUNTS: AtomicU32 = AtomicU32::new(0);
+static BG_JOBS: AtomicU32 = AtomicU32::new(0);
+/// Idle's spins, for the CPU's load.
+static IDLE_SPINS: AtomicU32 = AtomicU32::new(0);
 
 /// E-DAVAR per axis: λ2 = 512 samples, the link's τ alone (1, 8 and 64 ms:
 /// every third octave).
@@ -176,12 +221,20 @@ fn bus_clock() -> u64 {
     u64::from(since_tick())
 }
 
-/// Worst SysTick counts from a tick to a frame's first byte on the UART.
+/// Ticks so far, and the tick of the last sample task that queued frames.
+static TICK_N: AtomicU32 = AtomicU32::new(0);
+static QUEUED_TICK: AtomicU32 = AtomicU32::new(0);
+/// The emulated world's SysTick counts in that sample task.
+static QUEUED_EMU: AtomicU32 = AtomicU32::new(0);
+/// Worst SysTick counts from a frame's tick (that of the last sample task
+/// that queued frames) to its first byte on the UART: as it ran, and the
+/// firmware's own (the emulated world's share taken out).
 static FIRST_BYTE_WORST: AtomicU32 = AtomicU32::new(0);
+static FIRST_BYTE_FW_WORST: AtomicU32 = AtomicU32::new(0);
 
 /// What the sample task hands the background.
 pub struct Work {
-    job: schedule::Job<5>,
+    job: schedule::Job,
     /// The sample's number in the run.
     n: u32,
     /// Each axis's fused rate and weights, and the true rate (for the log).
@@ -322,6 +375,8 @@ mod app {
     struct Local {
         chips: Chips,
         clock: schedule::SampleClock,
+        /// Each chip's clock after the last sample, for the status frames.
+        clocks: [ChipTime; 5],
         jobs: Sender<'static, Work, JOBS>,
         run: Run,
         tx: Consumer<'static, u8>,
@@ -330,11 +385,12 @@ mod app {
         tracker: &'static mut Tracker,
         /// Instructions a SysTick count, measured.
         ipc: f32,
+        /// Instructions an idle spin, measured.
+        per_spin: f32,
         self_test_ok: bool,
         calibrated: bool,
         /// The last byte written was a frame's delimiter.
         at_delimiter: bool,
-        idle_spins: &'static AtomicU32,
     }
 
     #[init(local = [
@@ -344,7 +400,6 @@ mod app {
         tracker_slot: MaybeUninit<Tracker> = MaybeUninit::uninit(),
         tx_store: Queue<u8, 2048> = Queue::new(),
         rx_store: Queue<u8, 64> = Queue::new(),
-        spins: AtomicU32 = AtomicU32::new(0),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         stack::guard_stack();
@@ -367,6 +422,15 @@ mod app {
             20_000.0 / c0.saturating_sub(c1).max(1) as f32
         };
         defmt::info!("SysTick: {=f32} instructions a count", ipc);
+        // Instructions an idle spin takes: 10 000 of them timed.
+        let per_spin = {
+            let spins = AtomicU32::new(0);
+            let t0 = since_tick();
+            for _ in 0..10_000 {
+                spins.fetch_add(1, Ordering::Relaxed);
+            }
+            counts_since(t0) as f32 * ipc / 10_000.0
+        };
 
         let cs: &'static [CsLine; 5] = cx.local.cs;
         let bus = make_bus(cx.local.bus_slot, cs);
@@ -448,7 +512,18 @@ mod app {
         #[allow(unsafe_code)]
         let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
         uart.listen();
-        let port = cx.local.port_slot.insert(Port::new(Settings::default()));
+        let settings = if STRESS {
+            Settings {
+                status_every: 1,
+                ..Settings::default()
+            }
+        } else {
+            Settings::default()
+        };
+        let port = cx.local.port_slot.insert(Port::new(settings));
+        if STRESS {
+            defmt::info!("stress: the background ten times slower, a status frame every sample");
+        }
         let (out, tx) = cx.local.tx_store.split();
         let (rx_in, rx) = cx.local.rx_store.split();
         let (jobs, inbox) = make_channel!(Work, JOBS);
@@ -474,6 +549,7 @@ mod app {
             Local {
                 chips,
                 clock: schedule::SampleClock::new(now_us, 1_000_000 / FS_HZ),
+                clocks: [ChipTime::default(); 5],
                 jobs,
                 run: Run {
                     n: 0,
@@ -498,26 +574,26 @@ mod app {
                 rx: RxQueue(rx),
                 tracker,
                 ipc,
+                per_spin,
                 self_test_ok,
                 calibrated,
                 at_delimiter: true,
-                idle_spins: cx.local.spins,
             },
         )
     }
 
     /// Idle spins, counted: the CPU's load is what it did not spin.
-    #[idle(local = [idle_spins])]
-    fn idle(cx: idle::Context) -> ! {
+    #[idle]
+    fn idle(_: idle::Context) -> ! {
         loop {
-            cx.local.idle_spins.fetch_add(1, Ordering::Relaxed);
+            IDLE_SPINS.fetch_add(1, Ordering::Relaxed);
         }
     }
 
     /// One sample (`gyro_array::app::sample`), with the demo's faults and
     /// checks, and the schedule's timing measured.
     #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
-           local = [chips, clock, jobs, run])]
+           local = [chips, clock, clocks, jobs, run])]
     fn sample(mut cx: sample::Context) {
         let start = since_tick();
         let l = cx.local;
@@ -526,6 +602,7 @@ mod app {
         if n >= SAMPLES {
             return;
         }
+        let tick = TICK_N.fetch_add(1, Ordering::Relaxed).wrapping_add(1);
         r.n += 1;
         let bus = l.chips.bus;
         let step0 = since_tick();
@@ -569,6 +646,7 @@ mod app {
         for t in l.chips.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
         }
+        let clocks = *l.clocks;
         let Chips { timed, adx, .. } = l.chips;
         let [c0, c1, c2, c3] = timed;
         let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
@@ -578,9 +656,13 @@ mod app {
             &mut cx.shared.link,
             &mut cx.shared.noise,
             &mut gyros,
-            t_us,
-            missed,
+            (t_us, missed),
+            &STATUS_VIEW,
             || queued = since_tick(),
+            || schedule::StatusFacts {
+                clocks,
+                stack_peak: STACK_PEAK.load(Ordering::Relaxed),
+            },
         );
         let ops = with_bus(bus, |b| b.meter.ticks)
             .unwrap_or(0)
@@ -607,13 +689,12 @@ mod app {
                 r.digest.update(&v.to_le_bytes());
             }
         }
-        let (probe, status) = schedule::jobs(&s, t_us, || {
-            let mut c = [ChipTime::default(); 5];
-            for (slot, t) in c.iter_mut().zip(l.chips.timed.iter()) {
-                *slot = timed_clock(t);
-            }
-            c
-        });
+        // The chips' clocks as this sample left them, for the next status
+        // frame (read after the frame is out, not before the read).
+        for (slot, t) in l.clocks.iter_mut().zip(l.chips.timed.iter()) {
+            *slot = timed_clock(t);
+        }
+        let probe = schedule::Job::from(&s.out);
         let log = if n < 3000 {
             n % 500 == 499
         } else {
@@ -640,6 +721,10 @@ mod app {
         if cortex_m::peripheral::SCB::is_pendst_pending() {
             r.late += 1;
         }
+        // This task's frames go out once it returns (the UART's task runs
+        // at its priority): their first bytes count from this tick.
+        QUEUED_TICK.store(tick, Ordering::Relaxed);
+        QUEUED_EMU.store(emu, Ordering::Relaxed);
         let verdict = last.then(|| {
             let mut timing = [(TimingCounters::default(), 0.0); 4];
             for (slot, t) in timing.iter_mut().zip(l.chips.timed.iter()) {
@@ -664,26 +749,15 @@ mod app {
                 emu_sum: r.emu_sum,
             }
         });
-        let work = [
-            Some(Work {
-                job: probe,
-                n,
-                fused,
-                truth,
-                last: None,
-            }),
-            status.map(|job| Work {
-                job,
-                n,
-                fused: [None; 3],
-                truth,
-                last: None,
-            }),
-        ];
-        for w in work.into_iter().flatten() {
-            if l.jobs.try_send(w).is_err() {
-                r.lost += 1;
-            }
+        let w = Work {
+            job: probe,
+            n,
+            fused,
+            truth,
+            last: None,
+        };
+        if l.jobs.try_send(w).is_err() {
+            r.lost += 1;
         }
         if let Some(v) = verdict {
             let w = Work {
@@ -701,8 +775,14 @@ mod app {
     }
 
     /// UART0's transmit interrupt (a byte has gone out), or a kick from
-    /// whoever queued bytes: the next byte from the queue.
-    #[task(binds = UART0TX, priority = 3, shared = [uart], local = [tx, at_delimiter])]
+    /// whoever queued bytes: the next bytes from the queue, `TX_TURN` at
+    /// most. At the sample task's priority, not above: QEMU's UART takes
+    /// bytes as fast as they come, and a status frame's 389 bytes written
+    /// above it delayed the sample task's start by 16 960 instructions
+    /// (measured in the stress run); here it waits one turn at most (a
+    /// tick pending beside this interrupt goes first: SysTick's exception
+    /// number is the lower).
+    #[task(binds = UART0TX, priority = 2, shared = [uart], local = [tx, at_delimiter])]
     fn uart_tx(mut cx: uart_tx::Context) {
         use embedded_hal_nb::serial::Write;
         let l = cx.local;
@@ -710,13 +790,22 @@ mod app {
             u.clear_tx_interrupt();
             // The UART holds one byte; QEMU sends it at once, and the
             // interrupt that follows brings the next.
-            while let Some(&b) = l.tx.peek() {
+            for _ in 0..TX_TURN {
+                let Some(&b) = l.tx.peek() else { break };
                 if u.write(b).is_err() {
                     break;
                 }
                 l.tx.dequeue();
                 if *l.at_delimiter {
-                    FIRST_BYTE_WORST.fetch_max(since_tick(), Ordering::Relaxed);
+                    let periods = TICK_N
+                        .load(Ordering::Relaxed)
+                        .wrapping_sub(QUEUED_TICK.load(Ordering::Relaxed));
+                    let at = periods
+                        .saturating_mul(RELOAD + 1)
+                        .saturating_add(since_tick());
+                    FIRST_BYTE_WORST.fetch_max(at, Ordering::Relaxed);
+                    let fw = at.saturating_sub(QUEUED_EMU.load(Ordering::Relaxed));
+                    FIRST_BYTE_FW_WORST.fetch_max(fw, Ordering::Relaxed);
                 }
                 *l.at_delimiter = b == 0;
             }
@@ -741,13 +830,12 @@ mod app {
     /// The background (`gyro_array::app::Background`): the E-DAVARs,
     /// status frames, commands, the logs, and the run's end.
     #[task(priority = 1, shared = [pipe, link, noise, uart],
-           local = [rx, tracker, ipc, self_test_ok, calibrated])]
+           local = [rx, tracker, ipc, per_spin, self_test_ok, calibrated])]
     async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Work, JOBS>) {
         let l = cx.local;
         let mut bg = schedule::Background {
             tracker: l.tracker,
             taus: NOISE_TAU,
-            sample_us: 1_000_000 / FS_HZ,
         };
         let mut sigma_x_1ms = f32::NAN;
         loop {
@@ -760,19 +848,24 @@ mod app {
                     &v,
                     &bg,
                     sigma_x_1ms,
-                    *l.ipc,
+                    (*l.ipc, *l.per_spin),
                     *l.self_test_ok,
                     *l.calibrated,
                 );
             }
-            let peak = stack::stack_usage().peak;
-            bg.run(
-                w.job,
-                &mut cx.shared.pipe,
-                &mut cx.shared.link,
-                &mut cx.shared.noise,
-                peak,
-            );
+            // The stack's peak for the status frames: a scan of every free
+            // word, once a second.
+            if w.n % 1000 == 0 {
+                STACK_PEAK.store(stack::stack_usage().peak, Ordering::Relaxed);
+            }
+            let t0 = since_tick();
+            bg.run(w.job, &mut cx.shared.noise);
+            let took = counts_since(t0);
+            if STRESS {
+                burn(((9 * took) as f32 * *l.ipc) as u32);
+            }
+            BG_COUNTS.fetch_add(counts_since(t0), Ordering::Relaxed);
+            BG_JOBS.fetch_add(1, Ordering::Relaxed);
             if w.fused.iter().any(Option::is_some) {
                 for a in 0..3 {
                     let Some(d) = bg.tracker.estimate(a) else {
@@ -829,10 +922,11 @@ mod app {
         v: &Verdict,
         bg: &schedule::Background<'_, 512, 19, 3>,
         sigma_x_1ms: f32,
-        ipc: f32,
+        (ipc, per_spin): (f32, f32),
         self_test_ok: bool,
         calibrated: bool,
     ) -> ! {
+        let spins = IDLE_SPINS.load(Ordering::Relaxed);
         // Send what is still queued (bounded: the UART takes a byte at a time).
         for _ in 0..100_000 {
             let left = shared.link.lock(|l| {
@@ -938,7 +1032,7 @@ mod app {
         // The schedule as it ran.
         let ins = |counts: u32| (counts as f32 * ipc) as u32;
         defmt::info!(
-            "schedule: tick to the sample task's start worst {} instructions; to its frame queued mean {} worst {}; the task's worst length {}; a frame's first byte on the UART worst {} instructions after its period's tick",
+            "schedule, as it ran (the emulated world included): tick to the sample task's start worst {} instructions; to its frame queued mean {} worst {}; the task's worst length {}; a frame's first byte on the UART worst {} after its sample's tick",
             ins(v.start_worst),
             ins((v.queued_sum / u64::from(SAMPLES)) as u32),
             ins(v.queued_worst),
@@ -947,11 +1041,24 @@ mod app {
         );
         let mean = |sum: u64| ins((sum / u64::from(SAMPLES)) as u32);
         defmt::info!(
-            "schedule, the firmware's own (the emulated world's step and bus operations, mean {} instructions a sample, taken out): tick to frame queued mean {} worst {}; the sample task's worst length {}",
+            "schedule, the firmware's own (the emulated world's step and bus operations, mean {} instructions a sample, taken out): tick to frame queued mean {} worst {}; the sample task's worst length {}; a frame's first byte on the UART worst {} after its sample's tick",
             mean(v.emu_sum),
             mean(v.fw_queued_sum),
             ins(v.fw_queued_worst),
-            ins(v.fw_task_worst)
+            ins(v.fw_task_worst),
+            ins(FIRST_BYTE_FW_WORST.load(Ordering::Relaxed))
+        );
+        let jobs = BG_JOBS.load(Ordering::Relaxed).max(1);
+        let total = SAMPLES as f32 * (RELOAD + 1) as f32 * ipc;
+        defmt::info!(
+            "schedule: background mean {} instructions a job ({} jobs, preemption included), {=f32} % of the CPU; the CPU busy {=f32} % of the run (idle spun {} times, {=f32} instructions each){=str}",
+            ins(BG_COUNTS.load(Ordering::Relaxed) / jobs),
+            jobs,
+            100.0 * BG_COUNTS.load(Ordering::Relaxed) as f32 * ipc / total,
+            100.0 * (1.0 - spins as f32 * per_spin / total),
+            spins,
+            per_spin,
+            if STRESS { " (stress: ten times slower, a status frame every sample)" } else { "" }
         );
         defmt::info!(
             "schedule: {} ticks came while the sample task still ran, {} jobs the background had no room for",
