@@ -1,13 +1,18 @@
 //! The board's four ICM-42688-P on their own clocks through the real
 //! pipeline: drivers on the FIFO path, each wrapped in [`TimedIcm`] (INT1
 //! captures, clock tracker, alignment to one stated instant per sample),
-//! start-up failures marked and restarted as the board does. The timed
-//! fault campaign's harness (`fault-campaign --timed`).
+//! start-up failures marked and restarted as the board does, each sample
+//! through the board's own schedule (`gyro_array::app::sample`: the read,
+//! fusion, the frame queued on a link port, the calibration's learning,
+//! the status frames). The timed fault campaign's harness
+//! (`fault-campaign --timed`), `pointing-eval`'s board and the timed
+//! pipeline's tests.
 //!
 //! The ADXRS453 is left out: at the array's instant its rate, 3.9 ms old,
 //! is always late (docs/timing.md).
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
+use gyro_array::app::{self as schedule, StatusFacts, StatusView};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
@@ -15,9 +20,51 @@ use gyro_array::emu::{
     emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay, Fault,
     PastCount, PathReading, RateProfile, RtcTick,
 };
+use gyro_array::link::msg::Settings;
+use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
+use rtic_core::Exclusive;
 use std::cell::RefCell;
+
+/// The link as the harness runs it: the board's port, its bytes taken by
+/// a UART that takes every byte.
+pub struct HostLink {
+    /// The port.
+    pub port: Port<2048>,
+    /// Bytes the UART took.
+    pub bytes: u64,
+}
+
+struct Sink;
+
+impl embedded_hal_nb::serial::ErrorType for Sink {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for Sink {
+    fn write(&mut self, _: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+impl schedule::Link<2048> for HostLink {
+    fn port(&mut self) -> &mut Port<2048> {
+        &mut self.port
+    }
+    fn flush(&mut self) {
+        self.bytes += self.port.drain(&mut Sink) as u64;
+    }
+}
+
+/// What the status frames say of the schedule: the board's.
+const STATUS_VIEW: StatusView = StatusView {
+    taus: gyro_array::pipeline::tracker::LINK_TAUS,
+    sample_us: 1000,
+};
 
 /// Chips.
 pub const N: usize = 4;
@@ -200,13 +247,17 @@ pub fn run(
     for ti in t.iter_mut() {
         let _ = ti.driver().flush_fifo();
     }
+    let mut link = HostLink {
+        port: Port::new(Settings::default()),
+        bytes: 0,
+    };
+    let mut noise = NoiseSnapshot::default();
     for n in 0..samples {
         let k = stall(n);
         if k > 0 {
             for _ in 0..k {
                 with_bus(&bus, |b| b.advance(1e-3));
             }
-            pipe.note_overrun(k);
         }
         with_bus(&bus, |b| b.advance(1e-3));
         let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
@@ -215,12 +266,29 @@ pub fn run(
         for ti in t.iter_mut() {
             ti.set_instant(at, DELAY_US);
         }
+        let mut clocks = [ChipTime::default(); N];
+        for (slot, ti) in clocks.iter_mut().zip(t.iter()) {
+            *slot = timed_clock(ti);
+        }
         let out = {
             let (a, rest) = t.split_at_mut(1);
             let (b, rest) = rest.split_at_mut(1);
             let (c, d) = rest.split_at_mut(1);
             let mut g: [&mut dyn Gyro; N] = [&mut a[0], &mut b[0], &mut c[0], &mut d[0]];
-            pipe.step(&mut g)
+            schedule::sample(
+                &mut Exclusive(&mut pipe),
+                &mut Exclusive(&mut link),
+                &mut Exclusive(&mut noise),
+                &mut g,
+                (now_us as u64, k),
+                &STATUS_VIEW,
+                || {},
+                || StatusFacts {
+                    clocks,
+                    stack_peak: 0,
+                },
+            )
+            .out
         };
         if std::env::var_os("CAMPAIGN_TRACE").is_some() {
             println!(
