@@ -421,11 +421,9 @@ impl<const TX: usize> Port<TX> {
                 // in use.
                 s.degraded |= pipe.shared_errors() << 3;
                 s.degraded |= u8::from(!pipe.calibrated()) << 7;
-                // An estimate describes a sample half a window back: on a
-                // busy sample it waits for the next frame.
-                if !out.busy {
-                    s.noise = self.next_noise(noise);
-                }
+                // The newest estimate not sent yet (a copy the background
+                // left, on the board: no E-DAVAR work on the frame's path).
+                s.noise = self.next_noise(noise);
                 let sent = self.counters.sent;
                 self.send_ref(FrameRef::Sample(&s));
                 if self.counters.sent != sent {

@@ -567,7 +567,6 @@ fn output(seq: u32, rate: [f32; 3], age_us: u32) -> crate::pipeline::Output<4> {
         }),
         noise_probe_dps: [None; 3],
         health_changed: 0,
-        busy: false,
     }
 }
 

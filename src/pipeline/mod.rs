@@ -127,12 +127,6 @@ pub struct Output<const N: usize> {
     pub noise_probe_dps: [Option<f32>; 3],
     /// Gyros whose health flags changed in this sample.
     pub health_changed: u8,
-    /// This sample ran periodic heavy work on the frame's path (a
-    /// configuration read-back, a temperature read): work there that can
-    /// wait, the link's E-DAVAR estimate (some 300 instructions), waits a
-    /// sample, so that the two do not meet on the loop's worst sample
-    /// (`cargo xtask bench-loop`).
-    pub busy: bool,
 }
 
 impl<const N: usize> Output<N> {
@@ -394,7 +388,6 @@ impl<const N: usize> Pipeline<N> {
             fused: [None; 3],
             noise_probe_dps: [None; 3],
             health_changed: 0,
-            busy: false,
         };
         self.seq = self.seq.wrapping_add(1);
         let seq = out.seq;
@@ -445,7 +438,6 @@ impl<const N: usize> Pipeline<N> {
             } else {
                 let due = i == check;
                 // One gyro in turn also has its configuration read back.
-                out.busy |= due;
                 let r = if due {
                     g.check_config().and_then(|()| g.read())
                 } else {
@@ -476,7 +468,6 @@ impl<const N: usize> Pipeline<N> {
                 // The die temperature, for the bias model: one gyro in
                 // turn, between configuration checks.
                 if i == temp {
-                    out.busy = true;
                     if let Ok(t) = g.temperature_c() {
                         self.temp_change(i, t, seq);
                     }

@@ -88,7 +88,8 @@ const HELD_MEMORY: usize = 40;
 /// Samples from a window's end to the last read of its estimate, at most:
 /// the span ends on the last whole frame before the hop (≤ 2 frames back
 /// by the time the hop's work is done), and the estimate is replaced a
-/// frame later; one frame more for a link frame that waits (`busy`).
+/// frame later; one frame more of margin (the board's sample task reads a
+/// copy made when the estimate is published, never later).
 const HELD_LAG: usize = 4 * SEG;
 
 /// E-DAVAR on the three fused axes.
@@ -487,7 +488,6 @@ mod tests {
                     (k % 10 != 7).then_some(p),
                 ],
                 health_changed: 0,
-                busy: false,
             };
             t.push(&out);
             if let (Some(x), Some(y)) = (t.estimate(0), t.estimate(1)) {
@@ -542,7 +542,6 @@ mod tests {
                 fused: [None; 3],
                 noise_probe_dps: [Some(p), (k % 130 != 77).then_some(p), Some(p)],
                 health_changed: 0,
-                busy: false,
             };
             let before = t.bridged();
             t.push(&out);
@@ -692,7 +691,6 @@ mod tests {
                 fused: [None; 3],
                 noise_probe_dps: [(!gap).then_some(p), Some(p), Some(p)],
                 health_changed: 0,
-                busy: false,
             };
             t.push(&out);
             if k == 2003 {
