@@ -57,10 +57,9 @@ pub struct PipelineConfig {
 
 /// The sample (mod `check_every`, 64 by default) of each configuration
 /// read-back, and of each temperature read. A read-back costs the
-/// firmware about 900 instructions (its bus time aside), as much as an
-/// E-DAVAR stretch or a calibration solve, so on the shared 64-sample
-/// schedule (`calib::SOLVE_SLOTS`, `pipeline::tracker`) both take samples
-/// where the E-DAVARs cost least and no solve falls: ≡ 27 and ≡ 6 (mod 32).
+/// firmware about 900 instructions (its bus time aside), as much as a
+/// calibration solve, and is on the frame's path: both take samples where
+/// no solve falls (`calib::SOLVE_SLOTS`), ≡ 27 and ≡ 6 (mod 32).
 pub const CHECK_AT: u32 = 27;
 /// See [`CHECK_AT`].
 pub const TEMP_AT: u32 = 38;

@@ -37,17 +37,14 @@ pub const fn link_config(lambda2: u16) -> DavarConfig {
 
 /// The three axes' hop phases. Each axis's heavy samples are the τ terms
 /// after its hop and the segmentation's last rows (samples 1–7 of its
-/// hop) and the placement, publication and segmentation start (17–21).
-/// Chosen from one axis's mean cost at every sample of the hop (`cargo
-/// xtask bench`, "board tracker, one axis") as a stagger whose worst
-/// sample is low once three more costs are added where they fall: 1 000
-/// instructions where the calibration solves or the configuration is read
-/// back (`calib::SOLVE_SLOTS`, `pipeline::CHECK_AT`; the tracker's sample
-/// n is the pipeline's n − 1), and 340 on the frame after each axis
-/// publishes (it carries the estimate): 2 603 for [8, 17, 30]. Measured
-/// in the board loop (`cargo xtask bench-loop`) it is the lowest worst
-/// sample on K, where the loop is heaviest; the model's own best,
-/// [17, 20, 25], is 229 higher there.
+/// hop) and the placement, publication and segmentation start (17–21);
+/// apart, the three axes' heavy samples do not meet, so the background's
+/// job stays near one axis's worst (2 266 instructions at [8, 17, 30],
+/// `cargo xtask bench`, against some 6 000 for three axes hopping
+/// together) and a probe waits in its channel behind one short job. The
+/// values were chosen when the E-DAVARs shared the sample's loop with the
+/// calibration's solves and the read-backs; any three phases apart serve
+/// the background.
 pub const HOP_PHASES: [u8; 3] = [8, 17, 30];
 
 /// Write one axis's E-DAVAR to `dst`; not inlined, so that each axis's

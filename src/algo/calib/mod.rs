@@ -64,13 +64,11 @@ pub const LEARN_STRIDE: u32 = 2;
 /// Update counts (mod [`EVERY`]) of the three axes' scheduled solves.
 /// The pipeline counts samples from 0 and each axis learns on every other
 /// one (x and z on even samples, y on odd), so x solves on samples ≡ 10
-/// (mod 64), y on ≡ 59 and z on ≡ 62: samples ≡ 10, 27 and 30 (mod 32),
-/// where the E-DAVARs, whose frames are on the same 32-sample grid
-/// (`pipeline::tracker`), cost little (1 554, 1 592 and 1 603 instructions
-/// for the three axes against up to 2 300, from the one-axis profile of
-/// `cargo xtask bench` at `tracker::HOP_PHASES`, which were chosen with
-/// these slots fixed); a solve on the tracker's segmentation start makes
-/// the loop's worst sample.
+/// (mod 64), y on ≡ 59 and z on ≡ 62: three different samples, so that
+/// the sample task (which learns after each frame is queued, `app`) never
+/// runs two solves at once, nor one beside a configuration read-back
+/// (`pipeline::CHECK_AT`). They also miss the E-DAVARs' heaviest samples,
+/// which mattered when those ran in the same loop and no longer do.
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
