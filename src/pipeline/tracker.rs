@@ -39,9 +39,10 @@ pub const fn link_config(lambda2: u16) -> DavarConfig {
 /// after its hop and the segmentation's last rows (samples 1–7 of its
 /// hop) and the placement, publication and segmentation start (17–21);
 /// apart, the three axes' heavy samples do not meet, so the background's
-/// job stays near one axis's worst (2 266 instructions at [8, 17, 30],
-/// `cargo xtask bench`, against some 6 000 for three axes hopping
-/// together) and a probe waits in its channel behind one short job. The
+/// job stays near one axis's worst (the three axes' worst sample at
+/// [8, 17, 30] is 2 266 instructions, `cargo xtask bench`; hopping
+/// together, their heaviest samples would add up) and a probe waits in
+/// its channel behind one short job. The
 /// values were chosen when the E-DAVARs shared the sample's loop with the
 /// calibration's solves and the read-backs; any three phases apart serve
 /// the background.
