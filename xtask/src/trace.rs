@@ -137,8 +137,10 @@ pub fn loop_counts(elf: &Path) -> bool {
             println!("  ({counts}");
         }
     }
-    // The worst samples of them all: the frame's path (what the
-    // antenna's deadline is about) and the whole loop (the CPU's load).
+    // The worst samples of them all: the sample task's response (what the
+    // antenna's deadline is about; the bare loop's frame path was 9 782 at
+    // worst on K, the figure it must not pass) and everything a sample
+    // costs (the CPU's load).
     let worst_of = |f: &dyn Fn(&Sample) -> u64| {
         scenarios
             .iter()
@@ -149,23 +151,20 @@ pub fn loop_counts(elf: &Path) -> bool {
             })
             .max_by_key(|&(w, _)| w)
     };
-    let verdict = |w: u64| {
-        if w <= 10_000 {
-            format!("met, {} to spare", 10_000 - w)
-        } else {
-            format!("NOT met, {} over", w - 10_000)
-        }
-    };
-    if let Some((w, name)) = worst_of(&|x| x.fw[0] + x.fw[2]) {
+    if let Some((w, name)) = worst_of(&|x| x.fw[0]) {
         println!(
-            "bench whole loop, every scenario: the frame's path's worst sample {w} instructions ({name}); target <= 10000: {}",
-            verdict(w)
+            "bench whole loop, every scenario: the sample task's worst response (tick to frame queued) {w} instructions ({name}); target <= 9782 (the bare loop's frame path on K): {}",
+            if w <= 9_782 {
+                format!("met, {} to spare", 9_782 - w)
+            } else {
+                format!("NOT met, {} over", w - 9_782)
+            }
         );
     }
     if let Some((w, name)) = worst_of(&|x| x.fw.iter().sum()) {
         println!(
-            "bench whole loop, every scenario: the whole loop's worst sample {w} instructions ({name}); target <= 10000: {}",
-            verdict(w)
+            "bench whole loop, every scenario: everything one sample costs (the sample task and the background's share), worst {w} instructions ({name}), {:.1} % of a 1 ms period at 168 MHz (one instruction a cycle)",
+            w as f64 / 1680.0
         );
     }
     ok && !scenarios.is_empty()
@@ -392,10 +391,10 @@ fn parse(
                     s.bus += b.emu;
                 }
                 // `XTASK_TRACE_PHASE=0|1|2`: the breakdown by function of one
-                // phase alone (read + fuse, after the frame, link), `all` every one.
-                // By default the frame's path alone (read + fuse, link):
-                // the calibration's learning and the E-DAVARs run after it.
-                if !whole_loop && only_phase.map_or(p == 1, |q| q != p) {
+                // phase alone (the sample task to its frame queued, the
+                // background, the sample task after its frame), `all` every
+                // one. By default the frame's path alone (phase 0).
+                if !whole_loop && only_phase.map_or(p != 0, |q| q != p) {
                     continue;
                 }
                 let lines = std::env::var_os("XTASK_TRACE_LINES").is_some();
@@ -431,8 +430,8 @@ fn parse(
 }
 
 /// End the scenario's last sample: keep its breakdown by function if its
-/// frame's path (read + fuse, link) is the worst so far; clear `by_fn` for
-/// the next.
+/// frame's path (the sample task to its frame queued) is the worst so
+/// far; clear `by_fn` for the next.
 fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
     if let Some(sc) = scenario {
         if sc.all_by_fn.len() < by_fn.len() {
@@ -445,7 +444,7 @@ fn close_sample(scenario: Option<&mut Scenario>, by_fn: &mut [u64]) {
             let total = match only_phase() {
                 _ if whole_loop() => last.fw.iter().sum(),
                 Some(q) => last.fw.get(q).copied().unwrap_or(0),
-                None => last.fw[0] + last.fw[2],
+                None => last.fw[0],
             };
             // `>=`: the last of equal worst samples, as `report` picks.
             if total >= sc.worst_total {
@@ -503,7 +502,7 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .max()
         .unwrap_or(0);
     println!(
-        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (read+fuse {:.0}, after the frame (calibration learning, e-davars) {:.0}, link {:.0}; the emulated bus {:.0} more), worst {} at sample {at} (read+fuse {}, after the frame {}, link {}), next worst {second}; target <= 10000",
+        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (the sample task to its frame queued {:.0}, the background's e-davars {:.0}, the sample task after its frame (learning, status frames) {:.0}; the emulated bus {:.0} more), worst {} at sample {at} ({}, {}, {}), next worst {second}",
         mean(&total),
         mean(&|s| s.fw[0]),
         mean(&|s| s.fw[1]),
@@ -514,16 +513,18 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         worst.fw[1],
         worst.fw[2],
     );
-    // The part the antenna waits for: the read, the fusion and the frame;
-    // the E-DAVARs run after the frame is on the wire.
-    let path = |s: &Sample| s.fw[0] + s.fw[2];
+    // The part the antenna waits for: the sample task's response, tick to
+    // frame queued (the read, the fusion, the frame); the learning and a
+    // status frame follow in the same task, the E-DAVARs in the background.
+    let path = |s: &Sample| s.fw[0];
+    let task = |s: &Sample| s.fw[0] + s.fw[2];
     if let Some((pat, pworst)) = samples.iter().enumerate().max_by_key(|(_, s)| path(s)) {
+        let tworst = samples.iter().map(task).max().unwrap_or(0);
         println!(
-            "  the frame's path (read+fuse, link; the calibration's learning and the e-davars after the frame is out): mean {:.0}, worst {} at sample {pat} (read+fuse {}, link {}); target <= 10000",
+            "  the sample task's response (tick to frame queued: read, fuse, frame): mean {:.0}, worst {} at sample {pat} (target: no higher than the bare loop's frame path, 9 782 on K); the sample task whole: mean {:.0}, worst {tworst}",
             mean(&path),
             path(pworst),
-            pworst.fw[0],
-            pworst.fw[2],
+            mean(&task),
         );
     }
     // Where the worst sample spends more than the mean sample does.

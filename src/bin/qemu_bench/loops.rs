@@ -566,9 +566,9 @@ pub(super) fn bench_loop_on(
                 b.advance(dt);
             });
         },
-        |pipe| {
+        |sample| {
             let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-            pipe.read_and_fuse(&mut gyros)
+            sample(&mut gyros)
         },
     )
 }
@@ -699,7 +699,7 @@ pub(super) fn bench_timed_loop_on(
                 b.advance(1e-3);
             });
         },
-        |pipe| {
+        |sample| {
             // The board's timer would give this instant; the bus's clock
             // stands in for it.
             let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
@@ -710,7 +710,7 @@ pub(super) fn bench_timed_loop_on(
             }
             let [a, b, c, d] = gyros;
             let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
-            pipe.read_and_fuse(&mut gyros)
+            sample(&mut gyros)
         },
     );
     let late: [u32; 4] = [

@@ -1,15 +1,18 @@
-//! One scenario's loop, sample by sample, as the board runs it: read and
-//! fuse, the frame, then the idle work; its costs per phase.
+//! One scenario's loop, sample by sample, through the board's own schedule
+//! (`gyro_array::app`): the sample task (read, fuse, the frame queued,
+//! then the calibration's learning and a status frame when due), the
+//! UART fed, the background's E-DAVARs; the cost of each.
 
 use super::*;
 
 /// The measured part of the whole-loop bench, whatever the chips: per
-/// sample, `before(n)` (faults, the bus's time) untimed, then `step`
-/// (read + calibrate + fuse) and the link frame (the frame's path), the
-/// UART fed, and the calibration's learning and the E-DAVARs, timed and
-/// marked for the exact count (the UART on its own); the status frame in
-/// the idle time after, timed on its own. `meter` reads the emulated bus's own
-/// ticks and bytes.
+/// sample, `before(n)` (faults, the bus's time) untimed, then `step`,
+/// which hands the chips to the board's sample task (`app::sample`):
+/// timed and marked for the exact count up to its frame queued (the
+/// frame's path: phase 0) and after it (the learning, a status frame when
+/// due: phase 2); the UART fed, timed on its own; the background's
+/// E-DAVARs (phase 1). `meter` reads the emulated bus's own ticks and
+/// bytes.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_loop<const N: usize>(
     t: &Ticks,
@@ -20,10 +23,18 @@ pub(super) fn run_loop<const N: usize>(
     noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 3>,
     meter: &dyn Fn() -> (gyro_array::emu::Meter, u32),
     mut before: impl FnMut(u32),
-    mut step: impl FnMut(&mut gyro_array::pipeline::Pipeline<N>) -> gyro_array::pipeline::Output<N>,
+    mut step: impl FnMut(
+        &mut dyn FnMut(&mut [&mut dyn gyro_array::drivers::Gyro; N]) -> gyro_array::app::Sampled<N>,
+    ) -> gyro_array::app::Sampled<N>,
 ) -> bool {
+    use gyro_array::app as schedule;
     use gyro_array::link::msg::Settings;
-    use gyro_array::link::port::Port;
+    use gyro_array::link::port::{ChipTime, NoiseSnapshot, Port};
+    use rtic_core::Exclusive;
+    const VIEW: schedule::StatusView = schedule::StatusView {
+        taus: gyro_array::pipeline::tracker::LINK_TAUS,
+        sample_us: 1000,
+    };
     const SAMPLES: u32 = 8000;
     let mut port = Port::<2048>::new(Settings::default());
     let mut uart = NullUart(0);
@@ -41,21 +52,45 @@ pub(super) fn run_loop<const N: usize>(
     let mut fw_worst_parts = [0.0f32; 3];
     let mut bus_sum = 0.0f32;
     let bytes0 = meter().1;
-    // Parts: read + calibrate + fuse, E-DAVAR, link.
+    // Parts: the sample task to its frame queued, the background's
+    // E-DAVARs, the sample task after its frame.
     let mut sum = [0.0f32; 3];
     let (mut worst, mut worst_at) = (0.0f32, 0u32);
     let mut worst_parts = [0.0f32; 3];
     let mut status_worst = 0.0f32;
     let (mut drain_sum, mut drain_worst) = (0.0f32, 0.0f32);
     let mut fallbacks = 0u32;
+    let mut snap = NoiseSnapshot::default();
+    let mut bg = schedule::Background {
+        tracker: noise,
+        taus: gyro_array::pipeline::tracker::LINK_TAUS,
+    };
     mark::scenario();
     for n in 0..SAMPLES {
         mark::sample();
         before(n);
         let (m0, _) = meter();
         let t0 = t.now();
+        let mut tq = t0;
         mark::fuse();
-        let out = step(pipe);
+        let s = step(&mut |gyros| {
+            schedule::sample(
+                &mut Exclusive(&mut *pipe),
+                &mut Exclusive(&mut port),
+                &mut Exclusive(&mut snap),
+                gyros,
+                (u64::from(n) * 1000, 0),
+                &VIEW,
+                || {
+                    mark::link();
+                    tq = t.now();
+                },
+                || schedule::StatusFacts {
+                    clocks: [ChipTime::default(); N],
+                    stack_peak: 0,
+                },
+            )
+        });
         mark::off();
         let t1 = t.now();
         let (m1, _) = meter();
@@ -63,52 +98,29 @@ pub(super) fn run_loop<const N: usize>(
         // each (the outer interval holds two reads per operation, the
         // operation's own interval one).
         let in_bus = (m1.ticks - m0.ticks) as f32 + (m1.ops - m0.ops) as f32 * clock_cost;
-        fallbacks += out.fused.iter().flatten().filter(|f| f.fallback).count() as u32;
-        // The frame first, with the E-DAVAR estimate of the samples before
-        // this one: the antenna waits for it, not for the E-DAVARs.
-        mark::link();
-        port.publish(
-            &out,
-            u64::from(n) * 1000,
-            pipe,
-            &noise.at_taus(gyro_array::pipeline::tracker::LINK_TAUS),
-        );
-        let status_due = port.status_due(out.seq);
-        mark::off();
-        let t2 = t.now();
-        // The UART is fed in the idle time, as on the board (timed on its
-        // own).
+        fallbacks += s.out.fused.iter().flatten().filter(|f| f.fallback).count() as u32;
+        // The UART fed, timed on its own.
         let d0 = t.now();
         port.drain(&mut uart);
         let dt_drain = net(t.now() - d0, pair);
         drain_sum += dt_drain;
         drain_worst = drain_worst.max(dt_drain);
-        // The calibration's learning and the E-DAVARs, once the frame is
-        // out, as on the board.
-        let probe = gyro_array::pipeline::tracker::Probe::from(&out);
+        // The background: this sample's probe into the E-DAVARs.
         let t3a = t.now();
         mark::davar();
-        pipe.after_frame(noise, probe);
+        bg.run(
+            gyro_array::pipeline::tracker::Probe::from(&s.out),
+            &mut Exclusive(&mut snap),
+        );
         mark::off();
         let t3 = t.now();
-        // The status frame, as the board builds it: in the idle time after
-        // the sample (timed on its own).
-        if status_due {
-            let s0 = t.now();
-            let st = port.status(
-                pipe,
-                out.seq,
-                u64::from(n) * 1000,
-                [1, 16, 256],
-                1000,
-                0,
-                &[],
-            );
-            port.send(&st);
-            port.drain(&mut uart);
-            status_worst = status_worst.max(net(t.now() - s0, pair));
+        let after = net(t1 - tq, pair);
+        if s.status_sent {
+            status_worst = status_worst.max(after);
         }
-        let parts = [net(t1 - t0, pair), net(t3 - t3a, pair), net(t2 - t1, pair)];
+        // Parts: the sample task to its frame queued, the background's
+        // E-DAVARs, the sample task after its frame.
+        let parts = [net(tq - t0, pair), net(t3 - t3a, pair), after];
         let total: f32 = parts.iter().sum();
         for (s, p) in sum.iter_mut().zip(parts) {
             *s += p;
@@ -129,13 +141,13 @@ pub(super) fn run_loop<const N: usize>(
         "bench whole loop, {=str}: ({=u32} axis-samples fused in fallback, {=u32} missing noise samples bridged, {=u32} noise-tracker window restarts)",
         faults,
         fallbacks,
-        noise.bridged(),
-        noise.restarts()
+        bg.tracker.bridged(),
+        bg.tracker.restarts()
     );
     let f = |ticks: f32| (ticks * ipt) as u32;
     let mean = |ticks: f32| (ticks * ipt / SAMPLES as f32) as u32;
     defmt::info!(
-        "bench whole loop (5 gyros read, calibrated and fused on 3 axes, 3 E-DAVARs at lambda2 = 1024, link frame built and queued), {=u32} samples with faults and a variance step: mean {=u32} instructions per sample (read+fuse {=u32}, after the frame {=u32}, link {=u32}), worst {=u32} at sample {=u32} (read+fuse {=u32}, after the frame {=u32}, link {=u32})",
+        "bench whole loop, the board's schedule (5 gyros read, calibrated and fused on 3 axes, the frame queued, the learning, status frames; the background's 3 E-DAVARs at lambda2 = 1024), {=u32} samples with faults and a variance step: mean {=u32} instructions per sample (the sample task to its frame queued {=u32}, the background {=u32}, the sample task after its frame {=u32}), worst {=u32} at sample {=u32} ({=u32}, {=u32}, {=u32})",
         SAMPLES,
         mean(sum.iter().sum()),
         mean(sum[0]),
@@ -148,7 +160,7 @@ pub(super) fn run_loop<const N: usize>(
         f(worst_parts[2])
     );
     defmt::info!(
-        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (read+fuse {=u32}, after the frame {=u32}, link {=u32}); SysTick reads each bus operation to a tick (40 instructions), so the worst reads high: `cargo xtask bench` counts it exactly from the execution trace",
+        "bench whole loop, the firmware's own instructions (the emulated bus's operations timed and taken out: mean {=u32} instructions, {=u32} bytes a sample): mean {=u32} instructions per sample, worst {=u32} at sample {=u32} (the sample task to its frame queued {=u32}, the background {=u32}, the sample task after its frame {=u32}); SysTick reads each bus operation to a tick (40 instructions), so the worst reads high: `cargo xtask bench` counts it exactly from the execution trace",
         mean(bus_sum),
         bus_bytes / SAMPLES,
         mean(fw_sum),
@@ -164,11 +176,11 @@ pub(super) fn run_loop<const N: usize>(
         return ok;
     }
     defmt::info!(
-        "bench whole loop: status frame, built in the idle time after its sample: worst {=u32} instructions",
+        "bench whole loop: the sample task after its frame on a sample with a status frame (the learning and the status frame): worst {=u32} instructions",
         f(status_worst)
     );
     defmt::info!(
-        "bench whole loop: feeding the UART in the idle time (a sink that takes every byte): mean {=u32}, worst {=u32} instructions per sample",
+        "bench whole loop: feeding the UART (a sink that takes every byte): mean {=u32}, worst {=u32} instructions per sample",
         mean(drain_sum),
         f(drain_worst)
     );
