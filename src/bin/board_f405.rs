@@ -184,6 +184,9 @@ const STATUS_VIEW: schedule::StatusView = schedule::StatusView {
 /// sample task's status frames).
 static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 
+/// Probes the background had no room for (the E-DAVAR bridged them).
+static LOST_JOBS: AtomicU32 = AtomicU32::new(0);
+
 /// What the sample task hands the background: the schedule's job, with
 /// what the board's logs need of its sample.
 pub struct Work {
@@ -279,8 +282,6 @@ mod app {
         sleep: bool,
         /// Each chip's clock after the last sample, for the status frames.
         clocks: [ChipTime; 5],
-        /// Jobs the background had no room for.
-        lost: u32,
         tx: Tx<pac::USART1>,
         tx_bytes: Consumer<'static, u8>,
         rx_feed: f405::RxFeed,
@@ -585,7 +586,6 @@ mod app {
                 clock: SampleClock::new(now, period_us),
                 clocks: [ChipTime::default(); 5],
                 sleep,
-                lost: 0,
                 tx,
                 tx_bytes,
                 rx_feed,
@@ -612,7 +612,7 @@ mod app {
     /// and the UART woken; the calibration learns from it; the background
     /// gets its probe (`gyro_array::app::sample`).
     #[task(binds = SysTick, priority = 2, shared = [pipe, link, noise],
-           local = [chips, captures, watchdog, jobs, clock, clocks, lost])]
+           local = [chips, captures, watchdog, jobs, clock, clocks])]
     fn sample(mut cx: sample::Context) {
         let l = cx.local;
         // One clock: TIM5's µs at the read, for the instant and the frame.
@@ -656,7 +656,7 @@ mod app {
         // A background this far behind loses the probe (the E-DAVAR
         // bridges it), never the sample task's time.
         if l.jobs.try_send(w).is_err() {
-            *l.lost = l.lost.wrapping_add(1);
+            LOST_JOBS.fetch_add(1, Ordering::Relaxed);
         }
         // A completed sample is the only thing that feeds the watchdog.
         l.watchdog.feed();
@@ -718,14 +718,15 @@ mod app {
                 if probe.seq % 10_000 == 0 {
                     let c = cx.shared.link.lock(|l| l.port.counters());
                     defmt::info!(
-                        "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}",
+                        "seq {}: stack peak {} bytes; link {} frames sent, {} dropped, commands {} accepted {} rejected, rx errors {}; probes the background had no room for {}",
                         probe.seq,
                         l.meter.peak(),
                         c.sent,
                         c.dropped,
                         c.accepted,
                         c.rejected,
-                        l.rx.errors()
+                        l.rx.errors(),
+                        LOST_JOBS.load(Ordering::Relaxed)
                     );
                 }
             }
