@@ -284,6 +284,65 @@ fn demo_run(features: &str) -> Option<String> {
     ok.then_some(log)
 }
 
+/// The controller's C library (`clib/`): built as C99 and as C++ with
+/// `-Wall -Wextra -Werror` under AddressSanitizer and
+/// UndefinedBehaviorSanitizer, its tests run, and, where the demo left its
+/// recording, that recording decoded to the same frames by kind and the
+/// same CRC-32 of every sample frame's rates as the Rust decoder's
+/// (`gyro check`).
+fn clib() -> bool {
+    let dir = root().join("clib");
+    let out = root().join("target").join("clib");
+    let _ = std::fs::create_dir_all(&out);
+    let sanitize = [
+        "-g",
+        "-fsanitize=address,undefined",
+        "-fno-sanitize-recover=all",
+    ];
+    let builds = [
+        ("gcc", vec!["-std=c99", "-pedantic"], "test_gyrolink_c"),
+        (
+            "g++",
+            vec!["-x", "c++", "-std=c++11", "-pedantic"],
+            "test_gyrolink_cpp",
+        ),
+    ];
+    let mut bins = Vec::new();
+    for (cc, lang, name) in builds {
+        let bin = out.join(name);
+        let ok = run(Command::new(cc)
+            .args(&lang)
+            .args(["-Wall", "-Wextra", "-Werror"])
+            .args(sanitize)
+            .arg(dir.join("gyrolink.c"))
+            .arg(dir.join("test_gyrolink.c"))
+            .arg("-o")
+            .arg(&bin));
+        if !ok || !run(&mut Command::new(&bin)) {
+            eprintln!("xtask: the C library's {cc} build or its tests failed");
+            return false;
+        }
+        bins.push(bin);
+    }
+    let rec = root().join("target").join("link").join("qemu-demo.glk");
+    if !rec.exists() {
+        println!("xtask: no demo recording to decode (run `cargo xtask run` first)");
+        return true;
+    }
+    let lines = |o: std::io::Result<std::process::Output>| -> Vec<String> {
+        o.map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.starts_with("frames: ") || l.starts_with("fused-rate CRC-32: "))
+            .map(str::to_string)
+            .collect()
+    };
+    let c = lines(Command::new(&bins[0]).arg(&rec).output());
+    let rust = lines(Command::new(build_tool()).arg("check").arg(&rec).output());
+    println!("xtask: the demo recording, C: {c:?}; Rust: {rust:?}");
+    c.len() == 2 && c == rust
+}
+
 /// The sample task's worst response (tick to frame queued, the firmware's
 /// own instructions) a demo log states.
 fn worst_response(log: &str) -> Option<u64> {
@@ -665,6 +724,10 @@ fn main() {
             );
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
+            must(
+                clib(),
+                "the controller's C library (clib/): builds, tests, the demo recording",
+            );
             must(board_qemu(10), "board-f405 on QEMU netduinoplus2");
             // The board firmware panics in no code of its own: each site
             // is a bounds or divisor check the compiler could not drop, a
@@ -687,6 +750,9 @@ fn main() {
         "run" => {
             ensure_tools();
             must(demo_end_to_end(), "demo");
+        }
+        "clib" => {
+            must(clib(), "the controller's C library");
         }
         "stress" => {
             ensure_tools();
@@ -739,7 +805,7 @@ fn main() {
             println!("panic call sites from this crate, all ELFs: {ours_total}");
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|run|stress|board-qemu|python|bench|bench-loop|size|panics|fuzz [SECONDS]>");
+            eprintln!("usage: cargo xtask <test|run|stress|clib|board-qemu|python|bench|bench-loop|size|panics|fuzz [SECONDS]>");
             exit(2);
         }
     }

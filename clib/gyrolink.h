@@ -1,0 +1,229 @@
+/*
+ * gyrolink: the gyro board's output link for the antenna controller, in C.
+ *
+ * Decodes every frame the board sends and encodes every command it takes,
+ * as docs/link.md specifies them (protocol version 6): COBS framing with a
+ * 0x00 delimiter, CRC-16/IBM-3740 (poly 0x1021, init 0xFFFF) over the
+ * payload, payload = version (u8) | link_seq (u32 LE) | body (postcard).
+ *
+ * C99, no allocation, no dependency beyond <stdint.h>, <stddef.h> and
+ * <string.h>; compiles as C++ too. The decoder is a byte-at-a-time state
+ * machine: feed it the bytes as the UART delivers them, in any chunking,
+ * and it hands back each complete frame or says why it refused one.
+ */
+#ifndef GYROLINK_H
+#define GYROLINK_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** The protocol version this library speaks. */
+#define GL_VERSION 6u
+/** Gyros a frame can describe at most. */
+#define GL_MAX_GYROS 8u
+/** Longest payload (version, link_seq, body), bytes. */
+#define GL_MAX_PAYLOAD 768u
+/** Longest encoded frame: the payload, its CRC, COBS's code bytes and the
+ * delimiter. */
+#define GL_MAX_FRAME (GL_MAX_PAYLOAD + 2u + (GL_MAX_PAYLOAD + 2u) / 254u + 2u)
+
+/** Why a frame was refused, or a call failed. */
+typedef enum {
+    GL_OK = 0,
+    /** A COBS code byte points past the frame's end. */
+    GL_ERR_COBS = 1,
+    /** The CRC does not match: the frame was damaged. */
+    GL_ERR_CRC = 2,
+    /** Longer than GL_MAX_FRAME before its delimiter. */
+    GL_ERR_TOO_LONG = 3,
+    /** Another protocol version. */
+    GL_ERR_VERSION = 4,
+    /** The body does not decode as a frame, or bytes are left over. */
+    GL_ERR_MALFORMED = 5,
+    /** Shorter than a version, a link sequence number and a CRC. */
+    GL_ERR_SHORT = 6,
+    /** (Encoding) the output buffer is too small, or an argument out of
+     * range. */
+    GL_ERR_ARGUMENT = 7
+} gl_error;
+
+/** What a frame carries. */
+typedef enum {
+    GL_SAMPLE = 0,
+    GL_RAW = 1,
+    GL_STATUS = 2,
+    GL_ACK = 3
+} gl_kind;
+
+/** An E-DAVAR noise estimate of one fused axis. */
+typedef struct {
+    uint8_t axis;
+    /** The sample the estimate describes. */
+    uint32_t seq;
+    /** Window length, samples. */
+    uint16_t len;
+    /** Missing samples of the window, bridged. */
+    uint8_t bridged;
+    /** Allan deviation at the status frame's noise_tau, deg/s. */
+    float sigma_dps[3];
+} gl_noise;
+
+/** A fused sample (frame kind 0). */
+typedef struct {
+    uint32_t seq;
+    /** When the sample was read and queued, us of the board's clock. */
+    uint64_t t_us;
+    /** The rate describes t_us - age_us[a]. */
+    uint16_t age_us[3];
+    /** 1: rate_dps is predicted to t_us + predicted_us. */
+    uint8_t has_predicted;
+    uint16_t predicted_us;
+    /** NaN where the axis is not valid. */
+    float rate_dps[3];
+    uint8_t valid;
+    uint8_t degraded;
+    uint8_t used[3];
+    uint8_t n_health;
+    uint8_t health[GL_MAX_GYROS];
+    uint8_t has_noise;
+    gl_noise noise;
+} gl_sample;
+
+/** Every gyro's own reading (frame kind 1, raw mode). */
+typedef struct {
+    uint32_t seq;
+    uint64_t t_us;
+    uint8_t n_age;
+    uint16_t age_us[GL_MAX_GYROS];
+    uint8_t n_rates;
+    float rate_dps[GL_MAX_GYROS][3];
+    uint8_t n_health;
+    uint8_t health[GL_MAX_GYROS];
+} gl_raw;
+
+/** The board's settings. mode: 0 Fused, 1 Raw; method: 0 Mean, 1 Zhang,
+ * 2 Adaptive; compensation: 0 Off, 1 ToFrame, 2 Horizon(horizon_us). */
+typedef struct {
+    uint8_t mode;
+    uint8_t method;
+    uint16_t divider;
+    uint32_t status_every;
+    uint8_t compensation;
+    uint16_t horizon_us;
+} gl_settings;
+
+/** One gyro in a status frame. clock: 0 Polled, 1 Own, 2 ClkIn. */
+typedef struct {
+    uint8_t flags;
+    uint32_t reads, errors, excluded, restarts, restarted;
+    int32_t scale_ppm[3];
+    int16_t bias_mdps[3];
+    uint8_t clock;
+    int32_t clock_ppm;
+    uint32_t late;
+    uint32_t overflows, bad, cuts, resent;
+} gl_gyro_status;
+
+/** Counters and settings (frame kind 2). */
+typedef struct {
+    uint32_t seq;
+    uint64_t t_us;
+    gl_settings settings;
+    uint16_t noise_tau[3];
+    uint32_t sample_us;
+    uint32_t overruns;
+    uint32_t sent, dropped, accepted, rejected;
+    uint32_t stack_peak;
+    uint8_t n_gyros;
+    gl_gyro_status gyros[GL_MAX_GYROS];
+} gl_status;
+
+/** The answer to a command (frame kind 3). reject (when ok is 0):
+ * 0 Corrupt, 1 TooLong, 2 Version, 3 Malformed, 4 OutOfRange, 5 Refused. */
+typedef struct {
+    uint8_t has_id;
+    uint8_t id;
+    uint8_t ok;
+    uint8_t reject;
+} gl_ack;
+
+/** One decoded frame. */
+typedef struct {
+    uint32_t link_seq;
+    gl_kind kind;
+    union {
+        gl_sample sample;
+        gl_raw raw;
+        gl_status status;
+        gl_ack ack;
+    } u;
+} gl_frame;
+
+/** Frames refused so far, by reason, and the bytes they held. */
+typedef struct {
+    uint32_t cobs, crc, too_long, version, malformed, short_;
+    uint32_t bytes_dropped;
+} gl_stats;
+
+/** The streaming decoder. Zero it (or gl_decoder_init) before use. */
+typedef struct {
+    uint8_t buf[GL_MAX_FRAME];
+    size_t len;
+    /** Skipping to the next delimiter after an over-long frame. */
+    uint8_t overflow;
+    gl_stats stats;
+} gl_decoder;
+
+/** Start a decoder with no bytes and no counts. */
+void gl_decoder_init(gl_decoder *d);
+
+/**
+ * Feed one byte. Returns GL_OK with *out filled when the byte completed a
+ * frame; a gl_error when it completed a frame that was refused (counted in
+ * d->stats); and -1 when no frame ended with it.
+ */
+int gl_feed(gl_decoder *d, uint8_t byte, gl_frame *out);
+
+/** Decode one whole frame's bytes (without its 0x00 delimiter). */
+gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out);
+
+/** CRC-16/IBM-3740 of `len` bytes ("123456789" gives 0x29B1). */
+uint16_t gl_crc16(const uint8_t *data, size_t len);
+
+/** The commands' operations. */
+typedef enum {
+    GL_SET_MODE = 0,
+    GL_SET_METHOD = 1,
+    GL_SET_DIVIDER = 2,
+    GL_SET_STATUS_EVERY = 3,
+    GL_REQUEST_STATUS = 4,
+    GL_SET_COMPENSATION = 5
+} gl_op;
+
+/** A command: `arg` is the mode, the method, the divider, the status
+ * period, or the compensation (0 Off, 1 ToFrame, 2 Horizon with
+ * `horizon_us`); unused for GL_REQUEST_STATUS. */
+typedef struct {
+    uint8_t id;
+    gl_op op;
+    uint32_t arg;
+    uint16_t horizon_us;
+} gl_command;
+
+/**
+ * Encode a command frame, delimiter included, into out[0..cap). Returns
+ * the bytes written, or 0 (GL_ERR_ARGUMENT) when it does not fit or an
+ * argument is not one the protocol has. `link_seq` counts the host's own
+ * frames from 0.
+ */
+size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, size_t cap);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GYROLINK_H */
