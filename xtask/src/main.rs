@@ -289,7 +289,8 @@ fn demo_run(features: &str) -> Option<String> {
 /// UndefinedBehaviorSanitizer, its tests run, and, where the demo left its
 /// recording, that recording decoded to the same frames by kind and the
 /// same CRC-32 of every sample frame's rates as the Rust decoder's
-/// (`gyro check`).
+/// (`gyro check`), and its example program's CSV of the sample frames
+/// equal, byte for byte, to `gyro decode`'s.
 fn clib() -> bool {
     let dir = root().join("clib");
     let out = root().join("target").join("clib");
@@ -303,26 +304,33 @@ fn clib() -> bool {
         ("gcc", vec!["-std=c99", "-pedantic"], "test_gyrolink_c"),
         (
             "g++",
-            vec!["-x", "c++", "-std=c++11", "-pedantic"],
+            vec!["-x", "c++", "-std=c++17", "-pedantic"],
             "test_gyrolink_cpp",
         ),
     ];
     let mut bins = Vec::new();
+    let mut examples = Vec::new();
     for (cc, lang, name) in builds {
         let bin = out.join(name);
-        let ok = run(Command::new(cc)
-            .args(&lang)
-            .args(["-Wall", "-Wextra", "-Werror"])
-            .args(sanitize)
-            .arg(dir.join("gyrolink.c"))
-            .arg(dir.join("test_gyrolink.c"))
-            .arg("-o")
-            .arg(&bin));
+        let example = out.join(format!("{name}_example"));
+        let build = |main: &str, bin: &Path| {
+            run(Command::new(cc)
+                .args(&lang)
+                .args(["-Wall", "-Wextra", "-Werror"])
+                .args(sanitize)
+                .arg(dir.join("gyrolink.c"))
+                .arg(dir.join(main))
+                .arg("-o")
+                .arg(bin)
+                .arg("-lm"))
+        };
+        let ok = build("test_gyrolink.c", &bin) && build("example_decode.c", &example);
         if !ok || !run(&mut Command::new(&bin)) {
             eprintln!("xtask: the C library's {cc} build or its tests failed");
             return false;
         }
         bins.push(bin);
+        examples.push(example);
     }
     let rec = root().join("target").join("link").join("qemu-demo.glk");
     if !rec.exists() {
@@ -340,7 +348,36 @@ fn clib() -> bool {
     let c = lines(Command::new(&bins[0]).arg(&rec).output());
     let rust = lines(Command::new(build_tool()).arg("check").arg(&rec).output());
     println!("xtask: the demo recording, C: {c:?}; Rust: {rust:?}");
-    c.len() == 2 && c == rust
+    if !(c.len() == 2 && c == rust) {
+        return false;
+    }
+    // Every field of every sample frame, as text.
+    let decode = Command::new(build_tool())
+        .arg("decode")
+        .arg(&rec)
+        .output()
+        .map(|o| o.stdout)
+        .unwrap_or_default();
+    for ex in &examples {
+        let mine = Command::new(ex)
+            .arg(&rec)
+            .output()
+            .map(|o| o.stdout)
+            .unwrap_or_default();
+        let lines = mine.iter().filter(|&&b| b == b'\n').count();
+        if mine.is_empty() || mine != decode {
+            eprintln!(
+                "xtask: {} prints the demo's sample frames differently from `gyro decode`",
+                ex.display()
+            );
+            return false;
+        }
+        println!(
+            "xtask: {}: {lines} lines, byte for byte `gyro decode`'s",
+            ex.display()
+        );
+    }
+    true
 }
 
 /// The sample task's worst response (tick to frame queued, the firmware's
