@@ -228,6 +228,145 @@ mod tests {
         assert_eq!(c.period_us(), 1000);
     }
 
+    use crate::drivers::{ReadFault, Reading, Restart};
+    use crate::emu::Rng;
+    use crate::link::msg::{Frame, Settings};
+    use crate::link::wire::{Decoder, MAX_FRAME};
+    use rtic_core::Exclusive;
+
+    /// A gyro reading a still board's noise.
+    struct Still(Rng);
+
+    impl Gyro for Still {
+        fn read(&mut self) -> Result<Reading, ReadFault> {
+            let mut r = [0.0f32; 3];
+            for v in r.iter_mut() {
+                *v = 0.05 * self.0.gaussian();
+            }
+            Ok(Reading {
+                // Counts at the ICM-42688-P's ±250 °/s (131 LSB per °/s):
+                // a reading whose counts never change is a stuck chip.
+                raw: r.map(|v| (v * 131.0) as i16),
+                rate_dps: r,
+                axes: 0b111,
+                saturated: 0,
+            })
+        }
+        fn restart(&mut self, _: u8) -> Result<Restart, ReadFault> {
+            Ok(Restart::Done)
+        }
+    }
+
+    struct Sink(std::vec::Vec<u8>);
+
+    impl embedded_hal_nb::serial::ErrorType for Sink {
+        type Error = core::convert::Infallible;
+    }
+
+    impl embedded_hal_nb::serial::Write<u8> for Sink {
+        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            self.0.push(b);
+            Ok(())
+        }
+        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    /// The schedule as one loop runs it, on four still chips: every sample
+    /// a frame, a status frame right behind the sample's that makes it
+    /// due, missed periods counted and left as gaps, the E-DAVARs' records
+    /// reaching the frames through the background's copy.
+    #[test]
+    fn the_schedule_sends_each_sample_then_its_status_and_counts_what_it_missed() {
+        use crate::algo::fusion::{AdaptiveConfig, Method};
+        use crate::pipeline::PipelineConfig;
+        let mut pipe = Pipeline::<4>::new(
+            PipelineConfig::default(),
+            Method::Adaptive(AdaptiveConfig::default()),
+        )
+        .unwrap();
+        let mut port = Port::<2048>::new(Settings::default());
+        let mut noise = NoiseSnapshot::default();
+        let mut tracker =
+            NoiseTracker::<1024, 35, 3>::new(crate::pipeline::tracker::link_config(1024)).unwrap();
+        let mut bg = Background {
+            tracker: &mut tracker,
+            taus: crate::pipeline::tracker::LINK_TAUS,
+        };
+        let view = StatusView {
+            taus: crate::pipeline::tracker::LINK_TAUS,
+            sample_us: 1000,
+        };
+        let mut chips: [Still; 4] = core::array::from_fn(|i| Still(Rng::new(i as u64 + 1)));
+        let mut clock = SampleClock::new(0, 1000);
+        let mut wire = Sink(std::vec::Vec::new());
+        let mut queued = 0;
+        for n in 1..=3000u32 {
+            // Sample 1500 comes three periods after 1499: two missed.
+            let now = if n >= 1500 { (n + 2) * 1000 } else { n * 1000 };
+            let (t_us, missed) = clock.tick(now);
+            let [a, b, c, d] = &mut chips;
+            let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
+            let s = sample(
+                &mut Exclusive(&mut pipe),
+                &mut Exclusive(&mut port),
+                &mut Exclusive(&mut noise),
+                &mut gyros,
+                (t_us, missed),
+                &view,
+                || queued += 1,
+                || StatusFacts {
+                    clocks: [ChipTime::default(); 4],
+                    stack_peak: 0,
+                },
+            );
+            assert!(s.sent);
+            port.drain(&mut wire);
+            bg.run(Probe::from(&s.out), &mut Exclusive(&mut noise));
+        }
+        assert_eq!(queued, 3000);
+        assert_eq!(pipe.overruns(), 2);
+        let mut dec = Decoder::<MAX_FRAME>::new();
+        let frames: std::vec::Vec<Frame> = wire
+            .0
+            .iter()
+            .filter_map(|&b| dec.feed::<Frame>(b))
+            .map(|r| r.unwrap().body)
+            .collect();
+        let mut last_seq = None;
+        let (mut statuses, mut with_noise) = (0, 0);
+        for (k, f) in frames.iter().enumerate() {
+            match f {
+                Frame::Sample(s) => {
+                    // Each a millisecond after the last, but across the
+                    // two missed periods, whose sequence numbers are gaps.
+                    if let Some(q) = last_seq {
+                        assert_eq!(s.seq - q, if s.seq == 1501 { 3 } else { 1 }, "{}", s.seq);
+                    }
+                    last_seq = Some(s.seq);
+                    with_noise += usize::from(s.noise.is_some());
+                }
+                Frame::Status(st) => {
+                    statuses += 1;
+                    // Right behind the sample frame that made it due.
+                    match frames.get(k.wrapping_sub(1)) {
+                        Some(Frame::Sample(s)) => assert_eq!(s.seq, st.seq),
+                        other => panic!("a status frame after {other:?}"),
+                    }
+                    assert_eq!(st.seq % 1000, 0);
+                    assert_eq!(st.noise_tau, [1, 16, 256]);
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        // With sequence numbers 0, 1000, 2000 and 3000.
+        assert_eq!(statuses, 4);
+        // The E-DAVARs publish once their window has filled, and their
+        // records reach the frames.
+        assert!(with_noise > 10, "{with_noise}");
+    }
+
     #[test]
     fn status_frames_state_the_taus_in_samples() {
         let v = StatusView {
