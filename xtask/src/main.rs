@@ -62,38 +62,33 @@ fn have(tool: &str, arg: &str) -> Option<String> {
         .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
+/// Install a Debian package (through sudo when not root), or stop.
+fn apt_install(package: &str, what: &str) {
+    let sudo = if have("id", "-u").is_some_and(|u| u.trim() != "0") {
+        "sudo "
+    } else {
+        ""
+    };
+    must(
+        run(Command::new("sh").arg("-c").arg(format!(
+            "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq {package}"
+        ))),
+        what,
+    );
+}
+
 fn ensure_tools() {
     must(
         run(Command::new("rustup").args(["target", "add", TARGET])),
         "rustup target add",
     );
     if have("qemu-system-arm", "--version").is_none() {
-        let sudo = if have("id", "-u").is_some_and(|u| u.trim() != "0") {
-            "sudo "
-        } else {
-            ""
-        };
-        must(
-            run(Command::new("sh").arg("-c").arg(format!(
-                "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq qemu-system-arm"
-            ))),
-            "install qemu-system-arm",
-        );
+        apt_install("qemu-system-arm", "install qemu-system-arm");
     }
     // llvm-objdump and llvm-addr2line: the panic-site check.
     if have("llvm-objdump", "--version").is_none() || have("llvm-addr2line", "--version").is_none()
     {
-        let sudo = if have("id", "-u").is_some_and(|u| u.trim() != "0") {
-            "sudo "
-        } else {
-            ""
-        };
-        must(
-            run(Command::new("sh").arg("-c").arg(format!(
-                "{sudo}apt-get update -qq && {sudo}env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq llvm"
-            ))),
-            "install llvm (llvm-objdump, llvm-addr2line)",
-        );
+        apt_install("llvm", "install llvm (llvm-objdump, llvm-addr2line)");
     }
     // flip-link has no --version: ask cargo what it installed.
     let v = Command::new("cargo")
