@@ -80,6 +80,25 @@ impl<const TX: usize> Link<TX> for Port<TX> {
     fn flush(&mut self) {}
 }
 
+/// A byte queue written as a UART (full: it would block): where a
+/// [`Link::flush`] moves the port's bytes for the UART's interrupt.
+pub struct ToQueue<'a>(pub &'a mut heapless::spsc::Producer<'static, u8>);
+
+impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
+    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        self.0
+            .enqueue(b)
+            .map_err(|_| embedded_hal_nb::nb::Error::WouldBlock)
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
 /// What the sample task hands the background, in sample order: a
 /// sample's noise probe for the E-DAVARs.
 pub type Job = Probe;

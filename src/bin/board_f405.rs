@@ -235,24 +235,8 @@ impl schedule::Link<2048> for Link {
     /// Move the port's queued bytes to the UART's queue, as many as fit,
     /// and wake the interrupt.
     fn flush(&mut self) {
-        self.port.drain(&mut ToQueue(&mut self.out));
+        self.port.drain(&mut schedule::ToQueue(&mut self.out));
         rtic::pend(pac::Interrupt::USART1);
-    }
-}
-
-/// The UART's queue, written as a UART (full: it would block).
-struct ToQueue<'a>(&'a mut Producer<'static, u8>);
-
-impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
-    type Error = core::convert::Infallible;
-}
-
-impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
-    fn write(&mut self, b: u8) -> nb::Result<(), Self::Error> {
-        self.0.enqueue(b).map_err(|_| nb::Error::WouldBlock)
-    }
-    fn flush(&mut self) -> nb::Result<(), Self::Error> {
-        Ok(())
     }
 }
 

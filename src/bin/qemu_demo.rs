@@ -170,26 +170,8 @@ impl schedule::Link<1024> for Link {
     }
 
     fn flush(&mut self) {
-        self.port.drain(&mut ToQueue(&mut self.out));
+        self.port.drain(&mut schedule::ToQueue(&mut self.out));
         rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
-    }
-}
-
-/// The UART's queue, written as a UART (full: it would block).
-struct ToQueue<'a>(&'a mut Producer<'static, u8>);
-
-impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
-    type Error = core::convert::Infallible;
-}
-
-impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
-    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        self.0
-            .enqueue(b)
-            .map_err(|_| embedded_hal_nb::nb::Error::WouldBlock)
-    }
-    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        Ok(())
     }
 }
 
