@@ -64,7 +64,7 @@ pub mod latency {
         loop_us(&Config::board_fifo(ClockInput::ClkIn)) + wire_us(sample_frame_bytes())
     }
 }
-pub mod timed_array;
+pub mod stated;
 pub mod timed_board;
 
 pub mod calibration {

@@ -61,7 +61,7 @@ impl schedule::Link<2048> for HostLink {
 }
 
 /// What the status frames say of the schedule: the board's.
-const STATUS_VIEW: StatusView = StatusView {
+pub const STATUS_VIEW: StatusView = StatusView {
     taus: gyro_array::pipeline::tracker::LINK_TAUS,
     sample_us: 1000,
 };
@@ -93,6 +93,11 @@ pub struct Timing {
     /// s: where the loop's reads fall against CLKIN's edges and the chips'
     /// sample grids.
     pub power_up_s: f64,
+    /// Each chip's scale error (a fraction; the fixture's chips have none).
+    pub scale_error: [f32; N],
+    /// A chip whose PLL has failed from power-up, and its RC oscillator's
+    /// error (a fraction): it samples off its nominal rate by that much.
+    pub rc_fallback: Option<(usize, f64)>,
 }
 
 /// The four chips' PLL errors the timed tests and the power-up sweep run
@@ -128,6 +133,8 @@ impl Timing {
             past_count,
             power_up_s,
             path_reading,
+            scale_error: [0.0; N],
+            rc_fallback: None,
         }
     }
 }
@@ -160,6 +167,9 @@ pub struct Sample<'a, 'b> {
     pub pipe: &'a Pipeline<N>,
     /// The instant the sample states, s of bus time.
     pub stated_s: f64,
+    /// Per chip, how far the instant its newest moving mean describes lies
+    /// behind the read, µs (NaN before its clock is tracked).
+    pub newest_behind_us: [f64; N],
 }
 
 /// What a run leaves behind.
@@ -196,11 +206,19 @@ pub fn run(
             rtc_tick: timing.rtc_tick,
             past_count: timing.past_count,
             path_reading: timing.path_reading,
+            rc: match timing.rc_fallback {
+                Some((chip, offset)) if chip == i => ClockParams::fixed(offset),
+                _ => ChipTiming::pll(0.0).rc,
+            },
             ..ChipTiming::pll(0.0)
         }),
     );
-    for (c, f) in chips.iter_mut().zip(at_power_up) {
+    for (i, (c, f)) in chips.iter_mut().zip(at_power_up).enumerate() {
         c.set_fault(f);
+        if let Some(icm) = c.icm() {
+            icm.set_scale_error(timing.scale_error[i]);
+            icm.fail_pll(timing.rc_fallback.is_some_and(|(chip, _)| chip == i));
+        }
     }
     let cs: [CsLine; N] = Default::default();
     let bus: Bus = RefCell::new(EmuBus::new(chips, &cs));
@@ -298,12 +316,18 @@ pub fn run(
                     .collect::<Vec<_>>()
             );
         }
+        let now16 = (now_us as u64 as u32).wrapping_mul(16);
+        let newest_behind_us = core::array::from_fn(|i| {
+            t[i].newest_instant()
+                .map_or(f64::NAN, |at| f64::from(now16.wrapping_sub(at) as i32) / 16.0)
+        });
         each(Sample {
             n,
             bus: &bus,
             out: &out,
             pipe: &pipe,
             stated_s: stated_us * 1e-6,
+            newest_behind_us,
         });
     }
     Ran {

@@ -105,6 +105,8 @@ fn run_timed_on(
         power_up_s: 0.0,
         path_reading: gyro_array::emu::PathReading::DOCUMENTED,
         pll: timed_board::plls(),
+        scale_error: [0.0; N],
+        rc_fallback: None,
     };
     let mut sq = [0.0f64; 3];
     let mut count = 0u32;

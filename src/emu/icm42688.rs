@@ -220,6 +220,11 @@ impl Icm42688Model {
         self.params
     }
 
+    /// Give it a scale error (a part's sensitivity off by this fraction).
+    pub fn set_scale_error(&mut self, scale_error: f32) {
+        self.params.scale_error = scale_error;
+    }
+
     /// Keep time as a real chip does (`Some`): its own oscillator, its
     /// signal path at 32 kHz, its FIFO. `None` is the ideal lockstep
     /// sampler: a fresh, unfiltered sample at each bus step, the reference

@@ -635,13 +635,16 @@ pub fn mounted_board(temp: TempProfile) -> [Mount; 5] {
     })
 }
 
+/// The constant biases of [`timed_array`]'s chips, °/s.
+pub const TIMED_ARRAY_BIAS_DPS: [f32; 4] = [0.02, -0.015, 0.01, -0.005];
+
 /// The timed board's array: four ICM-42688-P keeping their own time as
 /// `timing` says, each with its own noise seed and a small bias (no scale
 /// error: the timing figures compare it with the same chips in lockstep).
 pub fn timed_array(profile: RateProfile, seed: u64, timing: [ChipTiming; 4]) -> [Chip; 4] {
     core::array::from_fn(|i| {
         let p = NoiseParams {
-            bias_dps: [0.02, -0.015, 0.01, -0.005][i],
+            bias_dps: TIMED_ARRAY_BIAS_DPS[i],
             ..NoiseParams::ICM42688
         };
         let mut c =

@@ -218,6 +218,19 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         &self.clock
     }
 
+    /// The instant its newest moving mean describes, on the board's clock
+    /// (1/16 µs): the mean's stamp less the signal path's delay, the
+    /// inverse of the mapping a read makes. `None` before the clock is
+    /// tracked. How far the newest data lie behind the read.
+    pub fn newest_instant(&self) -> Option<Instant16> {
+        let chip = self
+            .align
+            .newest()?
+            .wrapping_add(self.stamp_offset.wrapping_mul(16))
+            .wrapping_sub(self.path16);
+        self.clock.board_instant16(chip)
+    }
+
     /// Where the chip takes its clock from now.
     pub fn clock_input(&self) -> ClockInput {
         self.g.config().clock

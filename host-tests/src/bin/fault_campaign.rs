@@ -475,6 +475,8 @@ fn draw_timed(
             past_count,
             power_up_s: 0.0,
             path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+            scale_error: [0.0; 4],
+            rc_fallback: None,
         },
         inj,
         ev,

@@ -719,32 +719,43 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
 type Curve<'a> = (&'a str, Vec<(f64, f64)>, RGBColor);
 
 fn timing(out: &Path, seed: u64) -> Result<(), Err> {
-    use gyro_array::drivers::icm42688::{Filter, BOARD_FIFO_ODR};
-    use gyro_array::emu::timing::Vibration;
-    use host_tests::timed_array::{self, Clocks};
+    use gyro_array::emu::timing::ClockParams;
+    use host_tests::stated;
+    use host_tests::timed_board::Timing;
     let profile = RateProfile {
         base_dps: [0.0; 3],
         sine_dps: [95.0, -57.0, 76.0],
         sine_hz: 2.0,
         sine_start_s: 0.0,
     };
-    let run = |clocks| {
-        timed_array::run(timed_array::Run {
+    // Free-running: three PLLs and chip 3 fallen back to its RC
+    // oscillator; or every chip on CLKIN.
+    let run = |clkin: bool| {
+        let offsets = [0.008, -0.01, 0.003, 0.0];
+        stated::run(stated::Run {
             profile,
-            clocks,
-            odr: BOARD_FIFO_ODR,
-            filter: Filter::BOARD_FIFO,
-            delay_us: gyro_array::pipeline::timed::BOARD_DELAY_US,
+            timing: Timing {
+                clkin,
+                pll: offsets.map(|offset| ClockParams {
+                    offset,
+                    ..ClockParams::fixed(0.0)
+                }),
+                rc_fallback: (!clkin).then_some((3, -0.07)),
+                ..Timing::sweep(
+                    clkin,
+                    RtcTick::Microsecond,
+                    gyro_array::emu::PastCount::HandOver,
+                    gyro_array::emu::PathReading::DOCUMENTED,
+                    0.0,
+                )
+            },
             ms: 4000,
             seed,
             restart_at_ms: None,
-            scale_errors: false,
-            vibration: Vibration::NONE,
             band_limited: false,
-            clock_seed: None,
         })
     };
-    let (free, clkin) = (run(Clocks::Free), run(Clocks::ClkIn(RtcTick::Microsecond)));
+    let (free, clkin) = (run(false), run(true));
     let path = out.join("timing.svg");
     let root = SVGBackend::new(&path, (1100, 480)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -807,7 +818,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
     legend(&mut chart, SeriesLabelPosition::LowerRight)?;
     // (b) fused error RMS against the truth at shifted instants.
-    let shift_rms = |o: &timed_array::Outcome, a: usize, lag_us: f64| {
+    let shift_rms = |o: &stated::Outcome, a: usize, lag_us: f64| {
         let e: f64 = o
             .fused
             .iter()

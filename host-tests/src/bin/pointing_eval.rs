@@ -210,6 +210,8 @@ fn board_run_to(
             wander_period_s: 4.0,
         }),
         vibration: p.vibration,
+        scale_error: [0.0; 4],
+        rc_fallback: None,
     };
     let mut s = Stream {
         now_s: vec![],

@@ -13,16 +13,17 @@
 //! with the better of PX4's and ArduPilot's, per tone.
 //!
 //! `cargo run --profile host -p host-tests --bin timing-eval -- [--fusion |
-//! --fusion-2k | --search MS] [--seconds S] [--seed N] [--clocks N]`
-//! (`--fusion`: the fusion table alone; `--fusion-2k`: the same on the
-//! 2 kHz setting; `--search MS`: every setting within MS to the wire,
+//! --power-up | --search MS] [--seconds S] [--seed N] [--clocks N]`
+//! (`--fusion`: the fusion table through the board's own path and the
+//! power-up sweep; `--search MS`: every setting within MS to the wire,
 //! against the aliasing target)
 
 use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR};
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile, RtcTick};
 use host_tests::single_chip::{chip, run, Reads};
-use host_tests::timed_array::{self, Clocks};
+use host_tests::stated;
+use host_tests::timed_board::{self, Timing};
 
 /// A lag is measured where its standard error over the run is at most
 /// this, µs: half the 50 µs target, so a measured lag tells an error of 50
@@ -199,26 +200,101 @@ fn to_wire_ms(cfg: &Config, frame_bytes: usize) -> f64 {
     (delay_us + loop_us(cfg) + wire_us(frame_bytes)) * 1e-3
 }
 
-/// Fused error against the truth at the stated instant, over motion
-/// classes and clocks, against the same array as today's lockstep
-/// sampler; and the lag that best aligns the fused rate with the truth.
-fn fusion_table(
-    seconds: u32,
-    (seed, clock_seed): (u64, Option<u64>),
-    odr: Odr,
-    filter: Filter,
-) -> usize {
+/// How the fusion table's chips keep time.
+#[derive(Clone, Copy, Debug)]
+enum Clocks {
+    /// Every chip on the board's CLKIN at 32 kHz, its FIFO stamps counting
+    /// as the reading says (the sources leave it open).
+    ClkIn(RtcTick),
+    /// Free-running: PLLs within ±1 % with drift and wander, chip 3 fallen
+    /// back to its RC oscillator (−7 %, or drawn from `--clocks`).
+    Free,
+}
+
+/// The board's timing for `c` (`clock_seed`: the free-running clocks
+/// drawn from it instead of the fixed set the tables quote: each PLL off by
+/// up to ±1 % and drifting, the failing chip's RC oscillator by 1–8 %).
+fn board_timing(c: Clocks, vibration: Vibration, clock_seed: Option<u64>, scale: bool) -> Timing {
+    let mut free = [
+        ClockParams {
+            offset: 0.008,
+            drift_per_s: 2e-5,
+            wander: 5e-4,
+            wander_period_s: 7.0,
+        },
+        ClockParams {
+            offset: -0.01,
+            drift_per_s: -1e-5,
+            wander: 3e-4,
+            wander_period_s: 11.0,
+        },
+        ClockParams {
+            offset: 0.003,
+            drift_per_s: 0.0,
+            wander: 1e-3,
+            wander_period_s: 5.0,
+        },
+        ClockParams::fixed(0.0),
+    ];
+    let mut rc = -0.07;
+    if let Some(seed) = clock_seed {
+        let mut rng = gyro_array::emu::Rng::new(seed);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * f64::from(rng.uniform());
+        for p in free.iter_mut() {
+            *p = ClockParams {
+                offset: u(-0.01, 0.01),
+                drift_per_s: u(-2e-5, 2e-5),
+                wander: u(0.0, 1e-3),
+                wander_period_s: u(3.0, 15.0),
+            };
+        }
+        // At least 1 % off (else it reads as a PLL).
+        rc = u(0.01, 0.08) * if u(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
+    }
+    let (clkin, rtc_tick) = match c {
+        Clocks::ClkIn(t) => (true, t),
+        Clocks::Free => (false, RtcTick::Microsecond),
+    };
+    Timing {
+        clkin,
+        pll: match c {
+            Clocks::Free => free,
+            Clocks::ClkIn(_) => timed_board::plls(),
+        },
+        vibration,
+        rtc_tick,
+        past_count: gyro_array::emu::PastCount::HandOver,
+        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+        power_up_s: 0.0,
+        scale_error: if scale {
+            [0.01, -0.01, 0.004, -0.006]
+        } else {
+            [0.0; 4]
+        },
+        rc_fallback: match c {
+            Clocks::Free => Some((3, rc)),
+            Clocks::ClkIn(_) => None,
+        },
+    }
+}
+
+/// Fused error at the stated instant, over motion classes and clocks,
+/// through the board's own path (drivers, `TimedIcm`, the schedule), against
+/// the same array as ideal lockstep samplers; and the lag that best aligns
+/// the fused rate with the truth.
+fn fusion_table(seconds: u32, (seed, clock_seed): (u64, Option<u64>)) -> usize {
+    let (odr, filter) = (BOARD_FIFO_ODR, Filter::BOARD_FIFO);
     let delay_us = array_delay_us(odr, filter);
     println!();
     println!(
-        "fusion at the stated instant ({} Hz FIFO, {} µs path delay, output {} µs behind the read), {seconds} s per class",
+        "fusion at the stated instant, the board's path ({} Hz FIFO, {} µs path delay, output {} µs behind the read), {seconds} s per class",
         odr.hz(),
         filter.group_delay_us(odr).round(),
         delay_us
     );
     println!(
         "{:<36} {:<22} {:>22} {:>30} {:>6} {:>6}",
-        "motion", "clocks", "ratio x / y / z", "lag error ± its sd, µs x/y/z", "short", "rep"
+        "motion", "clocks", "ratio x / y / z", "lag error ± its sd, µs x/y/z", "short", "fifo"
     );
     let mut lines = Vec::new();
     let mut vib_lines = Vec::new();
@@ -314,19 +390,13 @@ fn fusion_table(
             ("free", Clocks::Free, None),
             ("restart", Clocks::Free, Some(seconds * 500)),
         ] {
-            let o = timed_array::run(timed_array::Run {
+            let o = stated::run(stated::Run {
                 profile,
-                clocks,
-                odr,
-                filter,
-                delay_us,
+                timing: board_timing(clocks, vibration, clock_seed, scale_errors),
                 ms: seconds * 1000,
                 seed,
                 restart_at_ms: restart,
-                scale_errors,
-                vibration,
                 band_limited: vibration != Vibration::NONE,
-                clock_seed,
             });
             if vibration != Vibration::NONE {
                 // The lockstep sampler has no signal path, so nothing to
@@ -372,8 +442,15 @@ fn fusion_table(
                     "-".to_string()
                 },
                 o.short,
-                o.repeats_or_skips + o.fifo_errors
+                o.fifo_anomalies
             );
+            if restart.is_some() {
+                lines.push(format!(
+                    "{name}, {cname}: chip 1 reset at {} ms, offered again {} ms later",
+                    seconds * 500,
+                    o.restart_out
+                ));
+            }
             if scale_errors {
                 lines.push(format!(
                     "{name}, {cname}: x RMS {:.4} °/s against the lockstep array's {:.4} (the online relative calibration takes the scale errors out of both)",
@@ -388,7 +465,7 @@ fn fusion_table(
     println!(
         "worst ratio to the lockstep array {worst_ratio:.3} (target 1.10), worst lag error {worst_lag:.0} µs (target 50; class-axes whose lag this run cannot measure to ±{LAG_SE_US:.0} µs, left out: {unmeasured}); class-axes over 1.10: {over}"
     );
-    println!("short: output samples with fewer than four chips aligned (after warm-up, outside a restart); rep: samples repeated, skipped or lost");
+    println!("short: output samples with fewer than four chips offered (after warm-up, outside a restart); fifo: FIFO overflows, streams out of step, cut bursts and packets sent again");
     over
 }
 
@@ -551,14 +628,11 @@ struct Args {
     /// set the tables quote.
     #[arg(long)]
     clocks: Option<u64>,
-    /// Only the fusion table, at the board's setting.
-    #[arg(long, conflicts_with_all = ["fusion_2k", "search"])]
-    fusion: bool,
-    /// Only the fusion table, on the 2 kHz setting.
+    /// Only the fusion table and the power-up sweep, at the board's setting.
     #[arg(long, conflicts_with = "search")]
-    fusion_2k: bool,
+    fusion: bool,
     /// Only the power-up phase sweep of the board's own path.
-    #[arg(long, conflicts_with_all = ["fusion", "fusion_2k", "search"])]
+    #[arg(long, conflicts_with_all = ["fusion", "search"])]
     power_up: bool,
     /// Every setting the driver can write that reaches the wire within
     /// this many ms, against the aliasing target.
@@ -574,16 +648,12 @@ fn main() {
         return;
     }
     if args.fusion {
-        fusion_table(args.seconds, seeds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+        fusion_table(args.seconds, seeds);
         power_up_sweep(args.seed);
         return;
     }
     if args.power_up {
         power_up_sweep(args.seed);
-        return;
-    }
-    if args.fusion_2k {
-        fusion_table(args.seconds, seeds, SLOW_2K.odr, SLOW_2K.filter);
         return;
     }
     let settings = [
@@ -653,7 +723,7 @@ fn main() {
         table[1].0 * 1e3
     );
     adxrs453_on_z(budget(&settings[settings.len() - 1], frame));
-    fusion_table(args.seconds, seeds, BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+    fusion_table(args.seconds, seeds);
     power_up_sweep(args.seed);
 }
 
