@@ -318,8 +318,9 @@ pub fn run(
         }
         let now16 = (now_us as u64 as u32).wrapping_mul(16);
         let newest_behind_us = core::array::from_fn(|i| {
-            t[i].newest_instant()
-                .map_or(f64::NAN, |at| f64::from(now16.wrapping_sub(at) as i32) / 16.0)
+            t[i].newest_instant().map_or(f64::NAN, |at| {
+                f64::from(now16.wrapping_sub(at) as i32) / 16.0
+            })
         });
         each(Sample {
             n,

@@ -57,36 +57,19 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use defmt_semihosting as _;
 use heapless::spsc::{Consumer, Producer, Queue};
 
-use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-use gyro_array::algo::mounting::CalRecord;
-use gyro_array::algo::qualify::QualifyError;
 use gyro_array::app as schedule;
 use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
 use gyro_array::board::qemu::exit;
 use gyro_array::board::stack;
-use gyro_array::drivers::adxrs453::Adxrs453;
-use gyro_array::drivers::icm42688::{ClockInput, Config};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::ClockParams;
-use gyro_array::emu::{
-    board_array, board_drivers, mounted_board, with_bus, BoardDrivers, Chip, ChipTiming, CsLine,
-    EmuBus, EmuCapture, EmuDelay, EmuDevice, Fault, PathModel, RateProfile, TempProfile,
-};
+use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
-use gyro_array::pipeline::selftest;
-use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, TimingCounters, BOARD_DELAY_US};
-use gyro_array::pipeline::tracker::{self, NoiseTracker};
-use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
+use gyro_array::pipeline::tracker;
+use gyro_array::pipeline::Pipeline;
 
-const FS_HZ: u32 = 1000;
-/// The board's calibration record, as the procedure wrote it.
-const CALIBRATION: &[u8] = include_bytes!("../../host-tests/vectors/board.gcal");
-/// 60 s of output.
-const SAMPLES: u32 = 60_000;
-/// σ of the link's noise estimates at τ = 1, 8, 64 ms.
-const NOISE_TAU: [usize; 3] = [0, 3, 6];
+use demo::{Tracker, FS_HZ, NOISE_TAU, SAMPLES};
 /// mps2-an386 core clock.
 const CORE_HZ: u32 = 25_000_000;
 /// SysTick's reload: one sample period.
@@ -136,21 +119,11 @@ static BG_JOBS: AtomicU32 = AtomicU32::new(0);
 /// Idle's spins, for the CPU's load.
 static IDLE_SPINS: AtomicU32 = AtomicU32::new(0);
 
-/// E-DAVAR per axis: λ2 = 512 samples, the link's τ alone (1, 8 and 64 ms:
-/// every third octave).
-type Tracker = NoiseTracker<512, 19, 3>;
-
-type Bus = RefCell<EmuBus<'static, 5>>;
-type Dev = EmuDevice<'static, 'static>;
-type Timed = TimedIcm<Dev, EmuCapture<'static, 'static, 5>>;
+type Bus = demo::Bus<'static>;
 
 /// Every chip and the emulated world they live in, as the sample task
 /// owns them after start-up.
-pub struct Chips {
-    timed: [Timed; 4],
-    adx: AtInstant<Adxrs453<Dev>>,
-    bus: &'static Bus,
-}
+pub struct Chips(demo::Chips<'static, 'static>);
 
 // SAFETY: the drivers, the captures and `bus` all reach the one emulated
 // bus (`init`'s 'static local), which nothing else names; they move
@@ -278,64 +251,7 @@ static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 /// are some 18 KB, moved twice on the way into the bus). Called once.
 #[inline(never)]
 fn make_bus(slot: &'static mut Option<Bus>, cs: &'static [CsLine; 5]) -> &'static Bus {
-    let profile = RateProfile {
-        base_dps: [0.5, -0.2, 10.0],
-        sine_dps: [0.0, 0.0, 20.0],
-        sine_hz: 1.0,
-        sine_start_s: 0.0,
-    };
-    // The chips are mounted as a real board's are (rotated, upside down,
-    // misaligned; `emu::mounted_board`), their die warming from 20 to
-    // 35 °C, and the board carries the record the calibration procedure
-    // made for it (`calibrate --out host-tests/vectors/board.gcal`).
-    let mut chips = board_array(profile, 1);
-    let warm_up = TempProfile {
-        start_c: 20.0,
-        ramp_c_per_s: 0.5,
-        ramp_from_s: 5.0,
-        end_c: 35.0,
-    };
-    const PLL: [f64; 4] = [0.006, -0.009, 0.003, -0.004];
-    for (i, (c, m)) in chips.iter_mut().zip(mounted_board(warm_up)).enumerate() {
-        c.set_mount(m);
-        if let (Chip::Icm(c), Some(&offset)) = (c, PLL.get(i)) {
-            c.set_timing(Some(ChipTiming {
-                pll: ClockParams {
-                    offset,
-                    drift_per_s: 1e-5,
-                    wander: 2e-4,
-                    wander_period_s: 3.0 + i as f64,
-                },
-                path: PathModel::Delay,
-                ..ChipTiming::pll(0.0)
-            }));
-        }
-    }
-    slot.insert(RefCell::new(EmuBus::new(chips, cs)))
-}
-
-/// The noise-health self-test, its 40 KB of blocks in a frame of its own,
-/// gone before the application starts. Called once.
-#[inline(never)]
-fn self_test(
-    gyros: &mut [&mut dyn Gyro; 5],
-    pipe: &Pipeline<5>,
-    bus: &'static Bus,
-    dt: f32,
-) -> (bool, [Result<selftest::NoiseHealth, QualifyError>; 5]) {
-    let mut blocks = [[0.0f32; selftest::BLOCK]; 5];
-    let mut results = [Err(QualifyError::TooShort); 5];
-    let ok = selftest::run(
-        gyros,
-        |_| 2, // z: every chip measures it, so each has four peers
-        |i, r| pipe.board_rates(i, r),
-        || {
-            with_bus(bus, |b| b.advance(dt));
-        },
-        &mut blocks,
-        &mut results,
-    );
-    (ok, results)
+    slot.insert(RefCell::new(EmuBus::new(demo::chips(), cs)))
 }
 
 #[rtic::app(device = gyro_array::board::an386, peripherals = false, dispatchers = [SPI2, SPI34])]
@@ -416,76 +332,31 @@ mod app {
 
         let cs: &'static [CsLine; 5] = cx.local.cs;
         let bus = make_bus(cx.local.bus_slot, cs);
-        let dt = 1.0 / FS_HZ as f32;
-        let mut delay = EmuDelay::new(bus, dt);
 
-        let BoardDrivers {
-            icm: [mut g0, mut g1, mut g2, mut g3],
-            adx: mut g4,
-        } = board_drivers(bus, cs);
-
-        let mut pipe: Pipeline<5> = Pipeline::new(
-            PipelineConfig::default(),
-            Method::Adaptive(AdaptiveConfig::default()),
-        )
-        .unwrap_or_else(|_| exit(false));
-        let calibrated =
-            match pipe.set_calibration(CalRecord::decode(CALIBRATION).as_ref().map_err(|e| *e)) {
-                Ok(()) => {
-                    defmt::info!("calibration record in use");
-                    true
-                }
-                Err(e) => {
-                    defmt::error!("calibration record: {}; running uncalibrated", e);
-                    false
-                }
-            };
-        start_array(
-            [&mut g0, &mut g1, &mut g2, &mut g3],
-            &mut g4,
-            &mut delay,
-            Some(20),
-            &mut pipe,
-        );
-
-        let (self_test_ok, results) = {
-            let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
-            self_test(&mut gyros, &pipe, bus, dt)
+        let mut pipe = demo::pipeline().unwrap_or_else(|_| exit(false));
+        let demo::Started {
+            chips,
+            calibration,
+            self_test_ok,
+            fifo_failed,
+        } = demo::start(bus, cs, &mut pipe);
+        let calibrated = match calibration {
+            Ok(()) => {
+                defmt::info!("calibration record in use");
+                true
+            }
+            Err(e) => {
+                defmt::error!("calibration record: {}; running uncalibrated", e);
+                false
+            }
         };
-
-        // Each gyro's measured noise: fusion's priors for an axis left with
-        // two gyros.
-        pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
-
-        // From the self-tests (data registers) to the board's sampling, as
-        // `board-f405` does it: FIFO at 4 kHz on each chip's own clock, each
-        // sample's INT1 captured (QEMU's board has no CLKIN to drive).
-        let cfg = Config::board_fifo(ClockInput::Internal);
-        for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
-            if let Err(e) = g.init(&mut delay, cfg) {
-                defmt::error!("gyro {}: FIFO set-up failed: {}", i, e);
-                pipe.mark_init_failed(i);
+        for i in 0..4 {
+            if fifo_failed & (1 << i) != 0 {
+                defmt::error!("gyro {}: FIFO set-up failed", i);
             }
         }
-        // One start for all (the chips set up first ran while the others were).
-        for g in [&mut g0, &mut g1, &mut g2, &mut g3] {
-            let _ = g.flush_fifo();
-        }
-        let capture = |index: usize| EmuCapture { bus, index };
-        let chips = Chips {
-            timed: [
-                TimedIcm::new(g0, capture(0)),
-                TimedIcm::new(g1, capture(1)),
-                TimedIcm::new(g2, capture(2)),
-                TimedIcm::new(g3, capture(3)),
-            ],
-            adx: AtInstant::new(g4, BOARD_DELAY_US),
-            bus,
-        };
-        let Ok(tracker) = Tracker::init_in(
-            cx.local.tracker_slot,
-            tracker::config(512).with_tau_octaves(3),
-        ) else {
+        let chips = Chips(chips);
+        let Ok(tracker) = Tracker::init_in(cx.local.tracker_slot, demo::tracker_config()) else {
             exit(false)
         };
         tracker.set_view(NOISE_TAU);
@@ -586,38 +457,32 @@ mod app {
         }
         let tick = TICK_N.fetch_add(1, Ordering::Relaxed).wrapping_add(1);
         r.n += 1;
-        let bus = l.chips.bus;
+        let bus = l.chips.0.bus;
         let step0 = since_tick();
-        with_bus(bus, |b| {
-            match n {
-                1500 => {
-                    b.chips[2].set_fault(Fault::Stuck);
-                    r.stuck_at = Some(n);
-                    defmt::warn!("t={}ms: injecting: gyro 2 stuck", n);
-                }
-                2000 => {
-                    b.chips[4].set_fault(Fault::BitErrors { prob: 0.05 });
-                    defmt::warn!("t={}ms: injecting: gyro 4 bit errors", n);
-                }
-                2200 => b.chips[4].set_fault(Fault::None),
-                3000 | 4000 => {
-                    if let Chip::Icm(c) = &mut b.chips[3] {
-                        c.fail_pll(n == 3000);
-                    }
-                    defmt::warn!(
-                        "t={}ms: gyro 3's clock {}",
-                        n,
-                        if n == 3000 {
-                            "falls back to its RC oscillator"
-                        } else {
-                            "back on its PLL"
-                        }
-                    );
-                }
-                _ => {}
-            }
+        let event = with_bus(bus, |b| {
+            let e = demo::inject(n, b);
             b.advance(1.0 / FS_HZ as f32);
-        });
+            e
+        })
+        .flatten();
+        match event {
+            Some(demo::Event::Stuck(i)) => {
+                r.stuck_at = Some(n);
+                defmt::warn!("t={}ms: injecting: gyro {} stuck", n, i);
+            }
+            Some(demo::Event::BitErrors(i)) => {
+                defmt::warn!("t={}ms: injecting: gyro {} bit errors", n, i)
+            }
+            Some(demo::Event::ClockToRc(i)) => defmt::warn!(
+                "t={}ms: gyro {}'s clock falls back to its RC oscillator",
+                n,
+                i
+            ),
+            Some(demo::Event::ClockToPll(i)) => {
+                defmt::warn!("t={}ms: gyro {}'s clock back on its PLL", n, i)
+            }
+            Some(demo::Event::BitErrorsEnd(_)) | None => {}
+        }
         let step = since_tick().saturating_sub(step0);
         let ops0 = with_bus(bus, |b| b.meter.ticks).unwrap_or(0);
         // One clock: the captures' µs (the bus's here, TIM5's on the
@@ -625,11 +490,11 @@ mod app {
         let now_us = with_bus(bus, |b| b.timer_us()).unwrap_or(0);
         let (t_us, missed) = l.clock.tick(now_us);
         let at = timed::array_instant(now_us, BOARD_DELAY_US);
-        for t in l.chips.timed.iter_mut() {
+        for t in l.chips.0.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
         }
         let clocks = *l.clocks;
-        let Chips { timed, adx, .. } = l.chips;
+        let demo::Chips { timed, adx, .. } = &mut l.chips.0;
         let [c0, c1, c2, c3] = timed;
         let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, adx];
         let mut queued = 0;
@@ -673,7 +538,7 @@ mod app {
         }
         // The chips' clocks as this sample left them, for the next status
         // frame (read after the frame is out, not before the read).
-        for (slot, t) in l.clocks.iter_mut().zip(l.chips.timed.iter()) {
+        for (slot, t) in l.clocks.iter_mut().zip(l.chips.0.timed.iter()) {
             *slot = timed_clock(t);
         }
         let probe = schedule::Job::from(&s.out);
@@ -709,7 +574,7 @@ mod app {
         QUEUED_EMU.store(emu, Ordering::Relaxed);
         let verdict = last.then(|| {
             let mut timing = [(TimingCounters::default(), 0.0); 4];
-            for (slot, t) in timing.iter_mut().zip(l.chips.timed.iter()) {
+            for (slot, t) in timing.iter_mut().zip(l.chips.0.timed.iter()) {
                 *slot = (t.counters, t.clock().error_ppm());
             }
             Verdict {

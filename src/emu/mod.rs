@@ -9,6 +9,7 @@
 
 pub mod adxrs453;
 pub mod board;
+pub mod demo;
 pub mod icm42688;
 pub mod mount;
 pub mod noise;

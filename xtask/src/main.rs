@@ -204,6 +204,35 @@ fn defmt_print(
 }
 
 /// The host tool (`gyro-tool`), built; its path.
+/// The host's run of the demo (`demo-replay`): its "N sample frames,
+/// fused-rate CRC-32 0x…".
+fn replay_digest(stress: bool) -> Option<String> {
+    let mut c = Command::new("cargo");
+    c.args([
+        "run",
+        "--quiet",
+        "--profile",
+        "host",
+        "-p",
+        "host-tests",
+        "--bin",
+        "demo-replay",
+    ]);
+    if stress {
+        c.args(["--", "--stress"]);
+    }
+    let out = c.output().ok().filter(|o| o.status.success());
+    let line = out.and_then(|o| {
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("link: ").map(str::to_string))
+    });
+    if line.is_none() {
+        eprintln!("xtask: demo-replay did not run or log its digest");
+    }
+    line
+}
+
 fn build_tool() -> PathBuf {
     must(
         run(Command::new("cargo").args(["build", "--profile", "host", "-p", "gyro-tool"])),
@@ -216,7 +245,8 @@ fn build_tool() -> PathBuf {
 /// records it (sending two commands: a status request, accepted, and a
 /// divider of 0, rejected), then `gyro check` compares the recording with
 /// the count and CRC-32 of fused rates the firmware logged, and
-/// `gyro analyse` analyses it.
+/// `gyro analyse` analyses it; the host's run of the same world through
+/// the same schedule (`demo-replay`) must log the same count and CRC-32.
 fn demo_end_to_end() -> bool {
     demo_run("qemu").is_some()
 }
@@ -267,6 +297,13 @@ fn demo_run(features: &str) -> Option<String> {
         eprintln!("xtask: the demo did not log its sample count and CRC-32");
         return None;
     };
+    let replay = replay_digest(features.contains("demo-stress"))?;
+    let target = format!("{n} sample frames, fused-rate CRC-32 {crc}");
+    if replay != target {
+        eprintln!("xtask: the host's replay logged \"{replay}\", the demo \"{target}\"");
+        return None;
+    }
+    println!("xtask: host replay and QEMU demo agree bit for bit: {target}");
     let ok = run(Command::new(&gyro).arg("check").arg(&rec).args([
         "--samples",
         &n,
