@@ -386,6 +386,175 @@ mod tests {
         assert!(with_noise > 10, "{with_noise}");
     }
 
+    /// The controller's side of a 6 Mbaud UART: at most `per_ms` bytes a
+    /// sample period each way.
+    struct Wire {
+        out: Sink,
+        room: usize,
+    }
+
+    impl embedded_hal_nb::serial::ErrorType for Wire {
+        type Error = core::convert::Infallible;
+    }
+
+    impl embedded_hal_nb::serial::Write<u8> for Wire {
+        fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            if self.room == 0 {
+                return Err(embedded_hal_nb::nb::Error::WouldBlock);
+            }
+            self.room -= 1;
+            self.out.0.push(b);
+            Ok(())
+        }
+        fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    /// Bytes from the controller, as the receive interrupt queues them.
+    struct Rx(std::collections::VecDeque<u8>);
+
+    impl embedded_hal_nb::serial::ErrorType for Rx {
+        type Error = core::convert::Infallible;
+    }
+
+    impl embedded_hal_nb::serial::Read<u8> for Rx {
+        fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
+            self.0
+                .pop_front()
+                .ok_or(embedded_hal_nb::nb::Error::WouldBlock)
+        }
+    }
+
+    /// A controller flooding the link at the UART's full rate (600 bytes a
+    /// millisecond at 6 Mbaud) with status requests back to back, with
+    /// noise, with runs of frame delimiters, or a mix, while the board
+    /// sends at the same rate: every sample frame still leaves, in order,
+    /// none dropped, and the transmit queue's backlog stays bounded (the
+    /// receive path takes a bounded number of bytes a call, and status
+    /// requests coalesce into one status frame a sample).
+    #[test]
+    fn a_flooded_link_loses_no_sample_frame() {
+        use crate::algo::fusion::{AdaptiveConfig, Method};
+        use crate::link::msg::{Command, Op};
+        use crate::link::wire::encode;
+        use crate::pipeline::PipelineConfig;
+        const PER_MS: usize = 600;
+        let request = {
+            let mut buf = [0u8; MAX_FRAME];
+            let n = encode(
+                0,
+                &Command {
+                    id: 9,
+                    op: Op::RequestStatus,
+                },
+                &mut buf,
+            )
+            .unwrap();
+            buf[..n].to_vec()
+        };
+        for flood in 0..4u8 {
+            let mut pipe = Pipeline::<4>::new(
+                PipelineConfig::default(),
+                Method::Adaptive(AdaptiveConfig::default()),
+            )
+            .unwrap();
+            let mut port = Port::<2048>::new(Settings::default());
+            let mut noise = NoiseSnapshot::default();
+            let view = StatusView {
+                taus: crate::pipeline::tracker::LINK_TAUS,
+                sample_us: 1000,
+            };
+            let mut chips: [Still; 4] = core::array::from_fn(|i| Still(Rng::new(i as u64 + 1)));
+            let mut rng = Rng::new(77 + u64::from(flood));
+            let mut rx = Rx(Default::default());
+            let mut wire = Wire {
+                out: Sink(std::vec::Vec::new()),
+                room: 0,
+            };
+            let mut backlog = 0;
+            for n in 0..2000u32 {
+                // This millisecond's bytes from the controller.
+                let mut k = 0;
+                while k < PER_MS {
+                    let kind = if flood == 3 {
+                        rng.uniform() * 3.0
+                    } else {
+                        f32::from(flood)
+                    };
+                    if kind < 1.0 {
+                        rx.0.extend(&request);
+                        k += request.len();
+                    } else if kind < 2.0 {
+                        rx.0.push_back((rng.uniform() * 256.0) as u8);
+                        k += 1;
+                    } else {
+                        rx.0.push_back(0);
+                        k += 1;
+                    }
+                }
+                let [a, b, c, d] = &mut chips;
+                let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
+                let s = sample(
+                    &mut Exclusive(&mut pipe),
+                    &mut Exclusive(&mut port),
+                    &mut Exclusive(&mut noise),
+                    &mut gyros,
+                    (u64::from(n) * 1000, 0),
+                    &view,
+                    || {},
+                    || StatusFacts {
+                        clocks: [ChipTime::default(); 4],
+                        stack_peak: 0,
+                    },
+                );
+                assert!(s.sent, "flood {flood}: sample {n} not queued");
+                receive(
+                    &mut rx,
+                    &mut Exclusive(&mut pipe),
+                    &mut Exclusive(&mut port),
+                );
+                // The receive queue is the interrupt's, bounded: what it
+                // cannot hold is lost (and fails its CRC as a command).
+                while rx.0.len() > 64 {
+                    rx.0.pop_front();
+                }
+                wire.room = PER_MS;
+                port.drain(&mut wire);
+                backlog = backlog.max(port.queued());
+            }
+            assert_eq!(port.counters().dropped, 0, "flood {flood}");
+            let mut dec = Decoder::<MAX_FRAME>::new();
+            let mut last = None;
+            let (mut samples, mut statuses, mut acks) = (0, 0, 0);
+            for &b in &wire.out.0 {
+                match dec.feed::<Frame>(b).map(|f| f.map(|f| f.body)) {
+                    Some(Ok(Frame::Sample(s))) => {
+                        if let Some(q) = last {
+                            assert_eq!(s.seq, q + 1, "flood {flood}");
+                        }
+                        last = Some(s.seq);
+                        samples += 1;
+                    }
+                    Some(Ok(Frame::Status(_))) => statuses += 1,
+                    Some(Ok(Frame::Ack(_))) => acks += 1,
+                    _ => {}
+                }
+            }
+            std::println!(
+                "flood {flood}: {samples} sample, {statuses} status, {acks} ack frames; backlog {backlog} B"
+            );
+            // The flood was answered: requests coalesced into a status
+            // frame a sample, every command acknowledged.
+            if flood == 0 {
+                assert!(statuses >= 1990 && acks >= 10_000, "{statuses} {acks}");
+            }
+            // The last sample's frame may still be on its way.
+            assert!(samples >= 1999, "flood {flood}: {samples} sample frames");
+            assert!(backlog < 1200, "flood {flood}: backlog {backlog} B");
+        }
+    }
+
     #[test]
     fn status_frames_state_the_taus_in_samples() {
         let v = StatusView {
