@@ -1,5 +1,7 @@
-//! Reading rate logs: CSV or whitespace-separated text with a header line,
-//! one column per series (axes, gyros), optionally a time column; units
+//! Reading rate logs: comma-, semicolon-, tab- or blank-separated text,
+//! with a header line or without one (a Stable32 `.dat` column, a plain
+//! export: the columns are then named `c1`, `c2`, …), one column per
+//! series (axes, gyros), optionally a time column; units
 //! °/s, rad/s, °/h or raw LSB with a scale. Every problem is a typed error
 //! with the file and line; gaps and non-monotonic time are found and
 //! reported, never skipped silently.
@@ -141,7 +143,9 @@ pub fn read_with(
             .map(std::io::BufReader::new)
             .map_err(|e| TableError::Io(path.to_path_buf(), e))
     };
-    // Comma-separated if the header has a comma, else whitespace.
+    // The separator is the first of comma, semicolon and tab that the first
+    // line holds, else blanks. With semicolons a decimal comma is read as a
+    // point (the European spreadsheet's export).
     let head_line = {
         use std::io::BufRead;
         let mut found = None;
@@ -155,14 +159,20 @@ pub fn read_with(
         }
         found.ok_or_else(|| TableError::NoHeader(p()))?
     };
-    let comma = head_line.contains(',');
+    let delimiter = [b',', b';', b'\t']
+        .into_iter()
+        .find(|&d| head_line.as_bytes().contains(&d))
+        .unwrap_or(b' ');
+    // Blank- and tab-separated text may repeat its separator for alignment.
+    let comma = matches!(delimiter, b',' | b';');
+    let decimal_comma = delimiter == b';';
     // One reader over the whole file, streamed (one reader per line cost
     // 90 % of the time of a 360 000-line log, and holding a 24 h log's text
     // 2 GB): comment lines skipped, fields trimmed, and in whitespace mode
     // the empty fields between repeated blanks dropped.
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
-        .delimiter(if comma { b',' } else { b' ' })
+        .delimiter(delimiter)
         .comment(Some(b'#'))
         .flexible(true)
         .from_reader(open()?);
@@ -179,13 +189,31 @@ pub fn read_with(
         let ln = rec.position().map_or(0, |q| q.line() as usize);
         let f: Vec<String> = rec
             .iter()
-            .map(|f| f.trim().to_string())
+            .map(|f| {
+                let f = f.trim();
+                if decimal_comma {
+                    f.replace(',', ".")
+                } else {
+                    f.to_string()
+                }
+            })
             .filter(|f| comma || !f.is_empty())
             .collect();
         // A line of blanks (or of empty fields only) is no record.
         (!f.iter().all(String::is_empty)).then_some(Ok((ln, f)))
     });
-    let (_, header) = lines.next().ok_or_else(|| TableError::NoHeader(p()))??;
+    let (first_ln, first) = lines.next().ok_or_else(|| TableError::NoHeader(p()))??;
+    // A first line of numbers is data: the file has no header.
+    let headerless = first.iter().all(|f| f.parse::<f64>().is_ok());
+    let header: Vec<String> = if headerless {
+        (1..=first.len()).map(|i| format!("c{i}")).collect()
+    } else {
+        first.clone()
+    };
+    let lines = headerless
+        .then_some(Ok((first_ln, first)))
+        .into_iter()
+        .chain(lines);
 
     let find = |c: &str| {
         header
@@ -261,6 +289,33 @@ mod tests {
         let p = std::env::temp_dir().join(format!("gyro-table-{}-{name}", std::process::id()));
         std::fs::write(&p, text).unwrap();
         p
+    }
+
+    #[test]
+    fn semicolons_tabs_decimal_commas_and_files_without_a_header() {
+        for (name, text) in [
+            ("tab.tsv", "t\tz\n0\t1.5\n0.01\t2\n0.02\t-1\n"),
+            ("semi.csv", "t;z\n0;1,5\n0,01;2\n0,02;-1\n"),
+            ("tabs.txt", "t\t\tz\n0\t\t1.5\n0.01\t2\n0.02\t-1\n"),
+        ] {
+            let s = read(&write(name, text), &[], Some("t"), None, Unit::Dps, None).unwrap();
+            assert_eq!(s.names, ["z"], "{name}");
+            assert_eq!(s.rates[0], [1.5, 2.0, -1.0], "{name}");
+            assert!((s.tau0 - 0.01).abs() < 1e-12, "{name}");
+        }
+        // A Stable32-style column: every line is data, the first included.
+        let col = write("col.dat", "1.5\n2\n-1\n0.25\n");
+        let s = read(&col, &[], None, Some(1.0), Unit::Dps, None).unwrap();
+        assert_eq!(s.names, ["c1"]);
+        assert_eq!(s.rates[0], [1.5, 2.0, -1.0, 0.25]);
+        // Two columns without a header, the first a time.
+        let two = write("two.txt", "0 1\n0.5 2\n1.0 3\n");
+        let s = read(&two, &[], Some("c1"), None, Unit::Dps, None).unwrap();
+        assert_eq!(
+            (s.names.clone(), s.rates[0].clone()),
+            (vec!["c2".to_string()], vec![1.0, 2.0, 3.0])
+        );
+        assert!((s.tau0 - 0.5).abs() < 1e-12);
     }
 
     #[test]
