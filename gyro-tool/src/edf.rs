@@ -235,6 +235,8 @@ pub fn of(kind: Kind, alpha: i32, m: usize, n: usize) -> Option<f64> {
             _ => simple(n, m, alpha),
         }
         .filter(|e| *e > 0.0),
+        // No EDF model here yet: these points carry no interval.
+        Kind::Mtotdev | Kind::Ttotdev | Kind::Htotdev | Kind::Mtie | Kind::Tierms => None,
     }
 }
 

@@ -20,6 +20,22 @@ pub enum Kind {
     Ohdev,
     /// Total (reflected extension of the phase).
     Totdev,
+    /// Modified total: MDEV over each 3m-point stretch of the phase with
+    /// its linear trend taken out, extended by even reflection to 9m
+    /// (SP 1065 eq. 27, Howe 1999).
+    Mtotdev,
+    /// Time total: τ/√3 · MTOTDEV (in the phase's unit).
+    Ttotdev,
+    /// Hadamard total: the same extension on the rate, Hadamard
+    /// differences (SP 1065 eq. 29); OHDEV at m = 1.
+    Htotdev,
+    /// Maximum time interval error: the largest peak-to-peak excursion of
+    /// the phase over any window of m + 1 points (in the phase's unit; for
+    /// a gyro, the angle).
+    Mtie,
+    /// Time interval error, RMS: √⟨(x[i + m] − x[i])²⟩ (in the phase's
+    /// unit).
+    Tierms,
 }
 
 impl Kind {
@@ -39,6 +55,11 @@ impl Kind {
             Kind::Hdev => "hdev",
             Kind::Ohdev => "ohdev",
             Kind::Totdev => "totdev",
+            Kind::Mtotdev => "mtotdev",
+            Kind::Ttotdev => "ttotdev",
+            Kind::Htotdev => "htotdev",
+            Kind::Mtie => "mtie",
+            Kind::Tierms => "tierms",
         }
     }
 
@@ -48,6 +69,11 @@ impl Kind {
         match self {
             Kind::Adev | Kind::Oadev | Kind::Totdev => n.saturating_sub(1) / 2,
             Kind::Mdev | Kind::Tdev | Kind::Hdev | Kind::Ohdev => n.saturating_sub(1) / 3,
+            // One 3m-point stretch of the phase (of the rate for HTOTDEV).
+            Kind::Mtotdev | Kind::Ttotdev => n / 3,
+            Kind::Htotdev => n.saturating_sub(1) / 3,
+            // At least two windows.
+            Kind::Mtie | Kind::Tierms => n.saturating_sub(2),
         }
     }
 }

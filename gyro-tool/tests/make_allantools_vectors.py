@@ -9,7 +9,10 @@ gyro-tool's `dev` module on data other than Stable32's (`dev.rs` test
 Writes `allantools_phase.csv` (4 000 phase points: white PM, white FM and
 random-walk FM, seed 2024) and `allantools_devs.csv` (kind, m, dev, n):
 ADEV, OADEV, MDEV, TDEV, HDEV, OHDEV and TOTDEV at every factor 1..40 and
-then octave factors, with tau0 = 1 s.
+then octave factors, with tau0 = 1 s; and `allantools_family.csv` (the
+same columns): MTOTDEV, TTOTDEV, HTOTDEV, MTIE and TIERMS at factors 1..12
+and then octave factors (allantools' total estimators are O(N·m) Python
+loops: some minutes).
 """
 import sys
 import numpy as np
@@ -25,6 +28,16 @@ ms = sorted(set(list(range(1, 41)) + [2**k for k in range(6, 12)]))
 funcs = {"adev": at.adev, "oadev": at.oadev, "mdev": at.mdev, "tdev": at.tdev,
          "hdev": at.hdev, "ohdev": at.ohdev, "totdev": at.totdev}
 with open(f"{out}/allantools_devs.csv", "w") as f:
+    f.write("kind,m,dev,n\n")
+    for name, fn in funcs.items():
+        taus, devs, errs, ns = fn(x, rate=1.0, data_type="phase", taus=np.array(ms, dtype=float))
+        for t, d, k in zip(taus, devs, ns):
+            f.write(f"{name},{int(round(t))},{float(d)!r},{int(k)}\n")
+
+ms = sorted(set(list(range(1, 13)) + [2**k for k in range(4, 11)]))
+funcs = {"mtotdev": at.mtotdev, "ttotdev": at.ttotdev, "htotdev": at.htotdev,
+         "mtie": at.mtie, "tierms": at.tierms}
+with open(f"{out}/allantools_family.csv", "w") as f:
     f.write("kind,m,dev,n\n")
     for name, fn in funcs.items():
         taus, devs, errs, ns = fn(x, rate=1.0, data_type="phase", taus=np.array(ms, dtype=float))

@@ -53,6 +53,11 @@ __all__ = [
     "hdev",
     "ohdev",
     "totdev",
+    "mtotdev",
+    "ttotdev",
+    "htotdev",
+    "mtie",
+    "tierms",
     "deviation",
     "noise_fit",
     "kalibr_yaml",
@@ -125,6 +130,11 @@ tdev = _wrap("tdev", "Time deviation, tau / sqrt(3) * MDEV, in the phase's unit"
 hdev = _wrap("hdev", "Hadamard deviation, non-overlapping")
 ohdev = _wrap("ohdev", "Overlapping Hadamard deviation")
 totdev = _wrap("totdev", "Total deviation (phase extended by reflection, SP 1065 eq. 25)")
+mtotdev = _wrap("mtotdev", "Modified total deviation (SP 1065 eq. 27)")
+ttotdev = _wrap("ttotdev", "Time total deviation, tau / sqrt(3) * MTOTDEV, in the phase's unit")
+htotdev = _wrap("htotdev", "Hadamard total deviation (SP 1065 eq. 29; OHDEV at m = 1)")
+mtie = _wrap("mtie", "Maximum time interval error over windows of m + 1 points, in the phase's unit")
+tierms = _wrap("tierms", "Time interval error RMS, in the phase's unit (error 0, as allantools)")
 
 
 def deviation(data, kind="oadev", rate=1.0, data_type="phase", taus=None, confidence=0.6826894921370859):

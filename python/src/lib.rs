@@ -32,7 +32,7 @@ fn value_error(e: impl std::fmt::Display) -> PyErr {
 fn kind_of(name: &str) -> PyResult<Kind> {
     Kind::from_name(name).ok_or_else(|| {
         value_error(format!(
-            "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev or totdev"
+            "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev, totdev, mtotdev, ttotdev, htotdev, mtie or tierms"
         ))
     })
 }
@@ -214,7 +214,12 @@ fn deviation_arrays<'py>(
         for p in points.into_iter().flatten().filter(|p| p.terms > 1) {
             t.push(p.m as f64 / rate);
             d.push(p.dev);
-            e.push(p.dev / (p.terms as f64).sqrt());
+            // allantools states no error for TIE rms (0).
+            e.push(if kind == Kind::Tierms {
+                0.0
+            } else {
+                p.dev / (p.terms as f64).sqrt()
+            });
             n.push(p.terms as f64);
         }
     }
@@ -249,6 +254,11 @@ allantools_fn!(tdev, Kind::Tdev);
 allantools_fn!(hdev, Kind::Hdev);
 allantools_fn!(ohdev, Kind::Ohdev);
 allantools_fn!(totdev, Kind::Totdev);
+allantools_fn!(mtotdev, Kind::Mtotdev);
+allantools_fn!(ttotdev, Kind::Ttotdev);
+allantools_fn!(htotdev, Kind::Htotdev);
+allantools_fn!(mtie, Kind::Mtie);
+allantools_fn!(tierms, Kind::Tierms);
 
 /// What allantools lacks, per τ: the deviation with its Greenhall EDF,
 /// its confidence interval at `confidence` (exact χ²), and the lag-1
@@ -731,6 +741,11 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(hdev, m)?)?;
     m.add_function(wrap_pyfunction!(ohdev, m)?)?;
     m.add_function(wrap_pyfunction!(totdev, m)?)?;
+    m.add_function(wrap_pyfunction!(mtotdev, m)?)?;
+    m.add_function(wrap_pyfunction!(ttotdev, m)?)?;
+    m.add_function(wrap_pyfunction!(htotdev, m)?)?;
+    m.add_function(wrap_pyfunction!(mtie, m)?)?;
+    m.add_function(wrap_pyfunction!(tierms, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;

@@ -43,6 +43,25 @@ def test_equals_allantools(shape, kind, data_type):
         np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
 
 
+FAMILY = ["mtotdev", "ttotdev", "htotdev", "mtie", "tierms"]
+
+
+@pytest.mark.parametrize("shape", ["white", "random walk"])
+@pytest.mark.parametrize("kind", FAMILY)
+@pytest.mark.parametrize("data_type", ["freq", "phase"])
+def test_the_total_family_and_tie_equal_allantools(shape, kind, data_type):
+    # allantools' total estimators are Python loops: a short record.
+    y = noise(shape, 400, seed=len(shape) + FAMILY.index(kind))
+    for taus in [None, "octave", [0.05, 0.1, 0.35, 1.0, 2.5, 6.0]]:
+        want = getattr(allantools, kind)(y, rate=20.0, data_type=data_type, taus=taus)
+        got = getattr(ga, kind)(y, rate=20.0, data_type=data_type, taus=taus)
+        assert len(got[0]) == len(want[0]) > 0, (taus, len(got[0]), len(want[0]))
+        np.testing.assert_array_equal(got[3], want[3])
+        np.testing.assert_allclose(got[0], want[0], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(got[1], want[1], rtol=1e-9, atol=0)
+        np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
+
+
 def table(name):
     """(AF, #, sigma) rows of a Stable32 table."""
     rows = []
