@@ -63,6 +63,12 @@ impl Kind {
         }
     }
 
+    /// In the phase's unit (for a gyro, an angle), not the rate's: the
+    /// time deviations and the time interval errors.
+    pub fn in_phase_unit(self) -> bool {
+        matches!(self, Kind::Tdev | Kind::Ttotdev | Kind::Mtie | Kind::Tierms)
+    }
+
     /// Largest averaging factor with at least one term for `n` phase
     /// points.
     pub fn max_factor(self, n: usize) -> usize {

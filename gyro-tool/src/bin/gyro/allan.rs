@@ -200,8 +200,9 @@ pub fn run(a: Args) -> Res<bool> {
             curves.push(CurveOut {
                 column: name,
                 deviation: k,
-                // TDEV is in the phase's unit (°); the others in °/s.
-                unit: if k == dev::Kind::Tdev { "deg" } else { "deg/s" },
+                // TDEV, TTOTDEV, MTIE and TIE rms are in the phase's unit
+                // (°); the others in °/s.
+                unit: if k.in_phase_unit() { "deg" } else { "deg/s" },
                 tau0_s: s.tau0,
                 samples: rate.len(),
                 points,
@@ -247,9 +248,13 @@ pub fn run(a: Args) -> Res<bool> {
         let cs: Vec<plot::Curve> = curves
             .iter()
             .map(|c| plot::Curve {
-                // TDEV is a time (angle) deviation: its unit is on its label.
-                label: if c.deviation == dev::Kind::Tdev {
-                    format!("{} TDEV (deg, not deg/s)", c.column)
+                // A time (angle) deviation: its unit is on its label.
+                label: if c.deviation.in_phase_unit() {
+                    format!(
+                        "{} {} (deg, not deg/s)",
+                        c.column,
+                        c.deviation.name().to_uppercase()
+                    )
                 } else {
                     format!("{} {}", c.column, c.deviation.name().to_uppercase())
                 },

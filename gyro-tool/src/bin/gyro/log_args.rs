@@ -7,7 +7,7 @@ use gyro_tool::{dev, table, Res};
 /// A rate log and how to read it (shared by `davar` and `replay`).
 #[derive(clap::Args)]
 pub struct LogArgs {
-    /// The log: CSV or whitespace text with a header line.
+    /// The log: comma-, semicolon-, tab- or blank-separated text, with a header line or without one (columns c1, c2, …).
     pub file: PathBuf,
     /// The time column, s: τ0 is its median step, and gaps (steps over
     /// 1.5 τ0) and non-monotonic times are reported.

@@ -88,8 +88,9 @@ enum Cmd {
         #[arg(long)]
         svg: Option<PathBuf>,
     },
-    /// Allan-family deviations of a rate log: CSV or whitespace text with
-    /// a header line, one column per series.
+    /// Allan-family deviations of a rate log: comma-, semicolon-, tab- or
+    /// blank-separated text, with a header line or without one, one column
+    /// per series.
     Allan(allan::Args),
     /// Write a rate log of an emulated chip at rest (`emu::noise`), one
     /// axis: the analysis tools' test input, of any length.
