@@ -16,6 +16,7 @@ pub mod source;
 pub mod summary;
 pub mod surface;
 pub mod table;
+pub mod ulog;
 
 /// `v` to 7 significant digits, then as short as it prints (a τ0 taken
 /// from a time column is 0.00999999999999 rather than 0.01).

@@ -137,6 +137,17 @@ pub fn read_with(
             _ => return Err(TableError::Scale),
         },
     };
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))
+    {
+        // A PX4 flight log: its own stamps and units (rad/s, read as °/s).
+        let mut s = crate::ulog::read(path, columns)?;
+        if let Some(t) = tau0 {
+            s.tau0 = t;
+        }
+        return Ok(s);
+    }
     let p = || path.to_path_buf();
     let open = || {
         std::fs::File::open(path)

@@ -7,11 +7,15 @@ use gyro_tool::{dev, table, Res};
 /// A rate log and how to read it (shared by `davar` and `replay`).
 #[derive(clap::Args)]
 pub struct LogArgs {
-    /// The log: comma-, semicolon-, tab- or blank-separated text, with a header line or without one (columns c1, c2, …).
+    /// The log: comma-, semicolon-, tab- or blank-separated text, with a
+    /// header line or without one (columns c1, c2, …); or a PX4 ULog
+    /// (`.ulg`: its gyro topics, columns `sensor_gyro.0.x` …, its own
+    /// stamps).
     pub file: PathBuf,
     /// The time column, s: τ0 is its median step, and gaps (steps over
-    /// 1.5 τ0) and non-monotonic times are reported.
-    #[arg(long, required_unless_present = "tau0", conflicts_with = "tau0")]
+    /// 1.5 τ0) and non-monotonic times are reported (a text log needs this
+    /// or `--tau0`).
+    #[arg(long, conflicts_with = "tau0")]
     pub time: Option<String>,
     /// Sample period, s (finite, in (0, 1e6]).
     #[arg(long, value_parser = dev::tau0_arg)]
