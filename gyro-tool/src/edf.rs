@@ -206,7 +206,10 @@ fn binomial(n: u32, k: u32) -> f64 {
 /// NIST SP 1065's simple EDF formulas (Table 5, the library's
 /// `algo::allan::edf`, equal to allantools' `edf_simple`), for TOTDEV
 /// outside white, flicker and random-walk FM.
-fn simple(n: usize, m: usize, alpha: i32) -> Option<f64> {
+/// The simple EDF formulas for OADEV (SP 1065 Table 5, after Stein
+/// 1985): `n` phase points, factor `m`, noise α (2 white PM, 1 flicker PM,
+/// 0 white FM, −1 flicker FM, −2 random-walk FM); None for another α.
+pub fn simple(n: usize, m: usize, alpha: i32) -> Option<f64> {
     use gyro_array::algo::allan::{edf, NoiseType};
     let noise = match alpha {
         2 => NoiseType::WhitePm,

@@ -103,6 +103,27 @@ pub struct Series {
     /// Gaps found in the time column: (line, step in s) where a step
     /// exceeds 1.5 τ0.
     pub gaps: Vec<(usize, f64)>,
+    /// The same gaps by sample: (index of the first sample after the gap,
+    /// samples missing: the step in periods, rounded, less one).
+    pub gap_samples: Vec<(usize, usize)>,
+}
+
+impl Series {
+    /// Column `c`'s rates with each gap's missing samples put back as NaN
+    /// (the time grid the log should have had).
+    pub fn with_gaps(&self, c: usize) -> Vec<f64> {
+        let r = &self.rates[c];
+        let missing: usize = self.gap_samples.iter().map(|g| g.1).sum();
+        let mut out = Vec::with_capacity(r.len() + missing);
+        let mut from = 0;
+        for &(at, k) in &self.gap_samples {
+            out.extend_from_slice(&r[from..at]);
+            out.extend(std::iter::repeat_n(f64::NAN, k));
+            from = at;
+        }
+        out.extend_from_slice(&r[from..]);
+        out
+    }
 }
 
 /// Read `path`: the named `columns` (all but the time column when empty),
@@ -269,18 +290,16 @@ pub fn read_with(
     if n < 3 {
         return Err(TableError::TooShort(p(), n));
     }
-    let (tau0, gaps) = match (tau0, times.len()) {
-        (Some(t), _) => (t, Vec::new()),
+    let (tau0, gaps, gap_samples) = match (tau0, times.len()) {
+        (Some(t), _) => (t, Vec::new(), Vec::new()),
         (None, k) if k >= 2 => {
-            let mut steps: Vec<f64> = times.windows(2).map(|w| w[1].1 - w[0].1).collect();
-            steps.sort_by(f64::total_cmp);
-            let med = steps[steps.len() / 2];
-            let gaps = times
-                .windows(2)
-                .filter(|w| w[1].1 - w[0].1 > 1.5 * med)
-                .map(|w| (w[1].0, w[1].1 - w[0].1))
+            let steps: Vec<f64> = times.windows(2).map(|w| w[1].1 - w[0].1).collect();
+            let (med, (gaps, gap_samples)) = gaps_of(&steps);
+            let gaps = gaps
+                .into_iter()
+                .map(|(k, step)| (times[k].0, step))
                 .collect();
-            (med, gaps)
+            (med, gaps, gap_samples)
         }
         _ => return Err(TableError::NoTau0),
     };
@@ -289,7 +308,28 @@ pub fn read_with(
         rates,
         tau0,
         gaps,
+        gap_samples,
     })
+}
+
+/// Gaps as (index of the sample after each, step in s) and as (that
+/// index, samples missing).
+type Gaps = (Vec<(usize, f64)>, Vec<(usize, usize)>);
+
+/// The sample period of time steps `steps` (s; their median) and its gaps:
+/// the steps over 1.5 periods.
+pub(crate) fn gaps_of(steps: &[f64]) -> (f64, Gaps) {
+    let mut sorted = steps.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let med = sorted[sorted.len() / 2];
+    let (mut gaps, mut samples) = (Vec::new(), Vec::new());
+    for (k, &d) in steps.iter().enumerate() {
+        if d > 1.5 * med {
+            gaps.push((k + 1, d));
+            samples.push((k + 1, ((d / med).round() as usize).saturating_sub(1).max(1)));
+        }
+    }
+    (med, (gaps, samples))
 }
 
 #[cfg(test)]

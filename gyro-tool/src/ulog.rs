@@ -154,20 +154,14 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             t[k + 1] as f64 * 1e-6,
         ));
     }
-    let mut steps: Vec<u64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_unstable();
-    let tau0 = steps[steps.len() / 2] as f64 * 1e-6;
-    let gaps = t
-        .windows(2)
-        .enumerate()
-        .filter(|(_, w)| (w[1] - w[0]) as f64 * 1e-6 > 1.5 * tau0)
-        .map(|(k, w)| (k + 1, (w[1] - w[0]) as f64 * 1e-6))
-        .collect();
+    let steps: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-6).collect();
+    let (tau0, (gaps, gap_samples)) = crate::table::gaps_of(&steps);
     Ok(Series {
         names: axes.iter().map(|&a| names(which)[a].clone()).collect(),
         rates,
         tau0,
         gaps,
+        gap_samples,
     })
 }
 

@@ -195,3 +195,53 @@ fn a_closed_pipe_ends_the_output_quietly() {
         assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
     }
 }
+
+/// A time column with a gap: by default OADEV from only the terms no gap
+/// falls in (the term count says so), never the samples joined silently;
+/// `--gaps join` joins them and says it; a deviation with no gap-tolerant
+/// estimator, or the fit, is refused with the way out.
+#[test]
+fn a_gap_in_the_time_column_is_never_joined_silently() {
+    let mut text = String::from("t,z\n");
+    let mut x: u64 = 7;
+    for i in 0..3000u32 {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        if (1000..1040).contains(&i) {
+            continue;
+        }
+        let v = (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+        text.push_str(&format!("{},{v}\n", f64::from(i) * 0.01));
+    }
+    let p = temp("gap.csv", &text);
+    let o = gyro()
+        .args(["allan", "--time", "t", "--format", "csv"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("only the terms no gap falls in"), "{err}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    // m = 1: 2 999 terms on the 3 000-sample grid, less the 41 that reach
+    // into the 40 missing samples.
+    let m1 = out.lines().find(|l| l.starts_with("z,oadev,1,")).unwrap();
+    assert_eq!(m1.split(',').nth(6), Some("2958"), "{m1}");
+    let o = gyro()
+        .args(["allan", "--time", "t", "--gaps", "join", "--format", "csv"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("analysed as contiguous"));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let m1 = out.lines().find(|l| l.starts_with("z,oadev,1,")).unwrap();
+    assert_eq!(m1.split(',').nth(6), Some("2959"), "{m1}");
+    for args in [&["--dev", "mdev"][..], &["--fit"][..]] {
+        let mut a = vec!["allan", "--time", "t"];
+        a.extend_from_slice(args);
+        let (code, err) = fails(&a, &p);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(err.contains("--gaps join"), "{args:?}: {err}");
+    }
+}

@@ -58,6 +58,7 @@ __all__ = [
     "htotdev",
     "mtie",
     "tierms",
+    "gradev",
     "deviation",
     "noise_fit",
     "kalibr_yaml",
@@ -134,6 +135,7 @@ mtotdev = _wrap("mtotdev", "Modified total deviation (SP 1065 eq. 27)")
 ttotdev = _wrap("ttotdev", "Time total deviation, tau / sqrt(3) * MTOTDEV, in the phase's unit")
 htotdev = _wrap("htotdev", "Hadamard total deviation (SP 1065 eq. 29; OHDEV at m = 1)")
 mtie = _wrap("mtie", "Maximum time interval error over windows of m + 1 points, in the phase's unit")
+gradev = _native.gradev
 tierms = _wrap("tierms", "Time interval error RMS, in the phase's unit (error 0, as allantools)")
 
 

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use gyro_array::link::msg::Frame;
 use gyro_tool::dev::{self, Alphas, DevError, Kind};
-use gyro_tool::edf::{Chi2, ONE_SIGMA};
+use gyro_tool::edf::{self, Chi2, ONE_SIGMA};
 use gyro_tool::{fit, replay as tool_replay, surface};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
@@ -259,6 +259,91 @@ allantools_fn!(ttotdev, Kind::Ttotdev);
 allantools_fn!(htotdev, Kind::Htotdev);
 allantools_fn!(mtie, Kind::Mtie);
 allantools_fn!(tierms, Kind::Tierms);
+
+/// allantools' `gradev`: the gap-resistant overlapping Allan deviation of
+/// data whose missing points are NaN. Phase: the terms whose three points
+/// are present (allantools' rule, its values and term counts). Rates
+/// (`data_type="freq"`): the terms none of whose 2m rates is missing
+/// (allantools integrates the rates first, so one NaN takes every later
+/// phase point with it). Returns (taus, devs, [lo, hi], ns), the bounds at
+/// confidence `ci` from the simple EDF for `noisetype` (wp, fp, wf, ff,
+/// rf; allantools 2024.6 swaps two arguments there and returns NaN).
+#[pyfunction]
+#[pyo3(signature = (data, rate = 1.0, data_type = "phase", taus = None, ci = 0.9, noisetype = "wp"))]
+#[allow(clippy::type_complexity)]
+fn gradev<'py>(
+    py: Python<'py>,
+    data: PyReadonlyArray1<'py, f64>,
+    rate: f64,
+    data_type: &str,
+    taus: Option<&Bound<'py, PyAny>>,
+    ci: f64,
+    noisetype: &str,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>),
+    Bound<'py, PyArray1<f64>>,
+)> {
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(value_error(DevError::Tau0));
+    }
+    if !(ci > 0.0 && ci < 1.0) {
+        return Err(value_error(format!("ci {ci}: a confidence in (0, 1)")));
+    }
+    let alpha = match noisetype {
+        "wp" => 2,
+        "fp" => 1,
+        "wf" => 0,
+        "ff" => -1,
+        "rf" => -2,
+        other => {
+            return Err(value_error(format!(
+                "noisetype {other:?}: expected wp, fp, wf, ff or rf"
+            )))
+        }
+    };
+    let data = data.as_slice()?;
+    let tau0 = 1.0 / rate;
+    let (phase_points, present) = match data_type {
+        "phase" => (data.len(), data.iter().filter(|v| !v.is_nan()).count()),
+        "freq" => (data.len() + 1, data.iter().filter(|v| !v.is_nan()).count() + 1),
+        other => {
+            return Err(value_error(format!(
+                "data_type {other:?}: expected \"phase\" or \"freq\""
+            )))
+        }
+    };
+    let ms = factors(taus, phase_points, rate)?;
+    let (mut t, mut d, mut lo, mut hi, mut n) = (vec![], vec![], vec![], vec![], vec![]);
+    for m in ms {
+        let p = match data_type {
+            "phase" => dev::gradev(data, tau0, m),
+            _ => dev::gradev_rate(data, tau0, m),
+        };
+        let p = match p {
+            Ok(p) => p,
+            Err(DevError::TooShort) => continue,
+            Err(e) => return Err(value_error(e)),
+        };
+        if p.terms < 2 {
+            continue;
+        }
+        let ci = edf::simple(present, m, alpha)
+            .and_then(|e| edf::interval_with(p.dev, e, ci, Chi2::Exact));
+        t.push(m as f64 * tau0);
+        d.push(p.dev);
+        lo.push(ci.map_or(f64::NAN, |c| c.0));
+        hi.push(ci.map_or(f64::NAN, |c| c.1));
+        n.push(p.terms as f64);
+    }
+    Ok((
+        t.into_pyarray(py),
+        d.into_pyarray(py),
+        (lo.into_pyarray(py), hi.into_pyarray(py)),
+        n.into_pyarray(py),
+    ))
+}
 
 /// What allantools lacks, per τ: the deviation with its Greenhall EDF,
 /// its confidence interval at `confidence` (exact χ²), and the lag-1
@@ -746,6 +831,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(htotdev, m)?)?;
     m.add_function(wrap_pyfunction!(mtie, m)?)?;
     m.add_function(wrap_pyfunction!(tierms, m)?)?;
+    m.add_function(wrap_pyfunction!(gradev, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;

@@ -62,6 +62,36 @@ def test_the_total_family_and_tie_equal_allantools(shape, kind, data_type):
         np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
 
 
+@pytest.mark.parametrize("shape", ["white", "random walk"])
+def test_gradev_equals_allantools_on_phase_with_holes(shape):
+    x = np.cumsum(noise(shape, 3000, seed=11))
+    x[400:430] = np.nan
+    x[1777] = np.nan
+    x[2000:2600] = np.nan
+    for taus in [None, "octave", [0.05, 0.1, 0.35, 1.0, 2.5, 6.0]]:
+        want = allantools.gradev(x, rate=20.0, data_type="phase", taus=taus)
+        got = ga.gradev(x, rate=20.0, data_type="phase", taus=taus)
+        assert len(got[0]) == len(want[0]) > 0
+        np.testing.assert_array_equal(got[3], want[3])
+        np.testing.assert_allclose(got[0], want[0], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(got[1], want[1], rtol=1e-9, atol=0)
+        # allantools' bounds are NaN (two arguments swapped); ours bracket.
+        lo, hi = got[2]
+        assert np.all(lo < got[1]) and np.all(got[1] < hi)
+
+
+def test_gradev_of_rates_skips_only_the_terms_a_missing_rate_reaches():
+    y = noise("white", 2000, seed=5)
+    whole = ga.oadev(y, rate=10.0, data_type="freq", taus=[0.1, 0.4, 1.6])
+    same = ga.gradev(y, rate=10.0, data_type="freq", taus=[0.1, 0.4, 1.6])
+    np.testing.assert_allclose(same[1], whole[1], rtol=1e-9)
+    np.testing.assert_array_equal(same[3], whole[3])
+    y[700] = np.nan
+    holed = ga.gradev(y, rate=10.0, data_type="freq", taus=[0.1, 0.4, 1.6])
+    # m = 1, 4, 16: 2m terms reach the missing rate.
+    np.testing.assert_array_equal(holed[3], whole[3] - 2 * np.array([1, 4, 16]))
+
+
 def table(name):
     """(AF, #, sigma) rows of a Stable32 table."""
     rows = []

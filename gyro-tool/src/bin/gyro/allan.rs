@@ -59,6 +59,20 @@ pub struct Args {
     /// them (an approximation beyond EDF 100, to reproduce its tables).
     #[arg(long, value_enum, default_value = "exact")]
     chi2: edf::Chi2,
+    /// What to do where the time column has gaps: `tolerant` computes
+    /// OADEV only from the terms no gap falls in (allantools' `gradev`,
+    /// from the rates); `join` analyses the samples as if contiguous (the
+    /// terms across a gap then mix rates from either side of it).
+    #[arg(long, value_enum, default_value = "tolerant")]
+    gaps: Gaps,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Gaps {
+    /// The gap-tolerant OADEV.
+    Tolerant,
+    /// The samples joined across each gap.
+    Join,
 }
 
 fn confidence_arg(s: &str) -> Result<f64, String> {
@@ -118,6 +132,7 @@ pub fn run(a: Args) -> Res<bool> {
         svg,
         confidence: cf,
         chi2,
+        gaps,
     } = a;
     if want_fit && matches!(format, OutFormat::Csv) {
         return Err("--fit has no place in the CSV of points: use --format json or table (or --kalibr for the Kalibr file)".into());
@@ -134,6 +149,34 @@ pub fn run(a: Args) -> Res<bool> {
             step / s.tau0
         );
     }
+    if !s.gaps.is_empty() && gaps == Gaps::Tolerant {
+        if let Some(k) = kinds.iter().find(|k| **k != dev::Kind::Oadev) {
+            return Err(format!(
+                "{} gap(s) in the time column: only OADEV has a gap-tolerant estimator here, not {}; --dev oadev, or --gaps join to analyse the samples as contiguous",
+                s.gaps.len(),
+                k.name().to_uppercase()
+            )
+            .into());
+        }
+        if want_fit || kalibr.is_some() || only_static {
+            return Err(format!(
+                "{} gap(s) in the time column: the fit and --static need a log without gaps; cut the log, or --gaps join",
+                s.gaps.len()
+            )
+            .into());
+        }
+        eprintln!(
+            "gyro: {} gap(s): OADEV from only the terms no gap falls in (--gaps join to analyse the samples as contiguous)",
+            s.gaps.len()
+        );
+    }
+    let tolerant = !s.gaps.is_empty() && gaps == Gaps::Tolerant;
+    if !s.gaps.is_empty() && gaps == Gaps::Join {
+        eprintln!(
+            "gyro: {} gap(s): the samples analysed as contiguous (--gaps join)",
+            s.gaps.len()
+        );
+    }
     let total = (s.rates.len() * kinds.len()) as u64;
     let bar = if s.rates.first().map_or(0, Vec::len) >= 1_000_000 {
         ProgressBar::new(total)
@@ -145,7 +188,16 @@ pub fn run(a: Args) -> Res<bool> {
     // chip's start-up value is left out; steps and motion are said, and
     // with --static only the longest quiet stretch is analysed.
     let mut used: Vec<&[f64]> = Vec::new();
+    // With gaps, each column on its time grid, the missing samples NaN.
+    let filled: Vec<Vec<f64>> = if tolerant {
+        (0..s.rates.len()).map(|c| s.with_gaps(c)).collect()
+    } else {
+        Vec::new()
+    };
     for (name, rate) in s.names.iter().zip(&s.rates) {
+        if tolerant {
+            break;
+        }
         let sc = screen::screen(rate, s.tau0);
         if sc.no_data_later > 0 {
             return Err(format!(
@@ -187,6 +239,17 @@ pub fn run(a: Args) -> Res<bool> {
         } else {
             &rate[sc.startup..]
         });
+    }
+    for (name, y) in s.names.iter().zip(&filled) {
+        curves.push(CurveOut {
+            column: name,
+            deviation: dev::Kind::Oadev,
+            unit: "deg/s",
+            tau0_s: s.tau0,
+            samples: y.len(),
+            points: dev::gap_curve(y, s.tau0, grid, (cf, chi2))?,
+        });
+        bar.inc(1);
     }
     // Each column's phase, once: the curves and the fit both read it.
     let phases = used
