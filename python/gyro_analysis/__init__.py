@@ -77,7 +77,9 @@ def _series(data):
     """``data`` as a contiguous float64 vector, or a ValueError."""
     a = _np.ascontiguousarray(data, dtype=_np.float64)
     if a.ndim != 1:
-        raise ValueError(f"data must be one-dimensional, not of shape {a.shape}")
+        raise ValueError(
+            f"data must be one-dimensional (two-dimensional for the deviations: one series per column), not of shape {a.shape}"
+        )
     if a.size < 2:
         raise ValueError("too few samples for this tau")
     return a
@@ -93,6 +95,19 @@ def _wrap(name, what):
     native = getattr(_native, name)
 
     def f(data, rate=1.0, data_type="phase", taus=None):
+        a = _np.asarray(data)
+        if a.ndim == 2:
+            # One series per column (an (N, 3) gyro log): the same taus
+            # and term counts for each, devs and errs one column each.
+            cols = [native(_series(a[:, k]), float(rate), data_type, _taus(taus)) for k in range(a.shape[1])]
+            if not cols:
+                raise ValueError(f"data of shape {a.shape} has no column")
+            return (
+                cols[0][0],
+                _np.column_stack([c[1] for c in cols]),
+                _np.column_stack([c[2] for c in cols]),
+                cols[0][3],
+            )
         return native(_series(data), float(rate), data_type, _taus(taus))
 
     f.__name__ = name
@@ -101,8 +116,11 @@ def _wrap(name, what):
 
     Parameters
     ----------
-    data : array_like, 1-D
+    data : array_like, 1-D, or 2-D with one series per column
         Phase (s, or the rate's unit times s) or frequency (rate) samples.
+        An (N, k) array (a gyro log's axes) gives devs and errs of shape
+        (len(taus), k), one column per series, beside the shared taus and
+        ns.
     rate : float
         Sample rate, Hz (tau0 = 1 / rate).
     data_type : {{"phase", "freq"}}
@@ -119,7 +137,7 @@ def _wrap(name, what):
     ------
     ValueError
         A non-positive rate, a sample that is not finite, an unknown
-        data_type or taus keyword, data that is not one-dimensional.
+        data_type or taus keyword, data of more than two dimensions.
     """
     return f
 

@@ -141,7 +141,8 @@ def test_deviation_gives_edf_intervals_and_noise_type():
         (lambda: ga.oadev(np.zeros(10), data_type="frequency"), "expected \"phase\" or \"freq\""),
         (lambda: ga.oadev(np.zeros(10), taus="weekly"), "expected \"all\", \"octave\""),
         (lambda: ga.oadev(np.zeros(10), taus=[1.0, np.inf]), "not a finite number of seconds"),
-        (lambda: ga.oadev(np.zeros((3, 4))), "one-dimensional"),
+        (lambda: ga.oadev(np.zeros((3, 4, 2))), "one-dimensional"),
+        (lambda: ga.oadev(np.zeros((10, 0))), "has no column"),
         (lambda: ga.oadev([1.0]), "too few samples"),
         (lambda: ga.deviation(np.zeros(100), kind="bdev"), "expected adev, oadev"),
         (lambda: ga.deviation(np.zeros(100), confidence=1.5), "must lie in (0, 1)"),
@@ -151,6 +152,18 @@ def test_errors_are_value_errors_with_the_tools_messages(call, message):
     with pytest.raises(ValueError) as e:
         call()
     assert message in str(e.value)
+
+
+def test_a_gyro_log_of_three_axes_gives_one_column_per_axis():
+    y = np.column_stack([noise(s, 2000, seed=3) for s in ["white", "flicker", "random walk"]])
+    for kind in ["oadev", "mtotdev", "mtie"]:
+        t, d, e, n = getattr(ga, kind)(y, rate=100.0, data_type="freq", taus="octave")
+        assert d.shape == e.shape == (len(t), 3)
+        for k in range(3):
+            one = getattr(ga, kind)(y[:, k], rate=100.0, data_type="freq", taus="octave")
+            np.testing.assert_array_equal(one[0], t)
+            np.testing.assert_array_equal(one[1], d[:, k])
+            np.testing.assert_array_equal(one[3], n)
 
 
 def test_long_inputs_and_lists():
