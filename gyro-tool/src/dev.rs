@@ -423,6 +423,23 @@ fn deviation_checked(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point
             }
             (mtie(x, m + 1).powi(2), n - m)
         }
+        Kind::Theo1 => {
+            // Odd factors have no value (the batch and curves skip them).
+            if !m.is_multiple_of(2) || m >= n {
+                return Err(DevError::TooShort);
+            }
+            // SP 1065 eq. 30: for each start i, the m/2 weighted squares of
+            // (x[i] − x[i − d + m/2] + x[i + m] − x[i + d + m/2]).
+            let h = m / 2;
+            let mut s = 0.0;
+            for i in 0..n - m {
+                for d in 0..h {
+                    let v = x[i] - x[i + h - d] + x[i + m] - x[i + h + d];
+                    s += v * v / (h - d) as f64;
+                }
+            }
+            (s / (0.75 * (n - m) as f64 * tau * tau), (n - m) * h)
+        }
         Kind::Tierms => {
             if n < m + 2 {
                 return Err(DevError::TooShort);
@@ -696,14 +713,12 @@ pub fn curve_with(
     (cf, chi2): (f64, crate::edf::Chi2),
     alphas: &mut Alphas,
 ) -> Result<Vec<Point>, DevError> {
-    curve_at(
-        kind,
-        x,
-        tau0,
-        &grid.factors(kind.max_factor(x.len())),
-        (cf, chi2),
-        alphas,
-    )
+    let factors: Vec<usize> = grid
+        .factors(kind.max_factor(x.len()))
+        .into_iter()
+        .filter(|&m| kind.takes_factor(m))
+        .collect();
+    curve_at(kind, x, tau0, &factors, (cf, chi2), alphas)
 }
 
 /// The gap-tolerant OADEV curve ([`gradev_rate`]) of rates `y` whose
@@ -1110,6 +1125,59 @@ mod tests {
         }
         assert_eq!(checked, 95);
         assert!(worst < 1e-9, "worst {worst:e}");
+    }
+
+    /// Theo1 against allantools 2024.6 (`allantools_theo1.csv`): 26 even
+    /// factors to 1e-9 relative, the same term counts; odd factors have no
+    /// value, and curves skip them.
+    #[test]
+    fn theo1_matches_allantools() {
+        let x = values(
+            include_str!("../tests/vectors/allantools_phase.csv")
+                .split_once('\n')
+                .unwrap()
+                .1,
+        );
+        let mut checked = 0;
+        for l in include_str!("../tests/vectors/allantools_theo1.csv")
+            .lines()
+            .skip(1)
+        {
+            let f: Vec<&str> = l.split(',').collect();
+            let (m, want, n): (usize, f64, usize) = (
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].parse().unwrap(),
+            );
+            let p = deviation(Kind::Theo1, &x, 1.0, m).unwrap();
+            assert!(
+                ((p.dev - want) / want).abs() < 1e-9,
+                "m {m}: {} against {want}",
+                p.dev
+            );
+            assert_eq!(p.terms, n, "m {m}");
+            checked += 1;
+        }
+        assert_eq!(checked, 26);
+        assert!(matches!(
+            deviation(Kind::Theo1, &x, 1.0, 3),
+            Err(DevError::TooShort)
+        ));
+        let mut alphas = Alphas::new();
+        let c = curve_with(
+            Kind::Theo1,
+            &x,
+            1.0,
+            Grid::Octave,
+            (0.68, crate::edf::Chi2::Exact),
+            &mut alphas,
+        )
+        .unwrap();
+        assert!(
+            c.iter().all(|p| p.m % 2 == 0) && c.len() == 11,
+            "{:?}",
+            c.iter().map(|p| p.m).collect::<Vec<_>>()
+        );
     }
 
     /// The gap-tolerant OADEV against allantools' `gradev` on the same

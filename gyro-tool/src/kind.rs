@@ -36,6 +36,9 @@ pub enum Kind {
     /// Time interval error, RMS: √⟨(x[i + m] − x[i])²⟩ (in the phase's
     /// unit).
     Tierms,
+    /// Theo1 (Howe & Peppar; SP 1065 eq. 30) at even factors m; its
+    /// averaging time is 0.75 m τ0, reported at m τ0 as allantools does.
+    Theo1,
 }
 
 impl Kind {
@@ -60,6 +63,7 @@ impl Kind {
             Kind::Htotdev => "htotdev",
             Kind::Mtie => "mtie",
             Kind::Tierms => "tierms",
+            Kind::Theo1 => "theo1",
         }
     }
 
@@ -80,6 +84,12 @@ impl Kind {
             Kind::Htotdev => n.saturating_sub(1) / 3,
             // At least two windows.
             Kind::Mtie | Kind::Tierms => n.saturating_sub(2),
+            Kind::Theo1 => n.saturating_sub(1),
         }
+    }
+
+    /// Whether it has a value at factor `m` (Theo1: even factors only).
+    pub fn takes_factor(self, m: usize) -> bool {
+        m > 0 && (self != Kind::Theo1 || m.is_multiple_of(2))
     }
 }

@@ -12,7 +12,8 @@ ADEV, OADEV, MDEV, TDEV, HDEV, OHDEV and TOTDEV at every factor 1..40 and
 then octave factors, with tau0 = 1 s; and `allantools_family.csv` (the
 same columns): MTOTDEV, TTOTDEV, HTOTDEV, MTIE and TIERMS at factors 1..12
 and then octave factors (allantools' total estimators are O(N·m) Python
-loops: some minutes).
+loops: some minutes); and `allantools_theo1.csv`: Theo1 at the even factors
+2..40 and 64..2048 by octaves.
 """
 import sys
 import numpy as np
@@ -43,3 +44,10 @@ with open(f"{out}/allantools_family.csv", "w") as f:
         taus, devs, errs, ns = fn(x, rate=1.0, data_type="phase", taus=np.array(ms, dtype=float))
         for t, d, k in zip(taus, devs, ns):
             f.write(f"{name},{int(round(t))},{float(d)!r},{int(k)}\n")
+
+ms = list(range(2, 41, 2)) + [2**k for k in range(6, 12)]
+taus, devs, errs, ns = at.theo1(x, rate=1.0, data_type="phase", taus=np.array(ms, dtype=float))
+with open(f"{out}/allantools_theo1.csv", "w") as f:
+    f.write("kind,m,dev,n\n")
+    for t, d, k in zip(taus, devs, ns):
+        f.write(f"theo1,{int(round(t))},{float(d)!r},{int(k)}\n")

@@ -59,6 +59,7 @@ __all__ = [
     "mtie",
     "tierms",
     "gradev",
+    "theo1",
     "deviation",
     "noise_fit",
     "kalibr_yaml",
@@ -154,6 +155,7 @@ ttotdev = _wrap("ttotdev", "Time total deviation, tau / sqrt(3) * MTOTDEV, in th
 htotdev = _wrap("htotdev", "Hadamard total deviation (SP 1065 eq. 29; OHDEV at m = 1)")
 mtie = _wrap("mtie", "Maximum time interval error over windows of m + 1 points, in the phase's unit")
 gradev = _native.gradev
+theo1 = _wrap("theo1", "Theo1 at even factors (SP 1065 eq. 30), reported at m tau0 as allantools does")
 tierms = _wrap("tierms", "Time interval error RMS, in the phase's unit (error 0, as allantools)")
 
 

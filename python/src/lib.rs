@@ -32,7 +32,7 @@ fn value_error(e: impl std::fmt::Display) -> PyErr {
 fn kind_of(name: &str) -> PyResult<Kind> {
     Kind::from_name(name).ok_or_else(|| {
         value_error(format!(
-            "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev, totdev, mtotdev, ttotdev, htotdev, mtie or tierms"
+            "{name:?}: expected adev, oadev, mdev, tdev, hdev, ohdev, totdev, mtotdev, ttotdev, htotdev, mtie, tierms or theo1"
         ))
     })
 }
@@ -214,11 +214,12 @@ fn deviation_arrays<'py>(
         for p in points.into_iter().flatten().filter(|p| p.terms > 1) {
             t.push(p.m as f64 / rate);
             d.push(p.dev);
-            // allantools states no error for TIE rms (0).
-            e.push(if kind == Kind::Tierms {
-                0.0
-            } else {
-                p.dev / (p.terms as f64).sqrt()
+            // allantools states no error for TIE rms (0), and Theo1's
+            // over its N − m outer sums, not its terms.
+            e.push(match kind {
+                Kind::Tierms => 0.0,
+                Kind::Theo1 => p.dev / ((2 * p.terms / p.m) as f64).sqrt(),
+                _ => p.dev / (p.terms as f64).sqrt(),
             });
             n.push(p.terms as f64);
         }
@@ -259,6 +260,7 @@ allantools_fn!(ttotdev, Kind::Ttotdev);
 allantools_fn!(htotdev, Kind::Htotdev);
 allantools_fn!(mtie, Kind::Mtie);
 allantools_fn!(tierms, Kind::Tierms);
+allantools_fn!(theo1, Kind::Theo1);
 
 /// allantools' `gradev`: the gap-resistant overlapping Allan deviation of
 /// data whose missing points are NaN. Phase: the terms whose three points
@@ -832,6 +834,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mtie, m)?)?;
     m.add_function(wrap_pyfunction!(tierms, m)?)?;
     m.add_function(wrap_pyfunction!(gradev, m)?)?;
+    m.add_function(wrap_pyfunction!(theo1, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;

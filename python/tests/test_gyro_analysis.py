@@ -43,7 +43,7 @@ def test_equals_allantools(shape, kind, data_type):
         np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
 
 
-FAMILY = ["mtotdev", "ttotdev", "htotdev", "mtie", "tierms"]
+FAMILY = ["mtotdev", "ttotdev", "htotdev", "mtie", "tierms", "theo1"]
 
 
 @pytest.mark.parametrize("shape", ["white", "random walk"])
