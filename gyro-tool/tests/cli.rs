@@ -245,3 +245,41 @@ fn a_gap_in_the_time_column_is_never_joined_silently() {
         assert!(err.contains("--gaps join"), "{args:?}: {err}");
     }
 }
+
+/// Stable32's own phase file as a user has it (a headerless column of
+/// phase, comment lines first), read with `--phase`: every OADEV of
+/// Stable32's octave table to its printed digits, from the command line.
+#[test]
+fn stable32s_phase_file_reads_as_phase_from_the_command_line() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/stable32");
+    let o = gyro()
+        .args(["allan", "--phase", "--tau0", "1", "--format", "csv"])
+        .arg(format!("{dir}/PHASE.DAT"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let table = std::fs::read_to_string(format!("{dir}/phase_dat_oadev_octave.txt")).unwrap();
+    let mut checked = 0;
+    for row in table.lines().filter(|l| !l.starts_with('#')) {
+        let f: Vec<&str> = row.split_whitespace().collect();
+        let Some(want) = f.get(5).and_then(|v| v.parse::<f64>().ok()) else {
+            continue;
+        };
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("c1,oadev,{},", f[0])))
+            .unwrap_or_else(|| panic!("m {}: {out}", f[0]));
+        let got: f64 = line.split(',').nth(4).unwrap().parse().unwrap();
+        // Printed to five significant digits: within half the last one.
+        let ulp = 10f64.powi(want.abs().log10().floor() as i32 - 4);
+        assert!(
+            (got - want).abs() <= 0.5 * ulp * (1.0 + 1e-9),
+            "m {}: {got} against {want}",
+            f[0]
+        );
+        assert_eq!(line.split(',').nth(6), Some(f[2]), "m {}", f[0]);
+        checked += 1;
+    }
+    assert_eq!(checked, 8);
+}

@@ -60,6 +60,8 @@ __all__ = [
     "tierms",
     "gradev",
     "theo1",
+    "frequency2phase",
+    "phase2frequency",
     "deviation",
     "noise_fit",
     "kalibr_yaml",
@@ -155,6 +157,29 @@ ttotdev = _wrap("ttotdev", "Time total deviation, tau / sqrt(3) * MTOTDEV, in th
 htotdev = _wrap("htotdev", "Hadamard total deviation (SP 1065 eq. 29; OHDEV at m = 1)")
 mtie = _wrap("mtie", "Maximum time interval error over windows of m + 1 points, in the phase's unit")
 gradev = _native.gradev
+
+
+def frequency2phase(freqdata, rate):
+    """Phase from frequency (rate) samples, as allantools' ``frequency2phase``:
+    the mean taken out, integrated at 1 / rate, a 0 in front (N + 1 points).
+    NaN samples are left out of the mean and make every later point NaN."""
+    y = _np.asarray(freqdata, dtype=_np.float64)
+    if y.ndim != 1:
+        raise ValueError(f"data must be one-dimensional, not of shape {y.shape}")
+    if not (_np.isfinite(rate) and rate > 0):
+        raise ValueError("tau0 must be a finite number of seconds > 0")
+    return _np.concatenate([[0.0], _np.cumsum(y - _np.nanmean(y)) / float(rate)])
+
+
+def phase2frequency(phase, rate):
+    """Frequency (rate) from phase, as allantools' ``phase2frequency``:
+    successive differences times the rate (N − 1 points)."""
+    x = _np.asarray(phase, dtype=_np.float64)
+    if x.ndim != 1:
+        raise ValueError(f"data must be one-dimensional, not of shape {x.shape}")
+    if not (_np.isfinite(rate) and rate > 0):
+        raise ValueError("tau0 must be a finite number of seconds > 0")
+    return _np.diff(x) * float(rate)
 theo1 = _wrap("theo1", "Theo1 at even factors (SP 1065 eq. 30), reported at m tau0 as allantools does")
 tierms = _wrap("tierms", "Time interval error RMS, in the phase's unit (error 0, as allantools)")
 

@@ -92,6 +92,15 @@ def test_gradev_of_rates_skips_only_the_terms_a_missing_rate_reaches():
     np.testing.assert_array_equal(holed[3], whole[3] - 2 * np.array([1, 4, 16]))
 
 
+def test_phase_and_frequency_convert_as_allantools_converts():
+    y = noise("random walk", 500, seed=2) + 3.0
+    np.testing.assert_allclose(ga.frequency2phase(y, 50.0), allantools.frequency2phase(y, 50.0), rtol=1e-12, atol=1e-15)
+    x = np.cumsum(y)
+    np.testing.assert_allclose(ga.phase2frequency(x, 50.0), allantools.phase2frequency(x, 50.0), rtol=1e-12)
+    # There and back: the rates less their mean.
+    np.testing.assert_allclose(ga.phase2frequency(ga.frequency2phase(y, 50.0), 50.0), y - y.mean(), atol=1e-12)
+
+
 def table(name):
     """(AF, #, sigma) rows of a Stable32 table."""
     rows = []

@@ -65,6 +65,12 @@ pub struct Args {
     /// terms across a gap then mix rates from either side of it).
     #[arg(long, value_enum, default_value = "tolerant")]
     gaps: Gaps,
+    /// The columns are phase, not rate: the integrated angle (deg, or rad
+    /// with `--unit rads`), one value per sample, as Stable32's phase
+    /// files and allantools' `data_type="phase"` are. Not screened (the
+    /// screen reads rates).
+    #[arg(long)]
+    phase: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -133,7 +139,11 @@ pub fn run(a: Args) -> Res<bool> {
         confidence: cf,
         chi2,
         gaps,
+        phase,
     } = a;
+    if phase && (only_static || matches!(log.unit, table::Unit::Dph | table::Unit::Lsb)) {
+        return Err("--phase takes angles in deg (or rad with --unit rads), and is not screened: no --static".into());
+    }
     if want_fit && matches!(format, OutFormat::Csv) {
         return Err("--fit has no place in the CSV of points: use --format json or table (or --kalibr for the Kalibr file)".into());
     }
@@ -171,6 +181,9 @@ pub fn run(a: Args) -> Res<bool> {
         );
     }
     let tolerant = !s.gaps.is_empty() && gaps == Gaps::Tolerant;
+    if tolerant && phase {
+        return Err("a phase log with gaps: not yet gap-tolerant here; --gaps join to analyse it as contiguous".into());
+    }
     if !s.gaps.is_empty() && gaps == Gaps::Join {
         eprintln!(
             "gyro: {} gap(s): the samples analysed as contiguous (--gaps join)",
@@ -195,7 +208,7 @@ pub fn run(a: Args) -> Res<bool> {
         Vec::new()
     };
     for (name, rate) in s.names.iter().zip(&s.rates) {
-        if tolerant {
+        if tolerant || phase {
             break;
         }
         let sc = screen::screen(rate, s.tau0);
@@ -252,10 +265,14 @@ pub fn run(a: Args) -> Res<bool> {
         bar.inc(1);
     }
     // Each column's phase, once: the curves and the fit both read it.
-    let phases = used
-        .iter()
-        .map(|rate| dev::phase_from_rate(rate, s.tau0))
-        .collect::<Result<Vec<_>, _>>()?;
+    let phases = if phase {
+        used = s.rates.iter().map(Vec::as_slice).collect();
+        s.rates.clone()
+    } else {
+        used.iter()
+            .map(|rate| dev::phase_from_rate(rate, s.tau0))
+            .collect::<Result<Vec<_>, _>>()?
+    };
     for ((name, rate), x) in s.names.iter().zip(&used).zip(&phases) {
         let mut alphas = dev::Alphas::new();
         for &k in kinds {
