@@ -158,6 +158,14 @@ pub fn read_with(
             _ => return Err(TableError::Scale),
         },
     };
+    if crate::ros2::is_bag(path) {
+        // A ROS 2 bag: its IMU topics' header stamps, rad/s read as °/s.
+        let mut s = crate::ros2::read(path, columns)?;
+        if let Some(t) = tau0 {
+            s.tau0 = t;
+        }
+        return Ok(s);
+    }
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))

@@ -1,0 +1,213 @@
+//! Gyro rates from a ROS 2 bag in MCAP storage (the default since ROS 2
+//! Iron; what `ros2 bag record`, Kalibr's and allan_variance_ros' users
+//! have): every `sensor_msgs/msg/Imu` topic, read by the `mcap` crate, each
+//! message's CDR decoded by the `cdr` crate.
+//!
+//! Columns are `TOPIC.x`, `TOPIC.y`, `TOPIC.z` (`/imu/data.z`) from
+//! `angular_velocity`, rad/s turned into °/s; one topic a read, by default
+//! the one with the most messages. Each sample's time is its header stamp
+//! (when the IMU sampled, not when the bag logged it): τ0 is the stamps'
+//! median step, steps over 1.5 τ0 are gaps (message index in place of a
+//! line). A bag directory (with `metadata.yaml`) or its `.mcap` file.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::table::{Series, TableError};
+
+/// `sensor_msgs/msg/Imu` as CDR lays it out.
+#[derive(serde::Deserialize)]
+struct Imu {
+    header: Header,
+    _orientation: [f64; 4],
+    _orientation_covariance: [f64; 9],
+    angular_velocity: [f64; 3],
+}
+
+#[derive(serde::Deserialize)]
+struct Header {
+    sec: i32,
+    nanosec: u32,
+    _frame_id: String,
+}
+
+const IMU: &str = "sensor_msgs/msg/Imu";
+
+/// The `.mcap` file of a bag given as a directory or as the file.
+fn mcap_file(path: &Path) -> Result<PathBuf, TableError> {
+    if !path.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    let entries = std::fs::read_dir(path).map_err(|e| TableError::Io(path.to_path_buf(), e))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
+    files.sort();
+    match files.len() {
+        1 => Ok(files.remove(0)),
+        0 => Err(TableError::Record(
+            path.to_path_buf(),
+            0,
+            "no .mcap file in the bag (a sqlite3 bag is not read here)".into(),
+        )),
+        n => Err(TableError::Record(
+            path.to_path_buf(),
+            0,
+            format!("{n} .mcap files in the bag: give one"),
+        )),
+    }
+}
+
+/// Whether `path` is a ROS 2 bag this module reads.
+pub fn is_bag(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+        || (path.is_dir() && path.join("metadata.yaml").is_file())
+}
+
+/// Read the gyro `columns` (every axis of the largest IMU topic when empty)
+/// of the bag at `path`.
+pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
+    let file = mcap_file(path)?;
+    let p = || file.clone();
+    let bytes = std::fs::read(&file).map_err(|e| TableError::Io(p(), e))?;
+    let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("MCAP: {e}"));
+    // Per IMU topic: (stamp ns, rates rad/s) in the file's order.
+    let mut topics: BTreeMap<String, Vec<(i64, [f64; 3])>> = BTreeMap::new();
+    let stream = mcap::MessageStream::new(&bytes).map_err(|e| bad(&e))?;
+    for m in stream {
+        let m = m.map_err(|e| bad(&e))?;
+        let is_imu = m.channel.schema.as_ref().is_some_and(|s| s.name == IMU);
+        if !is_imu {
+            continue;
+        }
+        if m.channel.message_encoding != "cdr" {
+            return Err(bad(&format!(
+                "{}: message encoding {:?}, not cdr",
+                m.channel.topic, m.channel.message_encoding
+            )));
+        }
+        let imu: Imu =
+            cdr::deserialize(&m.data).map_err(|e| bad(&format!("{}: {e}", m.channel.topic)))?;
+        let ns = i64::from(imu.header.sec) * 1_000_000_000 + i64::from(imu.header.nanosec);
+        topics
+            .entry(m.channel.topic.clone())
+            .or_default()
+            .push((ns, imu.angular_velocity));
+    }
+    let names =
+        |t: &str| -> Vec<String> { ["x", "y", "z"].iter().map(|a| format!("{t}.{a}")).collect() };
+    let all: Vec<String> = topics.keys().flat_map(|t| names(t)).collect();
+    let (topic, axes): (&String, Vec<usize>) = if columns.is_empty() {
+        let t = topics
+            .iter()
+            .max_by_key(|(_, v)| v.len())
+            .map(|(t, _)| t)
+            .ok_or_else(|| TableError::NoColumn(p(), IMU.into(), all.clone()))?;
+        (t, vec![0, 1, 2])
+    } else {
+        let mut topic: Option<&String> = None;
+        let mut axes = Vec::new();
+        for c in columns {
+            let hit = topics
+                .keys()
+                .find_map(|t| names(t).iter().position(|n| n == c).map(|a| (t, a)));
+            let Some((t, a)) = hit else {
+                return Err(TableError::NoColumn(p(), c.clone(), all.clone()));
+            };
+            if topic.is_some_and(|w| w != t) {
+                return Err(TableError::Record(
+                    p(),
+                    0,
+                    format!("{c}: one topic a read (each has its own time base)"),
+                ));
+            }
+            topic = Some(t);
+            axes.push(a);
+        }
+        match topic {
+            Some(t) => (t, axes),
+            None => return Err(TableError::NoColumn(p(), String::new(), all)),
+        }
+    };
+    let msgs = &topics[topic];
+    let n = msgs.len();
+    if n < 3 {
+        return Err(TableError::TooShort(p(), n));
+    }
+    if let Some(k) = msgs.windows(2).position(|w| w[1].0 <= w[0].0) {
+        return Err(TableError::Time(
+            p(),
+            k + 1,
+            msgs[k].0 as f64 * 1e-9,
+            msgs[k + 1].0 as f64 * 1e-9,
+        ));
+    }
+    let deg = 180.0 / std::f64::consts::PI;
+    let mut rates = Vec::with_capacity(axes.len());
+    for &a in &axes {
+        let v: Vec<f64> = msgs.iter().map(|m| m.1[a] * deg).collect();
+        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
+            return Err(TableError::Number(
+                p(),
+                k,
+                names(topic)[a].clone(),
+                v[k].to_string(),
+            ));
+        }
+        rates.push(v);
+    }
+    let steps: Vec<f64> = msgs
+        .windows(2)
+        .map(|w| (w[1].0 - w[0].0) as f64 * 1e-9)
+        .collect();
+    let (tau0, (gaps, gap_samples)) = crate::table::gaps_of(&steps);
+    Ok(Series {
+        names: axes.iter().map(|&a| names(topic)[a].clone()).collect(),
+        rates,
+        tau0,
+        gaps,
+        gap_samples,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/vectors/ros2");
+
+    /// A bag `rosbags` wrote (`make_bag.py`): every rate as written (°/s
+    /// from rad/s), the stamps' step and the one dropped message as a gap,
+    /// the other topic skipped; the bag as a directory or as its file.
+    #[test]
+    fn an_imu_topic_reads_as_rosbags_wrote_it() {
+        let bag = Path::new(DIR).join("imu_bag");
+        let want: Vec<Vec<f64>> = std::fs::read_to_string(Path::new(DIR).join("expected.csv"))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect();
+        assert!(is_bag(&bag));
+        for path in [bag.clone(), bag.join("imu_bag.mcap")] {
+            let s = read(&path, &[]).unwrap();
+            assert_eq!(s.names, ["/imu/data.x", "/imu/data.y", "/imu/data.z"]);
+            assert_eq!(s.rates[0].len(), want.len());
+            let deg = 180.0 / std::f64::consts::PI;
+            for (k, w) in want.iter().enumerate() {
+                for a in 0..3 {
+                    assert_eq!(s.rates[a][k], w[a + 1] * deg, "message {k} axis {a}");
+                }
+            }
+            assert!((s.tau0 - 0.005).abs() < 1e-12, "{}", s.tau0);
+            assert_eq!(s.gap_samples, [(250, 1)]);
+        }
+        let s = read(&bag, &["/imu/data.z".into()]).unwrap();
+        assert_eq!(s.rates.len(), 1);
+        let e = read(&bag, &["/imu/data.w".into()]).unwrap_err();
+        assert!(e.to_string().contains("/imu/data.x"), "{e}");
+    }
+}
