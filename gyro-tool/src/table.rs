@@ -146,8 +146,36 @@ pub fn read_with(
     columns: &[String],
     time: Option<&str>,
     tau0: Option<f64>,
+    units: (Unit, Option<f64>),
+    missing: bool,
+) -> Result<Series, TableError> {
+    read_layout(
+        path,
+        columns,
+        (time, tau0),
+        units,
+        missing,
+        Layout::default(),
+    )
+}
+
+/// How a text log is laid out, where the detection should be overruled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Layout {
+    /// The separator (`b' '`: runs of blanks); detected when None.
+    pub delimiter: Option<u8>,
+    /// Whether the first line is a header; detected when None.
+    pub header: Option<bool>,
+}
+
+/// [`read_with`] with the text's layout given where `layout` says.
+pub fn read_layout(
+    path: &Path,
+    columns: &[String],
+    (time, tau0): (Option<&str>, Option<f64>),
     (unit, lsb_per_dps): (Unit, Option<f64>),
     missing: bool,
+    layout: Layout,
 ) -> Result<Series, TableError> {
     let scale = match unit {
         Unit::Dps => 1.0,
@@ -199,10 +227,12 @@ pub fn read_with(
         }
         found.ok_or_else(|| TableError::NoHeader(p()))?
     };
-    let delimiter = [b',', b';', b'\t']
-        .into_iter()
-        .find(|&d| head_line.as_bytes().contains(&d))
-        .unwrap_or(b' ');
+    let delimiter = layout.delimiter.unwrap_or_else(|| {
+        [b',', b';', b'\t']
+            .into_iter()
+            .find(|&d| head_line.as_bytes().contains(&d))
+            .unwrap_or(b' ')
+    });
     // Blank- and tab-separated text may repeat its separator for alignment.
     let comma = matches!(delimiter, b',' | b';');
     let decimal_comma = delimiter == b';';
@@ -244,7 +274,9 @@ pub fn read_with(
     });
     let (first_ln, first) = lines.next().ok_or_else(|| TableError::NoHeader(p()))??;
     // A first line of numbers is data: the file has no header.
-    let headerless = first.iter().all(|f| f.parse::<f64>().is_ok());
+    let headerless = layout
+        .header
+        .map_or_else(|| first.iter().all(|f| f.parse::<f64>().is_ok()), |h| !h);
     let header: Vec<String> = if headerless {
         (1..=first.len()).map(|i| format!("c{i}")).collect()
     } else {
@@ -375,6 +407,40 @@ mod tests {
             (vec!["c2".to_string()], vec![1.0, 2.0, 3.0])
         );
         assert!((s.tau0 - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_layout_can_be_overruled() {
+        let dps = (Unit::Dps, None);
+        // Another separator.
+        let p = write("pipe.txt", "x|y\n1|2\n3|4\n5|6\n");
+        let l = Layout {
+            delimiter: Some(b'|'),
+            header: None,
+        };
+        let s = read_layout(&p, &[], (None, Some(1.0)), dps, false, l).unwrap();
+        assert_eq!(
+            (s.names.clone(), s.rates[1].clone()),
+            (vec!["x".into(), "y".into()], vec![2.0, 4.0, 6.0])
+        );
+        // A header of numbers (channel numbers) read as a header.
+        let p = write("numhead.csv", "1,2\n1.5,2\n3,4\n5,6\n");
+        let l = Layout {
+            delimiter: None,
+            header: Some(true),
+        };
+        let s = read_layout(&p, &[], (None, Some(1.0)), dps, false, l).unwrap();
+        assert_eq!(s.names, ["1", "2"]);
+        assert_eq!(s.rates[0], [1.5, 3.0, 5.0]);
+        // No header where the detection would take one: the first line's
+        // text is then a bad number, with its line.
+        let p = write("nohead.csv", "1.5,NA\n3,4\n5,6\n");
+        let l = Layout {
+            delimiter: None,
+            header: Some(false),
+        };
+        let e = read_layout(&p, &[], (None, Some(1.0)), dps, false, l).unwrap_err();
+        assert!(matches!(e, TableError::Number(_, 1, _, _)), "{e}");
     }
 
     #[test]

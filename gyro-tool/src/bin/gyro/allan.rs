@@ -150,7 +150,14 @@ pub fn run(a: Args) -> Res<bool> {
     let (file, columns, kinds) = (log.file.as_path(), &columns[..], &kinds[..]);
     let (time, tau0, unit, lsb) = (log.time.as_deref(), log.tau0, log.unit, log.lsb_per_dps);
     let started = Instant::now();
-    let s = table::read(file, columns, time, tau0, unit, lsb)?;
+    let s = table::read_layout(
+        file,
+        columns,
+        (time, tau0),
+        (unit, lsb),
+        false,
+        log.layout(),
+    )?;
     let read_s = started.elapsed().as_secs_f64();
     for (line, step) in &s.gaps {
         eprintln!(
@@ -306,7 +313,14 @@ pub fn run(a: Args) -> Res<bool> {
         let mut accel_fits = Vec::new();
         if !accel.is_empty() {
             // Read as they are (m/s²): no rate unit applies.
-            let a = table::read(file, &accel, time, tau0, table::Unit::Dps, None)?;
+            let a = table::read_layout(
+                file,
+                &accel,
+                (time, tau0),
+                (table::Unit::Dps, None),
+                false,
+                log.layout(),
+            )?;
             for (name, r) in a.names.iter().zip(&a.rates) {
                 let x = dev::phase_from_rate(r, a.tau0)?;
                 match fit::fit_phase(&x, a.tau0) {

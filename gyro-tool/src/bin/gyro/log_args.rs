@@ -26,18 +26,39 @@ pub struct LogArgs {
     /// Counts per °/s, with `--unit lsb`.
     #[arg(long)]
     pub lsb_per_dps: Option<f64>,
+    /// The separator of a text log: comma, semicolon, tab, space (runs of
+    /// blanks) or one character; detected from the first line when absent.
+    #[arg(long, value_parser = delimiter_arg)]
+    pub delimiter: Option<u8>,
+    /// The first line is data, not a header (columns c1, c2, …); detected
+    /// when absent (a first line of numbers is data).
+    #[arg(long)]
+    pub no_header: bool,
+}
+
+fn delimiter_arg(s: &str) -> Result<u8, String> {
+    match s {
+        "comma" | "," => Ok(b','),
+        "semicolon" | ";" => Ok(b';'),
+        "tab" | "\t" => Ok(b'\t'),
+        "space" | " " => Ok(b' '),
+        _ if s.len() == 1 && s.is_ascii() => Ok(s.as_bytes()[0]),
+        _ => Err(format!(
+            "{s}: comma, semicolon, tab, space or one ASCII character"
+        )),
+    }
 }
 
 impl LogArgs {
     /// Read `columns`; with `missing`, empty cells are NaN.
     pub fn read(&self, columns: &[String], missing: bool) -> Res<table::Series> {
-        let s = table::read_with(
+        let s = table::read_layout(
             &self.file,
             columns,
-            self.time.as_deref(),
-            self.tau0,
+            (self.time.as_deref(), self.tau0),
             (self.unit, self.lsb_per_dps),
             missing,
+            self.layout(),
         )?;
         for (line, step) in &s.gaps {
             eprintln!(
@@ -47,6 +68,14 @@ impl LogArgs {
             );
         }
         Ok(s)
+    }
+
+    /// The text's layout as the options overrule it.
+    pub fn layout(&self) -> table::Layout {
+        table::Layout {
+            delimiter: self.delimiter,
+            header: self.no_header.then_some(false),
+        }
     }
 
     pub fn name(&self) -> String {
