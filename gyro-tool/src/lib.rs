@@ -11,6 +11,7 @@ pub mod kind;
 pub mod plot;
 pub mod pointing;
 pub mod replay;
+pub mod ros1;
 pub mod ros2;
 pub mod screen;
 pub mod source;

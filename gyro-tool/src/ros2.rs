@@ -75,7 +75,7 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
     let bytes = std::fs::read(&file).map_err(|e| TableError::Io(p(), e))?;
     let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("MCAP: {e}"));
     // Per IMU topic: (stamp ns, rates rad/s) in the file's order.
-    let mut topics: BTreeMap<String, Vec<(i64, [f64; 3])>> = BTreeMap::new();
+    let mut topics = Topics::new();
     let stream = mcap::MessageStream::new(&bytes).map_err(|e| bad(&e))?;
     for m in stream {
         let m = m.map_err(|e| bad(&e))?;
@@ -97,6 +97,23 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             .or_default()
             .push((ns, imu.angular_velocity));
     }
+    series_of(&topics, columns, &file, IMU)
+}
+
+/// Per IMU topic, its messages as (stamp ns, angular velocity rad/s) in
+/// the log's order.
+pub(crate) type Topics = BTreeMap<String, Vec<(i64, [f64; 3])>>;
+
+/// The `columns` (`TOPIC.x` …; every axis of the topic with the most
+/// messages when empty) of `topics` as a rate log in °/s, timed by the
+/// stamps. `file` names the log in errors, `what` the message type.
+pub(crate) fn series_of(
+    topics: &Topics,
+    columns: &[String],
+    file: &Path,
+    what: &str,
+) -> Result<Series, TableError> {
+    let p = || file.to_path_buf();
     let names =
         |t: &str| -> Vec<String> { ["x", "y", "z"].iter().map(|a| format!("{t}.{a}")).collect() };
     let all: Vec<String> = topics.keys().flat_map(|t| names(t)).collect();
@@ -105,7 +122,7 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             .iter()
             .max_by_key(|(_, v)| v.len())
             .map(|(t, _)| t)
-            .ok_or_else(|| TableError::NoColumn(p(), IMU.into(), all.clone()))?;
+            .ok_or_else(|| TableError::NoColumn(p(), what.into(), all.clone()))?;
         (t, vec![0, 1, 2])
     } else {
         let mut topic: Option<&String> = None;

@@ -186,6 +186,14 @@ pub fn read_layout(
             _ => return Err(TableError::Scale),
         },
     };
+    if crate::ros1::is_bag(path) {
+        // A ROS 1 bag: as a ROS 2 bag.
+        let mut s = crate::ros1::read(path, columns)?;
+        if let Some(t) = tau0 {
+            s.tau0 = t;
+        }
+        return Ok(s);
+    }
     if crate::ros2::is_bag(path) {
         // A ROS 2 bag: its IMU topics' header stamps, rad/s read as °/s.
         let mut s = crate::ros2::read(path, columns)?;
