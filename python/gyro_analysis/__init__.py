@@ -69,6 +69,7 @@ __all__ = [
     "davar_surface",
     "replay",
     "read_recording",
+    "read_log",
     "recording_dataframe",
 ]
 
@@ -156,7 +157,19 @@ mtotdev = _wrap("mtotdev", "Modified total deviation (SP 1065 eq. 27)")
 ttotdev = _wrap("ttotdev", "Time total deviation, tau / sqrt(3) * MTOTDEV, in the phase's unit")
 htotdev = _wrap("htotdev", "Hadamard total deviation (SP 1065 eq. 29; OHDEV at m = 1)")
 mtie = _wrap("mtie", "Maximum time interval error over windows of m + 1 points, in the phase's unit")
-gradev = _native.gradev
+
+
+def gradev(data, rate=1.0, data_type="phase", taus=None, ci=0.9, noisetype="wp"):
+    """Gap-resistant overlapping Allan deviation, allantools' ``gradev``:
+    NaN marks a missing point. Phase: the terms whose three points are
+    present (allantools' rule). Rates (``data_type="freq"``): the terms none
+    of whose 2m rates is missing. Returns (taus, devs, [lo, hi], ns), the
+    bounds at confidence ``ci`` from the simple EDF for ``noisetype`` (wp,
+    fp, wf, ff, rf)."""
+    a = _np.ascontiguousarray(data, dtype=_np.float64)
+    if a.ndim != 1:
+        raise ValueError(f"data must be one-dimensional, not of shape {a.shape}")
+    return _native.gradev(a, float(rate), data_type, _taus(taus), float(ci), noisetype)
 
 
 def frequency2phase(freqdata, rate):
@@ -389,6 +402,25 @@ def replay(chips):
         "offered": _np.asarray(offered),
         "used": _np.asarray(used),
     }
+
+
+def read_log(path, columns=None, time=None, tau0=None, unit="dps", lsb_per_dps=None, delimiter=None, header=None):
+    """A rate log as ``gyro`` reads it: text of any separator, with or
+    without a header (detected; ``delimiter`` and ``header`` overrule), a PX4
+    ULog, or a ROS 1 or ROS 2 (MCAP) bag. Returns a dict: ``names``,
+    ``rates`` (an (N, k) float64 array in deg/s, with NaN where a gap's
+    samples are missing, so that :func:`gradev` takes it as it is), ``tau0``
+    (s) and ``gaps`` (line or message index, step in s)."""
+    return _native.read_log(
+        str(path),
+        None if columns is None else list(columns),
+        time,
+        tau0,
+        unit,
+        lsb_per_dps,
+        delimiter,
+        header,
+    )
 
 
 def read_recording(path):

@@ -626,6 +626,75 @@ fn replay<'py>(
     ))
 }
 
+/// A rate log as `gyro` reads it (text of any separator, with or without a
+/// header; a PX4 ULog; a ROS 1 or ROS 2 bag): a dict with `names`, `rates`
+/// (an (N, k) array, °/s; NaN where a gap's samples are missing, each gap
+/// put back on the time grid), `tau0` (s) and `gaps` (a list of (line or
+/// message index, step in s)).
+#[pyfunction]
+#[pyo3(signature = (path, columns = None, time = None, tau0 = None, unit = "dps", lsb_per_dps = None, delimiter = None, header = None))]
+#[allow(clippy::too_many_arguments)]
+fn read_log<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+    columns: Option<Vec<String>>,
+    time: Option<String>,
+    tau0: Option<f64>,
+    unit: &str,
+    lsb_per_dps: Option<f64>,
+    delimiter: Option<String>,
+    header: Option<bool>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use gyro_tool::table::{self, Layout, Unit};
+    let unit = match unit {
+        "dps" => Unit::Dps,
+        "rads" => Unit::Rads,
+        "dph" => Unit::Dph,
+        "lsb" => Unit::Lsb,
+        other => {
+            return Err(value_error(format!(
+                "unit {other:?}: expected dps, rads, dph or lsb"
+            )))
+        }
+    };
+    let delimiter = match delimiter.as_deref() {
+        None => None,
+        Some(d) if d.len() == 1 && d.is_ascii() => Some(d.as_bytes()[0]),
+        Some(d) => return Err(value_error(format!("delimiter {d:?}: one ASCII character"))),
+    };
+    let columns = columns.unwrap_or_default();
+    let s = py
+        .detach(|| {
+            table::read_layout(
+                &path,
+                &columns,
+                (time.as_deref(), tau0),
+                (unit, lsb_per_dps),
+                false,
+                Layout { delimiter, header },
+            )
+            .map_err(|e| e.to_string())
+        })
+        .map_err(value_error)?;
+    let cols: Vec<Vec<f64>> = (0..s.rates.len()).map(|c| s.with_gaps(c)).collect();
+    let n = cols.first().map_or(0, Vec::len);
+    let mut flat = Vec::with_capacity(n * cols.len());
+    for i in 0..n {
+        for c in &cols {
+            flat.push(c[i]);
+        }
+    }
+    let rates = numpy::ndarray::Array2::from_shape_vec((n, cols.len()), flat)
+        .map_err(value_error)?
+        .into_pyarray(py);
+    let d = PyDict::new(py);
+    d.set_item("names", s.names.clone())?;
+    d.set_item("rates", rates)?;
+    d.set_item("tau0", s.tau0)?;
+    d.set_item("gaps", s.gaps.clone())?;
+    Ok(d)
+}
+
 /// A board recording (`gyro record`'s file) decoded: a dict of numpy
 /// arrays for the sample frames, the E-DAVAR estimates they carry and the
 /// raw frames, the first status frame's sample period and τ, and the
@@ -835,6 +904,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tierms, m)?)?;
     m.add_function(wrap_pyfunction!(gradev, m)?)?;
     m.add_function(wrap_pyfunction!(theo1, m)?)?;
+    m.add_function(wrap_pyfunction!(read_log, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;

@@ -101,6 +101,29 @@ def test_phase_and_frequency_convert_as_allantools_converts():
     np.testing.assert_allclose(ga.phase2frequency(ga.frequency2phase(y, 50.0), 50.0), y - y.mean(), atol=1e-12)
 
 
+VECTORS = pathlib.Path(__file__).resolve().parents[2] / "gyro-tool" / "tests" / "vectors"
+
+
+def test_robot_logs_read_as_the_cli_reads_them():
+    ulog = ga.read_log(VECTORS / "ulog" / "sample_log_small.ulg")
+    assert ulog["names"] == ["sensor_combined.0.x", "sensor_combined.0.y", "sensor_combined.0.z"]
+    # One dropout at the start, put back as NaN on the time grid.
+    assert ulog["rates"].shape[1] == 3 and np.isnan(ulog["rates"]).any()
+    for bag, step in [(VECTORS / "ros1" / "imu.bag", 0.01), (VECTORS / "ros2" / "imu_bag", 0.005)]:
+        log = ga.read_log(bag)
+        want = np.loadtxt(bag.parent / "expected.csv", delimiter=",", skiprows=1)
+        assert abs(log["tau0"] - step) < 1e-12
+        assert len(log["gaps"]) == 1
+        rates = log["rates"][~np.isnan(log["rates"][:, 0])]
+        np.testing.assert_array_equal(rates, np.degrees(want[:, 1:]))
+        # The gap's samples are NaN: gradev takes the log as it is.
+        g = ga.gradev(log["rates"][:, 2], rate=1 / log["tau0"], data_type="freq", taus=[step])
+        # m = 1: N - 1 terms on the grid, two of them touching the gap.
+        assert g[3][0] == len(log["rates"]) - 3
+    with pytest.raises(ValueError, match="no column"):
+        ga.read_log(VECTORS / "ros1" / "imu.bag", columns=["/imu.w"])
+
+
 def table(name):
     """(AF, #, sigma) rows of a Stable32 table."""
     rows = []
