@@ -309,7 +309,10 @@ fn gradev<'py>(
     let tau0 = 1.0 / rate;
     let (phase_points, present) = match data_type {
         "phase" => (data.len(), data.iter().filter(|v| !v.is_nan()).count()),
-        "freq" => (data.len() + 1, data.iter().filter(|v| !v.is_nan()).count() + 1),
+        "freq" => (
+            data.len() + 1,
+            data.iter().filter(|v| !v.is_nan()).count() + 1,
+        ),
         other => {
             return Err(value_error(format!(
                 "data_type {other:?}: expected \"phase\" or \"freq\""
