@@ -36,6 +36,13 @@ The rest of the ``gyro`` tool's analysis, on the same code:
 - :func:`read_recording` and :func:`recording_dataframe`: a board recording
   (``gyro record``'s ``.glk`` file) as numpy arrays or a pandas DataFrame,
   with the link's counts and errors.
+- :func:`read_log`: a rate log as ``gyro`` reads it (text of any separator,
+  with or without a header; a PX4 ULog; a ROS 1 or ROS 2 bag), gaps put
+  back as NaN for :func:`gradev`;
+- beyond allantools' seven: :func:`mtotdev`, :func:`ttotdev`,
+  :func:`htotdev`, :func:`theo1`, :func:`mtie`, :func:`tierms` and
+  :func:`gradev` (equal to allantools 2024.6; ``gradev``'s bounds work);
+  every deviation takes an (N, k) array, one column per series.
 
 The long ones (E-DAVAR, replay) run without the GIL and stop on Ctrl-C
 (``KeyboardInterrupt``).
