@@ -327,8 +327,13 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         self.write_checked(reg::INTF_CONFIG1, cfg.intf_config1())?;
         self.write_checked(reg::GYRO_CONFIG1, cfg.gyro_config1())?;
         self.write_checked(reg::GYRO_ACCEL_CONFIG0, cfg.gyro_accel_config0())?;
-        // A new clock (RTC_MODE) steps its stamps by another count.
+        // A new clock (RTC_MODE) steps its stamps by another count, from
+        // wherever its counter stands: the stamps before are no stream to
+        // check the next against (a step back across the switch read as a
+        // packet sent again dropped a sample the chip gave out, the timed
+        // fault campaign at CLKIN's loss).
         self.step = 0;
+        self.stamp = None;
         Ok(())
     }
 
