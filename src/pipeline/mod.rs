@@ -474,6 +474,12 @@ impl<const N: usize> Pipeline<N> {
             }
             if self.health[i].flags != before {
                 out.health_changed |= 1 << i;
+                let frozen = flag::STUCK | flag::SATURATED;
+                if self.health[i].flags & frozen & !before != 0 {
+                    for cal in self.cal.iter_mut() {
+                        cal.drop_frozen(i);
+                    }
+                }
             }
             if !offered_any {
                 self.counters[i].excluded = self.counters[i].excluded.saturating_add(1);

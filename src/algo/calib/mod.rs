@@ -865,6 +865,29 @@ impl<const N: usize> RelCal<N> {
         self.n[i] = self.n[i].min(RESUME_SAMPLES);
     }
 
+    /// Chip `i` was found frozen (stuck or saturated) while some chip was
+    /// still warming up: each warming chip's early bias was taken against a
+    /// median the frozen chip was part of (two chips frozen from power-up
+    /// pull a four-chip median halfway, and the healthy pair kept a common
+    /// correction of 2–4 °/s, learning nothing more with two chips left:
+    /// the timed fault campaign, seeds 2598, 2664 and 4750). So the frozen
+    /// chip and every chip still warming start their warm-up again against
+    /// the chips left. Once every chip is warm, nothing changes: a median
+    /// of warm chips is not moved by one frozen minority within the
+    /// 20 samples the stuck check takes.
+    pub fn drop_frozen(&mut self, i: usize) {
+        if self.warming == 0 || i >= N {
+            return;
+        }
+        let warming = self.warming;
+        self.reset(i);
+        for j in 0..N {
+            if warming & (1 << j) != 0 {
+                self.reset(j);
+            }
+        }
+    }
+
     /// Forget chip `i` (after a restart): it is read as is until it has
     /// [`WARM`] updates again.
     pub fn reset(&mut self, i: usize) {

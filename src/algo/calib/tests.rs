@@ -381,3 +381,51 @@ fn the_boards_reference_leaves_out_a_chip_out_of_line() {
         "generic: the others read {generic}"
     );
 }
+
+/// Two chips of four frozen from power-up (at 0 while the board turns at
+/// 14 °/s): until the stuck check flags them, the healthy pair's early
+/// biases are taken against a median they pull halfway. Dropped when they
+/// are found frozen, the pair starts again against the chips left and is
+/// read as it is (two chips teach nothing); kept, it would sit 7 °/s off.
+#[test]
+fn chips_found_frozen_during_the_warm_up_take_what_was_learnt_against_them() {
+    let mut rng = Rng::new(9);
+    let mut kept = RelCal::<4>::new(CalConfig::default());
+    let mut dropped = RelCal::<4>::new(CalConfig::default());
+    let read = |rng: &mut Rng| {
+        [
+            0.0,
+            0.0,
+            14.0 + 0.05 * rng.gaussian(),
+            14.0 + 0.05 * rng.gaussian(),
+        ]
+    };
+    for _ in 0..20 {
+        let y = read(&mut rng);
+        kept.update(&y, 0b1111);
+        dropped.update(&y, 0b1111);
+    }
+    dropped.drop_frozen(0);
+    dropped.drop_frozen(1);
+    for _ in 0..500 {
+        let y = read(&mut rng);
+        kept.update(&y, 0b1100);
+        dropped.update(&y, 0b1100);
+    }
+    let y = [0.0, 0.0, 14.0, 14.0];
+    let (k, d) = (kept.correct(&y), dropped.correct(&y));
+    assert!(
+        (d[2] - 14.0).abs() < 0.01 && (d[3] - 14.0).abs() < 0.01,
+        "{d:?}"
+    );
+    assert!((k[2] - 14.0).abs() > 3.0, "the case this guards: {k:?}");
+    // Once every chip is warm, a chip found frozen changes no other's.
+    let mut warm = RelCal::<4>::new(CalConfig::default());
+    for _ in 0..2000 {
+        let y = [0, 1, 2, 3].map(|i| 14.0 + 0.1 * i as f32 + 0.05 * rng.gaussian());
+        warm.update(&y, 0b1111);
+    }
+    let before = warm.correct(&y);
+    warm.drop_frozen(0);
+    assert_eq!(warm.correct(&y), before);
+}
