@@ -138,7 +138,7 @@ pub(crate) fn series_of(
                 return Err(TableError::Record(
                     p(),
                     0,
-                    format!("{c}: one topic a read (each has its own time base)"),
+                    format!("{c}: one topic instance a read (each has its own time base)"),
                 ));
             }
             topic = Some(t);

@@ -8,13 +8,14 @@
 //! one topic instance (one time base); by default every axis of the gyro
 //! instance with the most samples. Rates are turned from the log's rad/s
 //! into °/s; τ0 is the median step of the stamps, and steps over 1.5 τ0
-//! are reported as gaps (sample index in place of a line).
+//! are reported as gaps (sample index in place of a line): as ROS bags'
+//! IMU topics are ([`crate::ros2::series_of`]).
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use px4_ulog::full_parser::{read_file, Completeness, SomeVec};
 
+use crate::ros2::{series_of, Topics};
 use crate::table::{Series, TableError};
 
 /// The gyro topics: (topic, the axes' fields, the stamp's field).
@@ -27,8 +28,6 @@ const TOPICS: [(&str, [&str; 3], &str); 2] = [
     ),
 ];
 
-const AXES: [&str; 3] = ["x", "y", "z"];
-
 fn floats(v: &SomeVec) -> Option<Vec<f64>> {
     Some(match v {
         SomeVec::Float(v) => v.iter().map(|&x| f64::from(x)).collect(),
@@ -37,25 +36,10 @@ fn floats(v: &SomeVec) -> Option<Vec<f64>> {
     })
 }
 
-fn stamps(v: &SomeVec) -> Option<Vec<u64>> {
-    match v {
-        SomeVec::UInt64(v) => Some(v.clone()),
-        _ => None,
-    }
-}
-
-/// A gyro instance in the log: topic, instance, samples.
-struct Found<'a> {
-    topic: &'static str,
-    axes: [&'static str; 3],
-    stamp: &'static str,
-    instance: u8,
-    fields: &'a HashMap<String, SomeVec>,
-    samples: usize,
-}
-
 /// Read the gyro `columns` (every axis of the largest gyro instance when
-/// empty) of the ULog at `path`.
+/// empty) of the ULog at `path`: each topic instance as `TOPIC.INSTANCE`,
+/// its samples (stamp, rates) chosen and checked as a ROS bag's IMU
+/// topics are ([`crate::ros2::series_of`]).
 pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
     let p = || path.to_path_buf();
     let text = path.to_string_lossy();
@@ -63,106 +47,42 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
     if let Completeness::MalformedRecord(why) = &parsed.completeness {
         return Err(TableError::Record(p(), 0, format!("ULog record: {why}")));
     }
-    let mut found: Vec<Found> = Vec::new();
+    let mut topics = Topics::new();
     for (topic, axes, stamp) in TOPICS {
         let Some(instances) = parsed.messages.get(topic) else {
             continue;
         };
         for (id, fields) in instances {
-            let samples = fields.get(stamp).and_then(stamps).map_or(0, |s| s.len());
-            found.push(Found {
-                topic,
-                axes,
-                stamp,
-                instance: id.value(),
-                fields,
-                samples,
-            });
-        }
-    }
-    found.sort_by_key(|f| (f.topic, f.instance));
-    let names = |f: &Found| -> Vec<String> {
-        AXES.iter()
-            .map(|a| format!("{}.{}.{a}", f.topic, f.instance))
-            .collect()
-    };
-    let all: Vec<String> = found.iter().flat_map(names).collect();
-    // The instance and its axes the columns name.
-    let (which, axes): (&Found, Vec<usize>) = if columns.is_empty() {
-        let f = found
-            .iter()
-            .max_by_key(|f| f.samples)
-            .ok_or_else(|| TableError::NoColumn(p(), "sensor_gyro".into(), all.clone()))?;
-        (f, vec![0, 1, 2])
-    } else {
-        let mut which: Option<&Found> = None;
-        let mut axes = Vec::new();
-        for c in columns {
-            let hit = found
-                .iter()
-                .find_map(|f| names(f).iter().position(|n| n == c).map(|a| (f, a)));
-            let Some((f, a)) = hit else {
-                return Err(TableError::NoColumn(p(), c.clone(), all.clone()));
+            let name = format!("{topic}.{}", id.value());
+            let missing = |f: &str| TableError::NoColumn(p(), format!("{name}: {f}"), Vec::new());
+            let t = match fields.get(stamp) {
+                Some(SomeVec::UInt64(t)) => t,
+                _ => return Err(missing(stamp)),
             };
-            if which.is_some_and(|w| (w.topic, w.instance) != (f.topic, f.instance)) {
+            let mut v = [Vec::new(), Vec::new(), Vec::new()];
+            for (slot, field) in v.iter_mut().zip(axes) {
+                *slot = fields
+                    .get(field)
+                    .and_then(floats)
+                    .ok_or_else(|| missing(field))?;
+            }
+            if v.iter().any(|a| a.len() != t.len()) {
                 return Err(TableError::Record(
                     p(),
                     0,
-                    format!("{c}: one topic instance a read (each has its own time base)"),
+                    format!("{name}: fields of unequal length"),
                 ));
             }
-            which = Some(f);
-            axes.push(a);
+            // µs stamps as ns: exact, and the bags' unit.
+            let samples = t
+                .iter()
+                .enumerate()
+                .map(|(k, &us)| (us as i64 * 1000, [v[0][k], v[1][k], v[2][k]]))
+                .collect();
+            topics.insert(name, samples);
         }
-        match which {
-            Some(w) => (w, axes),
-            None => return Err(TableError::NoColumn(p(), String::new(), all)),
-        }
-    };
-    let t = which
-        .fields
-        .get(which.stamp)
-        .and_then(stamps)
-        .ok_or_else(|| TableError::NoColumn(p(), which.stamp.into(), all.clone()))?;
-    let deg = 180.0 / std::f64::consts::PI;
-    let mut rates = Vec::with_capacity(axes.len());
-    for &a in &axes {
-        let v = which
-            .fields
-            .get(which.axes[a])
-            .and_then(floats)
-            .ok_or_else(|| TableError::NoColumn(p(), which.axes[a].into(), all.clone()))?;
-        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
-            return Err(TableError::Number(
-                p(),
-                k,
-                names(which)[a].clone(),
-                v[k].to_string(),
-            ));
-        }
-        rates.push(v.into_iter().map(|x| x * deg).collect::<Vec<f64>>());
     }
-    let n = t.len();
-    if n < 3 {
-        return Err(TableError::TooShort(p(), n));
-    }
-    if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
-        return Err(TableError::Time(
-            p(),
-            k + 1,
-            t[k] as f64 * 1e-6,
-            t[k + 1] as f64 * 1e-6,
-        ));
-    }
-    let steps: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-6).collect();
-    let (tau0, (gaps, gap_samples)) = crate::table::gaps_of(&steps);
-    Ok(Series {
-        names: axes.iter().map(|&a| names(which)[a].clone()).collect(),
-        rates,
-        tau0,
-        gaps,
-        gap_samples,
-    })
+    series_of(&topics, columns, path, "sensor_gyro")
 }
 
 #[cfg(test)]
