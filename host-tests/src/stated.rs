@@ -209,7 +209,7 @@ fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
     ) else {
         panic!("pipeline settings")
     };
-    let mut link = HostLink {
+    let mut link: HostLink = HostLink {
         port: Port::new(Settings::default()),
         bytes: 0,
     };

@@ -29,9 +29,9 @@ use std::cell::RefCell;
 
 /// The link as the harness runs it: the board's port, its bytes taken by
 /// a UART that takes every byte.
-pub struct HostLink {
+pub struct HostLink<const TX: usize = 2048> {
     /// The port.
-    pub port: Port<2048>,
+    pub port: Port<TX>,
     /// Bytes the UART took.
     pub bytes: u64,
 }
@@ -51,8 +51,8 @@ impl embedded_hal_nb::serial::Write<u8> for Sink {
     }
 }
 
-impl schedule::Link<2048> for HostLink {
-    fn port(&mut self) -> &mut Port<2048> {
+impl<const TX: usize> schedule::Link<TX> for HostLink<TX> {
+    fn port(&mut self) -> &mut Port<TX> {
         &mut self.port
     }
     fn flush(&mut self) {
@@ -265,7 +265,7 @@ pub fn run(
     for ti in t.iter_mut() {
         let _ = ti.driver().flush_fifo();
     }
-    let mut link = HostLink {
+    let mut link: HostLink = HostLink {
         port: Port::new(Settings::default()),
         bytes: 0,
     };

@@ -15,37 +15,9 @@ use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
+use host_tests::timed_board::HostLink;
 use rtic_core::Exclusive;
 use std::cell::RefCell;
-
-/// The demo's link: its port (the same size), its bytes taken at once.
-struct Link {
-    port: Port<1024>,
-}
-
-struct Sink;
-
-impl embedded_hal_nb::serial::ErrorType for Sink {
-    type Error = core::convert::Infallible;
-}
-
-impl embedded_hal_nb::serial::Write<u8> for Sink {
-    fn write(&mut self, _: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        Ok(())
-    }
-    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        Ok(())
-    }
-}
-
-impl schedule::Link<1024> for Link {
-    fn port(&mut self) -> &mut Port<1024> {
-        &mut self.port
-    }
-    fn flush(&mut self) {
-        self.port.drain(&mut Sink);
-    }
-}
 
 const VIEW: StatusView = StatusView {
     taus: demo::NOISE_TAU,
@@ -84,8 +56,10 @@ fn main() {
     } else {
         Settings::default()
     };
-    let mut link = Link {
+    // The demo's port size, its bytes taken at once.
+    let mut link = HostLink::<1024> {
         port: Port::new(settings),
+        bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();
     let Ok(mut tracker) = demo::Tracker::new(demo::tracker_config()) else {
