@@ -248,6 +248,7 @@ static void rd_status(reader *r, gl_status *s)
     s->accepted = rd_v32(r);
     s->rejected = rd_v32(r);
     s->stack_peak = rd_v32(r);
+    s->store = rd_variant(r, 4);
     s->n_gyros = rd_len(r);
     for (i = 0; i < s->n_gyros && !r->bad; i++) {
         gl_gyro_status *g = &s->gyros[i];
@@ -279,7 +280,7 @@ static void rd_ack(reader *r, gl_ack *s)
     s->id = s->has_id ? rd_u8(r) : 0;
     /* Result<(), Reject>: 0 Ok, 1 then the reason. */
     s->ok = (uint8_t)(rd_option(r) == 0);
-    s->reject = s->ok ? 0 : rd_variant(r, 6);
+    s->reject = s->ok ? 0 : rd_variant(r, 7);
 }
 
 /* ---- frames -------------------------------------------------------- */
@@ -448,6 +449,8 @@ size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, s
         wr_varint(&w, c->arg);
         break;
     case GL_REQUEST_STATUS:
+    case GL_SAVE_SETTINGS:
+    case GL_FACTORY_RESET:
         break;
     case GL_SET_COMPENSATION:
         if (c->arg > 2) return 0;

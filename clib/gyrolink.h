@@ -2,7 +2,7 @@
  * gyrolink: the gyro board's output link for the antenna controller, in C.
  *
  * Decodes every frame the board sends and encodes every command it takes,
- * as docs/link.md specifies them (protocol version 6): COBS framing with a
+ * as docs/link.md specifies them (protocol version 7): COBS framing with a
  * 0x00 delimiter, CRC-16/IBM-3740 (poly 0x1021, init 0xFFFF) over the
  * payload, payload = version (u8) | link_seq (u32 LE) | body (postcard).
  *
@@ -22,7 +22,7 @@ extern "C" {
 #endif
 
 /** The protocol version this library speaks. */
-#define GL_VERSION 6u
+#define GL_VERSION 7u
 /** Gyros a frame can describe at most. */
 #define GL_MAX_GYROS 8u
 /** Longest payload (version, link_seq, body), bytes. */
@@ -138,12 +138,17 @@ typedef struct {
     uint32_t overruns;
     uint32_t sent, dropped, accepted, rejected;
     uint32_t stack_peak;
+    /** The settings store: 0 Absent (no store on this build), 1 Defaults
+     * (nothing saved), 2 Stored (a record read back and checked), 3 Corrupt
+     * (the record at boot did not check: defaults until the next save). */
+    uint8_t store;
     uint8_t n_gyros;
     gl_gyro_status gyros[GL_MAX_GYROS];
 } gl_status;
 
 /** The answer to a command (frame kind 3). reject (when ok is 0):
- * 0 Corrupt, 1 TooLong, 2 Version, 3 Malformed, 4 OutOfRange, 5 Refused. */
+ * 0 Corrupt, 1 TooLong, 2 Version, 3 Malformed, 4 OutOfRange, 5 Refused,
+ * 6 Storage (the flash failed, or did not read back what it wrote). */
 typedef struct {
     uint8_t has_id;
     uint8_t id;
@@ -201,12 +206,17 @@ typedef enum {
     GL_SET_DIVIDER = 2,
     GL_SET_STATUS_EVERY = 3,
     GL_REQUEST_STATUS = 4,
-    GL_SET_COMPENSATION = 5
+    GL_SET_COMPENSATION = 5,
+    /** Save the settings in force to flash (acknowledged once read back). */
+    GL_SAVE_SETTINGS = 6,
+    /** The default settings now, the saved ones erased. */
+    GL_FACTORY_RESET = 7
 } gl_op;
 
 /** A command: `arg` is the mode, the method, the divider, the status
  * period, or the compensation (0 Off, 1 ToFrame, 2 Horizon with
- * `horizon_us`); unused for GL_REQUEST_STATUS. */
+ * `horizon_us`); unused for GL_REQUEST_STATUS, GL_SAVE_SETTINGS and
+ * GL_FACTORY_RESET. */
 typedef struct {
     uint8_t id;
     gl_op op;

@@ -48,7 +48,7 @@ static void tests(void)
 
     /* RequestStatus with id 7, the host's first frame. */
     {
-        static const uint8_t want[] = {0x02, 0x06, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0xf8, 0x89, 0x00};
+        static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x99, 0x31, 0x00};
         uint8_t out[64];
         gl_command c;
         size_t n;
@@ -64,9 +64,27 @@ static void tests(void)
         CHECK(gl_encode_command(&c, 0, out, sizeof out) == 0);
     }
 
+    /* SaveSettings and FactoryReset with id 7 (the same bytes the Rust
+     * encoder gives: link::tests). */
+    {
+        static const uint8_t save[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x06, 0xdb, 0x11, 0x00};
+        static const uint8_t reset[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x07, 0xfa, 0x01, 0x00};
+        uint8_t out[64];
+        gl_command c;
+        size_t n;
+        memset(&c, 0, sizeof c);
+        c.id = 7;
+        c.op = GL_SAVE_SETTINGS;
+        n = gl_encode_command(&c, 0, out, sizeof out);
+        CHECK(n == sizeof save && memcmp(out, save, n) == 0);
+        c.op = GL_FACTORY_RESET;
+        n = gl_encode_command(&c, 0, out, sizeof out);
+        CHECK(n == sizeof reset && memcmp(out, reset, n) == 0);
+    }
+
     /* The board's sixth frame, rejecting command 7 as out of range. */
     {
-        static const uint8_t wire[] = {0x03, 0x06, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x09, 0x8b, 0x00};
+        static const uint8_t wire[] = {0x03, 0x07, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x4c, 0xe4, 0x00};
         gl_decoder d;
         gl_frame f;
         int ok = 0, bad = 0;

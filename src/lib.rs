@@ -33,3 +33,4 @@ pub mod drivers;
 pub mod emu;
 pub mod link;
 pub mod pipeline;
+pub mod store;

@@ -22,10 +22,13 @@
 use rtic_core::prelude::*;
 use rtic_core::Mutex;
 
+use crate::algo::mounting::CalRecord;
 use crate::drivers::Gyro;
-use crate::link::port::{ChipTime, NoiseSnapshot, Port};
+use crate::link::msg::Reject;
+use crate::link::port::{ChipTime, NoiseSnapshot, Port, StoreRequest};
 use crate::pipeline::tracker::{NoiseTracker, Probe};
 use crate::pipeline::{Output, Pipeline};
+use crate::store::Store;
 
 /// The board's time for its samples: one µs counter (TIM5 on the board,
 /// the emulated bus's timer in QEMU) read at each tick, extended to 64
@@ -227,6 +230,33 @@ pub fn receive<const N: usize, const TX: usize, L: Link<TX>, R>(
     (pipe, link).lock(|pipe, link| {
         link.port().receive(rx, pipe);
         link.flush();
+    });
+}
+
+/// Carry out the store command waiting on the port, if any (a save or a
+/// factory reset), and queue its acknowledgement. Run in the background:
+/// the link is held only to take the request and to answer it, not while
+/// the flash is written (which stalls the core anyway, `crate::store`).
+/// `calibration`: the record in use, saved beside the settings.
+pub fn store<const TX: usize, L: Link<TX>, F>(
+    store: &mut Store<F>,
+    calibration: Option<&CalRecord>,
+    link: &mut impl Mutex<T = L>,
+) where
+    F: embedded_storage_async::nor_flash::MultiwriteNorFlash,
+{
+    let Some(request) = link.lock(|l| l.port().store_request()) else {
+        return;
+    };
+    let result = match request {
+        StoreRequest::Save(s) => store.save(&s, calibration),
+        StoreRequest::Clear => store.clear(),
+    };
+    let state = store.state();
+    link.lock(|l| {
+        l.port()
+            .store_done(result.map_err(|_| Reject::Storage), state);
+        l.flush();
     });
 }
 

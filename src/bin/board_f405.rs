@@ -80,7 +80,7 @@ use gyro_array::board::{persist, stack};
 use gyro_array::drivers::adxrs453::Adxrs453;
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
-use gyro_array::link::msg::Settings;
+use gyro_array::link::msg::{Settings, StoreState};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
@@ -88,6 +88,7 @@ use gyro_array::pipeline::startup::start_array;
 use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use gyro_array::store::Store;
 
 const FS_HZ: u32 = 1000;
 /// ICM-42688-P SPI clock limit (datasheet: 24 MHz).
@@ -155,6 +156,22 @@ fn calib_bytes() -> &'static [u8] {
     // while the firmware runs; MAX_LEN is far less.
     unsafe { core::slice::from_raw_parts(&raw const _calib_start, mounting::MAX_LEN) }
 }
+
+/// The settings store's sectors (`STORE` in memory.x), as offsets into
+/// the flash.
+#[allow(unsafe_code)]
+fn store_range() -> core::ops::Range<u32> {
+    unsafe extern "C" {
+        static _store_start: u8;
+        static _store_end: u8;
+    }
+    const FLASH_BASE: u32 = 0x0800_0000;
+    let at = |p: *const u8| (p as u32).wrapping_sub(FLASH_BASE);
+    at(&raw const _store_start)..at(&raw const _store_end)
+}
+
+/// The board's settings store.
+type BoardStore = Store<f405::StoreFlash>;
 
 /// A start-up step that cannot go on: log it and reset (the record says
 /// the firmware asked; the next boot reports it).
@@ -272,6 +289,10 @@ mod app {
         rx: f405::RxQueue,
         tracker: &'static mut Tracker,
         meter: stack::StackMeter,
+        /// The settings store, and the calibration record in use (saved
+        /// beside the settings).
+        store: BoardStore,
+        calibration: Option<CalRecord>,
     }
 
     #[init(local = [
@@ -417,13 +438,19 @@ mod app {
         };
         let (tx, rx) = serial.split();
         let (rx_feed, rx) = f405::rx_queue(rx, cx.local.rx_bytes);
-        let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(Settings::default())) else {
-            give_up("link port taken twice")
+        // The saved settings (the defaults where none are saved or the record
+        // does not check, said in the log and in every status frame).
+        let Some(mut store) = Store::new(f405::StoreFlash::new(dp.FLASH), store_range()) else {
+            give_up("settings store range")
         };
-        // The delay compensation predicts each frame's rates to its last byte
-        // at the rate the link runs.
-        port.set_timing(baud, 1_000_000 / FS_HZ);
-        port.set_core_hz(core_hz);
+        let saved = store.load();
+        match saved.state {
+            StoreState::Stored => defmt::info!("settings: saved ones in use"),
+            StoreState::Corrupt => {
+                defmt::warn!("settings: the saved record does not check; defaults")
+            }
+            _ => defmt::info!("settings: none saved; defaults"),
+        }
         let bus: &'static Spi1Bus = cx.local.bus1.insert(RefCell::new(spi1));
         let bus2: &'static Spi2Bus = cx.local.bus2.insert(RefCell::new(spi2));
 
@@ -457,10 +484,34 @@ mod app {
         // temperature slope). Without a valid record the board runs
         // uncalibrated and says so: here, and in every sample frame (bit 7 of
         // `degraded`).
-        match pipe.set_calibration(CalRecord::decode(calib_bytes()).as_ref().map_err(|e| *e)) {
+        // The record saved with the settings, else the lab's in its sector.
+        let calibration = match saved.calibration {
+            Some(Ok(rec)) => Ok(rec),
+            Some(Err(e)) => {
+                defmt::warn!("saved calibration record: {}; the lab's record instead", e);
+                CalRecord::decode(calib_bytes())
+            }
+            None => CalRecord::decode(calib_bytes()),
+        };
+        match pipe.set_calibration(calibration.as_ref().map_err(|e| *e)) {
             Ok(()) => defmt::info!("calibration record in use"),
             Err(e) => defmt::warn!("calibration record: {}; running uncalibrated", e),
         }
+        let settings = match pipe.set_method(saved.settings.method.method()) {
+            Ok(()) => saved.settings,
+            Err(_) => {
+                defmt::error!("the saved fusion method is refused; the defaults instead");
+                Settings::default()
+            }
+        };
+        let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(settings)) else {
+            give_up("link port taken twice")
+        };
+        port.set_store_state(saved.state);
+        // The delay compensation predicts each frame's rates to its last byte
+        // at the rate the link runs.
+        port.set_timing(baud, 1_000_000 / FS_HZ);
+        port.set_core_hz(core_hz);
         let failed = start_array(
             [&mut g0, &mut g1, &mut g2, &mut g3],
             &mut g4,
@@ -576,6 +627,8 @@ mod app {
                 rx,
                 tracker,
                 meter,
+                store,
+                calibration: calibration.ok(),
             },
         )
     }
@@ -675,7 +728,7 @@ mod app {
     /// Everything that does not have to be done within the sample
     /// (`gyro_array::app::Background`): the E-DAVARs, commands; and the
     /// logs, the stack meter.
-    #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter])]
+    #[task(priority = 1, shared = [pipe, link, noise], local = [rx, tracker, meter, store, calibration])]
     async fn background(mut cx: background::Context, mut inbox: Receiver<'static, Work, JOBS>) {
         let l = cx.local;
         let mut bg = schedule::Background {
@@ -716,6 +769,7 @@ mod app {
             }
             if l.rx.waiting() {
                 schedule::receive(&mut *l.rx, &mut cx.shared.pipe, &mut cx.shared.link);
+                schedule::store(l.store, l.calibration.as_ref(), &mut cx.shared.link);
             }
         }
     }

@@ -333,3 +333,97 @@ impl crate::drivers::SampleCapture for Int1Capture<'_> {
         self.last
     }
 }
+
+/// The MCU's flash under the settings store (`gyro_array::store`):
+/// stm32f4xx-hal's blocking `NorFlash` (byte programming, 128 KiB erase
+/// unit, reprogramming allowed: RM0090 3.6) behind the async trait the
+/// store is written against. Unlocked for each program or erase only, so a
+/// stray write at any other time faults instead of changing the flash.
+pub struct StoreFlash(stm32f4xx_hal::flash::LockedFlash);
+
+impl StoreFlash {
+    /// The flash, locked.
+    pub fn new(flash: pac::FLASH) -> Self {
+        Self(stm32f4xx_hal::flash::LockedFlash::new(flash))
+    }
+}
+
+impl embedded_storage_async::nor_flash::ErrorType for StoreFlash {
+    type Error = stm32f4xx_hal::flash::Error;
+}
+
+impl embedded_storage_async::nor_flash::ReadNorFlash for StoreFlash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        embedded_storage::nor_flash::ReadNorFlash::read(&mut self.0, offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        embedded_storage::nor_flash::ReadNorFlash::capacity(&self.0)
+    }
+}
+
+impl embedded_storage_async::nor_flash::NorFlash for StoreFlash {
+    const WRITE_SIZE: usize = 1;
+    const ERASE_SIZE: usize = 128 * 1024;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        use stm32f4xx_hal::flash::FlashExt;
+        // A 128 KiB sector erase at the HAL's x8 parallelism takes up to
+        // 4 s (datasheet table 39), with every fetch from flash stalled: no
+        // task can feed the watchdog meanwhile, so its period is widened
+        // for the erase and put back after.
+        let saved = widen_watchdog();
+        let r = embedded_storage::nor_flash::NorFlash::erase(&mut self.0.unlocked(), from, to);
+        restore_watchdog(saved);
+        r
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        use stm32f4xx_hal::flash::FlashExt;
+        embedded_storage::nor_flash::NorFlash::write(&mut self.0.unlocked(), offset, bytes)
+    }
+}
+
+impl embedded_storage_async::nor_flash::MultiwriteNorFlash for StoreFlash {}
+
+/// The independent watchdog's prescaler and reload values.
+type WatchdogPeriod = (u8, u16);
+
+/// Reload the watchdog and set its period to 8 s (LSI 32 kHz / 256, 1 000
+/// counts); what it was, back.
+#[allow(unsafe_code)]
+fn widen_watchdog() -> WatchdogPeriod {
+    // SAFETY: the IWDG's registers only; the sample task writes nothing
+    // but the reload key (KR = 0xAAAA), which is safe at any time, and the
+    // background task that saves is the only writer of PR and RLR after
+    // start-up.
+    let iwdg = unsafe { pac::IWDG::steal() };
+    let saved = (iwdg.pr().read().pr().bits(), iwdg.rlr().read().rl().bits());
+    set_watchdog(&iwdg, (6, 1000));
+    saved
+}
+
+/// Put the watchdog's period back and reload it.
+#[allow(unsafe_code)]
+fn restore_watchdog(saved: WatchdogPeriod) {
+    // SAFETY: as in `widen_watchdog`.
+    let iwdg = unsafe { pac::IWDG::steal() };
+    set_watchdog(&iwdg, saved);
+}
+
+/// RM0090 21.3.2: unlock PR and RLR (0x5555), write them, wait until the
+/// watchdog has taken both (PVU, RVU clear), reload (0xAAAA).
+#[allow(unsafe_code)]
+fn set_watchdog(iwdg: &pac::IWDG, (pr, rl): WatchdogPeriod) {
+    iwdg.kr().write(|w| unsafe { w.key().bits(0xAAAA) });
+    iwdg.kr().write(|w| unsafe { w.key().bits(0x5555) });
+    iwdg.pr().write(|w| unsafe { w.pr().bits(pr) });
+    iwdg.rlr().write(|w| unsafe { w.rl().bits(rl) });
+    let mut polls = READY_POLLS;
+    while iwdg.sr().read().bits() & 0b11 != 0 && polls > 0 {
+        polls -= 1;
+    }
+    iwdg.kr().write(|w| unsafe { w.key().bits(0xAAAA) });
+}

@@ -10,6 +10,7 @@
 pub mod adxrs453;
 pub mod board;
 pub mod demo;
+pub mod flash;
 pub mod icm42688;
 pub mod mount;
 pub mod noise;

@@ -21,7 +21,7 @@ pub mod wire;
 mod tests;
 
 /// Protocol version, the first byte of every payload.
-pub const VERSION: u8 = 6;
+pub const VERSION: u8 = 7;
 
 /// UART speed: 6 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
 /// oversampling by 8, USARTDIV = 1.75), on RS-422 to the antenna

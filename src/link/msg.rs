@@ -219,6 +219,8 @@ pub struct Status {
     pub link: LinkCounters,
     /// Peak stack use, bytes (0 where not measured).
     pub stack_peak: u32,
+    /// What the settings store holds.
+    pub store: StoreState,
     /// Per gyro counters.
     pub gyros: Vec<GyroStatus, MAX_GYROS>,
 }
@@ -290,6 +292,40 @@ pub enum Compensation {
     Horizon(u16),
 }
 
+impl Settings {
+    /// Whether every value is inside the range a command may set (a
+    /// stored record is checked the same way before it is used).
+    pub fn check(&self) -> Result<(), Reject> {
+        let status_ok = self.status_every == 0 || (100..=60_000).contains(&self.status_every);
+        let horizon_ok = match self.compensation {
+            Compensation::Horizon(h) => h <= MAX_HORIZON_US,
+            _ => true,
+        };
+        if (1..=1000).contains(&self.divider) && status_ok && horizon_ok {
+            Ok(())
+        } else {
+            Err(Reject::OutOfRange)
+        }
+    }
+}
+
+/// What the board's settings store holds (`src/store.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreState {
+    /// This build keeps no settings (a host replay, the QEMU demo).
+    #[default]
+    Absent,
+    /// Nothing saved (or cleared by a factory reset): the defaults came up
+    /// at boot.
+    Defaults,
+    /// A record read back and checked, at boot or after a save.
+    Stored,
+    /// The record found at boot did not read back or check: the defaults
+    /// are in force until the next save.
+    Corrupt,
+}
+
 /// The longest horizon [`Compensation::Horizon`] takes, µs: a line fitted
 /// to a few milliseconds says little about the rate further out.
 pub const MAX_HORIZON_US: u16 = 10_000;
@@ -329,8 +365,12 @@ pub enum Reject {
     Malformed,
     /// A value outside its range (the divider).
     OutOfRange,
-    /// The firmware refused the change (the fusion configuration).
+    /// The firmware refused the change (the fusion configuration; a save
+    /// while one is under way or on a build without a store).
     Refused,
+    /// The settings store failed to write or to read back what it wrote
+    /// (the settings in force are unchanged by it).
+    Storage,
 }
 
 /// A command to the board.
@@ -358,4 +398,11 @@ pub enum Op {
     RequestStatus,
     /// Select the delay compensation of the sample frames.
     SetCompensation(Compensation),
+    /// Save the settings in force (and the calibration record in use) to
+    /// flash; they come up at the next boot. The acknowledgement comes
+    /// once the record is written and read back.
+    SaveSettings,
+    /// The default settings now, and the saved ones erased: the next
+    /// boot comes up with the defaults and the lab's calibration record.
+    FactoryReset,
 }

@@ -14,8 +14,8 @@ use heapless::Vec;
 
 use super::msg::{
     Ack, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
-    GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, MAX_GYROS,
-    MAX_HORIZON_US,
+    GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, StoreState,
+    MAX_GYROS,
 };
 use super::ring::ByteRing;
 use super::wire::{
@@ -187,6 +187,17 @@ impl FusionMethod {
     }
 }
 
+/// What a command asked of the settings store (done in the background:
+/// a flash write stalls the core, see `src/store.rs`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreRequest {
+    /// Save these settings.
+    Save(Settings),
+    /// Erase what is saved (the defaults are already in force).
+    Clear,
+}
+
 /// The board's end of the link, with a `TX`-byte transmit queue.
 pub struct Port<const TX: usize> {
     tx: ByteRing<TX>,
@@ -199,6 +210,10 @@ pub struct Port<const TX: usize> {
     /// Per axis, the described sequence number last sent.
     noise_sent: [Option<u32>; 3],
     status_requested: bool,
+    /// The settings store's state, and the store command waiting for it
+    /// (its id and what it asks), acknowledged once done.
+    store: StoreState,
+    store_pending: Option<(u8, StoreRequest)>,
     /// Encoding scratch, kept so that a frame zeroes no buffers.
     payload: [u8; MAX_PAYLOAD],
     /// The fused rates' recent samples, for the delay compensation.
@@ -230,6 +245,8 @@ impl<const TX: usize> Port<TX> {
             noise_turn: 0,
             noise_sent: [None; 3],
             status_requested: false,
+            store: StoreState::Absent,
+            store_pending: None,
             payload: [0; MAX_PAYLOAD],
             predictor: Predictor::new(),
             predictor_seq: None,
@@ -541,6 +558,7 @@ impl<const TX: usize> Port<TX> {
             overruns: pipe.overruns(),
             link: self.counters,
             stack_peak,
+            store: self.store,
             gyros,
         })
     }
@@ -600,8 +618,19 @@ impl<const TX: usize> Port<TX> {
                     FrameError::Malformed => Reject::Malformed,
                 }),
             ),
-            Ok(d) => (Some(d.body.id), self.apply(d.body, pipe)),
+            Ok(d) => {
+                let r = self.apply(d.body, pipe);
+                if r.is_ok() && matches!(d.body.op, Op::SaveSettings | Op::FactoryReset) {
+                    // Acknowledged by `store_done`.
+                    return;
+                }
+                (Some(d.body.id), r)
+            }
         };
+        self.acknowledge(id, result);
+    }
+
+    fn acknowledge(&mut self, id: Option<u8>, result: Result<(), Reject>) {
         if result.is_ok() {
             self.counters.accepted = self.counters.accepted.wrapping_add(1);
         } else {
@@ -610,36 +639,58 @@ impl<const TX: usize> Port<TX> {
         self.send_ref(FrameRef::Ack(&Ack { id, result }));
     }
 
+    /// The settings store's state at boot (a port starts [`StoreState::Absent`]:
+    /// store commands are refused).
+    pub fn set_store_state(&mut self, state: StoreState) {
+        self.store = state;
+    }
+
+    /// The store command waiting, if any (it stays pending until
+    /// [`Port::store_done`]).
+    pub fn store_request(&self) -> Option<StoreRequest> {
+        self.store_pending.map(|(_, r)| r)
+    }
+
+    /// The pending store command was carried out with `result` and the
+    /// store is now in `state`: its acknowledgement is queued.
+    pub fn store_done(&mut self, result: Result<(), Reject>, state: StoreState) {
+        self.store = state;
+        if let Some((id, _)) = self.store_pending.take() {
+            self.acknowledge(Some(id), result);
+        }
+    }
+
     fn apply<const N: usize>(&mut self, c: Command, pipe: &mut Pipeline<N>) -> Result<(), Reject> {
+        let mut next = self.settings;
         match c.op {
-            Op::SetMode(m) => self.settings.mode = m,
-            Op::SetMethod(m) => {
-                pipe.set_method(m.method()).map_err(|_| Reject::Refused)?;
-                self.settings.method = m;
-            }
-            Op::SetDivider(d) => {
-                if !(1..=1000).contains(&d) {
-                    return Err(Reject::OutOfRange);
-                }
-                self.settings.divider = d;
-            }
-            Op::SetStatusEvery(n) => {
-                if n != 0 && !(100..=60_000).contains(&n) {
-                    return Err(Reject::OutOfRange);
-                }
-                self.settings.status_every = n;
-            }
+            Op::SetMode(m) => next.mode = m,
+            Op::SetMethod(m) => next.method = m,
+            Op::SetDivider(d) => next.divider = d,
+            Op::SetStatusEvery(n) => next.status_every = n,
             Op::RequestStatus => self.status_requested = true,
-            Op::SetCompensation(c) => {
-                if let Compensation::Horizon(h) = c {
-                    if h > MAX_HORIZON_US {
-                        return Err(Reject::OutOfRange);
-                    }
+            Op::SetCompensation(c) => next.compensation = c,
+            Op::SaveSettings | Op::FactoryReset => {
+                if self.store == StoreState::Absent || self.store_pending.is_some() {
+                    return Err(Reject::Refused);
                 }
-                self.settings.compensation = c;
-                self.retime();
+                if c.op == Op::FactoryReset {
+                    next = Settings::default();
+                }
             }
         }
+        next.check()?;
+        // A method selected again starts its noise model again.
+        if matches!(c.op, Op::SetMethod(_)) || next.method != self.settings.method {
+            pipe.set_method(next.method.method())
+                .map_err(|_| Reject::Refused)?;
+        }
+        self.settings = next;
+        self.retime();
+        self.store_pending = match c.op {
+            Op::SaveSettings => Some((c.id, StoreRequest::Save(next))),
+            Op::FactoryReset => Some((c.id, StoreRequest::Clear)),
+            _ => self.store_pending,
+        };
         Ok(())
     }
 }

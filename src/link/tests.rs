@@ -72,6 +72,7 @@ fn big_status(n: usize) -> Frame {
             rejected: u32::MAX,
         },
         stack_peak: u32::MAX,
+        store: StoreState::Corrupt,
         gyros: vec(
             GyroStatus {
                 flags: 0xFF,
@@ -531,8 +532,20 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x02, 0x06, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0xf8, 0x89, 0x00]
+        [0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x99, 0x31, 0x00]
     );
+    // The store commands, as the C library's test has them.
+    for (op, crc) in [
+        (Op::SaveSettings, [0xdb, 0x11]),
+        (Op::FactoryReset, [0xfa, 0x01]),
+    ] {
+        let n = encode(0, &Command { id: 7, op }, &mut buf).unwrap();
+        let code = if op == Op::SaveSettings { 0x06 } else { 0x07 };
+        assert_eq!(
+            buf[..n],
+            [0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, code, crc[0], crc[1], 0x00]
+        );
+    }
     let n = encode(
         5,
         &Frame::Ack(Ack {
@@ -544,7 +557,7 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x03, 0x06, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x09, 0x8b, 0x00]
+        [0x03, 0x07, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x4c, 0xe4, 0x00]
     );
 }
 
@@ -666,4 +679,55 @@ fn the_horizon_follows_the_core_clock() {
     // take 625 µs, not 60.
     port.set_core_hz(16_000_000);
     assert_eq!(port.horizon_us().unwrap(), at_168 + 625 - 60);
+}
+
+#[test]
+fn a_store_command_is_acknowledged_once_the_store_has_done_it() {
+    use super::port::StoreRequest;
+    let ack = |id, result| {
+        Frame::Ack(Ack {
+            id: Some(id),
+            result,
+        })
+    };
+    let mut pipe = pipeline();
+    let mut port = Port::<1024>::new(Settings::default());
+    // A build without a store refuses, and changes nothing.
+    let got = exchange(&mut port, &mut pipe, &command_bytes(1, Op::SaveSettings));
+    assert_eq!(got, [ack(1, Err(Reject::Refused))]);
+    assert_eq!(port.store_request(), None);
+
+    port.set_store_state(StoreState::Defaults);
+    let mut bytes = command_bytes(2, Op::SetDivider(4));
+    bytes.extend(command_bytes(3, Op::SaveSettings));
+    // A second while the first is under way is refused; other commands
+    // still go through.
+    bytes.extend(command_bytes(4, Op::FactoryReset));
+    bytes.extend(command_bytes(5, Op::SetMode(Mode::Raw)));
+    let got = exchange(&mut port, &mut pipe, &bytes);
+    assert_eq!(
+        got,
+        [ack(2, Ok(())), ack(4, Err(Reject::Refused)), ack(5, Ok(()))],
+        "no acknowledgement for the save before it is done"
+    );
+    let saved = Settings {
+        divider: 4,
+        ..Settings::default()
+    };
+    assert_eq!(port.store_request(), Some(StoreRequest::Save(saved)));
+    port.store_done(Ok(()), StoreState::Stored);
+    assert_eq!(port.store_request(), None);
+    let got = exchange(&mut port, &mut pipe, &[]);
+    assert_eq!(got, [ack(3, Ok(()))]);
+
+    // A factory reset: the defaults at once, the erase acknowledged after.
+    let got = exchange(&mut port, &mut pipe, &command_bytes(6, Op::FactoryReset));
+    assert!(got.is_empty());
+    assert_eq!(port.settings(), Settings::default());
+    assert_eq!(port.store_request(), Some(StoreRequest::Clear));
+    port.store_done(Err(Reject::Storage), StoreState::Corrupt);
+    let got = exchange(&mut port, &mut pipe, &[]);
+    assert_eq!(got, [ack(6, Err(Reject::Storage))]);
+    let counters = port.counters();
+    assert_eq!((counters.accepted, counters.rejected), (3, 3));
 }

@@ -793,6 +793,8 @@ fn main() {
             );
             let ok = qemu(&build_firmware("qemu,persist", "qemu-faults"), false);
             must(ok, "fault containment (qemu-faults)");
+            let ok = qemu(&build_qemu("qemu-settings"), false);
+            must(ok, "saved settings across a reset (qemu-settings)");
             must(
                 clib(),
                 "the controller's C library (clib/): builds, tests, the demo recording",
@@ -865,6 +867,7 @@ fn main() {
                 build_qemu("qemu-tests"),
                 build_qemu("qemu-demo"),
                 build_firmware("qemu,persist", "qemu-faults"),
+                build_qemu("qemu-settings"),
                 build_board(),
             ];
             let mut ours_total = 0;

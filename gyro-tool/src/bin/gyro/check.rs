@@ -34,6 +34,7 @@ enum AckKind {
     Malformed,
     OutOfRange,
     Refused,
+    Storage,
 }
 
 impl AckKind {
@@ -46,6 +47,7 @@ impl AckKind {
             Err(Reject::Malformed) => AckKind::Malformed,
             Err(Reject::OutOfRange) => AckKind::OutOfRange,
             Err(Reject::Refused) => AckKind::Refused,
+            Err(Reject::Storage) => AckKind::Storage,
         }
     }
 }

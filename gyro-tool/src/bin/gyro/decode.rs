@@ -137,6 +137,7 @@ pub fn run(a: Args) -> Res<bool> {
                         "accepted",
                         "rejected",
                         "stack_peak",
+                        "store",
                     ]
                     .map(String::from)
                     .to_vec();
@@ -163,6 +164,7 @@ pub fn run(a: Args) -> Res<bool> {
                     s.link.accepted.to_string(),
                     s.link.rejected.to_string(),
                     s.stack_peak.to_string(),
+                    format!("{:?}", s.store),
                 ];
                 for g in &s.gyros {
                     r.extend(g.scale_ppm.iter().map(|v| v.to_string()));

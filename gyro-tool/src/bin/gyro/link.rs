@@ -35,6 +35,8 @@ fn parse_op(s: &str) -> Result<Op, String> {
     let num = |v: &str| v.parse::<u32>().map_err(|e| format!("{s:?}: {e}"));
     Ok(match (k, v) {
         ("status", "") => Op::RequestStatus,
+        ("save", "") => Op::SaveSettings,
+        ("factory-reset", "") => Op::FactoryReset,
         // Out-of-range values are sent as they are: the board rejects them.
         ("divider", v) => Op::SetDivider(u16::try_from(num(v)?).unwrap_or(u16::MAX)),
         ("status-every", v) => Op::SetStatusEvery(num(v)?),
@@ -50,7 +52,7 @@ fn parse_op(s: &str) -> Result<Op, String> {
         }
         _ => {
             return Err(format!(
-                "{s:?}: expected status, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
+                "{s:?}: expected status, save, factory-reset, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
             ))
         }
     })
