@@ -136,7 +136,7 @@ int main(int argc, char **argv)
             for (i = 0; i < s->n_health; i++) {
                 printf(",flags_%d", i);
             }
-            fputc('\n', stdout);
+            fputs(",angle_x,angle_y,angle_z\n", stdout);
             header = 1;
         }
         printf("%lu,%lu,%llu", (unsigned long)f.link_seq, (unsigned long)s->seq, (unsigned long long)s->t_us);
@@ -157,6 +157,13 @@ int main(int argc, char **argv)
         }
         for (i = 0; i < s->n_health; i++) {
             printf(",%u", (unsigned)s->health[i]);
+        }
+        /* The integrated angle, 2^-32 turn (empty where not sent). */
+        for (a = 0; a < 3; a++) {
+            fputc(',', stdout);
+            if (s->has_angle) {
+                printf("%lu", (unsigned long)s->angle_turn32[a]);
+            }
         }
         fputc('\n', stdout);
     }

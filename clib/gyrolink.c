@@ -197,6 +197,10 @@ static void rd_sample(reader *r, gl_sample *s)
             s->noise.sigma_dps[a] = rd_f32(r);
         }
     }
+    s->has_angle = rd_option(r);
+    for (a = 0; a < 3; a++) {
+        s->angle_turn32[a] = s->has_angle ? rd_le32(r) : 0;
+    }
 }
 
 static void rd_raw(reader *r, gl_raw *s)
@@ -229,6 +233,7 @@ static void rd_settings(reader *r, gl_settings *s)
     s->status_every = rd_v32(r);
     s->compensation = rd_variant(r, 3);
     s->horizon_us = s->compensation == 2 ? rd_v16(r) : 0;
+    s->angle = rd_option(r); /* a bool: 0 or 1, as an Option's tag */
 }
 
 static void rd_status(reader *r, gl_status *s)
@@ -451,6 +456,10 @@ size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, s
     case GL_REQUEST_STATUS:
     case GL_SAVE_SETTINGS:
     case GL_FACTORY_RESET:
+        break;
+    case GL_SET_ANGLE:
+        if (c->arg > 1) return 0;
+        wr_u8(&w, (uint8_t)c->arg);
         break;
     case GL_SET_COMPENSATION:
         if (c->arg > 2) return 0;

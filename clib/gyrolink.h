@@ -91,6 +91,11 @@ typedef struct {
     uint8_t health[GL_MAX_GYROS];
     uint8_t has_noise;
     gl_noise noise;
+    /** 1 with the angle setting on: angle_turn32[a], axis a's fused rate
+     * integrated since boot, 2^-32 turn, wrapping; the angle between two
+     * frames is (int32_t)(new - old) * 360.0 / 4294967296.0 deg. */
+    uint8_t has_angle;
+    uint32_t angle_turn32[3];
 } gl_sample;
 
 /** Every gyro's own reading (frame kind 1, raw mode). */
@@ -106,7 +111,8 @@ typedef struct {
 } gl_raw;
 
 /** The board's settings. mode: 0 Fused, 1 Raw; method: 0 Mean, 1 Zhang,
- * 2 Adaptive; compensation: 0 Off, 1 ToFrame, 2 Horizon(horizon_us). */
+ * 2 Adaptive; compensation: 0 Off, 1 ToFrame, 2 Horizon(horizon_us);
+ * angle: 1 when sample frames carry the integrated angle. */
 typedef struct {
     uint8_t mode;
     uint8_t method;
@@ -114,6 +120,7 @@ typedef struct {
     uint32_t status_every;
     uint8_t compensation;
     uint16_t horizon_us;
+    uint8_t angle;
 } gl_settings;
 
 /** One gyro in a status frame. clock: 0 Polled, 1 Own, 2 ClkIn. */
@@ -210,11 +217,13 @@ typedef enum {
     /** Save the settings in force to flash (acknowledged once read back). */
     GL_SAVE_SETTINGS = 6,
     /** The default settings now, the saved ones erased. */
-    GL_FACTORY_RESET = 7
+    GL_FACTORY_RESET = 7,
+    /** arg 1: sample frames carry the integrated angle; 0: they do not. */
+    GL_SET_ANGLE = 8
 } gl_op;
 
 /** A command: `arg` is the mode, the method, the divider, the status
- * period, or the compensation (0 Off, 1 ToFrame, 2 Horizon with
+ * period, the angle (0 or 1), or the compensation (0 Off, 1 ToFrame, 2 Horizon with
  * `horizon_us`); unused for GL_REQUEST_STATUS, GL_SAVE_SETTINGS and
  * GL_FACTORY_RESET. */
 typedef struct {

@@ -81,6 +81,21 @@ static void tests(void)
         n = gl_encode_command(&c, 0, out, sizeof out);
         CHECK(n == sizeof reset && memcmp(out, reset, n) == 0);
     }
+    /* SetAngle(true) with id 7; a bool is 0 or 1. */
+    {
+        static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0x3e, 0xea, 0x00};
+        uint8_t out[64];
+        gl_command c;
+        size_t n;
+        memset(&c, 0, sizeof c);
+        c.id = 7;
+        c.op = GL_SET_ANGLE;
+        c.arg = 1;
+        n = gl_encode_command(&c, 0, out, sizeof out);
+        CHECK(n == sizeof want && memcmp(out, want, n) == 0);
+        c.arg = 2;
+        CHECK(gl_encode_command(&c, 0, out, sizeof out) == 0);
+    }
 
     /* The board's sixth frame, rejecting command 7 as out of range. */
     {

@@ -544,6 +544,7 @@ mod tests {
                     used: [0b1111; 3],
                     health: [u8::from(faulty), 0, 0, 0, 0].into_iter().collect(),
                     noise: None,
+                    angle: None,
                 })
             })
             .collect()

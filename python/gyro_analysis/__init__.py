@@ -445,7 +445,10 @@ def read_recording(path):
         the true rate), ``predicted_us`` (NaN where the rates are measured,
         not predicted), ``rate_dps`` (n x 3, NaN where the axis is not
         valid), ``valid``, ``degraded``, ``used`` (n x 3 gyro masks),
-        ``health`` (n x gyros), ``link_seq``. ``noise``: the E-DAVAR
+        ``health`` (n x gyros), ``link_seq``, ``angle_deg`` (n x 3: the
+        board's integrated angle, unwrapped from the frames' 2^-32 turn
+        counts across lost or skipped frames, degrees from the first frame's
+        wrapped value; NaN where the frames do not carry it). ``noise``: the E-DAVAR
         estimates the frames carried (``frame_seq``, ``axis``, ``seq`` it
         describes, window ``len``, ``bridged``, ``sigma_dps`` at the three
         ``noise_tau``). ``raw``: raw frames (``seq``, ``t_us``, ``rate_dps``
@@ -470,7 +473,7 @@ def recording_dataframe(path_or_recording):
 
     Columns: ``t_us``, ``age_x_us`` ... ``age_z_us``, ``predicted_us``,
     ``x_dps``, ``y_dps``, ``z_dps``, ``valid``, ``degraded``, ``used_x`` ...
-    ``used_z``. Needs pandas (``ImportError`` otherwise); takes a path or what
+    ``used_z``, ``angle_x_deg`` ... ``angle_z_deg``. Needs pandas (``ImportError`` otherwise); takes a path or what
     :func:`read_recording` returned.
     """
     import pandas as pd
@@ -487,4 +490,6 @@ def recording_dataframe(path_or_recording):
     cols["degraded"] = s["degraded"]
     for a, name in enumerate("xyz"):
         cols[f"used_{name}"] = s["used"][:, a]
+    for a, name in enumerate("xyz"):
+        cols[f"angle_{name}_deg"] = s["angle_deg"][:, a]
     return pd.DataFrame(cols, index=pd.Index(s["seq"], name="seq"))

@@ -773,6 +773,10 @@ struct SampleCols {
     degraded: Vec<u8>,
     used: Vec<u8>,
     health: Vec<Vec<u8>>,
+    /// The integrated angle, unwrapped, degrees (NaN where not sent), and
+    /// the last wrapped value with the sum so far.
+    angle_deg: Vec<f64>,
+    angle_last: Option<([u32; 3], [f64; 3])>,
 }
 
 impl SampleCols {
@@ -795,6 +799,22 @@ impl SampleCols {
         self.degraded.push(f.degraded);
         self.used.extend(f.used);
         self.health.push(f.health.to_vec());
+        // Each frame's wrapping difference from the one before (any
+        // frames between lost or skipped, up to half a turn), summed.
+        const UNIT: f64 = 360.0 / 4_294_967_296.0;
+        match f.angle.map(|a| a.turns32()) {
+            Some(now) => {
+                let sum = match self.angle_last {
+                    Some((last, sum)) => std::array::from_fn(|a| {
+                        sum[a] + f64::from(now[a].wrapping_sub(last[a]) as i32) * UNIT
+                    }),
+                    None => now.map(|v| f64::from(v as i32) * UNIT),
+                };
+                self.angle_deg.extend(sum);
+                self.angle_last = Some((now, sum));
+            }
+            None => self.angle_deg.extend([f64::NAN; 3]),
+        }
     }
 
     fn into_dict(self, py: Python<'_>, gyros: usize) -> PyResult<Bound<'_, PyDict>> {
@@ -809,6 +829,7 @@ impl SampleCols {
         d.set_item("valid", self.valid.into_pyarray(py))?;
         d.set_item("degraded", self.degraded.into_pyarray(py))?;
         d.set_item("used", self.used.into_pyarray(py).reshape([n, 3])?)?;
+        d.set_item("angle_deg", self.angle_deg.into_pyarray(py).reshape([n, 3])?)?;
         // Health per gyro; 0xFF where a frame names fewer gyros.
         let h: Vec<u8> = self
             .health

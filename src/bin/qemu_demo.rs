@@ -63,7 +63,6 @@ use gyro_array::board::qemu::exit;
 use gyro_array::board::stack;
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
-use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker;
@@ -365,14 +364,7 @@ mod app {
         #[allow(unsafe_code)]
         let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
         uart.listen();
-        let settings = if STRESS {
-            Settings {
-                status_every: 1,
-                ..Settings::default()
-            }
-        } else {
-            Settings::default()
-        };
+        let settings = demo::link_settings(STRESS);
         let port = cx.local.port_slot.insert(Port::new(settings));
         if STRESS {
             defmt::info!("stress: the background ten times slower, a status frame every sample");

@@ -148,6 +148,21 @@ pub struct Chips<'a, 'c> {
     pub bus: &'a Bus<'c>,
 }
 
+/// The demo's link settings: the defaults with the integrated angle on
+/// (every field of the sample frame exercised); under stress, a status
+/// frame every sample.
+pub fn link_settings(stress: bool) -> crate::link::msg::Settings {
+    crate::link::msg::Settings {
+        status_every: if stress {
+            1
+        } else {
+            crate::link::msg::Settings::default().status_every
+        },
+        angle: true,
+        ..crate::link::msg::Settings::default()
+    }
+}
+
 /// The board's pipeline: default settings, the adaptive fusion.
 pub fn pipeline() -> Result<Pipeline<5>, ConfigError> {
     Pipeline::new(

@@ -95,6 +95,35 @@ pub struct Sample {
     /// The newest E-DAVAR estimate of one axis (the axes take turns; only
     /// new estimates are sent, never before a window has filled).
     pub noise: Option<Noise>,
+    /// With [`Settings::angle`]: the integrated angles.
+    pub angle: Option<Angle>,
+}
+
+/// Per axis, the fused rate integrated since boot up to the instant its
+/// measurement describes, in 2⁻³² turn, wrapping. The angle between two
+/// frames is the wrapping difference read as an `i32` (× 360 / 2³² °),
+/// whatever frames were skipped by the divider or lost on the way, up to
+/// half a turn. It does not advance while the axis has no value (`valid`
+/// clear). Fixed-width on the wire: the values are spread over the whole
+/// range, where varints would take five bytes each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Angle {
+    /// x.
+    #[serde(with = "postcard::fixint::le")]
+    pub x: u32,
+    /// y.
+    #[serde(with = "postcard::fixint::le")]
+    pub y: u32,
+    /// z.
+    #[serde(with = "postcard::fixint::le")]
+    pub z: u32,
+}
+
+impl Angle {
+    /// x, y, z.
+    pub fn turns32(self) -> [u32; 3] {
+        [self.x, self.y, self.z]
+    }
 }
 
 /// One E-DAVAR estimate with the time it describes.
@@ -275,6 +304,8 @@ pub struct Settings {
     pub status_every: u32,
     /// Delay compensation of the sample frames.
     pub compensation: Compensation,
+    /// Whether sample frames carry [`Sample::angle`].
+    pub angle: bool,
 }
 
 /// What the sample frames' rates are predicted to ([`Sample::predicted_us`]).
@@ -338,6 +369,7 @@ impl Default for Settings {
             divider: 1,
             status_every: 1000,
             compensation: Compensation::ToFrame,
+            angle: false,
         }
     }
 }
@@ -405,4 +437,6 @@ pub enum Op {
     /// The default settings now, and the saved ones erased: the next
     /// boot comes up with the defaults and the lab's calibration record.
     FactoryReset,
+    /// Whether sample frames carry the integrated angle ([`Sample::angle`]).
+    SetAngle(bool),
 }

@@ -13,7 +13,7 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
+    Ack, Angle, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
     GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, StoreState,
     MAX_GYROS,
 };
@@ -117,7 +117,16 @@ pub const PREDICT_K: usize = 3;
 /// [`Compensation::ToFrame`] allows for: the largest (five gyros, an
 /// E-DAVAR estimate; `link::tests` checks it). A frame without an estimate
 /// ends before the instant stated, by some 20 µs at 6 Mbaud.
-pub const SAMPLE_FRAME_MAX: u32 = 80;
+pub const SAMPLE_FRAME_MAX: u32 = 81;
+
+/// Bytes [`Sample::angle`] adds (three u32, fixed width).
+pub const ANGLE_BYTES: u32 = 12;
+
+/// 2³² / 360 / 10⁶: °/s × µs to 2⁻³² turn. In f32 (soft f64 costs the
+/// Cortex-M4 hundreds of cycles): a step of 2 000 °/s over 1 ms is 2.4 × 10⁷
+/// units, held to 2 units (2 × 10⁻⁷ °) with rounding errors that do not
+/// add up one way (`link::tests`: 10⁴ steps against an f64 sum).
+const TURN_UNITS: f32 = (4_294_967_296.0 / 360.0 / 1e6) as f32;
 
 /// The loop's time from the sample's read (`t_us`) to its frame being
 /// queued, µs, that [`Compensation::ToFrame`] allows for: the SPI
@@ -231,6 +240,10 @@ pub struct Port<const TX: usize> {
     horizon: Option<u16>,
     /// The rates of the last sample frame queued.
     last_rates: Option<[f32; 3]>,
+    /// Per axis, the integrated angle (2⁻³² turn, wrapping) and the last
+    /// measured rate with the instant it describes, µs.
+    angle: [u64; 3],
+    angle_from: [Option<(u64, f32)>; 3],
 }
 
 impl<const TX: usize> Port<TX> {
@@ -255,6 +268,8 @@ impl<const TX: usize> Port<TX> {
             loop_us: LOOP_US,
             horizon: None,
             last_rates: None,
+            angle: [0; 3],
+            angle_from: [None; 3],
         };
         p.retime();
         p
@@ -289,7 +304,8 @@ impl<const TX: usize> Port<TX> {
             Compensation::Off => None,
             Compensation::ToFrame => {
                 // (baud ≥ 1: set_timing keeps it so.)
-                let bits = SAMPLE_FRAME_MAX * 10 * 1_000_000;
+                let frame = SAMPLE_FRAME_MAX + if self.settings.angle { ANGLE_BYTES } else { 0 };
+                let bits = frame * 10 * 1_000_000;
                 let wire = bits
                     .checked_div(self.baud)
                     .zip(bits.checked_rem(self.baud))
@@ -392,6 +408,8 @@ impl<const TX: usize> Port<TX> {
             _ => self.predictor.clear(),
         }
         self.predictor_seq = Some(out.seq);
+        let age_us = out.age_us();
+        self.integrate(out, t_us, age_us);
         let div = u32::from(self.settings.divider.max(1));
         if !out.seq.is_multiple_of(div) {
             return;
@@ -402,7 +420,6 @@ impl<const TX: usize> Port<TX> {
         }
         match self.settings.mode {
             Mode::Fused => {
-                let age_us = out.age_us();
                 let mut s = Sample {
                     seq: out.seq,
                     t_us,
@@ -414,6 +431,10 @@ impl<const TX: usize> Port<TX> {
                     used: [0; 3],
                     health,
                     noise: None,
+                    angle: self.settings.angle.then(|| {
+                        let [x, y, z] = self.angle.map(|a| a as u32);
+                        Angle { x, y, z }
+                    }),
                 };
                 for (a, f) in out.fused.iter().enumerate() {
                     if let Some(f) = f {
@@ -465,6 +486,28 @@ impl<const TX: usize> Port<TX> {
                 };
                 self.send_ref(FrameRef::Raw(&r));
             }
+        }
+    }
+
+    /// Every sample's measured fused rates into the angles: per axis, the
+    /// trapezoid from the instant the last measurement described to this
+    /// one's (`t_us − age_us`), so a missed sample's period is spanned and
+    /// the chips' changing delay is followed. An axis without a value
+    /// stops its integral until it has two values again.
+    fn integrate<const N: usize>(&mut self, out: &Output<N>, t_us: u64, age_us: [u16; 3]) {
+        for a in 0..3 {
+            let now = out.fused[a]
+                .map(|f| f.rate_dps)
+                .filter(|r| r.is_finite())
+                .map(|r| (t_us.saturating_sub(u64::from(age_us[a])), r));
+            if let (Some((t0, r0)), Some((t1, r1))) = (self.angle_from[a], now) {
+                // (≤ 2²⁴ µs is exact in f32; a longer gap is no period.)
+                let dt = t1.saturating_sub(t0).min(1 << 24) as f32;
+                let step = 0.5 * (r0 + r1) * dt * TURN_UNITS;
+                // (A saturating cast.)
+                self.angle[a] = self.angle[a].wrapping_add(libm::roundf(step) as i64 as u64);
+            }
+            self.angle_from[a] = now;
         }
     }
 
@@ -669,6 +712,7 @@ impl<const TX: usize> Port<TX> {
             Op::SetStatusEvery(n) => next.status_every = n,
             Op::RequestStatus => self.status_requested = true,
             Op::SetCompensation(c) => next.compensation = c,
+            Op::SetAngle(on) => next.angle = on,
             Op::SaveSettings | Op::FactoryReset => {
                 if self.store == StoreState::Absent || self.store_pending.is_some() {
                     return Err(Reject::Refused);

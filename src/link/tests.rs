@@ -38,6 +38,11 @@ fn big_sample(n: usize) -> Frame {
             bridged: u8::MAX,
             sigma_dps: [1.0; 3],
         }),
+        angle: Some(Angle {
+            x: u32::MAX,
+            y: u32::MAX,
+            z: u32::MAX,
+        }),
     })
 }
 
@@ -61,6 +66,7 @@ fn big_status(n: usize) -> Frame {
             divider: 1000,
             status_every: u32::MAX,
             compensation: Compensation::Horizon(u16::MAX),
+            angle: true,
         },
         noise_tau: [u16::MAX; 3],
         sample_us: u32::MAX,
@@ -215,10 +221,19 @@ fn the_largest_frames_fit_one_sample_period_at_1_khz() {
         assert!(st + ack + periods * s <= periods * budget);
     }
     assert_eq!(budget, 600);
-    // The delay compensation's horizon allows for the largest sample frame.
+    // The delay compensation's horizon allows for the largest sample frame,
+    // with the angle and without.
+    assert_eq!(
+        (super::port::SAMPLE_FRAME_MAX + super::port::ANGLE_BYTES) as usize,
+        wire_len(&big_sample(5))
+    );
+    let Frame::Sample(mut s) = big_sample(5) else {
+        unreachable!()
+    };
+    s.angle = None;
     assert_eq!(
         super::port::SAMPLE_FRAME_MAX as usize,
-        wire_len(&big_sample(5))
+        wire_len(&Frame::Sample(s))
     );
 }
 
@@ -547,6 +562,19 @@ fn the_specification_examples_are_what_the_code_sends() {
         );
     }
     let n = encode(
+        0,
+        &Command {
+            id: 7,
+            op: Op::SetAngle(true),
+        },
+        &mut buf,
+    )
+    .unwrap();
+    assert_eq!(
+        buf[..n],
+        [0x02, 0x07, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0x3e, 0xea, 0x00]
+    );
+    let n = encode(
         5,
         &Frame::Ack(Ack {
             id: Some(7),
@@ -609,7 +637,7 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
     let d = port.horizon_us().expect("on by default");
     // The frame's end at 6 Mbaud: the SPI reads and the loop's time, then
     // the largest sample frame, 10 bits a byte.
-    assert_eq!(d, 170 + 134);
+    assert_eq!(d, 170 + 135);
     for (k, s) in got.iter().enumerate() {
         if k + 1 < super::port::PREDICT_K {
             // Not enough samples to fit yet: the measured rates, unstated.
@@ -730,4 +758,70 @@ fn a_store_command_is_acknowledged_once_the_store_has_done_it() {
     assert_eq!(got, [ack(6, Err(Reject::Storage))]);
     let counters = port.counters();
     assert_eq!((counters.accepted, counters.rejected), (3, 3));
+}
+
+#[test]
+fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
+    // 10 s: a 1 Hz, 100 °/s sway on x, a 300 °/s turn on y, a slow drift on
+    // z; the chips' delay changing; samples 4 000–4 002 missed; one frame
+    // in a sample frame every third sample, and every 50th frame lost on
+    // the way.
+    let rate = |k: u32| {
+        let t = f64::from(k) * 1e-3;
+        [
+            (100.0 * (2.0 * std::f64::consts::PI * t).sin()) as f32,
+            300.0,
+            (0.01 + 1e-4 * f64::from(k)) as f32,
+        ]
+    };
+    let mut port = Port::<1024>::new(Settings {
+        divider: 3,
+        angle: true,
+        ..Settings::default()
+    });
+    let pipe = pipeline();
+    let mut reference = [0.0f64; 3];
+    let mut last: Option<(u64, [f32; 3])> = None;
+    let mut got = std::vec::Vec::new();
+    for k in 0..10_000u32 {
+        if (4_000..4_003).contains(&k) {
+            continue;
+        }
+        let age = 1_500 + (k % 7) * 10;
+        let t_us = 1_000 * u64::from(k) + 1_700;
+        port.publish(&output(k, rate(k), age), t_us, &pipe, &());
+        let at = t_us - u64::from(age);
+        if let Some((t0, r0)) = last {
+            for a in 0..3 {
+                reference[a] +=
+                    0.5 * (f64::from(r0[a]) + f64::from(rate(k)[a])) * (at - t0) as f64 * 1e-6;
+            }
+        }
+        last = Some((at, rate(k)));
+        for f in exchange(&mut port, &mut pipeline(), &[]) {
+            if let Frame::Sample(s) = f {
+                got.push((s.seq, s.angle.unwrap().turns32(), reference));
+            }
+        }
+    }
+    let kept: std::vec::Vec<_> = got
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| i % 50 != 49)
+        .map(|(_, g)| g)
+        .collect();
+    assert!(kept.len() > 3_000);
+    let unit = 360.0 / 4_294_967_296.0;
+    let mut sum = [0.0f64; 3];
+    let mut worst = 0.0f64;
+    for w in kept.windows(2) {
+        let ((_, a0, _), (_, a1, r1)) = (w[0], w[1]);
+        for a in 0..3 {
+            sum[a] += f64::from(a1[a].wrapping_sub(a0[a]) as i32) * unit;
+            let want = r1[a] - kept[0].2[a];
+            worst = worst.max((sum[a] - want).abs());
+        }
+    }
+    println!("worst angle error over 10 s: {worst:.2e} deg");
+    assert!(worst < 2e-5, "{worst} deg");
 }

@@ -29,6 +29,7 @@ fn settings(i: u32) -> Settings {
         divider: 1 + (i % 1000) as u16,
         status_every: 100 + i,
         compensation: Compensation::Horizon((i % 10_000) as u16),
+        angle: i % 3 == 1,
     }
 }
 

@@ -12,7 +12,6 @@
 use gyro_array::app::{self as schedule, StatusFacts, StatusView};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
-use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
 use host_tests::timed_board::HostLink;
@@ -48,14 +47,7 @@ fn main() {
     let demo::Chips {
         mut timed, mut adx, ..
     } = chips;
-    let settings = if stress {
-        Settings {
-            status_every: 1,
-            ..Settings::default()
-        }
-    } else {
-        Settings::default()
-    };
+    let settings = demo::link_settings(stress);
     // The demo's port size, its bytes taken at once.
     let mut link = HostLink::<1024> {
         port: Port::new(settings),

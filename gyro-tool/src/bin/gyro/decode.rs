@@ -67,6 +67,7 @@ pub fn run(a: Args) -> Res<bool> {
                     .map(String::from)
                     .to_vec();
                     h.extend((0..s.health.len()).map(|i| format!("flags_{i}")));
+                    h.extend(["angle_x", "angle_y", "angle_z"].map(String::from));
                     w.write_record(&h)?;
                     header_done = true;
                 }
@@ -77,6 +78,11 @@ pub fn run(a: Args) -> Res<bool> {
                 r.extend([s.valid, s.degraded].iter().map(|v| v.to_string()));
                 r.extend(s.used.iter().map(|v| v.to_string()));
                 r.extend(s.health.iter().map(|v| v.to_string()));
+                // The integrated angle, 2⁻³² turn (empty where not sent).
+                match s.angle {
+                    Some(a) => r.extend(a.turns32().map(|v| v.to_string())),
+                    None => r.extend(["", "", ""].map(String::from)),
+                }
                 w.write_record(&r)?;
             }
             (Frame::Sample(s), What::Noise) => {

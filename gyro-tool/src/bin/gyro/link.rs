@@ -37,6 +37,8 @@ fn parse_op(s: &str) -> Result<Op, String> {
         ("status", "") => Op::RequestStatus,
         ("save", "") => Op::SaveSettings,
         ("factory-reset", "") => Op::FactoryReset,
+        ("angle", "on") => Op::SetAngle(true),
+        ("angle", "off") => Op::SetAngle(false),
         // Out-of-range values are sent as they are: the board rejects them.
         ("divider", v) => Op::SetDivider(u16::try_from(num(v)?).unwrap_or(u16::MAX)),
         ("status-every", v) => Op::SetStatusEvery(num(v)?),
@@ -52,7 +54,7 @@ fn parse_op(s: &str) -> Result<Op, String> {
         }
         _ => {
             return Err(format!(
-                "{s:?}: expected status, save, factory-reset, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
+                "{s:?}: expected status, save, factory-reset, angle=on|off, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
             ))
         }
     })
