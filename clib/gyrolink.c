@@ -288,6 +288,30 @@ static void rd_ack(reader *r, gl_ack *s)
     s->reject = s->ok ? 0 : rd_variant(r, 7);
 }
 
+static void rd_sync(reader *r, gl_sync *s)
+{
+    s->state = rd_variant(r, 4);
+    s->board_us = rd_le64(r);
+    s->ctrl_us = rd_le64(r);
+    s->ppm = rd_f32(r);
+    s->residual_us = rd_f32(r);
+    s->dropped = rd_v32(r);
+    s->unpaired = rd_v32(r);
+}
+
+int gl_sync_to_controller(const gl_sync *s, uint64_t board_us, uint64_t *out)
+{
+    double dt, c;
+    if (s->state != 2) {
+        return 0;
+    }
+    /* Differences of a few seconds: exact in a double. */
+    dt = board_us >= s->board_us ? (double)(board_us - s->board_us) : -(double)(s->board_us - board_us);
+    c = dt * (1.0 + (double)s->ppm * 1e-6);
+    *out = c >= 0 ? s->ctrl_us + (uint64_t)(c + 0.5) : s->ctrl_us - (uint64_t)(-c + 0.5);
+    return 1;
+}
+
 /* ---- frames -------------------------------------------------------- */
 
 gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out)
@@ -319,7 +343,7 @@ gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out)
     r.i = 1;
     r.bad = 0;
     out->link_seq = rd_le32(&r);
-    out->kind = (gl_kind)rd_variant(&r, 4);
+    out->kind = (gl_kind)rd_variant(&r, 5);
     switch (out->kind) {
     case GL_SAMPLE:
         rd_sample(&r, &out->u.sample);
@@ -332,6 +356,9 @@ gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out)
         break;
     case GL_ACK:
         rd_ack(&r, &out->u.ack);
+        break;
+    case GL_SYNC:
+        rd_sync(&r, &out->u.sync);
         break;
     }
     if (r.bad || r.i != r.n) {
@@ -457,6 +484,15 @@ size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, s
     case GL_SAVE_SETTINGS:
     case GL_FACTORY_RESET:
         break;
+    case GL_SYNC_TIME: {
+        uint64_t v = c->time_us;
+        while (v >= 0x80u) {
+            wr_u8(&w, (uint8_t)(v | 0x80u));
+            v >>= 7;
+        }
+        wr_u8(&w, (uint8_t)v);
+        break;
+    }
     case GL_SET_ANGLE:
         if (c->arg > 1) return 0;
         wr_u8(&w, (uint8_t)c->arg);

@@ -56,7 +56,8 @@ typedef enum {
     GL_SAMPLE = 0,
     GL_RAW = 1,
     GL_STATUS = 2,
-    GL_ACK = 3
+    GL_ACK = 3,
+    GL_SYNC = 4
 } gl_kind;
 
 /** An E-DAVAR noise estimate of one fused axis. */
@@ -163,6 +164,20 @@ typedef struct {
     uint8_t reject;
 } gl_ack;
 
+/** The controller's clock as the board tracks it (frame kind 4), after
+ * each GL_SYNC_TIME and when the pulse is lost. state: 0 Off, 1 Acquiring,
+ * 2 Locked, 3 Lost. While Locked, board instant t (us) is, in the
+ * controller's clock, ctrl_us + (t - board_us) * (1 + ppm * 1e-6):
+ * gl_sync_to_controller. */
+typedef struct {
+    uint8_t state;
+    uint64_t board_us;
+    uint64_t ctrl_us;
+    float ppm;
+    float residual_us;
+    uint32_t dropped, unpaired;
+} gl_sync;
+
 /** One decoded frame. */
 typedef struct {
     uint32_t link_seq;
@@ -172,6 +187,7 @@ typedef struct {
         gl_raw raw;
         gl_status status;
         gl_ack ack;
+        gl_sync sync;
     } u;
 } gl_frame;
 
@@ -219,7 +235,9 @@ typedef enum {
     /** The default settings now, the saved ones erased. */
     GL_FACTORY_RESET = 7,
     /** arg 1: sample frames carry the integrated angle; 0: they do not. */
-    GL_SET_ANGLE = 8
+    GL_SET_ANGLE = 8,
+    /** time_us: the controller's time at its last sync pulse. */
+    GL_SYNC_TIME = 9
 } gl_op;
 
 /** A command: `arg` is the mode, the method, the divider, the status
@@ -231,6 +249,7 @@ typedef struct {
     gl_op op;
     uint32_t arg;
     uint16_t horizon_us;
+    uint64_t time_us;
 } gl_command;
 
 /**
@@ -240,6 +259,14 @@ typedef struct {
  * frames from 0.
  */
 size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, size_t cap);
+
+/**
+ * A board instant (us of its clock: a sample's t_us - age_us[a], say) in
+ * the controller's clock by the newest sync frame: 1 with *out set while
+ * it is Locked, 0 otherwise (the instant is then on the board's clock
+ * only).
+ */
+int gl_sync_to_controller(const gl_sync *s, uint64_t board_us, uint64_t *out);
 
 #ifdef __cplusplus
 }

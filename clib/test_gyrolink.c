@@ -81,6 +81,32 @@ static void tests(void)
         n = gl_encode_command(&c, 0, out, sizeof out);
         CHECK(n == sizeof reset && memcmp(out, reset, n) == 0);
     }
+    /* SyncTime(0x123456789ABC) with id 7, a u64 varint. */
+    {
+        static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x0c, 0x07, 0x09, 0xbc, 0xb5, 0xe2,
+                                       0xb3, 0xc5, 0xc6, 0x04, 0x8f, 0x0d, 0x00};
+        uint8_t out[64];
+        gl_command c;
+        size_t n;
+        gl_sync s;
+        uint64_t t = 0;
+        memset(&c, 0, sizeof c);
+        c.id = 7;
+        c.op = GL_SYNC_TIME;
+        c.time_us = 0x123456789ABCull;
+        n = gl_encode_command(&c, 0, out, sizeof out);
+        CHECK(n == sizeof want && memcmp(out, want, n) == 0);
+        /* A board instant 1 s after the line's anchor, 50 ppm fast. */
+        memset(&s, 0, sizeof s);
+        s.state = 2;
+        s.board_us = 5000000u;
+        s.ctrl_us = 9000000000ull;
+        s.ppm = 50.0f;
+        CHECK(gl_sync_to_controller(&s, 6000000u, &t) == 1 && t == 9001000050ull);
+        CHECK(gl_sync_to_controller(&s, 4000000u, &t) == 1 && t == 8998999950ull);
+        s.state = 3;
+        CHECK(gl_sync_to_controller(&s, 6000000u, &t) == 0);
+    }
     /* SetAngle(true) with id 7; a bool is 0 or 1. */
     {
         static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0x3e, 0xea, 0x00};

@@ -56,6 +56,9 @@ pub struct Summary {
     last_t_us: Option<(u32, u64)>,
     last_link: Option<u32>,
     digest: crc::Digest<'static, u32>,
+    /// Sync frames, and the newest (the controller's clock).
+    pub syncs: u64,
+    pub last_sync: Option<gyro_array::link::msg::SyncStatus>,
 }
 
 impl Default for Summary {
@@ -83,6 +86,8 @@ impl Default for Summary {
             last_t_us: None,
             last_link: None,
             digest: CRC32.digest(),
+            syncs: 0,
+            last_sync: None,
         }
     }
 }
@@ -136,6 +141,10 @@ impl Summary {
                 self.last_status = Some(s.clone());
             }
             Frame::Ack(a) => self.acks.push(*a),
+            Frame::Sync(s) => {
+                self.syncs += 1;
+                self.last_sync = Some(*s);
+            }
         }
     }
 

@@ -452,7 +452,11 @@ def read_recording(path):
         estimates the frames carried (``frame_seq``, ``axis``, ``seq`` it
         describes, window ``len``, ``bridged``, ``sigma_dps`` at the three
         ``noise_tau``). ``raw``: raw frames (``seq``, ``t_us``, ``rate_dps``
-        n x gyros x 3). ``tau0_s`` and ``noise_tau`` from the first status
+        n x gyros x 3). ``sync``: the sync frames (``state``: 0 Off,
+        1 Acquiring, 2 Locked, 3 Lost; ``board_us``, ``ctrl_us``, ``ppm``,
+        ``residual_us``: board instant t is ``ctrl_us + (t - board_us) *
+        (1 + ppm * 1e-6)`` in the controller's clock while Locked).
+        ``tau0_s`` and ``noise_tau`` from the first status
         frame (NaN and the board's defaults without one). ``counts``: the
         decoder's (``frames``, ``corrupt``, ``too_long``, ``version``,
         ``malformed``, ``bytes_dropped``), ``status_frames``,

@@ -715,6 +715,7 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let mut sum = gyro_tool::summary::Summary::default();
     let mut first_status = None;
     let mut gyros = 0usize;
+    let mut sync = Vec::new();
     for r in &frames {
         sum.add(r);
         let Ok(d) = r else { continue };
@@ -731,6 +732,7 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
                 first_status.get_or_insert_with(|| (gyro_tool::summary::tau0_s(st), st.noise_tau));
             }
             Frame::Ack(_) => {}
+            Frame::Sync(y) => sync.push(*y),
         }
     }
     let (tau0_s, noise_tau) =
@@ -738,6 +740,20 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let stats = dec.stats();
     let out = PyDict::new(py);
     out.set_item("samples", s.into_dict(py, gyros)?)?;
+    // The controller's clock as the board tracked it, one row a sync frame.
+    let sd = PyDict::new(py);
+    sd.set_item(
+        "state",
+        sync.iter().map(|y| y.state as u8).collect::<Vec<_>>().into_pyarray(py),
+    )?;
+    sd.set_item("board_us", sync.iter().map(|y| y.board_us).collect::<Vec<_>>().into_pyarray(py))?;
+    sd.set_item("ctrl_us", sync.iter().map(|y| y.ctrl_us).collect::<Vec<_>>().into_pyarray(py))?;
+    sd.set_item("ppm", sync.iter().map(|y| y.ppm).collect::<Vec<_>>().into_pyarray(py))?;
+    sd.set_item(
+        "residual_us",
+        sync.iter().map(|y| y.residual_us).collect::<Vec<_>>().into_pyarray(py),
+    )?;
+    out.set_item("sync", sd)?;
     out.set_item("noise", nz.into_dict(py)?)?;
     out.set_item("raw", raw.into_dict(py)?)?;
     out.set_item("tau0_s", tau0_s)?;

@@ -55,13 +55,13 @@
 #![no_main]
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use defmt_rtt as _;
 
 use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
 use heapless::spsc::{Consumer, Producer, Queue};
 use stm32f4xx_hal::{
-    gpio::{ErasedPin, Output},
+    gpio::{self, Edge, ErasedPin, ExtiPin, Output},
     pac,
     prelude::*,
     serial::{config::Config as SerialConfig, Serial, Tx},
@@ -204,6 +204,11 @@ static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 /// Probes the background had no room for (the E-DAVAR bridged them).
 static LOST_JOBS: AtomicU32 = AtomicU32::new(0);
 
+/// The controller's newest sync pulse: TIM5's µs at its rising edge on
+/// PB8 (EXTI8), and whether the sample task has not taken it yet.
+static SYNC_US: AtomicU32 = AtomicU32::new(0);
+static SYNC_NEW: AtomicBool = AtomicBool::new(false);
+
 /// What the sample task hands the background: the schedule's job, with
 /// what the board's logs need of its sample.
 pub struct Work {
@@ -289,6 +294,8 @@ mod app {
         rx: f405::RxQueue,
         tracker: &'static mut Tracker,
         meter: stack::StackMeter,
+        sync_pin: gpio::PB8<gpio::Input>,
+        sync_captures: &'static Int1Captures,
         /// The settings store, and the calibration record in use (saved
         /// beside the settings).
         store: BoardStore,
@@ -338,6 +345,15 @@ mod app {
         let gpioa = dp.GPIOA.split(&mut rcc);
         let gpiob = dp.GPIOB.split(&mut rcc);
         let gpioc = dp.GPIOC.split(&mut rcc);
+        // The controller's sync pulse on PB8: its rising edge interrupts
+        // (EXTI8, the highest priority: its only work is to read TIM5, so
+        // its latency is the hardware's plus the longest lock, < 2 µs).
+        let mut syscfg = dp.SYSCFG.constrain(&mut rcc);
+        let mut exti = dp.EXTI;
+        let mut sync_pin = gpiob.pb8.into_pull_down_input();
+        sync_pin.make_interrupt_source(&mut syscfg);
+        sync_pin.trigger_on_edge(&mut exti, Edge::Rising);
+        sync_pin.enable_interrupt(&mut exti);
         // The chips' clock (TIM3 CH1, PC6) and their INT1 captures (TIM5
         // CH1-4, PA0-PA3), before anything else takes the pins.
         let clkin = f405::start_clkin(dp.TIM3, gpioc.pc6.into_alternate(), &mut rcc);
@@ -629,6 +645,8 @@ mod app {
                 meter,
                 store,
                 calibration: calibration.ok(),
+                sync_pin,
+                sync_captures: captures,
             },
         )
     }
@@ -655,6 +673,13 @@ mod app {
         // One clock: TIM5's µs at the read, for the instant and the frame.
         let now = l.captures.micros();
         let (t_us, missed) = l.clock.tick(now);
+        // A sync pulse since the last tick, on the same 64-bit µs.
+        if SYNC_NEW.swap(false, Ordering::Acquire) {
+            // (Signed: the edge may come between `now` and this line.)
+            let ago = now.wrapping_sub(SYNC_US.load(Ordering::Relaxed)) as i32;
+            let edge = t_us.wrapping_sub(i64::from(ago) as u64);
+            cx.shared.link.lock(|l| l.port.sync_pulse(edge));
+        }
         let at = timed::array_instant(now, BOARD_DELAY_US);
         for t in l.chips.timed.iter_mut() {
             t.set_instant(at, BOARD_DELAY_US);
@@ -703,6 +728,15 @@ mod app {
     /// the UART's queue while the UART takes them. Above the sample task
     /// and sharing nothing: at 6 Mbaud a byte arrives every 1.7 µs and the
     /// USART holds one, so no lock may hold this task off.
+    /// The controller's sync pulse: its edge's time on TIM5, for the
+    /// sample task to hand to the port (`link::sync`).
+    #[task(binds = EXTI9_5, priority = 4, local = [sync_pin, sync_captures])]
+    fn sync_pulse(cx: sync_pulse::Context) {
+        SYNC_US.store(cx.local.sync_captures.micros(), Ordering::Relaxed);
+        SYNC_NEW.store(true, Ordering::Release);
+        cx.local.sync_pin.clear_interrupt_pending_bit();
+    }
+
     #[task(binds = USART1, priority = 3, local = [tx, tx_bytes, rx_feed])]
     fn uart(cx: uart::Context) {
         use embedded_hal_nb::serial::Write;

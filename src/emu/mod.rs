@@ -9,6 +9,7 @@
 
 pub mod adxrs453;
 pub mod board;
+pub mod controller;
 pub mod demo;
 pub mod flash;
 pub mod icm42688;

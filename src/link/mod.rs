@@ -15,6 +15,7 @@
 pub mod msg;
 pub mod port;
 pub mod ring;
+pub mod sync;
 pub mod wire;
 
 #[cfg(test)]

@@ -29,6 +29,9 @@ pub enum Frame {
     Status(Status),
     /// The answer to a command.
     Ack(Ack),
+    /// The controller's clock as the board tracks it (after each sync
+    /// time message, and when the pulse is lost).
+    Sync(SyncStatus),
 }
 
 /// A borrowed [`Frame`]: the same variants in the same order, so it
@@ -45,6 +48,8 @@ pub enum FrameRef<'a> {
     Status(&'a Status),
     /// [`Frame::Ack`].
     Ack(&'a Ack),
+    /// [`Frame::Sync`].
+    Sync(&'a SyncStatus),
 }
 
 impl Frame {
@@ -55,6 +60,7 @@ impl Frame {
             Frame::Raw(r) => FrameRef::Raw(r),
             Frame::Status(s) => FrameRef::Status(s),
             Frame::Ack(a) => FrameRef::Ack(a),
+            Frame::Sync(s) => FrameRef::Sync(s),
         }
     }
 }
@@ -125,6 +131,34 @@ impl Angle {
         [self.x, self.y, self.z]
     }
 }
+
+/// The controller's clock against the board's (`link::sync`): a line
+/// through the last pulses. Any board instant `t` (a sample's `t_us −
+/// age_us`, say) is, in the controller's clock, `ctrl_us + (t − board_us) ×
+/// (1 + ppm × 10⁻⁶)`, while `state` is `Locked`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SyncStatus {
+    /// The tracker's state.
+    pub state: SyncState,
+    /// The newest pulse's capture, board µs (0 before two pairs).
+    #[serde(with = "postcard::fixint::le")]
+    pub board_us: u64,
+    /// The controller's time there, by the line, µs.
+    #[serde(with = "postcard::fixint::le")]
+    pub ctrl_us: u64,
+    /// The controller's clock against the board's, ppm (positive: fast).
+    pub ppm: f32,
+    /// RMS distance of the pulses' times from the line, µs: the
+    /// controller's timestamp jitter and what the line cannot follow.
+    pub residual_us: f32,
+    /// Time messages dropped as not their pulse's (far from the line),
+    /// and messages with no pulse captured before them.
+    pub dropped: u32,
+    /// The latter.
+    pub unpaired: u32,
+}
+
+pub use super::sync::SyncState;
 
 /// One E-DAVAR estimate with the time it describes.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -439,4 +473,7 @@ pub enum Op {
     FactoryReset,
     /// Whether sample frames carry the integrated angle ([`Sample::angle`]).
     SetAngle(bool),
+    /// The controller's own time, µs, at its last sync pulse (the board's
+    /// sync input): answered by an [`Ack`] and a [`Frame::Sync`].
+    SyncTime(u64),
 }

@@ -15,9 +15,10 @@ use heapless::Vec;
 use super::msg::{
     Ack, Angle, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
     GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, StoreState,
-    MAX_GYROS,
+    SyncStatus, MAX_GYROS,
 };
 use super::ring::ByteRing;
+use super::sync::{CtrlClock, SyncState};
 use super::wire::{
     encode_in_place, encode_payload, frame_payload, framed_len, Decoded, Decoder, FrameError,
     IN_PLACE_MAX, MAX_PAYLOAD,
@@ -244,6 +245,8 @@ pub struct Port<const TX: usize> {
     /// measured rate with the instant it describes, µs.
     angle: [u64; 3],
     angle_from: [Option<(u64, f32)>; 3],
+    /// The controller's clock.
+    sync: CtrlClock,
 }
 
 impl<const TX: usize> Port<TX> {
@@ -270,6 +273,7 @@ impl<const TX: usize> Port<TX> {
             last_rates: None,
             angle: [0; 3],
             angle_from: [None; 3],
+            sync: CtrlClock::new(),
         };
         p.retime();
         p
@@ -410,6 +414,12 @@ impl<const TX: usize> Port<TX> {
         self.predictor_seq = Some(out.seq);
         let age_us = out.age_us();
         self.integrate(out, t_us, age_us);
+        // A pulse that stopped is said once, in its own frame.
+        let was = self.sync.state();
+        self.sync.tick(t_us);
+        if was != SyncState::Lost && self.sync.state() == SyncState::Lost {
+            self.send_sync();
+        }
         let div = u32::from(self.settings.divider.max(1));
         if !out.seq.is_multiple_of(div) {
             return;
@@ -667,10 +677,40 @@ impl<const TX: usize> Port<TX> {
                     // Acknowledged by `store_done`.
                     return;
                 }
+                if r.is_ok() && matches!(d.body.op, Op::SyncTime(_)) {
+                    self.acknowledge(Some(d.body.id), r);
+                    self.send_sync();
+                    return;
+                }
                 (Some(d.body.id), r)
             }
         };
         self.acknowledge(id, result);
+    }
+
+    /// The controller's sync pulse, captured at `board_us` (on the
+    /// sample clock's 64-bit µs).
+    pub fn sync_pulse(&mut self, board_us: u64) {
+        self.sync.pulse(board_us);
+    }
+
+    /// The controller's clock as tracked.
+    pub fn sync(&self) -> &CtrlClock {
+        &self.sync
+    }
+
+    fn send_sync(&mut self) {
+        let (board_us, ctrl_us, ppm, residual_us) = self.sync.line().unwrap_or((0, 0, 0.0, 0.0));
+        let s = SyncStatus {
+            state: self.sync.state(),
+            board_us,
+            ctrl_us,
+            ppm,
+            residual_us,
+            dropped: self.sync.dropped,
+            unpaired: self.sync.unpaired,
+        };
+        self.send_ref(FrameRef::Sync(&s));
     }
 
     fn acknowledge(&mut self, id: Option<u8>, result: Result<(), Reject>) {
@@ -713,6 +753,11 @@ impl<const TX: usize> Port<TX> {
             Op::RequestStatus => self.status_requested = true,
             Op::SetCompensation(c) => next.compensation = c,
             Op::SetAngle(on) => next.angle = on,
+            Op::SyncTime(t) => {
+                // Taken whether or not it pairs: the Sync frame says what
+                // became of it.
+                self.sync.time(t);
+            }
             Op::SaveSettings | Op::FactoryReset => {
                 if self.store == StoreState::Absent || self.store_pending.is_some() {
                     return Err(Reject::Refused);

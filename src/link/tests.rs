@@ -565,6 +565,22 @@ fn the_specification_examples_are_what_the_code_sends() {
         0,
         &Command {
             id: 7,
+            op: Op::SyncTime(0x1234_5678_9ABC),
+        },
+        &mut buf,
+    )
+    .unwrap();
+    assert_eq!(
+        buf[..n],
+        [
+            0x02, 0x07, 0x01, 0x01, 0x01, 0x0c, 0x07, 0x09, 0xbc, 0xb5, 0xe2, 0xb3, 0xc5, 0xc6,
+            0x04, 0x8f, 0x0d, 0x00
+        ]
+    );
+    let n = encode(
+        0,
+        &Command {
+            id: 7,
             op: Op::SetAngle(true),
         },
         &mut buf,
@@ -824,4 +840,50 @@ fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
     }
     println!("worst angle error over 10 s: {worst:.2e} deg");
     assert!(worst < 2e-5, "{worst} deg");
+}
+
+#[test]
+fn sync_time_messages_give_the_controllers_clock_and_a_stopped_pulse_is_said() {
+    let mut pipe = pipeline();
+    let mut port = Port::<1024>::new(Settings::default());
+    let ctrl = |b: u64| 9_000_000_000 + b + b / 20_000; // 50 ppm fast
+    let mut syncs = std::vec::Vec::new();
+    for k in 1..=5u64 {
+        let b = k * 1_000_000;
+        port.sync_pulse(b);
+        for f in exchange(
+            &mut port,
+            &mut pipe,
+            &command_bytes(k as u8, Op::SyncTime(ctrl(b))),
+        ) {
+            match f {
+                Frame::Ack(a) => assert_eq!(a.result, Ok(())),
+                Frame::Sync(s) => syncs.push(s),
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+    let states: std::vec::Vec<_> = syncs.iter().map(|s| s.state).collect();
+    use super::sync::SyncState::*;
+    assert_eq!(states, [Acquiring, Acquiring, Locked, Locked, Locked]);
+    let last = syncs.last().unwrap();
+    assert_eq!((last.board_us, last.ctrl_us), (5_000_000, ctrl(5_000_000)));
+    assert!((last.ppm - 50.0).abs() < 0.01, "{}", last.ppm);
+    assert_eq!(port.sync().to_ctrl(5_500_000), Some(ctrl(5_500_000)));
+    // No more pulses: the sample frames' path says it once, within three
+    // periods.
+    let pipe = pipeline();
+    let mut lost_at = None;
+    for ms in 5_001..10_000u64 {
+        port.publish(&output(ms as u32, [0.0; 3], 0), ms * 1_000, &pipe, &());
+        for f in exchange(&mut port, &mut pipeline(), &[]) {
+            if let Frame::Sync(s) = f {
+                assert_eq!(s.state, Lost);
+                assert!(lost_at.replace(ms).is_none(), "said twice");
+            }
+        }
+    }
+    let lost_at = lost_at.expect("never said");
+    assert!((8_000..=8_001).contains(&lost_at), "{lost_at}");
+    assert_eq!(port.sync().to_ctrl(9_000_000), None);
 }

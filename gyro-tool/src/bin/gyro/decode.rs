@@ -25,6 +25,8 @@ enum What {
     Noise,
     Raw,
     Status,
+    /// The controller's clock as the board tracked it.
+    Sync,
 }
 
 /// The first three CSV columns of a sample or raw frame.
@@ -182,6 +184,31 @@ pub fn run(a: Args) -> Res<bool> {
                     ]);
                 }
                 w.write_record(&r)?;
+            }
+            (Frame::Sync(y), What::Sync) => {
+                if !header_done {
+                    w.write_record([
+                        "link_seq",
+                        "state",
+                        "board_us",
+                        "ctrl_us",
+                        "ppm",
+                        "residual_us",
+                        "dropped",
+                        "unpaired",
+                    ])?;
+                    header_done = true;
+                }
+                w.write_record([
+                    d.link_seq.to_string(),
+                    format!("{:?}", y.state),
+                    y.board_us.to_string(),
+                    y.ctrl_us.to_string(),
+                    y.ppm.to_string(),
+                    y.residual_us.to_string(),
+                    y.dropped.to_string(),
+                    y.unpaired.to_string(),
+                ])?;
             }
             _ => {}
         }
