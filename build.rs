@@ -2,6 +2,7 @@
 fn main() {
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
+    build_id();
     let target = std::env::var("TARGET").unwrap_or_default();
     if !target.starts_with("thumb") {
         return;
@@ -23,5 +24,36 @@ fn main() {
         if std::fs::copy("src/board/an386.x", out.join("device.x")).is_ok() {
             println!("cargo:rustc-link-search={}", out.display());
         }
+    }
+}
+
+/// The commit the firmware is built from, for the link's board-information
+/// frame: `GYRO_BUILD`, the commit's first 32 bits as hex (absent outside a
+/// git checkout; the frame then says 0). Built again when HEAD moves.
+fn build_id() {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let Some(hash) = git(&["rev-parse", "HEAD"]) else {
+        return;
+    };
+    // (Only files that exist: cargo runs a script again every build for
+    // one that does not, and a fresh clone keeps its refs packed.)
+    if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
+        let mut watch = vec![format!("{dir}/HEAD"), format!("{dir}/packed-refs")];
+        if let Some(r) = git(&["symbolic-ref", "-q", "HEAD"]) {
+            watch.push(format!("{dir}/{r}"));
+        }
+        for w in watch.iter().filter(|w| std::path::Path::new(w).exists()) {
+            println!("cargo:rerun-if-changed={w}");
+        }
+    }
+    if let Some(head) = hash.get(..8) {
+        println!("cargo:rustc-env=GYRO_BUILD={head}");
     }
 }

@@ -299,6 +299,28 @@ static void rd_sync(reader *r, gl_sync *s)
     s->unpaired = rd_v32(r);
 }
 
+static void rd_info(reader *r, gl_info *s)
+{
+    uint8_t i;
+    int k;
+    for (k = 0; k < 12; k++) {
+        s->uid[k] = rd_u8(r);
+    }
+    for (k = 0; k < 3; k++) {
+        s->firmware[k] = rd_u8(r);
+    }
+    s->build = rd_le32(r);
+    s->n_chips = rd_len(r);
+    for (i = 0; i < s->n_chips && !r->bad; i++) {
+        gl_chip_info *c = &s->chips[i];
+        c->part = rd_variant(r, 3);
+        c->id = rd_v16(r);
+        c->start = rd_variant(r, 4);
+        c->has_temp = rd_option(r);
+        c->temp_cc = c->has_temp ? rd_zz16(r) : 0;
+    }
+}
+
 int gl_sync_to_controller(const gl_sync *s, uint64_t board_us, uint64_t *out)
 {
     double dt, c;
@@ -343,7 +365,7 @@ gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out)
     r.i = 1;
     r.bad = 0;
     out->link_seq = rd_le32(&r);
-    out->kind = (gl_kind)rd_variant(&r, 5);
+    out->kind = (gl_kind)rd_variant(&r, 6);
     switch (out->kind) {
     case GL_SAMPLE:
         rd_sample(&r, &out->u.sample);
@@ -359,6 +381,9 @@ gl_error gl_decode_frame(const uint8_t *frame, size_t len, gl_frame *out)
         break;
     case GL_SYNC:
         rd_sync(&r, &out->u.sync);
+        break;
+    case GL_INFO:
+        rd_info(&r, &out->u.info);
         break;
     }
     if (r.bad || r.i != r.n) {
@@ -481,6 +506,7 @@ size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, s
         wr_varint(&w, c->arg);
         break;
     case GL_REQUEST_STATUS:
+    case GL_REQUEST_INFO:
     case GL_SAVE_SETTINGS:
     case GL_FACTORY_RESET:
         break;

@@ -57,7 +57,8 @@ typedef enum {
     GL_RAW = 1,
     GL_STATUS = 2,
     GL_ACK = 3,
-    GL_SYNC = 4
+    GL_SYNC = 4,
+    GL_INFO = 5
 } gl_kind;
 
 /** An E-DAVAR noise estimate of one fused axis. */
@@ -178,6 +179,29 @@ typedef struct {
     uint32_t dropped, unpaired;
 } gl_sync;
 
+/** One gyro in an info frame. part: 0 Unknown, 1 ICM-42688-P, 2 ADXRS453;
+ * id: its identity register as read at start-up (0x47; 0x52xx); start:
+ * 0 Unknown, 1 Passed, 2 InitFailed, 3 SelfTestFailed; temp_cc: die
+ * temperature, 0.01 deg C, when has_temp. */
+typedef struct {
+    uint8_t part;
+    uint16_t id;
+    uint8_t start;
+    uint8_t has_temp;
+    int16_t temp_cc;
+} gl_chip_info;
+
+/** The board and its chips (frame kind 5): on request (GL_REQUEST_INFO) and
+ * once every status period, half way between status frames. */
+typedef struct {
+    uint8_t uid[12];
+    uint8_t firmware[3];
+    /** The commit's first 32 bits (0: unknown). */
+    uint32_t build;
+    uint8_t n_chips;
+    gl_chip_info chips[GL_MAX_GYROS];
+} gl_info;
+
 /** One decoded frame. */
 typedef struct {
     uint32_t link_seq;
@@ -188,6 +212,7 @@ typedef struct {
         gl_status status;
         gl_ack ack;
         gl_sync sync;
+        gl_info info;
     } u;
 } gl_frame;
 
@@ -237,13 +262,15 @@ typedef enum {
     /** arg 1: sample frames carry the integrated angle; 0: they do not. */
     GL_SET_ANGLE = 8,
     /** time_us: the controller's time at its last sync pulse. */
-    GL_SYNC_TIME = 9
+    GL_SYNC_TIME = 9,
+    /** Send an info frame now. */
+    GL_REQUEST_INFO = 10
 } gl_op;
 
 /** A command: `arg` is the mode, the method, the divider, the status
  * period, the angle (0 or 1), or the compensation (0 Off, 1 ToFrame, 2 Horizon with
- * `horizon_us`); unused for GL_REQUEST_STATUS, GL_SAVE_SETTINGS and
- * GL_FACTORY_RESET. */
+ * `horizon_us`); unused for GL_REQUEST_STATUS, GL_SAVE_SETTINGS,
+ * GL_FACTORY_RESET and GL_REQUEST_INFO; GL_SYNC_TIME takes `time_us`. */
 typedef struct {
     uint8_t id;
     gl_op op;

@@ -107,6 +107,18 @@ static void tests(void)
         s.state = 3;
         CHECK(gl_sync_to_controller(&s, 6000000u, &t) == 0);
     }
+    /* RequestInfo with id 7. */
+    {
+        static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x0a, 0x57, 0xd0, 0x00};
+        uint8_t out[64];
+        gl_command c;
+        size_t n;
+        memset(&c, 0, sizeof c);
+        c.id = 7;
+        c.op = GL_REQUEST_INFO;
+        n = gl_encode_command(&c, 0, out, sizeof out);
+        CHECK(n == sizeof want && memcmp(out, want, n) == 0);
+    }
     /* SetAngle(true) with id 7; a bool is 0 or 1. */
     {
         static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0x3e, 0xea, 0x00};
@@ -230,7 +242,7 @@ static int recording(const char *path)
     FILE *fp = fopen(path, "rb");
     gl_decoder d;
     gl_frame f;
-    long kinds[4] = {0, 0, 0, 0};
+    long kinds[6] = {0, 0, 0, 0, 0, 0};
     long decoded = 0;
     uint32_t crc = 0xFFFFFFFFu;
     int c;
@@ -259,8 +271,8 @@ static int recording(const char *path)
         }
     }
     fclose(fp);
-    printf("frames: %ld decoded (%ld sample, %ld raw, %ld status, %ld ack)\n", decoded, kinds[0], kinds[1],
-           kinds[2], kinds[3]);
+    printf("frames: %ld decoded (%ld sample, %ld raw, %ld status, %ld ack, %ld sync, %ld info)\n", decoded,
+           kinds[0], kinds[1], kinds[2], kinds[3], kinds[4], kinds[5]);
     printf("fused-rate CRC-32: 0x%08x\n", (unsigned)(crc ^ 0xFFFFFFFFu));
     printf("refused: cobs %u, crc %u, too long %u, version %u, malformed %u, short %u; bytes dropped %u\n",
            (unsigned)d.stats.cobs, (unsigned)d.stats.crc, (unsigned)d.stats.too_long, (unsigned)d.stats.version,

@@ -59,6 +59,9 @@ pub struct Summary {
     /// Sync frames, and the newest (the controller's clock).
     pub syncs: u64,
     pub last_sync: Option<gyro_array::link::msg::SyncStatus>,
+    /// Board-information frames, and the newest.
+    pub infos: u64,
+    pub last_info: Option<gyro_array::link::msg::Info>,
 }
 
 impl Default for Summary {
@@ -88,6 +91,8 @@ impl Default for Summary {
             digest: CRC32.digest(),
             syncs: 0,
             last_sync: None,
+            last_info: None,
+            infos: 0,
         }
     }
 }
@@ -145,6 +150,10 @@ impl Summary {
                 self.syncs += 1;
                 self.last_sync = Some(*s);
             }
+            Frame::Info(i) => {
+                self.infos += 1;
+                self.last_info = Some(i.clone());
+            }
         }
     }
 
@@ -177,7 +186,7 @@ impl Summary {
     /// A short human-readable report.
     pub fn report(&self, stats: &DecodeStats) -> String {
         let mut s = format!(
-            "frames: {} decoded ({} sample, {} raw, {} status, {} ack)\n\
+            "frames: {} decoded ({} sample, {} raw, {} status, {} ack, {} sync, {} info)\n\
              wire: {} corrupt, {} too long, {} other version, {} malformed, {} bytes dropped\n\
              link: {} frames missing by sequence number, {} restarts\n\
              samples: seq {}..={}, {} gaps ({} samples missing)\n",
@@ -186,6 +195,8 @@ impl Summary {
             self.raws,
             self.statuses,
             self.acks.len(),
+            self.syncs,
+            self.infos,
             stats.corrupt,
             stats.too_long,
             stats.version,
@@ -207,6 +218,33 @@ impl Summary {
         }
         if let Some(st) = &self.last_status {
             s += &format!("last status: {}\n", status_line(st));
+        }
+        if let Some(i) = &self.last_info {
+            let uid: String = i.uid.iter().map(|b| format!("{b:02x}")).collect();
+            let chips: Vec<String> = i
+                .chips
+                .iter()
+                .map(|c| {
+                    let t = c
+                        .temp_cc
+                        .map_or("-".into(), |t| format!("{:.2} C", f32::from(t) / 100.0));
+                    format!("{:?} id {:#06x} {:?} {t}", c.part, c.id, c.start)
+                })
+                .collect();
+            s += &format!(
+                "board: uid {uid}, firmware {}.{}.{} build {:08x}; chips [{}]\n",
+                i.firmware[0],
+                i.firmware[1],
+                i.firmware[2],
+                i.build,
+                chips.join(", ")
+            );
+        }
+        if let Some(y) = &self.last_sync {
+            s += &format!(
+                "controller clock: {:?}, {:+.2} ppm, residual {:.1} us, {} sync frames ({} dropped, {} unpaired)\n",
+                y.state, y.ppm, y.residual_us, self.syncs, y.dropped, y.unpaired
+            );
         }
         s
     }

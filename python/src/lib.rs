@@ -733,6 +733,7 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
             }
             Frame::Ack(_) => {}
             Frame::Sync(y) => sync.push(*y),
+            Frame::Info(_) => {}
         }
     }
     let (tau0_s, noise_tau) =

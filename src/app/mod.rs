@@ -192,6 +192,13 @@ pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
             link.flush();
             ok
         };
+        // The board and its chips, half way between status frames.
+        let port = link.port();
+        if port.info_due(out.seq) {
+            let info = port.info(pipe, gyros);
+            port.send(&info);
+            link.flush();
+        }
         Sampled {
             out,
             sent,
@@ -384,7 +391,7 @@ mod tests {
             .map(|r| r.unwrap().body)
             .collect();
         let mut last_seq = None;
-        let (mut statuses, mut with_noise) = (0, 0);
+        let (mut statuses, mut infos, mut with_noise) = (0, 0, 0);
         for (k, f) in frames.iter().enumerate() {
             match f {
                 Frame::Sample(s) => {
@@ -406,11 +413,22 @@ mod tests {
                     assert_eq!(st.seq % 1000, 0);
                     assert_eq!(st.noise_tau, [1, 16, 256]);
                 }
+                Frame::Info(i) => {
+                    infos += 1;
+                    // Half way between status frames, behind its sample.
+                    match frames.get(k.wrapping_sub(1)) {
+                        Some(Frame::Sample(s)) => assert_eq!(s.seq % 1000, 500),
+                        other => panic!("an info frame after {other:?}"),
+                    }
+                    assert_eq!(i.chips.len(), 4);
+                }
                 other => panic!("{other:?}"),
             }
         }
-        // With sequence numbers 0, 1000, 2000 and 3000.
+        // With sequence numbers 0, 1000, 2000 and 3000; info frames with
+        // 500 and 2500 (1500 was missed).
         assert_eq!(statuses, 4);
+        assert_eq!(infos, 2);
         // The E-DAVARs publish once their window has filled, and their
         // records reach the frames.
         assert!(with_noise > 10, "{with_noise}");

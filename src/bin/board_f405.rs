@@ -524,6 +524,7 @@ mod app {
             give_up("link port taken twice")
         };
         port.set_store_state(saved.state);
+        port.set_uid(f405::unique_id());
         // The delay compensation predicts each frame's rates to its last byte
         // at the rate the link runs.
         port.set_timing(baud, 1_000_000 / FS_HZ);

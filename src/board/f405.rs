@@ -427,3 +427,15 @@ fn set_watchdog(iwdg: &pac::IWDG, (pr, rl): WatchdogPeriod) {
     }
     iwdg.kr().write(|w| unsafe { w.key().bits(0xAAAA) });
 }
+
+/// The MCU's 96-bit unique ID (RM0090 39.1, at 0x1FFF_7A10), as bytes in
+/// address order.
+pub fn unique_id() -> [u8; 12] {
+    let uid = stm32f4xx_hal::signature::Uid::get();
+    let mut out = [0u8; 12];
+    out[0..2].copy_from_slice(&uid.x().to_le_bytes());
+    out[2..4].copy_from_slice(&uid.y().to_le_bytes());
+    out[4] = uid.waf_num();
+    out[5..12].copy_from_slice(uid.lot_num().as_bytes());
+    out
+}

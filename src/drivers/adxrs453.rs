@@ -122,6 +122,8 @@ pub struct Adxrs453<SPI> {
     spi: SPI,
     axis: usize,
     pending: Pending,
+    /// PID as the last init read it.
+    pid: u16,
 }
 
 /// True when `v` has an odd number of set bits.
@@ -163,6 +165,7 @@ impl<SPI: SpiDevice> Adxrs453<SPI> {
             spi,
             axis: axis.min(2),
             pending: Pending::Nothing,
+            pid: 0,
         }
     }
 
@@ -188,6 +191,7 @@ impl<SPI: SpiDevice> Adxrs453<SPI> {
             return Err(Error::CheckFailed { forced, after });
         }
         let pid = self.read_register(reg::PID1)?;
+        self.pid = pid;
         if (pid >> 8) as u8 != PID_HIGH {
             return Err(Error::WrongId(pid));
         }
@@ -272,6 +276,10 @@ impl<SPI: SpiDevice> Gyro for Adxrs453<SPI> {
 
     fn delay_us(&self) -> u32 {
         DELAY_US
+    }
+
+    fn identity(&self) -> (crate::link::msg::Part, u16) {
+        (crate::link::msg::Part::Adxrs453, self.pid)
     }
 
     fn read(&mut self) -> Result<Reading, ReadFault> {

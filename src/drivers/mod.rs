@@ -96,6 +96,12 @@ pub trait Gyro {
         Err(ReadFault::BadResponse)
     }
 
+    /// The part, and its identity register as the last start read it (0
+    /// before a start read it).
+    fn identity(&self) -> (crate::link::msg::Part, u16) {
+        (crate::link::msg::Part::Unknown, 0)
+    }
+
     /// How long before its read a reading's rate was the true rate, µs:
     /// the part's filters and how old its newest sample is, as the part's
     /// configuration and datasheet give them (an ideal sampler: 0).

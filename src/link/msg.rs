@@ -32,6 +32,9 @@ pub enum Frame {
     /// The controller's clock as the board tracks it (after each sync
     /// time message, and when the pulse is lost).
     Sync(SyncStatus),
+    /// The board and its chips: on request, and once every
+    /// `status_every` samples half way between status frames.
+    Info(Info),
 }
 
 /// A borrowed [`Frame`]: the same variants in the same order, so it
@@ -50,6 +53,8 @@ pub enum FrameRef<'a> {
     Ack(&'a Ack),
     /// [`Frame::Sync`].
     Sync(&'a SyncStatus),
+    /// [`Frame::Info`].
+    Info(&'a Info),
 }
 
 impl Frame {
@@ -61,6 +66,7 @@ impl Frame {
             Frame::Status(s) => FrameRef::Status(s),
             Frame::Ack(a) => FrameRef::Ack(a),
             Frame::Sync(s) => FrameRef::Sync(s),
+            Frame::Info(i) => FrameRef::Info(i),
         }
     }
 }
@@ -159,6 +165,68 @@ pub struct SyncStatus {
 }
 
 pub use super::sync::SyncState;
+
+/// Which board, which firmware, which chips. A frame of its own, not a
+/// part of the status frame: with an acknowledgement and a sample frame
+/// the status frame fills 598 of the 600 bytes a millisecond carries at
+/// 6 Mbaud (`link::tests`), and none of this changes from one second to
+/// the next but the temperatures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Info {
+    /// The MCU's 96-bit unique ID (RM0090 39.1; zeros where there is none,
+    /// as on QEMU's boards).
+    pub uid: [u8; 12],
+    /// Firmware version: major, minor, patch.
+    pub firmware: [u8; 3],
+    /// The commit it was built from: its first 32 bits (0: unknown).
+    #[serde(with = "postcard::fixint::le")]
+    pub build: u32,
+    /// Per gyro, in the pipeline's order.
+    pub chips: Vec<ChipInfo, MAX_GYROS>,
+}
+
+/// One gyro in [`Info`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChipInfo {
+    /// The part.
+    pub part: Part,
+    /// Its identity register as read at start-up (ICM-42688-P WHO_AM_I,
+    /// 0x47; ADXRS453 PID, 0x52xx; 0 where not read).
+    pub id: u16,
+    /// How its start-up went.
+    pub start: Start,
+    /// Its die temperature, 0.01 °C (`None` where not read: only while a
+    /// static calibration is in use, or a part without a sensor).
+    pub temp_cc: Option<i16>,
+}
+
+/// A gyro part.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Part {
+    /// Not identified.
+    #[default]
+    Unknown,
+    /// TDK InvenSense ICM-42688-P.
+    Icm42688P,
+    /// Analog Devices ADXRS453.
+    Adxrs453,
+}
+
+/// How a gyro's start-up went.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Start {
+    /// Not started through the board's start-up (a host replay).
+    #[default]
+    Unknown,
+    /// Identified, configured, and its self-test passed (where it has one).
+    Passed,
+    /// It did not answer, or not as its part.
+    InitFailed,
+    /// Its self-test (the array's actuation test) failed.
+    SelfTestFailed,
+}
 
 /// One E-DAVAR estimate with the time it describes.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -476,4 +544,6 @@ pub enum Op {
     /// The controller's own time, µs, at its last sync pulse (the board's
     /// sync input): answered by an [`Ack`] and a [`Frame::Sync`].
     SyncTime(u64),
+    /// Send a [`Frame::Info`] now.
+    RequestInfo,
 }

@@ -13,9 +13,9 @@
 use heapless::Vec;
 
 use super::msg::{
-    Ack, Angle, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef, FusionMethod,
-    GyroStatus, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings, Status, StoreState,
-    SyncStatus, MAX_GYROS,
+    Ack, Angle, ChipInfo, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef,
+    FusionMethod, GyroStatus, Info, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings,
+    Status, StoreState, SyncStatus, MAX_GYROS,
 };
 use super::ring::ByteRing;
 use super::sync::{CtrlClock, SyncState};
@@ -25,6 +25,7 @@ use super::wire::{
 };
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::algo::predict::Predictor;
+use crate::drivers::Gyro;
 use crate::pipeline::tracker::LinkNoise;
 use crate::pipeline::{Output, Pipeline};
 
@@ -119,6 +120,52 @@ pub const PREDICT_K: usize = 3;
 /// E-DAVAR estimate; `link::tests` checks it). A frame without an estimate
 /// ends before the instant stated, by some 20 µs at 6 Mbaud.
 pub const SAMPLE_FRAME_MAX: u32 = 81;
+
+/// The firmware's version, from the crate's.
+pub const FIRMWARE: [u8; 3] = [
+    parse_u8(env!("CARGO_PKG_VERSION_MAJOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_MINOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_PATCH")),
+];
+
+/// The commit the firmware was built from, its first 32 bits (`build.rs`;
+/// 0 outside a git checkout).
+pub const BUILD: u32 = match option_env!("GYRO_BUILD") {
+    Some(h) => parse_hex32(h),
+    None => 0,
+};
+
+const fn parse_u8(s: &str) -> u8 {
+    let b = s.as_bytes();
+    let mut v: u32 = 0;
+    let mut i = 0;
+    while i < b.len() {
+        v = v * 10 + (b[i] - b'0') as u32;
+        i += 1;
+    }
+    if v > 255 {
+        255
+    } else {
+        v as u8
+    }
+}
+
+const fn parse_hex32(s: &str) -> u32 {
+    let b = s.as_bytes();
+    let mut v: u32 = 0;
+    let mut i = 0;
+    while i < b.len() && i < 8 {
+        let d = match b[i] {
+            c @ b'0'..=b'9' => c - b'0',
+            c @ b'a'..=b'f' => c - b'a' + 10,
+            c @ b'A'..=b'F' => c - b'A' + 10,
+            _ => 0,
+        };
+        v = (v << 4) | d as u32;
+        i += 1;
+    }
+    v
+}
 
 /// Bytes [`Sample::angle`] adds (three u32, fixed width).
 pub const ANGLE_BYTES: u32 = 12;
@@ -247,6 +294,9 @@ pub struct Port<const TX: usize> {
     angle_from: [Option<(u64, f32)>; 3],
     /// The controller's clock.
     sync: CtrlClock,
+    /// An info frame was asked for; the MCU's unique ID.
+    info_requested: bool,
+    uid: [u8; 12],
 }
 
 impl<const TX: usize> Port<TX> {
@@ -274,6 +324,8 @@ impl<const TX: usize> Port<TX> {
             angle: [0; 3],
             angle_from: [None; 3],
             sync: CtrlClock::new(),
+            info_requested: false,
+            uid: [0; 12],
         };
         p.retime();
         p
@@ -616,6 +668,43 @@ impl<const TX: usize> Port<TX> {
         })
     }
 
+    /// The MCU's unique ID, for the info frames.
+    pub fn set_uid(&mut self, uid: [u8; 12]) {
+        self.uid = uid;
+    }
+
+    /// Whether an info frame goes with sample `seq`: when asked for, and
+    /// once every `status_every` samples half way between status frames.
+    pub fn info_due(&mut self, seq: u32) -> bool {
+        let every = self.settings.status_every;
+        let due = self.info_requested || (every != 0 && seq % every == every / 2);
+        self.info_requested = false;
+        due
+    }
+
+    /// The info frame: the board, the firmware, and each gyro as `gyros`
+    /// and the pipeline know it.
+    pub fn info<const N: usize>(&self, pipe: &Pipeline<N>, gyros: &[&mut dyn Gyro; N]) -> Frame {
+        let mut chips = Vec::<ChipInfo, MAX_GYROS>::new();
+        for ((g, start), t) in gyros.iter().zip(pipe.starts()).zip(pipe.temperatures()) {
+            let (part, id) = g.identity();
+            // (A saturating cast: ±327 °C is beyond any die.)
+            let temp_cc = t.map(|t| (t * 100.0) as i16);
+            let _ = chips.push(ChipInfo {
+                part,
+                id,
+                start: *start,
+                temp_cc,
+            });
+        }
+        Frame::Info(Info {
+            uid: self.uid,
+            firmware: FIRMWARE,
+            build: BUILD,
+            chips,
+        })
+    }
+
     /// Send queued bytes until the UART would block or the queue is empty;
     /// the bytes sent.
     pub fn drain<W: embedded_hal_nb::serial::Write<u8>>(&mut self, uart: &mut W) -> usize {
@@ -753,6 +842,7 @@ impl<const TX: usize> Port<TX> {
             Op::RequestStatus => self.status_requested = true,
             Op::SetCompensation(c) => next.compensation = c,
             Op::SetAngle(on) => next.angle = on,
+            Op::RequestInfo => self.info_requested = true,
             Op::SyncTime(t) => {
                 // Taken whether or not it pairs: the Sync frame says what
                 // became of it.

@@ -887,3 +887,58 @@ fn sync_time_messages_give_the_controllers_clock_and_a_stopped_pulse_is_said() {
     assert!((8_000..=8_001).contains(&lost_at), "{lost_at}");
     assert_eq!(port.sync().to_ctrl(9_000_000), None);
 }
+
+#[test]
+fn the_info_frame_names_the_board_the_build_and_each_chip() {
+    use crate::drivers::{Gyro, ReadFault, Reading, Restart};
+    use crate::link::msg::{Part, Start};
+    struct Chip(Part, u16);
+    impl Gyro for Chip {
+        fn read(&mut self) -> Result<Reading, ReadFault> {
+            Err(ReadFault::BadResponse)
+        }
+        fn restart(&mut self, _: u8) -> Result<Restart, ReadFault> {
+            Ok(Restart::Done)
+        }
+        fn identity(&self) -> (Part, u16) {
+            (self.0, self.1)
+        }
+    }
+    let mut pipe = pipeline();
+    pipe.set_start(0, Start::Passed);
+    pipe.set_start(2, Start::SelfTestFailed);
+    pipe.mark_init_failed(2);
+    pipe.mark_init_failed(3);
+    let mut port = Port::<1024>::new(Settings::default());
+    port.set_uid([7; 12]);
+    // Due half way between status frames, and on request.
+    assert!(!port.info_due(0) && port.info_due(500) && !port.info_due(501));
+    exchange(&mut port, &mut pipe, &command_bytes(1, Op::RequestInfo));
+    assert!(port.info_due(501) && !port.info_due(502));
+    let (mut a, mut b, mut c, mut d) = (
+        Chip(Part::Icm42688P, 0x47),
+        Chip(Part::Icm42688P, 0x47),
+        Chip(Part::Icm42688P, 0x12),
+        Chip(Part::Adxrs453, 0x5201),
+    );
+    let gyros: [&mut dyn Gyro; 4] = [&mut a, &mut b, &mut c, &mut d];
+    let Frame::Info(i) = port.info(&pipe, &gyros) else {
+        panic!("not an info frame")
+    };
+    assert_eq!(i.uid, [7; 12]);
+    assert_eq!(i.firmware, super::port::FIRMWARE);
+    let starts: std::vec::Vec<_> = i.chips.iter().map(|c| (c.part, c.id, c.start)).collect();
+    assert_eq!(
+        starts,
+        [
+            (Part::Icm42688P, 0x47, Start::Passed),
+            (Part::Icm42688P, 0x47, Start::Unknown),
+            (Part::Icm42688P, 0x12, Start::SelfTestFailed),
+            (Part::Adxrs453, 0x5201, Start::InitFailed),
+        ]
+    );
+    // It fits beside a sample frame in any period.
+    let n = wire_len(&Frame::Info(i));
+    println!("info frame {n} B");
+    assert!(n + wire_len(&big_sample(4)) <= 600);
+}

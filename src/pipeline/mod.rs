@@ -190,6 +190,8 @@ pub struct Pipeline<const N: usize> {
     /// Last die temperature per chip, °C (read while calibrated), and the
     /// sample it was read on.
     temps: [Option<f32>; N],
+    /// How each gyro's start-up went.
+    start: [crate::link::msg::Start; N],
     temp_seq: [u32; N],
     /// The fastest die temperature change lately, °C/s (the calibration's
     /// drift allowance follows it).
@@ -220,6 +222,7 @@ impl<const N: usize> Pipeline<N> {
             static_cal: [ChipCal::IDENTITY; N],
             calibrated: false,
             temps: [None; N],
+            start: [crate::link::msg::Start::Unknown; N],
             temp_seq: [0; N],
             temp_rate: 0.0,
             cal_flagged: (0, 0),
@@ -230,9 +233,28 @@ impl<const N: usize> Pipeline<N> {
         })
     }
 
+    /// How gyro `i`'s start-up went (the start-up says; a gyro marked
+    /// failed reads `InitFailed` unless its self-test was what failed).
+    pub fn set_start(&mut self, i: usize, s: crate::link::msg::Start) {
+        if let Some(slot) = self.start.get_mut(i) {
+            *slot = s;
+        }
+    }
+
+    /// How each gyro's start-up went.
+    pub fn starts(&self) -> &[crate::link::msg::Start; N] {
+        &self.start
+    }
+
     /// Mark a gyro whose init or self-test failed: it is not read, and is
     /// restarted after the first back-off.
     pub fn mark_init_failed(&mut self, i: usize) {
+        use crate::link::msg::Start;
+        if let Some(s) = self.start.get_mut(i) {
+            if *s != Start::SelfTestFailed {
+                *s = Start::InitFailed;
+            }
+        }
         let (seq, backoff) = (self.seq, self.cfg.backoff_min);
         if let Some(h) = self.health.get_mut(i) {
             h.flags |= flag::INIT_FAILED;

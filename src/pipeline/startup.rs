@@ -91,8 +91,8 @@ where
             continue;
         }
         match r {
-            Ok(_st) =>
-            {
+            Ok(_st) => {
+                pipe.set_start(i, crate::link::msg::Start::Passed);
                 #[cfg(feature = "defmt")]
                 match _st {
                     Some(st) => {
@@ -104,6 +104,7 @@ where
             Err(_e) => {
                 #[cfg(feature = "defmt")]
                 defmt::error!("gyro {}: ICM-42688-P self-test failed: {}", i, _e);
+                pipe.set_start(i, crate::link::msg::Start::SelfTestFailed);
                 pipe.mark_init_failed(i);
                 failed |= 1 << i;
             }
@@ -111,6 +112,7 @@ where
     }
     match adx.init(delay) {
         Ok(()) => {
+            pipe.set_start(4, crate::link::msg::Start::Passed);
             #[cfg(feature = "defmt")]
             defmt::info!("gyro 4: ADXRS453 ok (CHK passed, PID 0x52xx) on z");
         }

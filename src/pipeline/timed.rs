@@ -562,6 +562,10 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         self.g.temperature_c()
     }
 
+    fn identity(&self) -> (crate::link::msg::Part, u16) {
+        self.g.identity()
+    }
+
     fn delay_us(&self) -> u32 {
         self.behind_us
     }
@@ -621,6 +625,10 @@ impl<G: Gyro> Gyro for AtInstant<G> {
 
     fn delay_us(&self) -> u32 {
         self.g.delay_us()
+    }
+
+    fn identity(&self) -> (crate::link::msg::Part, u16) {
+        self.g.identity()
     }
 }
 

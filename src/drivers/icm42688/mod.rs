@@ -245,6 +245,8 @@ pub struct Icm42688<SPI> {
     /// The FIFO bursts' buffer: kept, so a read does not zero 67 bytes
     /// first (some 45 instructions a read on the Cortex-M4).
     fifo_buf: [u8; 3 + FIFO_PACKET * MAX_PER_READ],
+    /// WHO_AM_I as the last init read it.
+    who_am_i: u8,
 }
 
 impl<SPI: SpiDevice> Icm42688<SPI> {
@@ -265,6 +267,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             per_read: 1,
             stamp_lim: Config::default().stamp_step_max(),
             fifo_buf: [0; 3 + FIFO_PACKET * MAX_PER_READ],
+            who_am_i: 0,
         }
     }
 
@@ -296,6 +299,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         delay.delay_ms(1); // datasheet: wait 1 ms after a soft reset
         self.write(reg::REG_BANK_SEL, 0)?;
         let id = self.read(reg::WHO_AM_I)?;
+        self.who_am_i = id;
         if id != WHO_AM_I_VALUE {
             return Err(Error::WrongId(id));
         }
@@ -479,6 +483,10 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
     /// newest sample is 0 to 1 period old at the read).
     fn delay_us(&self) -> u32 {
         self.delay_us
+    }
+
+    fn identity(&self) -> (crate::link::msg::Part, u16) {
+        (crate::link::msg::Part::Icm42688P, u16::from(self.who_am_i))
     }
 
     /// The configuration `init` set, as PX4 re-checks its register table a
