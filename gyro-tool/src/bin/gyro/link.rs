@@ -36,6 +36,7 @@ fn parse_op(s: &str) -> Result<Op, String> {
     Ok(match (k, v) {
         ("status", "") => Op::RequestStatus,
         ("save", "") => Op::SaveSettings,
+        ("info", "") => Op::RequestInfo,
         ("factory-reset", "") => Op::FactoryReset,
         ("angle", "on") => Op::SetAngle(true),
         ("angle", "off") => Op::SetAngle(false),
@@ -54,7 +55,7 @@ fn parse_op(s: &str) -> Result<Op, String> {
         }
         _ => {
             return Err(format!(
-                "{s:?}: expected status, save, factory-reset, angle=on|off, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
+                "{s:?}: expected status, info, save, factory-reset, angle=on|off, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
             ))
         }
     })
