@@ -524,7 +524,6 @@ mod app {
             give_up("link port taken twice")
         };
         port.set_store_state(saved.state);
-        port.set_uid(f405::unique_id());
         // The delay compensation predicts each frame's rates to its last byte
         // at the rate the link runs.
         port.set_timing(baud, 1_000_000 / FS_HZ);
@@ -652,8 +651,13 @@ mod app {
         )
     }
 
-    #[idle(local = [sleep])]
-    fn idle(cx: idle::Context) -> ! {
+    #[idle(local = [sleep], shared = [link])]
+    fn idle(mut cx: idle::Context) -> ! {
+        // The MCU's unique ID for the info frames: probed here, in thread
+        // mode with interrupts on, where a bus fault (QEMU's STM32F405 maps
+        // no system memory) can be stepped over (`f405::probe_u32`).
+        let uid = f405::unique_id();
+        cx.shared.link.lock(|l| l.port.set_uid(uid));
         let sleep = *cx.local.sleep;
         loop {
             if sleep {

@@ -334,55 +334,202 @@ impl crate::drivers::SampleCapture for Int1Capture<'_> {
     }
 }
 
-/// The MCU's flash under the settings store (`gyro_array::store`):
-/// stm32f4xx-hal's blocking `NorFlash` (byte programming, 128 KiB erase
-/// unit, reprogramming allowed: RM0090 3.6) behind the async trait the
-/// store is written against. Unlocked for each program or erase only, so a
-/// stray write at any other time faults instead of changing the flash.
-pub struct StoreFlash(stm32f4xx_hal::flash::LockedFlash);
+/// The MCU's flash under the settings store (`gyro_array::store`), on its
+/// registers (RM0090 3.6): byte programming (PSIZE x8, so any byte may be
+/// written, as the store's 1-byte write size needs), sector erase at x32
+/// (the board runs at 3.3 V: 1–2 s for 128 KiB, datasheet table 39), and a
+/// byte may be programmed again to clear more bits (the F4 has no ECC on
+/// its flash words). Unlocked for each program or erase only, so a stray
+/// write at any other time faults instead of changing the flash.
+///
+/// Written on the registers rather than through stm32f4xx-hal's `NorFlash`:
+/// that one sizes the flash from its size register in system memory
+/// (0x1FFF_7A22), which QEMU's STM32F405 does not map (the read bus-faults,
+/// and the board-f405 run in CI with it); this one knows the part (1 MiB,
+/// RM0090 table 5) and touches only the flash and its registers.
+pub struct StoreFlash {
+    regs: pac::FLASH,
+}
 
-impl StoreFlash {
-    /// The flash, locked.
-    pub fn new(flash: pac::FLASH) -> Self {
-        Self(stm32f4xx_hal::flash::LockedFlash::new(flash))
+/// Why a flash operation failed (FLASH_SR's error bits, RM0090 3.8.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+pub enum FlashError {
+    /// Outside the flash.
+    OutOfBounds,
+    /// An erase not on sector boundaries.
+    NotAligned,
+    /// PGSERR, PGPERR or PGAERR: the programming sequence.
+    Sequence,
+    /// WRPERR: the sector is write-protected.
+    Protected,
+    /// OPERR.
+    Operation,
+}
+
+impl embedded_storage_async::nor_flash::NorFlashError for FlashError {
+    fn kind(&self) -> embedded_storage_async::nor_flash::NorFlashErrorKind {
+        use embedded_storage_async::nor_flash::NorFlashErrorKind as K;
+        match self {
+            Self::OutOfBounds => K::OutOfBounds,
+            Self::NotAligned => K::NotAligned,
+            _ => K::Other,
+        }
     }
 }
 
+/// The STM32F405RG's flash: 1 MiB at 0x0800_0000 (RM0090 table 5).
+const FLASH_BASE: u32 = 0x0800_0000;
+const FLASH_LEN: u32 = 1 << 20;
+/// Sectors 5 to 11 are 128 KiB from 0x2_0000 (sectors 0–4 hold the
+/// firmware; the store never erases them).
+const BIG_SECTOR: u32 = 128 * 1024;
+
+#[allow(unsafe_code)]
+impl StoreFlash {
+    /// The flash, locked.
+    pub fn new(regs: pac::FLASH) -> Self {
+        Self { regs }
+    }
+
+    fn unlock(&mut self) {
+        // RM0090 3.5.1: the two keys in order unlock FLASH_CR.
+        if self.regs.cr().read().lock().bit_is_set() {
+            self.regs
+                .keyr()
+                .write(|w| unsafe { w.key().bits(0x4567_0123) });
+            self.regs
+                .keyr()
+                .write(|w| unsafe { w.key().bits(0xCDEF_89AB) });
+        }
+    }
+
+    fn lock(&mut self) {
+        self.regs.cr().modify(|_, w| w.lock().set_bit());
+    }
+
+    /// Wait for BSY to clear, then the error bits (cleared for the next
+    /// operation).
+    fn finish(&mut self) -> Result<(), FlashError> {
+        while self.regs.sr().read().bsy().bit_is_set() {}
+        let sr = self.regs.sr().read();
+        let r = if sr.wrperr().bit_is_set() {
+            Err(FlashError::Protected)
+        } else if sr.pgserr().bit_is_set() || sr.pgperr().bit_is_set() || sr.pgaerr().bit_is_set() {
+            Err(FlashError::Sequence)
+        } else if sr.operr().bit_is_set() {
+            Err(FlashError::Operation)
+        } else {
+            Ok(())
+        };
+        // (The error bits clear by writing 1.)
+        self.regs.sr().write(|w| unsafe { w.bits(0xF3) });
+        r
+    }
+
+    fn erase_sector(&mut self, n: u8) -> Result<(), FlashError> {
+        self.unlock();
+        // SER, the sector, x32 parallelism; then STRT.
+        self.regs.cr().modify(|_, w| unsafe {
+            w.pg()
+                .clear_bit()
+                .ser()
+                .set_bit()
+                .snb()
+                .bits(n)
+                .psize()
+                .bits(0b10)
+        });
+        self.regs.cr().modify(|_, w| w.strt().set_bit());
+        let r = self.finish();
+        self.regs.cr().modify(|_, w| w.ser().clear_bit());
+        self.lock();
+        r
+    }
+
+    fn program(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        self.unlock();
+        self.regs
+            .cr()
+            .modify(|_, w| unsafe { w.ser().clear_bit().pg().set_bit().psize().bits(0b00) });
+        let mut r = Ok(());
+        for (k, &b) in bytes.iter().enumerate() {
+            let at = (FLASH_BASE + offset + k as u32) as *mut u8;
+            // SAFETY: inside the flash (checked by the caller), with PG set:
+            // the write programs the byte (RM0090 3.6.4).
+            unsafe { at.write_volatile(b) };
+            r = self.finish();
+            if r.is_err() {
+                break;
+            }
+        }
+        self.regs.cr().modify(|_, w| w.pg().clear_bit());
+        self.lock();
+        r
+    }
+}
+
+fn in_flash(offset: u32, len: usize) -> Result<(), FlashError> {
+    let end = offset
+        .checked_add(len as u32)
+        .ok_or(FlashError::OutOfBounds)?;
+    if end > FLASH_LEN {
+        return Err(FlashError::OutOfBounds);
+    }
+    Ok(())
+}
+
 impl embedded_storage_async::nor_flash::ErrorType for StoreFlash {
-    type Error = stm32f4xx_hal::flash::Error;
+    type Error = FlashError;
 }
 
 impl embedded_storage_async::nor_flash::ReadNorFlash for StoreFlash {
     const READ_SIZE: usize = 1;
 
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        embedded_storage::nor_flash::ReadNorFlash::read(&mut self.0, offset, bytes)
+    #[allow(unsafe_code)]
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        in_flash(offset, bytes.len())?;
+        for (k, b) in bytes.iter_mut().enumerate() {
+            // SAFETY: memory-mapped flash, inside the part (checked above).
+            *b = unsafe { ((FLASH_BASE + offset + k as u32) as *const u8).read_volatile() };
+        }
+        Ok(())
     }
 
     fn capacity(&self) -> usize {
-        embedded_storage::nor_flash::ReadNorFlash::capacity(&self.0)
+        FLASH_LEN as usize
     }
 }
 
 impl embedded_storage_async::nor_flash::NorFlash for StoreFlash {
     const WRITE_SIZE: usize = 1;
-    const ERASE_SIZE: usize = 128 * 1024;
+    const ERASE_SIZE: usize = BIG_SECTOR as usize;
 
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        use stm32f4xx_hal::flash::FlashExt;
-        // A 128 KiB sector erase at the HAL's x8 parallelism takes up to
-        // 4 s (datasheet table 39), with every fetch from flash stalled: no
-        // task can feed the watchdog meanwhile, so its period is widened
-        // for the erase and put back after.
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        in_flash(from, to.saturating_sub(from) as usize)?;
+        // (Only the 128 KiB sectors: the ones below hold the vectors.)
+        if from < BIG_SECTOR || !from.is_multiple_of(BIG_SECTOR) || !to.is_multiple_of(BIG_SECTOR) {
+            return Err(FlashError::NotAligned);
+        }
+        // A 128 KiB sector erase stalls every fetch from flash for up to
+        // 2 s: no task can feed the watchdog meanwhile, so its period is
+        // widened for the erase and put back after.
         let saved = widen_watchdog();
-        let r = embedded_storage::nor_flash::NorFlash::erase(&mut self.0.unlocked(), from, to);
+        let mut r = Ok(());
+        for start in (from..to).step_by(BIG_SECTOR as usize) {
+            // Sector 5 starts at 0x2_0000, then one every 128 KiB.
+            let n = (5 + (start - BIG_SECTOR) / BIG_SECTOR) as u8;
+            r = self.erase_sector(n);
+            if r.is_err() {
+                break;
+            }
+        }
         restore_watchdog(saved);
         r
     }
 
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        use stm32f4xx_hal::flash::FlashExt;
-        embedded_storage::nor_flash::NorFlash::write(&mut self.0.unlocked(), offset, bytes)
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        in_flash(offset, bytes.len())?;
+        self.program(offset, bytes)
     }
 }
 
@@ -429,13 +576,79 @@ fn set_watchdog(iwdg: &pac::IWDG, (pr, rl): WatchdogPeriod) {
 }
 
 /// The MCU's 96-bit unique ID (RM0090 39.1, at 0x1FFF_7A10), as bytes in
-/// address order.
+/// address order; zeros where the system memory does not answer (QEMU's
+/// STM32F405 does not map it: the read is probed, not taken).
 pub fn unique_id() -> [u8; 12] {
-    let uid = stm32f4xx_hal::signature::Uid::get();
     let mut out = [0u8; 12];
-    out[0..2].copy_from_slice(&uid.x().to_le_bytes());
-    out[2..4].copy_from_slice(&uid.y().to_le_bytes());
-    out[4] = uid.waf_num();
-    out[5..12].copy_from_slice(uid.lot_num().as_bytes());
+    for (k, chunk) in out.chunks_exact_mut(4).enumerate() {
+        match probe_u32(0x1FFF_7A10 + 4 * k) {
+            Some(w) => chunk.copy_from_slice(&w.to_le_bytes()),
+            None => return [0; 12],
+        }
+    }
     out
+}
+
+/// A word read that may bus-fault, taken as `None` instead: BusFault is
+/// enabled for the one `ldr.w`, and its handler (below), finding a probe
+/// armed, marks it failed and returns past the load (ARMv7-M ARM B1.5.6:
+/// the stacked PC is the faulting instruction's). Needs PRIMASK clear (a
+/// masked BusFault escalates to HardFault): call it from thread mode with
+/// interrupts on, as `idle` does.
+#[allow(unsafe_code)]
+pub fn probe_u32(addr: usize) -> Option<u32> {
+    const SHCSR: *mut u32 = 0xE000_ED24 as *mut u32;
+    const BUSFAULTENA: u32 = 1 << 17;
+    let v: u32;
+    // SAFETY: SHCSR's enable bit, set for the probe and cleared after; the
+    // load is of any address, its fault taken by `BusFault`, which skips
+    // exactly this 4-byte instruction.
+    unsafe {
+        SHCSR.write_volatile(SHCSR.read_volatile() | BUSFAULTENA);
+        core::arch::asm!("dsb", "isb");
+        PROBE.store(1, Ordering::SeqCst);
+        core::arch::asm!("ldr.w {v}, [{a}]", v = out(reg) v, a = in(reg) addr, options(nostack, readonly));
+        let faulted = PROBE.swap(0, Ordering::SeqCst) == 2;
+        SHCSR.write_volatile(SHCSR.read_volatile() & !BUSFAULTENA);
+        core::arch::asm!("dsb", "isb");
+        (!faulted).then_some(v)
+    }
+}
+
+/// 1 while [`probe_u32`] loads, 2 once its load faulted.
+static PROBE: AtomicU32 = AtomicU32::new(0);
+
+// BusFault: a probe's fault is marked and stepped over (the stacked PC
+// moved past the 4-byte load, BFSR cleared, write-1-to-clear); any other
+// goes on to the HardFault handler, which records it and resets
+// (`board::persist`): LR still holds the EXC_RETURN that handler reads.
+#[allow(unsafe_code)]
+mod bus_fault {
+    core::arch::global_asm!(
+    ".section .text.BusFault,\"ax\",%progbits",
+    ".global BusFault",
+    ".type BusFault,%function",
+    ".thumb_func",
+    "BusFault:",
+    "  ldr r0, ={probe}",
+    "  ldr r1, [r0]",
+    "  cmp r1, #1",
+    "  bne 1f",
+    "  movs r1, #2",
+    "  str r1, [r0]",
+    "  tst lr, #4",
+    "  ite eq",
+    "  mrseq r2, msp",
+    "  mrsne r2, psp",
+    "  ldr r1, [r2, #24]",
+    "  adds r1, #4",
+    "  str r1, [r2, #24]",
+    "  ldr r0, =0xE000ED28",
+    "  mov r1, #0xFF00",
+    "  str r1, [r0]",
+    "  bx lr",
+    "1:",
+    "  b HardFault",
+    probe = sym super::PROBE,
+    );
 }
