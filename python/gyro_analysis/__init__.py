@@ -456,6 +456,9 @@ def read_recording(path):
         1 Acquiring, 2 Locked, 3 Lost; ``board_us``, ``ctrl_us``, ``ppm``,
         ``residual_us``: board instant t is ``ctrl_us + (t - board_us) *
         (1 + ppm * 1e-6)`` in the controller's clock while Locked).
+        ``info``: the newest info frame (``uid`` hex, ``firmware`` tuple,
+        ``build`` hex, ``chips``: per gyro ``part``, ``id``, ``start``,
+        ``temp_c``), or None.
         ``tau0_s`` and ``noise_tau`` from the first status
         frame (NaN and the board's defaults without one). ``counts``: the
         decoder's (``frames``, ``corrupt``, ``too_long``, ``version``,

@@ -716,6 +716,7 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let mut first_status = None;
     let mut gyros = 0usize;
     let mut sync = Vec::new();
+    let mut info = None;
     for r in &frames {
         sum.add(r);
         let Ok(d) = r else { continue };
@@ -733,7 +734,7 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
             }
             Frame::Ack(_) => {}
             Frame::Sync(y) => sync.push(*y),
-            Frame::Info(_) => {}
+            Frame::Info(i) => info = Some(i.clone()),
         }
     }
     let (tau0_s, noise_tau) =
@@ -755,6 +756,27 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
         sync.iter().map(|y| y.residual_us).collect::<Vec<_>>().into_pyarray(py),
     )?;
     out.set_item("sync", sd)?;
+    // The newest info frame: the board, its firmware, its chips.
+    match info {
+        Some(i) => {
+            let d = PyDict::new(py);
+            d.set_item("uid", i.uid.iter().map(|b| format!("{b:02x}")).collect::<String>())?;
+            d.set_item("firmware", (i.firmware[0], i.firmware[1], i.firmware[2]))?;
+            d.set_item("build", format!("{:08x}", i.build))?;
+            let chips = pyo3::types::PyList::empty(py);
+            for c in &i.chips {
+                let cd = PyDict::new(py);
+                cd.set_item("part", format!("{:?}", c.part))?;
+                cd.set_item("id", c.id)?;
+                cd.set_item("start", format!("{:?}", c.start))?;
+                cd.set_item("temp_c", c.temp_cc.map(|t| f64::from(t) / 100.0))?;
+                chips.append(cd)?;
+            }
+            d.set_item("chips", chips)?;
+            out.set_item("info", d)?;
+        }
+        None => out.set_item("info", py.None())?,
+    }
     out.set_item("noise", nz.into_dict(py)?)?;
     out.set_item("raw", raw.into_dict(py)?)?;
     out.set_item("tau0_s", tau0_s)?;

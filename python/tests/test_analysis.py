@@ -149,6 +149,10 @@ def test_read_recording_gives_the_samples_and_the_links_counts():
     assert np.ptp(s["rate_dps"][ok], axis=0).max() > 20.0
     nz = rec["noise"]
     assert nz["sigma_dps"].shape == (len(nz["seq"]), 3)
+    # This run sends no integrated angle, no sync and no info frames.
+    assert s["angle_deg"].shape == (n, 3) and np.isnan(s["angle_deg"]).all()
+    assert len(rec["sync"]["ctrl_us"]) == 0
+    assert rec["info"] is None
 
 
 def test_a_damaged_recording_is_counted_not_guessed():
