@@ -857,7 +857,17 @@ impl<const TX: usize> Port<TX> {
                 }
             }
         }
-        next.check()?;
+        // The value the command sets, in its range (a stored record is
+        // checked whole; a port may be built with values no command sets,
+        // as the demo's stress run's status frame every sample).
+        let mut set = Settings::default();
+        match c.op {
+            Op::SetDivider(d) => set.divider = d,
+            Op::SetStatusEvery(n) => set.status_every = n,
+            Op::SetCompensation(c) => set.compensation = c,
+            _ => {}
+        }
+        set.check()?;
         // A method selected again starts its noise model again.
         if matches!(c.op, Op::SetMethod(_)) || next.method != self.settings.method {
             pipe.set_method(next.method.method())

@@ -942,3 +942,26 @@ fn the_info_frame_names_the_board_the_build_and_each_chip() {
     println!("info frame {n} B");
     assert!(n + wire_len(&big_sample(4)) <= 600);
 }
+
+#[test]
+fn a_command_is_checked_for_its_own_value_not_the_ports_others() {
+    // The demo's stress run builds its port with a status frame every
+    // sample, a period no command may set: other commands still apply.
+    let mut pipe = pipeline();
+    let mut port = Port::<1024>::new(Settings {
+        status_every: 1,
+        ..Settings::default()
+    });
+    let mut bytes = command_bytes(0, Op::SetDivider(2));
+    bytes.extend(command_bytes(1, Op::SetStatusEvery(1)));
+    let got = exchange(&mut port, &mut pipe, &bytes);
+    let results: std::vec::Vec<_> = got
+        .iter()
+        .filter_map(|f| match f {
+            Frame::Ack(a) => Some(a.result),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(results, [Ok(()), Err(Reject::OutOfRange)]);
+    assert_eq!(port.settings().divider, 2);
+}
