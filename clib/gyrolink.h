@@ -94,7 +94,7 @@ typedef struct {
     uint8_t has_noise;
     gl_noise noise;
     /** 1 with the angle setting on: angle_turn32[a], axis a's fused rate
-     * integrated since boot, 2^-32 turn, wrapping; the angle between two
+     * integrated since the angle was turned on, 2^-32 turn, wrapping; the angle between two
      * frames is (int32_t)(new - old) * 360.0 / 4294967296.0 deg. */
     uint8_t has_angle;
     uint32_t angle_turn32[3];

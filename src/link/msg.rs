@@ -111,8 +111,8 @@ pub struct Sample {
     pub angle: Option<Angle>,
 }
 
-/// Per axis, the fused rate integrated since boot up to the instant its
-/// measurement describes, in 2⁻³² turn, wrapping. The angle between two
+/// Per axis, the fused rate integrated since the angle was turned on, up to
+/// the instant its measurement describes, in 2⁻³² turn, wrapping. The angle between two
 /// frames is the wrapping difference read as an `i32` (× 360 / 2³² °),
 /// whatever frames were skipped by the divider or lost on the way, up to
 /// half a turn. It does not advance while the axis has no value (`valid`

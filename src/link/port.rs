@@ -173,7 +173,8 @@ pub const ANGLE_BYTES: u32 = 12;
 /// 2³² / 360 / 10⁶: °/s × µs to 2⁻³² turn. In f32 (soft f64 costs the
 /// Cortex-M4 hundreds of cycles): a step of 2 000 °/s over 1 ms is 2.4 × 10⁷
 /// units, held to 2 units (2 × 10⁻⁷ °) with rounding errors that do not
-/// add up one way (`link::tests`: 10⁴ steps against an f64 sum).
+/// add up one way (`link::tests`: 10⁴ steps against an f64 sum). Nothing is
+/// integrated while the angle is off.
 const TURN_UNITS: f32 = (4_294_967_296.0 / 360.0 / 1e6) as f32;
 
 /// The loop's time from the sample's read (`t_us`) to its frame being
@@ -551,23 +552,36 @@ impl<const TX: usize> Port<TX> {
         }
     }
 
-    /// Every sample's measured fused rates into the angles: per axis, the
-    /// trapezoid from the instant the last measurement described to this
-    /// one's (`t_us − age_us`), so a missed sample's period is spanned and
-    /// the chips' changing delay is followed. An axis without a value
-    /// stops its integral until it has two values again.
+    /// Every sample's measured fused rates into the angles (while the
+    /// angle is on): per axis, the trapezoid from the instant the last
+    /// measurement described to this one's (`t_us − age_us`), so a missed
+    /// sample's period is spanned and the chips' changing delay is
+    /// followed. An axis without a value stops its integral until it has
+    /// two values again.
     fn integrate<const N: usize>(&mut self, out: &Output<N>, t_us: u64, age_us: [u16; 3]) {
+        if !self.settings.angle {
+            self.angle_from = [None; 3];
+            return;
+        }
         for a in 0..3 {
             let now = out.fused[a]
                 .map(|f| f.rate_dps)
                 .filter(|r| r.is_finite())
                 .map(|r| (t_us.saturating_sub(u64::from(age_us[a])), r));
             if let (Some((t0, r0)), Some((t1, r1))) = (self.angle_from[a], now) {
-                // (≤ 2²⁴ µs is exact in f32; a longer gap is no period.)
-                let dt = t1.saturating_sub(t0).min(1 << 24) as f32;
-                let step = 0.5 * (r0 + r1) * dt * TURN_UNITS;
-                // (A saturating cast.)
-                self.angle[a] = self.angle[a].wrapping_add(libm::roundf(step) as i64 as u64);
+                let dt = t1.saturating_sub(t0);
+                let step = 0.5 * (r0 + r1) * TURN_UNITS;
+                let units = if dt <= 1 << 16 {
+                    // The FPU's conversion, rounded half away from zero:
+                    // |step| ≤ 2 000 °/s × 65 536 µs is 1.6 × 10⁹ units, inside
+                    // an i32 (the cast saturates beyond).
+                    let x = step * dt as f32;
+                    i64::from((x + 0.5f32.copysign(x)) as i32)
+                } else {
+                    // A gap of more than 65 ms: in f64 (rare, and slow).
+                    libm::round(f64::from(step) * dt as f64) as i64
+                };
+                self.angle[a] = self.angle[a].wrapping_add(units as u64);
             }
             self.angle_from[a] = now;
         }

@@ -142,6 +142,9 @@ impl CtrlClock {
     /// The board's time is now `board_us`: a pulse that has stopped is
     /// called lost.
     pub fn tick(&mut self, board_us: u64) {
+        if !matches!(self.state, SyncState::Locked | SyncState::Acquiring) {
+            return;
+        }
         let Some(&(last, _)) = self.pairs.back() else {
             return;
         };
@@ -152,7 +155,7 @@ impl CtrlClock {
         };
         let no_pulse = board_us.saturating_sub(last.max(self.last_pulse)) > LOST_PERIODS * period;
         let no_pair = board_us.saturating_sub(last) > STALE_PERIODS * period;
-        if matches!(self.state, SyncState::Locked | SyncState::Acquiring) && (no_pulse || no_pair) {
+        if no_pulse || no_pair {
             self.state = SyncState::Lost;
             // Pulses that come again start a new line: the crystals have
             // drifted meanwhile, and the controller may have been reset.

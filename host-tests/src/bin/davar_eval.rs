@@ -176,6 +176,146 @@ fn ramp_class(len: usize, l1: u16, l2: u16) -> Class {
     }
 }
 
+/// White noise whose variance ramps from 1 to `r` over `len` samples from
+/// sample 4000, with 4000 steady samples after.
+fn ramp_to(r: f64, len: usize, l1: u16, l2: u16) -> Class {
+    let n = 4000 + len + 4000;
+    Class {
+        name: format!("ramp 1→{r} over {len}, λ {l1}/{l2}"),
+        kind: Kind::Ramp,
+        lambda: (l1, l2),
+        n,
+        gen: Box::new(white_class(n, move |t| {
+            1.0 + (r - 1.0) * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
+        })),
+        changes: None,
+    }
+}
+
+/// The λ pairs the sweep runs (`--sweep`): the paper's 400/800, the
+/// board's 512/1024, and pairs on either side of them.
+const SWEEP_LAMBDAS: [(u16, u16); 5] = [
+    (200, 1000),
+    (256, 1024),
+    (400, 800),
+    (512, 1024),
+    (128, 2048),
+];
+
+/// `--sweep`: every ramp and step class at every λ pair of
+/// [`SWEEP_LAMBDAS`]; the default against the best fixed window of λ1,
+/// the midpoint and λ2, per seed; the worst class per pair.
+fn sweep(args: &Args) -> ExitCode {
+    let first = args.first_seed.unwrap_or_else(|| {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_secs() % 1_000_000)
+    });
+    let seeds = args.seeds;
+    println!("E-DAVAR λ sweep: seeds {first}..{}, default ÷ best fixed window of λ1, midpoint, λ2 (mean of per-seed ratios over the mean; ± two standard errors)", first + seeds);
+    let mut all_ok = true;
+    for &(l1, l2) in &SWEEP_LAMBDAS {
+        let mut classes = Vec::new();
+        for r in [1.5, 2.0, 4.0] {
+            for len in [l1 as usize, l2 as usize, 4 * l2 as usize] {
+                classes.push(ramp_to(r, len, l1, l2));
+            }
+        }
+        for r in [1.5, 2.0, 4.0, 0.5, 0.25] {
+            classes.push(step_class(r, l1, l2));
+        }
+        let ms = methods(l1, l2, args.p_fa);
+        // The three fixed windows and the default (the last).
+        let picks = [0, 1, 2, ms.len() - 1];
+        let mut worst: Option<(String, f64, f64)> = None;
+        let mut steps = Vec::new();
+        println!(
+            "
+λ {l1}/{l2}"
+        );
+        for class in &classes {
+            let (a, b) = (l2 as usize / 2 + SEG, class.n - l2 as usize / 2 - SEG);
+            let mut errs = vec![Vec::new(); picks.len()];
+            let mut short = 0.0;
+            for seed in first..first + seeds {
+                let (w, truth) = (class.gen)(seed * 7919 + class.n as u64);
+                for (k, &i) in picks.iter().enumerate() {
+                    let r = run(ms[i].1, &w);
+                    errs[k].push(rms(&r, &truth, a, b));
+                    if k == picks.len() - 1 {
+                        let full = (l2 as usize / SEG * SEG) as u16;
+                        short += r.hops.iter().filter(|h| h.2 < full).count() as f64
+                            / r.hops.len() as f64
+                            / seeds as f64;
+                    }
+                }
+            }
+            let best = (0..3)
+                .min_by(|&x, &y| mean_sd(&errs[x]).0.total_cmp(&mean_sd(&errs[y]).0))
+                .unwrap_or(0);
+            let ratio = mean_sd(&errs[3]).0 / mean_sd(&errs[best]).0;
+            let per_seed: Vec<f64> = errs[3]
+                .iter()
+                .zip(&errs[best])
+                .map(|(x, y)| x / y)
+                .collect();
+            let se2 = 2.0 * mean_sd(&per_seed).1 / (per_seed.len() as f64).sqrt();
+            let harm = ratio > 1.0 + se2;
+            println!(
+                "  {:<34} best {:<11} {ratio:>7.4} ± {se2:.4}  shortened {:>5.1} % {}",
+                class.name,
+                ms[picks[best]].0,
+                100.0 * short,
+                if harm { " ABOVE 1" } else { "" }
+            );
+            all_ok &= !harm;
+            if worst.as_ref().is_none_or(|w| ratio - se2 > w.1 - w.2) {
+                worst = Some((class.name.clone(), ratio, se2));
+            }
+            if matches!(class.kind, Kind::Step) {
+                steps.push((class.name.clone(), ratio, se2));
+            }
+        }
+        if let Some((name, r, se2)) = worst {
+            println!("  worst: {name}: {r:.4} ± {se2:.4}");
+        }
+        // Where a short window has room to gain: ×2 ≤ 0.87, ×4 ≤ 0.70.
+        if l2 >= 4 * l1 {
+            for (name, r, _) in &steps {
+                let goal = if name.starts_with("step ×2,") {
+                    Some(0.87)
+                } else if name.starts_with("step ×4,") {
+                    Some(0.70)
+                } else {
+                    None
+                };
+                if let Some(g) = goal {
+                    let met = *r <= g;
+                    all_ok &= met;
+                    println!(
+                        "  target {name} ≤ {g}: {r:.4} {}",
+                        if met { "met" } else { "NOT met" }
+                    );
+                }
+            }
+        }
+    }
+    println!(
+        "
+λ sweep: {}",
+        if all_ok {
+            "no class above the best fixed window, step targets met"
+        } else {
+            "targets NOT all met"
+        }
+    );
+    if all_ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
 /// Ramps and steps at other λ than the standard classes (`--other-lambdas`).
 fn other_lambdas() -> Vec<Class> {
     let mut v = Vec::new();
@@ -364,7 +504,18 @@ struct Run {
 }
 
 fn run(cfg: DavarConfig, w: &[i32]) -> Run {
-    let mut d = D::new(cfg).expect("valid config");
+    match D::new(cfg) {
+        Ok(d) => run_on(d, w),
+        // λ1 < 256 cannot hold τ = 128's terms: seven octaves there (only
+        // σ²(τ0) is scored).
+        Err(gyro_array::algo::davar::DavarError::Capacity) => {
+            run_on(Davar::<2048, 67, 7>::new(cfg).expect("valid config"), w)
+        }
+        Err(e) => panic!("configuration refused: {e:?}"),
+    }
+}
+
+fn run_on<const C: usize, const F: usize, const T: usize>(mut d: Davar<C, F, T>, w: &[i32]) -> Run {
     let mut hops = Vec::new();
     for &x in w {
         if d.push(x).expect("in range").is_some() {
@@ -561,9 +712,9 @@ struct Args {
     /// Seeds per class (at least 2: the tables print seed-to-seed sd).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(2..))]
     seeds: u64,
-    /// First seed of each class's run (seeds S..S+N; the trace is of S).
-    #[arg(long, default_value_t = 1)]
-    first_seed: u64,
+    /// First seed of each class's run (seeds S..S+N; the trace is of S; default 1, or the clock with `--sweep`).
+    #[arg(long)]
+    first_seed: Option<u64>,
     /// Where the paper experiment's window trace goes (default
     /// target/davar-trace.csv).
     #[arg(long)]
@@ -580,6 +731,13 @@ struct Args {
     /// carries its LSB²/12.
     #[arg(long, value_parser = host_tests::args::positive)]
     lsb: Option<f64>,
+    /// The λ sweep instead of the classes: ramps from 1 to ×1.5, ×2 and ×4
+    /// over λ1, λ2 and 4λ2 samples and steps of ×1.5, ×2, ×4, ×0.5 and
+    /// ×0.25 at λ 200/1000, 256/1024, 400/800, 512/1024 and 128/2048, on a
+    /// seed block taken from the clock unless `--first-seed` is given;
+    /// prints the worst class per λ pair.
+    #[arg(long)]
+    sweep: bool,
     /// Run only the classes whose name holds this text (as printed, e.g.
     /// `"ramp 1→3 over 1000"` or `"every 200"`).
     #[arg(long)]
@@ -602,6 +760,9 @@ fn main() -> ExitCode {
     let args = <Args as clap::Parser>::parse();
     if let Some(l) = args.lsb {
         let _ = LSB.set(l);
+    }
+    if args.sweep {
+        return sweep(&args);
     }
     let seeds = args.seeds;
     println!(
@@ -631,7 +792,8 @@ fn main() -> ExitCode {
         let mut oracle_errs = Vec::new();
         let mut centred_errs = Vec::new();
         let mut soft_errs = [Vec::new(), Vec::new()];
-        for seed in args.first_seed..args.first_seed + seeds {
+        let first_seed = args.first_seed.unwrap_or(1);
+        for seed in first_seed..first_seed + seeds {
             let (w, truth) = (class.gen)(seed * 7919 + class.n as u64);
             for (i, (name, cfg)) in ms.iter().enumerate() {
                 let r = run(*cfg, &w);
@@ -650,7 +812,7 @@ fn main() -> ExitCode {
                 short[i] += r.hops.iter().filter(|h| h.2 < full).count() as f64
                     / r.hops.len() as f64
                     / seeds as f64;
-                if seed == args.first_seed && matches!(class.kind, Kind::Paper) {
+                if seed == first_seed && matches!(class.kind, Kind::Paper) {
                     for &(t, v, len) in &r.hops {
                         let _ = writeln!(trace, "{name},{t},{len},{v},{}", truth[t]);
                     }
@@ -730,7 +892,7 @@ fn main() -> ExitCode {
     match std::fs::write(&path, trace) {
         Ok(()) => println!(
             "\npaper experiment, seed {}: window trace written to {path}",
-            args.first_seed
+            args.first_seed.unwrap_or(1)
         ),
         Err(e) => eprintln!("davar-eval: cannot write {path}: {e}"),
     }
