@@ -134,12 +134,15 @@ fn exchange(
     let mut bytes = [0u8; 4 * MAX_FRAME];
     let mut n = 0;
     for (i, &op) in ops.iter().enumerate() {
-        let Ok(k) = encode(i as u32, &Command { id: i as u8, op }, &mut bytes[n..]) else {
+        let Some(Ok(k)) = bytes
+            .get_mut(n..)
+            .map(|rest| encode(i as u32, &Command { id: i as u8, op }, rest))
+        else {
             exit(false)
         };
         n += k;
     }
-    let mut rx = Bytes(&bytes[..n]);
+    let mut rx = Bytes(bytes.get(..n).unwrap_or(&[]));
     let mut pipe = Exclusive(&mut pipe);
     let mut link = Exclusive(&mut port);
     while !rx.0.is_empty() {
@@ -154,7 +157,7 @@ fn exchange(
     let mut dec = Decoder::<MAX_FRAME>::new();
     let mut acks = 0;
     let mut all_ok = true;
-    for &b in &sent.buf[..sent.len] {
+    for &b in sent.buf.get(..sent.len).unwrap_or(&[]) {
         if let Some(r) = dec.feed::<Frame>(b) {
             match r {
                 Ok(d) => match d.body {

@@ -486,13 +486,21 @@ impl embedded_storage_async::nor_flash::ReadNorFlash for StoreFlash {
     const READ_SIZE: usize = 1;
 
     #[allow(unsafe_code)]
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        in_flash(offset, bytes.len())?;
-        for (k, b) in bytes.iter_mut().enumerate() {
-            // SAFETY: memory-mapped flash, inside the part (checked above).
-            *b = unsafe { ((FLASH_BASE + offset + k as u32) as *const u8).read_volatile() };
-        }
-        Ok(())
+    fn read(
+        &mut self,
+        offset: u32,
+        bytes: &mut [u8],
+    ) -> impl core::future::Future<Output = Result<(), FlashError>> {
+        // (Answered at once: no `async fn`, whose resumed-after-completion
+        // check would be a panic site in the firmware.)
+        core::future::ready((|| {
+            in_flash(offset, bytes.len())?;
+            for (k, b) in bytes.iter_mut().enumerate() {
+                // SAFETY: memory-mapped flash, inside the part (checked above).
+                *b = unsafe { ((FLASH_BASE + offset + k as u32) as *const u8).read_volatile() };
+            }
+            Ok(())
+        })())
     }
 
     fn capacity(&self) -> usize {
@@ -504,32 +512,51 @@ impl embedded_storage_async::nor_flash::NorFlash for StoreFlash {
     const WRITE_SIZE: usize = 1;
     const ERASE_SIZE: usize = BIG_SECTOR as usize;
 
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        in_flash(from, to.saturating_sub(from) as usize)?;
-        // (Only the 128 KiB sectors: the ones below hold the vectors.)
-        if from < BIG_SECTOR || !from.is_multiple_of(BIG_SECTOR) || !to.is_multiple_of(BIG_SECTOR) {
-            return Err(FlashError::NotAligned);
-        }
-        // A 128 KiB sector erase stalls every fetch from flash for up to
-        // 2 s: no task can feed the watchdog meanwhile, so its period is
-        // widened for the erase and put back after.
-        let saved = widen_watchdog();
-        let mut r = Ok(());
-        for start in (from..to).step_by(BIG_SECTOR as usize) {
-            // Sector 5 starts at 0x2_0000, then one every 128 KiB.
-            let n = (5 + (start - BIG_SECTOR) / BIG_SECTOR) as u8;
-            r = self.erase_sector(n);
-            if r.is_err() {
-                break;
+    fn erase(
+        &mut self,
+        from: u32,
+        to: u32,
+    ) -> impl core::future::Future<Output = Result<(), FlashError>> {
+        // (Answered at once: no `async fn`, whose resumed-after-completion
+        // check would be a panic site in the firmware.)
+        core::future::ready((|| {
+            in_flash(from, to.saturating_sub(from) as usize)?;
+            // (Only the 128 KiB sectors: the ones below hold the vectors.)
+            if from < BIG_SECTOR
+                || !from.is_multiple_of(BIG_SECTOR)
+                || !to.is_multiple_of(BIG_SECTOR)
+            {
+                return Err(FlashError::NotAligned);
             }
-        }
-        restore_watchdog(saved);
-        r
+            // A 128 KiB sector erase stalls every fetch from flash for up to
+            // 2 s: no task can feed the watchdog meanwhile, so its period is
+            // widened for the erase and put back after.
+            let saved = widen_watchdog();
+            let mut r = Ok(());
+            for start in (from..to).step_by(BIG_SECTOR as usize) {
+                // Sector 5 starts at 0x2_0000, then one every 128 KiB.
+                let n = (5 + (start - BIG_SECTOR) / BIG_SECTOR) as u8;
+                r = self.erase_sector(n);
+                if r.is_err() {
+                    break;
+                }
+            }
+            restore_watchdog(saved);
+            r
+        })())
     }
 
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        in_flash(offset, bytes.len())?;
-        self.program(offset, bytes)
+    fn write(
+        &mut self,
+        offset: u32,
+        bytes: &[u8],
+    ) -> impl core::future::Future<Output = Result<(), FlashError>> {
+        // (Answered at once: no `async fn`, whose resumed-after-completion
+        // check would be a panic site in the firmware.)
+        core::future::ready((|| {
+            in_flash(offset, bytes.len())?;
+            self.program(offset, bytes)
+        })())
     }
 }
 

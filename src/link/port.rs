@@ -688,9 +688,13 @@ impl<const TX: usize> Port<TX> {
     }
 
     /// Whether an info frame goes with sample `seq`: when asked for, and
-    /// once every `status_every` samples half way between status frames.
+    /// once every `status_every` samples (at least every 1 000) half way
+    /// between status frames.
     pub fn info_due(&mut self, seq: u32) -> bool {
-        let every = self.settings.status_every;
+        let every = match self.settings.status_every {
+            0 => 0,
+            n => n.max(1000),
+        };
         let due = self.info_requested || (every != 0 && seq % every == every / 2);
         self.info_requested = false;
         due
