@@ -224,6 +224,14 @@ fn sweep(args: &Args) -> ExitCode {
         for r in [1.5, 2.0, 4.0, 0.5, 0.25] {
             classes.push(step_class(r, l1, l2));
         }
+        classes.retain(|c| {
+            args.only
+                .as_ref()
+                .is_none_or(|o| c.name.contains(o.as_str()))
+        });
+        if classes.is_empty() {
+            continue;
+        }
         let ms = methods(l1, l2, args.p_fa);
         // The three fixed windows and the default (the last).
         let picks = [0, 1, 2, ms.len() - 1];
