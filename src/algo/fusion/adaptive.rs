@@ -634,6 +634,12 @@ pub(super) struct PendLearn<const N: usize> {
 #[inline(never)]
 pub(super) fn learn<const N: usize>(st: &mut AxisState<N>, p: &PendLearn<N>) {
     let (y, med, active, good) = (&p.y, p.med, p.active, p.good);
+    // The chips this sample teaches: the gated-in ones and those still
+    // warming up. The variances are solved over them only: a warm chip the
+    // gate leaves out keeps the variance it had, which the gate judges it
+    // by, and its pairs (a range flipped ×16 reads as 19 °/s of "noise")
+    // do not spread into the others' (fault-campaign seed 2846).
+    let learners = good | (active & !st.warm);
     pairwise_update(p.warmup, st, y, active, good, p.warm_cap);
     for i in 0..N {
         if has(good, i) {
@@ -647,8 +653,8 @@ pub(super) fn learn<const N: usize>(st: &mut AxisState<N>, p: &PendLearn<N>) {
             st.ef[i] += at_least(g, GATE_ALPHA) * (e2 - st.ef[i]);
         }
     }
-    if active != st.solved || st.k.wrapping_add(st.slot).is_multiple_of(SOLVE_EVERY) {
-        attribute(st, active);
+    if learners != st.solved || st.k.wrapping_add(st.slot).is_multiple_of(SOLVE_EVERY) {
+        attribute(st, learners);
         rise(st, active, p.alpha);
     }
 }
