@@ -17,36 +17,21 @@
 #![no_main]
 #![allow(unsafe_code)]
 
-use core::mem::MaybeUninit;
-
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
-use gyro_array::board::qemu::exit;
+use gyro_array::board::qemu::{self, exit};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
 
-/// Stage word and its guard, kept across resets (both garbage at power-up).
-#[unsafe(link_section = ".uninit.stage")]
-static mut STAGE: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+/// This binary's guard for its stage word (`board::qemu::stage`).
 const GUARD: u32 = 0x57A6_E000;
 
 fn stage() -> u32 {
-    // SAFETY: plain words, single-threaded.
-    let [s, g] = unsafe { (&raw const STAGE).cast::<[u32; 2]>().read_volatile() };
-    if g == GUARD ^ s {
-        s
-    } else {
-        0
-    }
+    qemu::stage(GUARD)
 }
 
 fn set_stage(s: u32) {
-    // SAFETY: as above.
-    unsafe {
-        (&raw mut STAGE)
-            .cast::<[u32; 2]>()
-            .write_volatile([s, GUARD ^ s])
-    };
+    qemu::set_stage(GUARD, s)
 }
 
 /// The mps2-an386's CMSDK APB watchdog (ARM DDI 0479, at 0x4000_8000, on

@@ -18,8 +18,6 @@
 #![no_main]
 #![allow(unsafe_code)]
 
-use core::mem::MaybeUninit;
-
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
 use embedded_hal_nb::nb;
@@ -27,7 +25,7 @@ use rtic_core::Exclusive;
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::app;
-use gyro_array::board::qemu::exit;
+use gyro_array::board::qemu::{self, exit};
 use gyro_array::emu::flash::NorSim;
 use gyro_array::link::msg::{Ack, Command, Frame, FusionMethod, Op, Reject, Settings, StoreState};
 use gyro_array::link::port::Port;
@@ -35,28 +33,15 @@ use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use gyro_array::store::Store;
 
-/// Stage word and its guard, kept across resets (garbage at power-up).
-#[unsafe(link_section = ".uninit.stage")]
-static mut STAGE: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+/// This binary's guard for its stage word (`board::qemu::stage`).
 const GUARD: u32 = 0x5E77_1000;
 
 fn stage() -> u32 {
-    // SAFETY: plain words, single-threaded.
-    let [s, g] = unsafe { (&raw const STAGE).cast::<[u32; 2]>().read_volatile() };
-    if g == GUARD ^ s {
-        s
-    } else {
-        0
-    }
+    qemu::stage(GUARD)
 }
 
 fn set_stage(s: u32) {
-    // SAFETY: as above.
-    unsafe {
-        (&raw mut STAGE)
-            .cast::<[u32; 2]>()
-            .write_volatile([s, GUARD ^ s])
-    };
+    qemu::set_stage(GUARD, s)
 }
 
 /// The STORE region (memory.x), 2 × 128 KiB.

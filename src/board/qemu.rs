@@ -107,3 +107,34 @@ unsafe fn HardFault(ef: &cortex_m_rt::ExceptionFrame) -> ! {
     defmt::error!("hard fault at pc {=u32:#010x}", ef.pc());
     exit(false)
 }
+
+/// A multi-boot test's stage, in RAM the runtime does not initialise
+/// (`.uninit`) and QEMU keeps across a system reset; garbage at power-up,
+/// so stored beside `guard ^ stage` and read as 0 unless the two agree.
+#[allow(unsafe_code)]
+#[unsafe(link_section = ".uninit.stage")]
+static mut STAGE: core::mem::MaybeUninit<[u32; 2]> = core::mem::MaybeUninit::uninit();
+
+/// The stage [`set_stage`] left before the last reset (0: none, or
+/// power-up).
+#[allow(unsafe_code)]
+pub fn stage(guard: u32) -> u32 {
+    // SAFETY: plain words, single-threaded test binaries.
+    let [s, g] = unsafe { (&raw const STAGE).cast::<[u32; 2]>().read_volatile() };
+    if g == guard ^ s {
+        s
+    } else {
+        0
+    }
+}
+
+/// Keep `s` for the next boot.
+#[allow(unsafe_code)]
+pub fn set_stage(guard: u32, s: u32) {
+    // SAFETY: as in `stage`.
+    unsafe {
+        (&raw mut STAGE)
+            .cast::<[u32; 2]>()
+            .write_volatile([s, guard ^ s])
+    };
+}
