@@ -163,17 +163,7 @@ fn step_class(r: f64, l1: u16, l2: u16) -> Class {
 /// White noise whose variance ramps from 1 to 3 over `len` samples from
 /// sample 4000, with 4000 steady samples after.
 fn ramp_class(len: usize, l1: u16, l2: u16) -> Class {
-    let n = 4000 + len + 4000;
-    Class {
-        name: format!("ramp 1→3 over {len}, λ {l1}/{l2}"),
-        kind: Kind::Ramp,
-        lambda: (l1, l2),
-        n,
-        gen: Box::new(white_class(n, move |t| {
-            1.0 + 2.0 * ((t as f64 - 4000.0) / len as f64).clamp(0.0, 1.0)
-        })),
-        changes: None,
-    }
+    ramp_to(3.0, len, l1, l2)
 }
 
 /// White noise whose variance ramps from 1 to `r` over `len` samples from
