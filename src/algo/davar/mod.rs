@@ -116,19 +116,6 @@ const HINGE_SLACK: f32 = 0.5;
 /// board-λ ramp at seed 9001 loses, 1.034).
 const HINGE_MAX_GAIN: f32 = 6.0;
 
-/// A change the hinge test reads as gradual gives t a symmetric window of
-/// at most this × λ1. On 32 frames a ×2 step and a level that starts to
-/// slope gain alike. With the change δ ≤ 3λ1/4 from t, the share of this
-/// window beyond a step it missed is (λ1 − δ)/2λ1, the whole span's
-/// (λ2/2 − δ)/λ2 (at λ1 = λ2/4 and δ = λ1/2 a quarter against three
-/// eighths), and a ramp still gets a symmetric window half the span long
-/// (at λ1 = λ2/4; at the board's λ1 = λ2/2 it is the whole span).
-/// `davar-eval --first-seed 55555 --seeds 60`: ×2 at 256/1024 0.844, with
-/// the span's window 0.913; the ramp over 500 0.906 against 0.977. (A cap
-/// of λ1 costs the ramps at λ1 = λ2/4 more than it gains the steps: the
-/// alternatives are in docs/davar.md.)
-const HINGE_WINDOW: usize = 2;
-
 /// t's segment is a stair of a ramp, not the level of a step, where its
 /// energies' slope has z² above this (and runs with the change).
 const SLOPE_Z2: f32 = 9.0;

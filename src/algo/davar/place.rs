@@ -5,8 +5,8 @@
 use super::refine::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
 use super::{
-    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, HINGE_WINDOW,
-    LAG, SEG, SLOPE_Z2, STRONG,
+    Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, SEG,
+    SLOPE_Z2, STRONG,
 };
 use crate::algo::math::lnf;
 use core::cell::Cell;
@@ -124,6 +124,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // symmetric about it, which a linear change leaves unbiased. (Each
         // side tests one change, so the sample's cost stays bounded.)
         let (beta, min_frames, q) = (self.dp.beta, self.min_frames, self.dp.group.max(1));
+        let lambda1 = usize::from(self.cfg.lambda1);
         // (Asked only of a change next to t's segment.)
         let seg_slope = if nb > 1 {
             slope_z2(px, nu, (b(s), b(s + 1)))
@@ -142,9 +143,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                     return true;
                 }
             }
-            // (At the board's λ1 = λ2/2 only a change alone in the span
-            // passes.)
-            if r - l < 2 * min_frames {
+            // At least 2λ1 samples, not frames rounded up: at λ1 = λ2/2
+            // only a change alone in the span passes, and at the paper's
+            // 400/800 (12.5 frames a side) a rounded count would let none
+            // pass, and a ×4 ramp over λ2 would read 1.23× the best fixed
+            // window (`davar-eval --sweep`).
+            if (r - l) * SEG < 2 * lambda1 {
                 return false;
             }
             let sums = line_sums(px, l, r);
@@ -163,16 +167,23 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             if d > -beta && gain_of(&mut step) < GRADUAL * beta {
                 return true;
             }
-            // Near t: within 3λ1/4 of it and inside the span's middle half
-            // (farther, the segment that holds t is most of a one-sided
-            // window's length on either side of t, and the few frames
-            // beyond the change let a steep line mimic the step; at the
-            // board's λ1 = λ2/2 the middle half is the nearer bound, λ1/2,
-            // where a step read as gradual gets the whole span). And not
+            // Near t: within 3λ1/4 or λ2/8 of it, whichever is farther,
+            // and inside the span's middle half (farther, the segment that
+            // holds t is most of a one-sided window's length on either
+            // side of t, and the few frames beyond the change let a steep
+            // line mimic the step; at the board's λ1 = λ2/2 the middle
+            // half is the nearer bound, λ1/2). λ2/8 where λ1 is short
+            // against λ2: a ramp over λ2 at 128/2048 is cut where the noise
+            // puts it, up to λ2/4 from where it bends. With the rounded
+            // 2⌈λ1/32⌉ frames, as the line test had them: at 400/800 the
+            // joined lines come within β/2 of the paper's ×3 steps (gains
+            // 3–6β, deficits 0–0.5β on 25 frames), and reading those as
+            // gradual takes its experiment from 0.70 to 0.77–0.88. And not
             // strong (the second-order form holds near equal levels and
             // understates a large step's edge).
             if nb == 2
-                && c.abs_diff(ft) * 4 <= (3 * min_frames).min(k)
+                && r - l >= 2 * min_frames
+                && c.abs_diff(ft) * 4 <= (3 * min_frames).max(k / 2).min(k)
                 && gain_of(&mut step) < HINGE_MAX_GAIN * beta
                 && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
             {
@@ -210,7 +221,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 .saturating_sub(run_lo)
                 .min(run_hi.saturating_sub(ft + odd));
             if hinged.get() {
-                h = h.min(HINGE_WINDOW * self.min_frames / 2);
+                h = h.min(hinge_half(self.min_frames, k));
             }
             if 2 * h + odd < self.min_frames {
                 h = self.min_frames.saturating_sub(odd).div_ceil(2).min(ft);
@@ -369,6 +380,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             .max(self.cfg.lambda1 as i32)
             .min(self.cfg.lambda2 as i32) as u16;
     }
+}
+
+/// Half the symmetric window, in frames, that a change the hinge test
+/// reads as gradual leaves t: the window is half the span, and at least
+/// λ1. A ×2
+/// step and a level that starts to slope gain alike; with the change δ
+/// from t the share of a window of 2h beyond a step it missed is
+/// (h − δ)/2h, so the shorter window costs a missed step less and a ramp
+/// more. At λ1 = λ2/4 this is 2λ1, as tuned there (`--first-seed 55555
+/// --seeds 60`: ×2 at 256/1024 0.844, with the whole span 0.913); at
+/// λ1 = λ2/2 it is λ1 (with the whole span a ramp over λ1 at 512/1024
+/// reads 1.074× the best fixed window and ×2 steps 0.908; with λ1 ≤ 1.00
+/// and 0.841); at 128/2048 λ2/2 (with 2λ1 the ramp over λ2 reads 1.16: a
+/// window of 256 is too noisy against the bias it avoids).
+pub(super) fn hinge_half(min_frames: usize, span: usize) -> usize {
+    (min_frames / 2).max(span / 4)
 }
 
 /// The mark of a block that no segmentation has put a change at since it
