@@ -1,14 +1,18 @@
-//! Gyro rates from a ROS 2 bag in MCAP storage (the default since ROS 2
-//! Iron; what `ros2 bag record`, Kalibr's and allan_variance_ros' users
-//! have): every `sensor_msgs/msg/Imu` topic, read by the `mcap` crate, each
-//! message's CDR decoded by the `cdr` crate.
+//! Gyro rates from a ROS 2 bag, in MCAP storage (the default since ROS 2
+//! Iron) or in sqlite3 (the default before it: Foxy to Humble, what most
+//! of Kalibr's and allan_variance_ros' users have): every
+//! `sensor_msgs/msg/Imu` topic, the container read by the `mcap` crate or
+//! through `rusqlite` (the `topics` and `messages` tables rosbag2's
+//! sqlite3 plugin writes; the columns read are in every schema version
+//! since Foxy), each message's CDR decoded by the `cdr` crate.
 //!
 //! Columns are `TOPIC.x`, `TOPIC.y`, `TOPIC.z` (`/imu/data.z`) from
 //! `angular_velocity`, rad/s turned into °/s; one topic a read, by default
 //! the one with the most messages. Each sample's time is its header stamp
 //! (when the IMU sampled, not when the bag logged it): τ0 is the stamps'
 //! median step, steps over 1.5 τ0 are gaps (message index in place of a
-//! line). A bag directory (with `metadata.yaml`) or its `.mcap` file.
+//! line). A bag directory (with `metadata.yaml`) or its `.mcap` or `.db3`
+//! file; a bag split over several files is refused, naming them.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -33,46 +37,147 @@ struct Header {
 
 const IMU: &str = "sensor_msgs/msg/Imu";
 
-/// The `.mcap` file of a bag given as a directory or as the file.
-fn mcap_file(path: &Path) -> Result<PathBuf, TableError> {
+/// How a bag's messages are stored.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Storage {
+    Mcap,
+    Sqlite3,
+}
+
+fn storage_of(path: &Path) -> Option<Storage> {
+    let ext = path.extension()?;
+    if ext.eq_ignore_ascii_case("mcap") {
+        Some(Storage::Mcap)
+    } else if ext.eq_ignore_ascii_case("db3") {
+        Some(Storage::Sqlite3)
+    } else {
+        None
+    }
+}
+
+/// The storage file of a bag given as a directory or as the file.
+fn bag_file(path: &Path) -> Result<(PathBuf, Storage), TableError> {
     if !path.is_dir() {
-        return Ok(path.to_path_buf());
+        let s = storage_of(path).ok_or_else(|| {
+            TableError::Record(
+                path.to_path_buf(),
+                0,
+                "not a ROS 2 bag file (.mcap or .db3)".into(),
+            )
+        })?;
+        return Ok((path.to_path_buf(), s));
     }
     let entries = std::fs::read_dir(path).map_err(|e| TableError::Io(path.to_path_buf(), e))?;
-    let mut files: Vec<PathBuf> = entries
+    let mut files: Vec<(PathBuf, Storage)> = entries
         .filter_map(Result::ok)
         .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .filter_map(|p| storage_of(&p).map(|s| (p, s)))
         .collect();
-    files.sort();
+    files.sort_by(|a, b| a.0.cmp(&b.0));
     match files.len() {
         1 => Ok(files.remove(0)),
         0 => Err(TableError::Record(
             path.to_path_buf(),
             0,
-            "no .mcap file in the bag (a sqlite3 bag is not read here)".into(),
+            "no .mcap or .db3 file in the bag".into(),
         )),
         n => Err(TableError::Record(
             path.to_path_buf(),
             0,
-            format!("{n} .mcap files in the bag: give one"),
+            format!(
+                "{n} storage files in the bag (a split bag): give one of {}",
+                files
+                    .iter()
+                    .filter_map(|(f, _)| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
         )),
     }
 }
 
 /// Whether `path` is a ROS 2 bag this module reads.
 pub fn is_bag(path: &Path) -> bool {
-    path.extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
-        || (path.is_dir() && path.join("metadata.yaml").is_file())
+    storage_of(path).is_some() || (path.is_dir() && path.join("metadata.yaml").is_file())
 }
 
 /// Read the gyro `columns` (every axis of the largest IMU topic when empty)
 /// of the bag at `path`.
 pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
-    let file = mcap_file(path)?;
-    let p = || file.clone();
-    let bytes = std::fs::read(&file).map_err(|e| TableError::Io(p(), e))?;
+    let (file, storage) = bag_file(path)?;
+    let topics = match storage {
+        Storage::Mcap => mcap_topics(&file)?,
+        Storage::Sqlite3 => sqlite_topics(&file)?,
+    };
+    series_of(&topics, columns, &file, IMU)
+}
+
+/// One message's CDR as (stamp ns, angular velocity rad/s).
+fn decode(data: &[u8], topic: &str, file: &Path) -> Result<(i64, [f64; 3]), TableError> {
+    let imu: Imu = cdr::deserialize(data)
+        .map_err(|e| TableError::Record(file.to_path_buf(), 0, format!("{topic}: {e}")))?;
+    let ns = i64::from(imu.header.sec) * 1_000_000_000 + i64::from(imu.header.nanosec);
+    Ok((ns, imu.angular_velocity))
+}
+
+/// The IMU topics of a sqlite3 bag, each in the order the recorder wrote
+/// them (the `messages` table's row id).
+fn sqlite_topics(file: &Path) -> Result<Topics, TableError> {
+    use rusqlite::{Connection, OpenFlags};
+    let p = || file.to_path_buf();
+    let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("sqlite3 bag: {e}"));
+    if !file.is_file() {
+        return Err(TableError::Io(
+            p(),
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    // Read-only, and no journal or lock files beside a bag that may sit
+    // on a read-only medium.
+    let db = Connection::open_with_flags(
+        file,
+        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
+    )
+    .map_err(|e| bad(&e))?;
+    let mut topics = Topics::new();
+    let mut formats = db
+        .prepare("SELECT name, serialization_format FROM topics WHERE type = ?1")
+        .map_err(|e| bad(&e))?;
+    let rows = formats
+        .query_map([IMU], |r| {
+            Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?))
+        })
+        .map_err(|e| bad(&e))?;
+    for row in rows {
+        let (topic, format) = row.map_err(|e| bad(&e))?;
+        if format != "cdr" {
+            return Err(bad(&format!(
+                "{topic}: serialization format {format:?}, not cdr"
+            )));
+        }
+    }
+    let mut stmt = db
+        .prepare(
+            "SELECT topics.name, messages.data FROM messages \
+             JOIN topics ON messages.topic_id = topics.id \
+             WHERE topics.type = ?1 ORDER BY messages.id",
+        )
+        .map_err(|e| bad(&e))?;
+    let mut rows = stmt.query([IMU]).map_err(|e| bad(&e))?;
+    while let Some(row) = rows.next().map_err(|e| bad(&e))? {
+        let topic: String = row.get(0).map_err(|e| bad(&e))?;
+        let data = row.get_ref(1).map_err(|e| bad(&e))?;
+        let bytes = data.as_blob().map_err(|e| bad(&format!("{topic}: {e}")))?;
+        let m = decode(bytes, &topic, file)?;
+        topics.entry(topic).or_default().push(m);
+    }
+    Ok(topics)
+}
+
+/// The IMU topics of an MCAP bag, in the file's order.
+fn mcap_topics(file: &Path) -> Result<Topics, TableError> {
+    let p = || file.to_path_buf();
+    let bytes = std::fs::read(file).map_err(|e| TableError::Io(p(), e))?;
     let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("MCAP: {e}"));
     // Per IMU topic: (stamp ns, rates rad/s) in the file's order.
     let mut topics = Topics::new();
@@ -89,15 +194,10 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
                 m.channel.topic, m.channel.message_encoding
             )));
         }
-        let imu: Imu =
-            cdr::deserialize(&m.data).map_err(|e| bad(&format!("{}: {e}", m.channel.topic)))?;
-        let ns = i64::from(imu.header.sec) * 1_000_000_000 + i64::from(imu.header.nanosec);
-        topics
-            .entry(m.channel.topic.clone())
-            .or_default()
-            .push((ns, imu.angular_velocity));
+        let msg = decode(&m.data, &m.channel.topic, file)?;
+        topics.entry(m.channel.topic.clone()).or_default().push(msg);
     }
-    series_of(&topics, columns, &file, IMU)
+    Ok(topics)
 }
 
 /// Per IMU topic, its messages as (stamp ns, angular velocity rad/s) in
@@ -226,5 +326,38 @@ mod tests {
         assert_eq!(s.rates.len(), 1);
         let e = read(&bag, &["/imu/data.w".into()]).unwrap_err();
         assert!(e.to_string().contains("/imu/data.x"), "{e}");
+    }
+
+    /// The same messages `rosbags` wrote in sqlite3 storage read exactly as
+    /// their MCAP twin, as a directory or as the `.db3` file; a bag with
+    /// two storage files is refused, naming both.
+    #[test]
+    fn a_sqlite3_bag_reads_as_its_mcap_twin() {
+        let mcap = read(&Path::new(DIR).join("imu_bag"), &[]).unwrap();
+        let bag = Path::new(DIR).join("imu_bag_db3");
+        assert!(is_bag(&bag));
+        for path in [bag.clone(), bag.join("imu_bag_db3.db3")] {
+            assert!(is_bag(&path));
+            let s = read(&path, &[]).unwrap();
+            assert_eq!(s.names, mcap.names);
+            assert_eq!(s.rates, mcap.rates);
+            assert_eq!(s.tau0, mcap.tau0);
+            assert_eq!(s.gap_samples, mcap.gap_samples);
+        }
+        let split = std::env::temp_dir().join(format!("gyro-split-bag-{}", std::process::id()));
+        std::fs::create_dir_all(&split).unwrap();
+        for f in ["a_0.db3", "a_1.db3"] {
+            std::fs::copy(bag.join("imu_bag_db3.db3"), split.join(f)).unwrap();
+        }
+        std::fs::write(split.join("metadata.yaml"), "").unwrap();
+        let e = read(&split, &[]).unwrap_err().to_string();
+        std::fs::remove_dir_all(&split).unwrap();
+        assert!(e.contains("a_0.db3") && e.contains("a_1.db3"), "{e}");
+        // Not a database: a typed error, not a panic.
+        let junk = std::env::temp_dir().join(format!("gyro-junk-{}.db3", std::process::id()));
+        std::fs::write(&junk, b"not sqlite").unwrap();
+        let e = read(&junk, &[]).unwrap_err().to_string();
+        std::fs::remove_file(&junk).unwrap();
+        assert!(e.contains("sqlite3 bag"), "{e}");
     }
 }

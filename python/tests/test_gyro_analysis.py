@@ -109,7 +109,11 @@ def test_robot_logs_read_as_the_cli_reads_them():
     assert ulog["names"] == ["sensor_combined.0.x", "sensor_combined.0.y", "sensor_combined.0.z"]
     # One dropout at the start, put back as NaN on the time grid.
     assert ulog["rates"].shape[1] == 3 and np.isnan(ulog["rates"]).any()
-    for bag, step in [(VECTORS / "ros1" / "imu.bag", 0.01), (VECTORS / "ros2" / "imu_bag", 0.005)]:
+    for bag, step in [
+        (VECTORS / "ros1" / "imu.bag", 0.01),
+        (VECTORS / "ros2" / "imu_bag", 0.005),
+        (VECTORS / "ros2" / "imu_bag_db3", 0.005),
+    ]:
         log = ga.read_log(bag)
         want = np.loadtxt(bag.parent / "expected.csv", delimiter=",", skiprows=1)
         assert abs(log["tau0"] - step) < 1e-12
