@@ -4,6 +4,7 @@
 
 pub mod analyse;
 pub mod assess;
+pub mod dataflash;
 pub mod dev;
 pub mod edf;
 pub mod fit;

@@ -218,8 +218,11 @@ pub(crate) fn series_of(
         |t: &str| -> Vec<String> { ["x", "y", "z"].iter().map(|a| format!("{t}.{a}")).collect() };
     let all: Vec<String> = topics.keys().flat_map(|t| names(t)).collect();
     let (topic, axes): (&String, Vec<usize>) = if columns.is_empty() {
+        // The first in name order where several have the most (`max_by_key`
+        // keeps the last of equals).
         let t = topics
             .iter()
+            .rev()
             .max_by_key(|(_, v)| v.len())
             .map(|(t, _)| t)
             .ok_or_else(|| TableError::NoColumn(p(), what.into(), all.clone()))?;

@@ -202,6 +202,14 @@ pub fn read_layout(
         }
         return Ok(s);
     }
+    if crate::dataflash::is_log(path) {
+        // An ArduPilot log: its IMUs' stamps, rad/s read as °/s.
+        let mut s = crate::dataflash::read(path, columns)?;
+        if let Some(t) = tau0 {
+            s.tau0 = t;
+        }
+        return Ok(s);
+    }
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))

@@ -128,6 +128,18 @@ def test_robot_logs_read_as_the_cli_reads_them():
         ga.read_log(VECTORS / "ros1" / "imu.bag", columns=["/imu.w"])
 
 
+def test_an_ardupilot_log_reads_as_pymavlink_reads_it():
+    # pymavlink's own test log; expected.csv is what its DFReader decodes.
+    path = VECTORS / "dataflash" / "test.BIN"
+    want = np.genfromtxt(path.parent / "expected.csv", delimiter=",", skip_header=1, usecols=(1, 2, 3, 4, 5))
+    for inst in (0, 1):
+        cols = [f"IMU.{inst}.{a}" for a in "xyz"]
+        log = ga.read_log(path, columns=cols)
+        assert log["names"] == cols
+        rates = log["rates"][~np.isnan(log["rates"][:, 0])]
+        np.testing.assert_array_equal(rates, np.degrees(want[want[:, 0] == inst][:, 2:]))
+
+
 def table(name):
     """(AF, #, sigma) rows of a Stable32 table."""
     rows = []
