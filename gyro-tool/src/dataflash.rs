@@ -68,7 +68,7 @@ fn gyro_of(e: &Entry) -> Option<(String, u64, [f64; 3])> {
 
 /// Read the gyro `columns` (every axis of the largest gyro topic when
 /// empty) of the dataflash log at `path`.
-pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
+pub fn read(path: &Path, columns: &[String], grid: bool) -> Result<Series, TableError> {
     let p = || path.to_path_buf();
     let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("dataflash log: {e}"));
     let file = File::open(path).map_err(|e| bad(&e))?;
@@ -83,7 +83,7 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             topics.entry(topic).or_default().push((ns, rates));
         }
     }
-    series_of(&topics, columns, path, "IMU or GYR message")
+    series_of(&topics, columns, path, "IMU or GYR message", grid)
 }
 
 #[cfg(test)]
@@ -115,7 +115,7 @@ mod tests {
                 .iter()
                 .map(|a| format!("IMU.{instance}.{a}"))
                 .collect();
-            let s = read(&log, &cols).unwrap();
+            let s = read(&log, &cols, false).unwrap();
             assert_eq!(s.names, cols);
             assert_eq!(s.rates[0].len(), want.len());
             for (k, w) in want.iter().enumerate() {
@@ -135,9 +135,11 @@ mod tests {
             steps.sort_by(f64::total_cmp);
             assert!((s.tau0 - steps[steps.len() / 2]).abs() < 1e-9, "{}", s.tau0);
         }
-        let s = read(&log, &[]).unwrap();
+        let s = read(&log, &[], false).unwrap();
         assert_eq!(s.names, ["IMU.0.x", "IMU.0.y", "IMU.0.z"]);
-        let e = read(&log, &["IMU.2.x".into()]).unwrap_err().to_string();
+        let e = read(&log, &["IMU.2.x".into()], false)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("IMU.1.x"), "{e}");
     }
 
@@ -153,9 +155,9 @@ mod tests {
         let bytes = std::fs::read(Path::new(DIR).join("test.BIN")).unwrap();
         let cut = dir.join(format!("gyro-cut-{}.bin", std::process::id()));
         std::fs::write(&cut, &bytes[..bytes.len() / 2 + 7]).unwrap();
-        let s = read(&cut, &[]);
+        let s = read(&cut, &[], false);
         std::fs::remove_file(&cut).unwrap();
-        let whole = read(&Path::new(DIR).join("test.BIN"), &[]).unwrap();
+        let whole = read(&Path::new(DIR).join("test.BIN"), &[], false).unwrap();
         let s = s.unwrap();
         let n = s.rates[0].len();
         assert!(n > 3 && n < whole.rates[0].len(), "{n}");

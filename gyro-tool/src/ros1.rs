@@ -47,7 +47,7 @@ fn decode(d: &[u8]) -> Option<(i64, [f64; 3])> {
 
 /// Read the gyro `columns` (every axis of the largest IMU topic when empty)
 /// of the ROS 1 bag at `path`.
-pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
+pub fn read(path: &Path, columns: &[String], grid: bool) -> Result<Series, TableError> {
     let p = || path.to_path_buf();
     let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("ROS bag: {e}"));
     let bag = RosBag::new(path).map_err(|e| TableError::Io(p(), e))?;
@@ -77,7 +77,7 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             }
         }
     }
-    series_of(&topics, columns, path, IMU)
+    series_of(&topics, columns, path, IMU, grid)
 }
 
 #[cfg(test)]
@@ -99,7 +99,7 @@ mod tests {
             .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
             .collect();
         assert!(is_bag(&bag));
-        let s = read(&bag, &[]).unwrap();
+        let s = read(&bag, &[], false).unwrap();
         assert_eq!(s.names, ["/imu.x", "/imu.y", "/imu.z"]);
         assert_eq!(s.rates[0].len(), want.len());
         let deg = 180.0 / std::f64::consts::PI;
@@ -112,6 +112,6 @@ mod tests {
         assert_eq!(s.gap_samples, [(100, 1)]);
         let not = std::env::temp_dir().join(format!("gyro-ros1-{}.bag", std::process::id()));
         std::fs::write(&not, b"t,x\n0,1\n").unwrap();
-        assert!(read(&not, &[]).is_err());
+        assert!(read(&not, &[], false).is_err());
     }
 }

@@ -103,13 +103,13 @@ pub fn is_bag(path: &Path) -> bool {
 
 /// Read the gyro `columns` (every axis of the largest IMU topic when empty)
 /// of the bag at `path`.
-pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
+pub fn read(path: &Path, columns: &[String], grid: bool) -> Result<Series, TableError> {
     let (file, storage) = bag_file(path)?;
     let topics = match storage {
         Storage::Mcap => mcap_topics(&file)?,
         Storage::Sqlite3 => sqlite_topics(&file)?,
     };
-    series_of(&topics, columns, &file, IMU)
+    series_of(&topics, columns, &file, IMU, grid)
 }
 
 /// One message's CDR as (stamp ns, angular velocity rad/s).
@@ -207,17 +207,28 @@ pub(crate) type Topics = BTreeMap<String, Vec<(i64, [f64; 3])>>;
 /// The `columns` (`TOPIC.x` …; every axis of the topic with the most
 /// messages when empty) of `topics` as a rate log in °/s, timed by the
 /// stamps. `file` names the log in errors, `what` the message type.
+///
+/// Columns of several topics (several IMUs: `gyro replay`'s chips) only
+/// with `grid`: they are put on the first column's topic's stamps, each
+/// other topic's message nearest a grid stamp taken where it lies within
+/// half the grid's τ0 (each message once), and NaN, a chip that did not
+/// answer, where none does. Nearest, not interpolated: a value between two
+/// samples of white noise has half their variance, which the fusion's
+/// noise model would read as a quieter chip; a lag of whole samples is
+/// `gyro replay`'s alignment to take out.
 pub(crate) fn series_of(
     topics: &Topics,
     columns: &[String],
     file: &Path,
     what: &str,
+    grid: bool,
 ) -> Result<Series, TableError> {
     let p = || file.to_path_buf();
     let names =
         |t: &str| -> Vec<String> { ["x", "y", "z"].iter().map(|a| format!("{t}.{a}")).collect() };
     let all: Vec<String> = topics.keys().flat_map(|t| names(t)).collect();
-    let (topic, axes): (&String, Vec<usize>) = if columns.is_empty() {
+    // Each column as (topic, axis).
+    let picks: Vec<(&String, usize)> = if columns.is_empty() {
         // The first in name order where several have the most (`max_by_key`
         // keeps the last of equals).
         let t = topics
@@ -226,10 +237,9 @@ pub(crate) fn series_of(
             .max_by_key(|(_, v)| v.len())
             .map(|(t, _)| t)
             .ok_or_else(|| TableError::NoColumn(p(), what.into(), all.clone()))?;
-        (t, vec![0, 1, 2])
+        (0..3).map(|a| (t, a)).collect()
     } else {
-        let mut topic: Option<&String> = None;
-        let mut axes = Vec::new();
+        let mut picks = Vec::new();
         for c in columns {
             let hit = topics
                 .keys()
@@ -237,60 +247,105 @@ pub(crate) fn series_of(
             let Some((t, a)) = hit else {
                 return Err(TableError::NoColumn(p(), c.clone(), all.clone()));
             };
-            if topic.is_some_and(|w| w != t) {
+            if !grid && picks.first().is_some_and(|&(w, _)| w != t) {
                 return Err(TableError::Record(
                     p(),
                     0,
-                    format!("{c}: one topic instance a read (each has its own time base)"),
+                    format!(
+                        "{c}: one topic instance a read (each has its own time base; `gyro replay` puts several on one)"
+                    ),
                 ));
             }
-            topic = Some(t);
-            axes.push(a);
+            picks.push((t, a));
         }
-        match topic {
-            Some(t) => (t, axes),
-            None => return Err(TableError::NoColumn(p(), String::new(), all)),
-        }
+        picks
+    };
+    let Some(&(topic, _)) = picks.first() else {
+        return Err(TableError::NoColumn(p(), String::new(), all));
     };
     let msgs = &topics[topic];
     let n = msgs.len();
     if n < 3 {
         return Err(TableError::TooShort(p(), n));
     }
-    if let Some(k) = msgs.windows(2).position(|w| w[1].0 <= w[0].0) {
-        return Err(TableError::Time(
-            p(),
-            k + 1,
-            msgs[k].0 as f64 * 1e-9,
-            msgs[k + 1].0 as f64 * 1e-9,
-        ));
-    }
-    let deg = 180.0 / std::f64::consts::PI;
-    let mut rates = Vec::with_capacity(axes.len());
-    for &a in &axes {
-        let v: Vec<f64> = msgs.iter().map(|m| m.1[a] * deg).collect();
-        if let Some(k) = v.iter().position(|x| !x.is_finite()) {
-            return Err(TableError::Number(
-                p(),
-                k,
-                names(topic)[a].clone(),
-                v[k].to_string(),
+    for (t, m) in topics
+        .iter()
+        .filter(|(t, _)| picks.iter().any(|q| q.0 == *t))
+    {
+        if let Some(k) = m.windows(2).position(|w| w[1].0 <= w[0].0) {
+            return Err(TableError::Time(
+                p().join(t),
+                k + 1,
+                m[k].0 as f64 * 1e-9,
+                m[k + 1].0 as f64 * 1e-9,
             ));
         }
-        rates.push(v);
     }
     let steps: Vec<f64> = msgs
         .windows(2)
         .map(|w| (w[1].0 - w[0].0) as f64 * 1e-9)
         .collect();
     let (tau0, (gaps, gap_samples)) = crate::table::gaps_of(&steps);
+    let deg = 180.0 / std::f64::consts::PI;
+    let mut rates = Vec::with_capacity(picks.len());
+    for &(t, a) in &picks {
+        let v: Vec<f64> = if t == topic {
+            msgs.iter().map(|m| m.1[a] * deg).collect()
+        } else {
+            on_grid(msgs, &topics[t], tau0)
+                .into_iter()
+                .map(|m| m.map_or(f64::NAN, |m| m.1[a] * deg))
+                .collect()
+        };
+        if let Some(k) = v
+            .iter()
+            .position(|x| x.is_infinite() || (t == topic && x.is_nan()))
+        {
+            return Err(TableError::Number(
+                p(),
+                k,
+                names(t)[a].clone(),
+                v[k].to_string(),
+            ));
+        }
+        rates.push(v);
+    }
     Ok(Series {
-        names: axes.iter().map(|&a| names(topic)[a].clone()).collect(),
+        names: picks.iter().map(|&(t, a)| names(t)[a].clone()).collect(),
         rates,
         tau0,
         gaps,
         gap_samples,
     })
+}
+
+/// Per stamp of `grid`, the message of `other` nearest it within τ0/2 (τ0
+/// in s), each message used once; both in time order.
+fn on_grid<'a>(
+    grid: &[(i64, [f64; 3])],
+    other: &'a [(i64, [f64; 3])],
+    tau0: f64,
+) -> Vec<Option<&'a (i64, [f64; 3])>> {
+    let half = (tau0 * 0.5e9) as i64;
+    let mut j = 0;
+    grid.iter()
+        .map(|&(g, _)| {
+            // The first message not before g − τ0/2 and its successor: the
+            // nearest to g is one of them.
+            while other.get(j).is_some_and(|m| m.0 < g - half) {
+                j += 1;
+            }
+            let best = [j, j + 1]
+                .into_iter()
+                .filter_map(|k| other.get(k).map(|m| (k, m)))
+                .filter(|(_, m)| (m.0 - g).abs() <= half)
+                .min_by_key(|(_, m)| (m.0 - g).abs());
+            best.map(|(k, m)| {
+                j = k + 1;
+                m
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -313,7 +368,7 @@ mod tests {
             .collect();
         assert!(is_bag(&bag));
         for path in [bag.clone(), bag.join("imu_bag.mcap")] {
-            let s = read(&path, &[]).unwrap();
+            let s = read(&path, &[], false).unwrap();
             assert_eq!(s.names, ["/imu/data.x", "/imu/data.y", "/imu/data.z"]);
             assert_eq!(s.rates[0].len(), want.len());
             let deg = 180.0 / std::f64::consts::PI;
@@ -325,10 +380,75 @@ mod tests {
             assert!((s.tau0 - 0.005).abs() < 1e-12, "{}", s.tau0);
             assert_eq!(s.gap_samples, [(250, 1)]);
         }
-        let s = read(&bag, &["/imu/data.z".into()]).unwrap();
+        let s = read(&bag, &["/imu/data.z".into()], false).unwrap();
         assert_eq!(s.rates.len(), 1);
-        let e = read(&bag, &["/imu/data.w".into()]).unwrap_err();
+        let e = read(&bag, &["/imu/data.w".into()], false).unwrap_err();
         assert!(e.to_string().contains("/imu/data.x"), "{e}");
+    }
+
+    /// Several topics on the first's stamps: a topic 1 ms late, one
+    /// running twice as fast, one that misses a message; each matched to
+    /// the nearest within half a period, the rest NaN; refused without
+    /// `grid`.
+    #[test]
+    fn several_topics_on_one_grid() {
+        let ms = 1_000_000i64;
+        let msg = |t: i64, v: f64| (t, [v, 0.0, 0.0]);
+        let mut topics = Topics::new();
+        topics.insert(
+            "/a".into(),
+            (0..10).map(|k| msg(10 * ms * k, k as f64)).collect(),
+        );
+        topics.insert(
+            "/b".into(),
+            (0..10)
+                .map(|k| msg(10 * ms * k + ms, 10.0 + k as f64))
+                .collect(),
+        );
+        topics.insert(
+            "/c".into(),
+            (0..20).map(|k| msg(5 * ms * k, 20.0 + k as f64)).collect(),
+        );
+        topics.insert(
+            "/d".into(),
+            (0..10)
+                .filter(|&k| k != 4)
+                .map(|k| msg(10 * ms * k + 6 * ms, 40.0 + k as f64))
+                .collect(),
+        );
+        let cols: Vec<String> = ["/a.x", "/b.x", "/c.x", "/d.x"].map(String::from).to_vec();
+        let f = Path::new("x.bag");
+        let s = series_of(&topics, &cols, f, IMU, true).unwrap();
+        let deg = 180.0 / std::f64::consts::PI;
+        let got: Vec<Vec<f64>> = s
+            .rates
+            .iter()
+            .map(|r| r.iter().map(|v| (v / deg * 1e6).round() / 1e6).collect())
+            .collect();
+        assert!((s.tau0 - 0.01).abs() < 1e-12);
+        assert_eq!(got[0], (0..10).map(f64::from).collect::<Vec<_>>());
+        assert_eq!(
+            got[1],
+            (0..10).map(|k| 10.0 + f64::from(k)).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            got[2],
+            (0..10)
+                .map(|k| 20.0 + 2.0 * f64::from(k))
+                .collect::<Vec<_>>()
+        );
+        // /d is 6 ms late, past half a period: its message is nearer the
+        // next grid stamp (4 ms), taken there; none for stamp 0; the one it
+        // missed leaves one more hole.
+        let d: Vec<Option<f64>> = got[3].iter().map(|v| v.is_finite().then_some(*v)).collect();
+        assert_eq!(d[0], None);
+        assert_eq!(d[1], Some(40.0));
+        assert_eq!(d[5], None, "{d:?}");
+        assert_eq!(d.iter().flatten().count(), 8, "{d:?}");
+        let e = series_of(&topics, &cols, f, IMU, false)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("one topic instance a read"), "{e}");
     }
 
     /// The same messages `rosbags` wrote in sqlite3 storage read exactly as
@@ -336,12 +456,12 @@ mod tests {
     /// two storage files is refused, naming both.
     #[test]
     fn a_sqlite3_bag_reads_as_its_mcap_twin() {
-        let mcap = read(&Path::new(DIR).join("imu_bag"), &[]).unwrap();
+        let mcap = read(&Path::new(DIR).join("imu_bag"), &[], false).unwrap();
         let bag = Path::new(DIR).join("imu_bag_db3");
         assert!(is_bag(&bag));
         for path in [bag.clone(), bag.join("imu_bag_db3.db3")] {
             assert!(is_bag(&path));
-            let s = read(&path, &[]).unwrap();
+            let s = read(&path, &[], false).unwrap();
             assert_eq!(s.names, mcap.names);
             assert_eq!(s.rates, mcap.rates);
             assert_eq!(s.tau0, mcap.tau0);
@@ -353,13 +473,13 @@ mod tests {
             std::fs::copy(bag.join("imu_bag_db3.db3"), split.join(f)).unwrap();
         }
         std::fs::write(split.join("metadata.yaml"), "").unwrap();
-        let e = read(&split, &[]).unwrap_err().to_string();
+        let e = read(&split, &[], false).unwrap_err().to_string();
         std::fs::remove_dir_all(&split).unwrap();
         assert!(e.contains("a_0.db3") && e.contains("a_1.db3"), "{e}");
         // Not a database: a typed error, not a panic.
         let junk = std::env::temp_dir().join(format!("gyro-junk-{}.db3", std::process::id()));
         std::fs::write(&junk, b"not sqlite").unwrap();
-        let e = read(&junk, &[]).unwrap_err().to_string();
+        let e = read(&junk, &[], false).unwrap_err().to_string();
         std::fs::remove_file(&junk).unwrap();
         assert!(e.contains("sqlite3 bag"), "{e}");
     }

@@ -188,7 +188,7 @@ pub fn read_layout(
     };
     if crate::ros1::is_bag(path) {
         // A ROS 1 bag: as a ROS 2 bag.
-        let mut s = crate::ros1::read(path, columns)?;
+        let mut s = crate::ros1::read(path, columns, missing)?;
         if let Some(t) = tau0 {
             s.tau0 = t;
         }
@@ -196,7 +196,7 @@ pub fn read_layout(
     }
     if crate::ros2::is_bag(path) {
         // A ROS 2 bag: its IMU topics' header stamps, rad/s read as °/s.
-        let mut s = crate::ros2::read(path, columns)?;
+        let mut s = crate::ros2::read(path, columns, missing)?;
         if let Some(t) = tau0 {
             s.tau0 = t;
         }
@@ -204,7 +204,7 @@ pub fn read_layout(
     }
     if crate::dataflash::is_log(path) {
         // An ArduPilot log: its IMUs' stamps, rad/s read as °/s.
-        let mut s = crate::dataflash::read(path, columns)?;
+        let mut s = crate::dataflash::read(path, columns, missing)?;
         if let Some(t) = tau0 {
             s.tau0 = t;
         }
@@ -215,7 +215,7 @@ pub fn read_layout(
         .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))
     {
         // A PX4 flight log: its own stamps and units (rad/s, read as °/s).
-        let mut s = crate::ulog::read(path, columns)?;
+        let mut s = crate::ulog::read(path, columns, missing)?;
         if let Some(t) = tau0 {
             s.tau0 = t;
         }

@@ -40,7 +40,7 @@ fn floats(v: &SomeVec) -> Option<Vec<f64>> {
 /// empty) of the ULog at `path`: each topic instance as `TOPIC.INSTANCE`,
 /// its samples (stamp, rates) chosen and checked as a ROS bag's IMU
 /// topics are ([`crate::ros2::series_of`]).
-pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
+pub fn read(path: &Path, columns: &[String], grid: bool) -> Result<Series, TableError> {
     let p = || path.to_path_buf();
     let text = path.to_string_lossy();
     let parsed = read_file(&text).map_err(|e| TableError::Io(p(), e))?;
@@ -82,7 +82,7 @@ pub fn read(path: &Path, columns: &[String]) -> Result<Series, TableError> {
             topics.insert(name, samples);
         }
     }
-    series_of(&topics, columns, path, "sensor_gyro")
+    series_of(&topics, columns, path, "sensor_gyro", grid)
 }
 
 #[cfg(test)]
@@ -101,7 +101,7 @@ mod tests {
         let mut checked = 0;
         for l in expected.lines().skip(1) {
             let f: Vec<&str> = l.split(',').collect();
-            let s = read(&log, &[f[0].to_string()]).unwrap();
+            let s = read(&log, &[f[0].to_string()], false).unwrap();
             assert_eq!(s.names, [f[0]]);
             assert_eq!(s.rates[0].len(), f[1].parse::<usize>().unwrap(), "{l}");
             assert!((s.tau0 - f[2].parse::<f64>().unwrap()).abs() < 1e-12, "{l}");
@@ -117,7 +117,7 @@ mod tests {
         }
         assert_eq!(checked, 12);
         // By default every axis of the instance with the most samples.
-        let s = read(&log, &[]).unwrap();
+        let s = read(&log, &[], false).unwrap();
         assert_eq!(
             s.names,
             [
@@ -127,14 +127,19 @@ mod tests {
             ]
         );
         // Two instances in one read: refused, with the reason.
-        let e = read(&log, &["sensor_gyro.0.x".into(), "sensor_gyro.1.x".into()]).unwrap_err();
+        let e = read(
+            &log,
+            &["sensor_gyro.0.x".into(), "sensor_gyro.1.x".into()],
+            false,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("one topic instance"), "{e}");
         // A column that is not there names those that are.
-        let e = read(&log, &["sensor_gyro.7.x".into()]).unwrap_err();
+        let e = read(&log, &["sensor_gyro.7.x".into()], false).unwrap_err();
         assert!(e.to_string().contains("sensor_gyro.2.z"), "{e}");
         // Not a ULog.
         let bad = std::env::temp_dir().join(format!("gyro-ulog-{}.ulg", std::process::id()));
         std::fs::write(&bad, b"t,x\n0,1\n").unwrap();
-        assert!(read(&bad, &[]).is_err());
+        assert!(read(&bad, &[], false).is_err());
     }
 }

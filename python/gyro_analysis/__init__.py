@@ -44,6 +44,11 @@ The rest of the ``gyro`` tool's analysis, on the same code:
   :func:`gradev` (equal to allantools 2024.6; ``gradev``'s bounds work);
   every deviation takes an (N, k) array, one column per series.
 
+:class:`Dataset` is allantools' ``Dataset`` (``compute(name)`` gives the
+same ``taus``, ``stat``, ``stat_err``, ``stat_n`` as allantools') carrying
+also each point's EDF and confidence interval, the noise fit, a table and
+a picture.
+
 The long ones (E-DAVAR, replay) run without the GIL and stop on Ctrl-C
 (``KeyboardInterrupt``).
 """
@@ -78,6 +83,7 @@ __all__ = [
     "read_recording",
     "read_log",
     "recording_dataframe",
+    "Dataset",
 ]
 
 #: The IEEE 952 terms, in the order :func:`noise_fit` gives them.
@@ -411,13 +417,22 @@ def replay(chips):
     }
 
 
-def read_log(path, columns=None, time=None, tau0=None, unit="dps", lsb_per_dps=None, delimiter=None, header=None):
+def read_log(
+    path, columns=None, time=None, tau0=None, unit="dps", lsb_per_dps=None, delimiter=None, header=None, chips=False
+):
     """A rate log as ``gyro`` reads it: text of any separator, with or
     without a header (detected; ``delimiter`` and ``header`` overrule), a PX4
-    ULog, or a ROS 1 or ROS 2 (MCAP) bag. Returns a dict: ``names``,
-    ``rates`` (an (N, k) float64 array in deg/s, with NaN where a gap's
-    samples are missing, so that :func:`gradev` takes it as it is), ``tau0``
-    (s) and ``gaps`` (line or message index, step in s)."""
+    ULog, an ArduPilot dataflash log, or a ROS 1 or ROS 2 (MCAP or sqlite3)
+    bag. Returns a dict: ``names``, ``rates`` (an (N, k) float64 array in
+    deg/s, with NaN where a gap's samples are missing, so that
+    :func:`gradev` takes it as it is), ``tau0`` (s) and ``gaps`` (line or
+    message index, step in s).
+
+    With ``chips=True`` the columns are read as :func:`replay`'s chips, as
+    ``gyro replay`` reads them: an empty cell is NaN (no answer), and
+    columns of several IMU topics (``["IMU.0.z", "IMU.1.z"]``) are put on
+    the first one's stamps, each other topic's sample nearest a stamp
+    within half a period, NaN where none is."""
     return _native.read_log(
         str(path),
         None if columns is None else list(columns),
@@ -427,6 +442,7 @@ def read_log(path, columns=None, time=None, tau0=None, unit="dps", lsb_per_dps=N
         lsb_per_dps,
         delimiter,
         header,
+        chips,
     )
 
 
@@ -500,3 +516,134 @@ def recording_dataframe(path_or_recording):
     for a, name in enumerate("xyz"):
         cols[f"angle_{name}_deg"] = s["angle_deg"][:, a]
     return pd.DataFrame(cols, index=pd.Index(s["seq"], name="seq"))
+
+
+#: One standard deviation's two-sided confidence (Stable32's default).
+_ONE_SIGMA = 0.6826894921370859
+
+
+class Dataset:
+    """allantools' ``Dataset``, on this package: the input in ``inp``, the
+    last :meth:`compute`'s result in ``out``; and what allantools' lacks:
+    each point's confidence interval and EDF, the noise model fit
+    (:meth:`fit`), a table (:meth:`write_results`) and a picture
+    (:meth:`plot`).
+
+    ``out`` holds allantools' keys, ``taus``, ``stat``, ``stat_err``,
+    ``stat_n`` and ``stat_id`` (equal to allantools 2024.6's to about 1e-12
+    relative: the same functions as this package's), and ``stat_lo``,
+    ``stat_hi``, ``stat_edf``, ``stat_alpha`` from :func:`deviation` (NaN
+    at the tau beyond Stable32's last factor, where allantools still
+    reports a value, and for the deviations without an EDF model here:
+    MTOTDEV, TTOTDEV, HTOTDEV, Theo1, MTIE, TIE rms). ``fit_result`` is :func:`noise_fit`'s dict after
+    :meth:`fit`.
+    """
+
+    _FUNCTIONS = (
+        "adev",
+        "oadev",
+        "mdev",
+        "tdev",
+        "hdev",
+        "ohdev",
+        "totdev",
+        "mtotdev",
+        "ttotdev",
+        "htotdev",
+        "theo1",
+        "mtie",
+        "tierms",
+    )
+
+    def __init__(self, data=None, rate=1.0, data_type="phase", taus=None):
+        self.inp = {"data": data, "rate": rate, "data_type": data_type, "taus": taus}
+        self.out = {
+            "taus": None,
+            "stat": None,
+            "stat_err": None,
+            "stat_n": None,
+            "stat_unc": None,
+            "stat_id": None,
+        }
+        self.fit_result = None
+
+    def set_input(self, data, rate=1.0, data_type="phase", taus=None):
+        """The input, where it was not given to the constructor."""
+        self.inp = {"data": data, "rate": rate, "data_type": data_type, "taus": taus}
+
+    def compute(self, function, confidence=_ONE_SIGMA):
+        """One deviation by name (``"oadev"``, ``"mdev"``, …, ``"theo1"``,
+        ``"mtie"``, ``"tierms"``): allantools' keys, returned and kept in
+        ``out`` with the confidence interval at ``confidence``."""
+        if function not in self._FUNCTIONS:
+            raise ValueError(f"{function!r}: one of {', '.join(self._FUNCTIONS)}")
+        inp = self.inp
+        taus, devs, errs, ns = globals()[function](
+            inp["data"], rate=inp["rate"], data_type=inp["data_type"], taus=inp["taus"]
+        )
+        result = {"taus": taus, "stat": devs, "stat_err": errs, "stat_n": ns}
+        extra = {k: _np.full(len(taus), _np.nan) for k in ("stat_lo", "stat_hi", "stat_edf", "stat_alpha")}
+        if len(taus) and _np.asarray(inp["data"]).ndim == 1:
+            d = deviation(inp["data"], function, inp["rate"], inp["data_type"], taus, confidence)
+            # Each of deviation's tau is one of allantools' (the same factors).
+            at = _np.searchsorted(taus, d["taus"] * (1 - 1e-12))
+            for key, col in (("stat_lo", "lo"), ("stat_hi", "hi"), ("stat_edf", "edf"), ("stat_alpha", "alpha")):
+                extra[key][at] = d[col]
+        self.out = dict(result, stat_unc=None, stat_id=function, **extra)
+        return result
+
+    def fit(self):
+        """The noise model of the data (:func:`noise_fit`), kept in
+        ``fit_result`` and drawn by :meth:`plot`."""
+        inp = self.inp
+        self.fit_result = noise_fit(inp["data"], rate=inp["rate"], data_type=inp["data_type"])
+        return self.fit_result
+
+    def write_results(self, filename, digits=5, header_params=None):
+        """The last :meth:`compute`'s table as text, one tau a line
+        (allantools' columns, then the interval, the EDF and alpha)."""
+        if self.out["stat_id"] is None:
+            raise ValueError("nothing computed yet: call compute() first")
+        o = self.out
+        cols = ("taus", "stat", "stat_err", "stat_n", "stat_lo", "stat_hi", "stat_edf", "stat_alpha")
+        with open(filename, "w") as f:
+            for k, v in (header_params or {}).items():
+                f.write(f"# {k} = {v}\n")
+            f.write(f"# {o['stat_id']}, rate {self.inp['rate']} Hz, {self.inp['data_type']} data\n")
+            f.write("# " + " ".join(cols) + "\n")
+            for row in zip(*(o[c] for c in cols)):
+                f.write(" ".join(f"{float(v):.{digits}e}" for v in row) + "\n")
+
+    def plot(self, ax=None, errorbars=True, fit=True):
+        """The deviation on log-log axes (matplotlib), with its confidence
+        interval and, after :meth:`fit`, the fitted model; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        if self.out["stat_id"] is None:
+            raise ValueError("nothing computed yet: call compute() first")
+        if ax is None:
+            _, ax = plt.subplots()
+        o = self.out
+        taus, devs = _np.asarray(o["taus"]), _np.asarray(o["stat"])
+        ax.loglog(taus, devs, "o-", ms=3, label=o["stat_id"])
+        if errorbars:
+            lo, hi = _np.asarray(o["stat_lo"]), _np.asarray(o["stat_hi"])
+            ok = _np.isfinite(lo) & _np.isfinite(hi)
+            ax.fill_between(taus[ok], lo[ok], hi[ok], alpha=0.25, label="confidence interval")
+        if fit and self.fit_result is not None and o["stat_id"] in ("adev", "oadev"):
+            model = _fit_curve(self.fit_result, taus)
+            ax.loglog(taus, model, "--", label="noise fit")
+        ax.set_xlabel("tau (s)")
+        ax.set_ylabel(o["stat_id"])
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        return ax
+
+
+def _fit_curve(fit, taus):
+    """The IEEE 952 terms' Allan deviation at ``taus`` (the Gauss-Markov
+    terms left out: the curve drawn is the white/flicker/random-walk part)."""
+    q, n, b, k, r = (_np.nan_to_num(v) for v in fit["value"])
+    t = _np.asarray(taus, dtype=float)
+    var = 3 * q**2 / t**2 + n**2 / t + 2 * _np.log(2) / _np.pi * b**2 + k**2 * t / 3 + r**2 * t**2 / 2
+    return _np.sqrt(var)

@@ -630,12 +630,14 @@ fn replay<'py>(
 }
 
 /// A rate log as `gyro` reads it (text of any separator, with or without a
-/// header; a PX4 ULog; a ROS 1 or ROS 2 bag): a dict with `names`, `rates`
-/// (an (N, k) array, °/s; NaN where a gap's samples are missing, each gap
-/// put back on the time grid), `tau0` (s) and `gaps` (a list of (line or
-/// message index, step in s)).
+/// header; a PX4 ULog; an ArduPilot log; a ROS 1 or ROS 2 bag): a dict with
+/// `names`, `rates` (an (N, k) array, °/s; NaN where a gap's samples are
+/// missing, each gap put back on the time grid), `tau0` (s) and `gaps` (a
+/// list of (line or message index, step in s)). With `chips`, as `gyro
+/// replay` reads its chips: an empty cell is NaN, and columns of several
+/// IMU topics are put on the first's stamps.
 #[pyfunction]
-#[pyo3(signature = (path, columns = None, time = None, tau0 = None, unit = "dps", lsb_per_dps = None, delimiter = None, header = None))]
+#[pyo3(signature = (path, columns = None, time = None, tau0 = None, unit = "dps", lsb_per_dps = None, delimiter = None, header = None, chips = false))]
 #[allow(clippy::too_many_arguments)]
 fn read_log<'py>(
     py: Python<'py>,
@@ -647,6 +649,7 @@ fn read_log<'py>(
     lsb_per_dps: Option<f64>,
     delimiter: Option<String>,
     header: Option<bool>,
+    chips: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     use gyro_tool::table::{self, Layout, Unit};
     let unit = match unit {
@@ -673,7 +676,7 @@ fn read_log<'py>(
                 &columns,
                 (time.as_deref(), tau0),
                 (unit, lsb_per_dps),
-                false,
+                chips,
                 Layout { delimiter, header },
             )
             .map_err(|e| e.to_string())

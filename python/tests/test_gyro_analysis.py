@@ -138,6 +138,14 @@ def test_an_ardupilot_log_reads_as_pymavlink_reads_it():
         assert log["names"] == cols
         rates = log["rates"][~np.isnan(log["rates"][:, 0])]
         np.testing.assert_array_equal(rates, np.degrees(want[want[:, 0] == inst][:, 2:]))
+    # Both IMUs' z as one replay's chips (the log stamps them alike).
+    with pytest.raises(ValueError, match="one topic instance a read"):
+        ga.read_log(path, columns=["IMU.0.z", "IMU.1.z"])
+    log = ga.read_log(path, columns=["IMU.0.z", "IMU.1.z"], chips=True)
+    z = log["rates"][~np.isnan(log["rates"][:, 0])]
+    np.testing.assert_array_equal(z[:, 1], np.degrees(want[want[:, 0] == 1][:, 4]))
+    fused = ga.replay(z)["fused"]
+    assert np.isfinite(fused).all()
 
 
 def table(name):
@@ -222,3 +230,47 @@ def test_long_inputs_and_lists():
     np.testing.assert_array_equal(a[1], b[1])
     t, d, _, _ = ga.oadev(y, rate=1000.0, data_type="freq")
     assert len(t) == 17 and np.all(np.isfinite(d))
+
+
+def test_dataset_is_allantools_dataset_with_intervals_fit_table_and_plot(tmp_path):
+    at = pytest.importorskip("allantools")
+    y = np.random.default_rng(7).standard_normal(20_000) + 0.01 * np.cumsum(np.random.default_rng(8).standard_normal(20_000))
+    ours = ga.Dataset(data=y, rate=100.0, data_type="freq", taus="octave")
+    theirs = at.Dataset(data=y, rate=100.0, data_type="freq", taus="octave")
+    # Theo1 on a shorter log: allantools' takes minutes on 20 000 points.
+    short = (ga.Dataset(data=y[:2000], rate=100.0, data_type="freq"), at.Dataset(data=y[:2000], rate=100.0, data_type="freq"))
+    r, t = short[0].compute("theo1"), short[1].compute("theo1")
+    np.testing.assert_allclose(r["stat"], t["stat"], rtol=1e-9)
+    # No EDF model for Theo1 here: no interval, said as NaN.
+    assert np.isnan(short[0].out["stat_lo"]).all()
+    for fn in ("oadev", "mdev", "totdev"):
+        r, t = ours.compute(fn), theirs.compute(fn)
+        assert set(t) <= set(r)
+        np.testing.assert_allclose(r["taus"], t["taus"], rtol=1e-12)
+        np.testing.assert_allclose(r["stat"], t["stat"], rtol=1e-9)
+        np.testing.assert_array_equal(r["stat_n"], t["stat_n"])
+        assert ours.out["stat_id"] == fn
+        # The interval brackets the value wherever Stable32's factors reach.
+        lo, hi, dev = ours.out["stat_lo"], ours.out["stat_hi"], ours.out["stat"]
+        ok = np.isfinite(lo)
+        assert ok.sum() >= len(dev) - 2 and (lo[ok] < dev[ok]).all() and (dev[ok] < hi[ok]).all()
+    ours.compute("oadev")
+    d = ga.deviation(y, "oadev", rate=100.0, data_type="freq", taus="octave")
+    np.testing.assert_array_equal(ours.out["stat_edf"][: len(d["edf"])], d["edf"])
+    fit = ours.fit()
+    assert fit is ours.fit_result and "value" in fit
+    path = tmp_path / "oadev.txt"
+    ours.write_results(path, header_params={"source": "test"})
+    table = np.loadtxt(path)
+    assert table.shape == (len(ours.out["taus"]), 8)
+    np.testing.assert_allclose(table[:, 1], ours.out["stat"], rtol=1e-4)
+    pytest.importorskip("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    ax = ours.plot()
+    png = tmp_path / "oadev.png"
+    ax.figure.savefig(png)
+    assert png.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="one of"):
+        ours.compute("nodev")
