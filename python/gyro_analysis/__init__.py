@@ -57,7 +57,9 @@ import numpy as _np
 
 from . import _native
 
-__all__ = [
+#: The deviations by name, each ``f(data, rate, data_type, taus)`` shaped as
+#: allantools' (and :meth:`Dataset.compute`'s names).
+_DEVIATIONS = (
     "adev",
     "oadev",
     "mdev",
@@ -68,10 +70,14 @@ __all__ = [
     "mtotdev",
     "ttotdev",
     "htotdev",
+    "theo1",
     "mtie",
     "tierms",
+)
+
+__all__ = [
+    *_DEVIATIONS,
     "gradev",
-    "theo1",
     "frequency2phase",
     "phase2frequency",
     "deviation",
@@ -535,25 +541,9 @@ class Dataset:
     ``stat_hi``, ``stat_edf``, ``stat_alpha`` from :func:`deviation` (NaN
     at the tau beyond Stable32's last factor, where allantools still
     reports a value, and for the deviations without an EDF model here:
-    MTOTDEV, TTOTDEV, HTOTDEV, Theo1, MTIE, TIE rms). ``fit_result`` is :func:`noise_fit`'s dict after
-    :meth:`fit`.
+    MTOTDEV, TTOTDEV, HTOTDEV, Theo1, MTIE, TIE rms). ``fit_result`` is
+    :func:`noise_fit`'s dict after :meth:`fit`.
     """
-
-    _FUNCTIONS = (
-        "adev",
-        "oadev",
-        "mdev",
-        "tdev",
-        "hdev",
-        "ohdev",
-        "totdev",
-        "mtotdev",
-        "ttotdev",
-        "htotdev",
-        "theo1",
-        "mtie",
-        "tierms",
-    )
 
     def __init__(self, data=None, rate=1.0, data_type="phase", taus=None):
         self.inp = {"data": data, "rate": rate, "data_type": data_type, "taus": taus}
@@ -575,8 +565,8 @@ class Dataset:
         """One deviation by name (``"oadev"``, ``"mdev"``, …, ``"theo1"``,
         ``"mtie"``, ``"tierms"``): allantools' keys, returned and kept in
         ``out`` with the confidence interval at ``confidence``."""
-        if function not in self._FUNCTIONS:
-            raise ValueError(f"{function!r}: one of {', '.join(self._FUNCTIONS)}")
+        if function not in _DEVIATIONS:
+            raise ValueError(f"{function!r}: one of {', '.join(_DEVIATIONS)}")
         inp = self.inp
         taus, devs, errs, ns = globals()[function](
             inp["data"], rate=inp["rate"], data_type=inp["data_type"], taus=inp["taus"]
