@@ -37,8 +37,9 @@ The rest of the ``gyro`` tool's analysis, on the same code:
   (``gyro record``'s ``.glk`` file) as numpy arrays or a pandas DataFrame,
   with the link's counts and errors.
 - :func:`read_log`: a rate log as ``gyro`` reads it (text of any separator,
-  with or without a header; a PX4 ULog; a ROS 1 or ROS 2 bag), gaps put
-  back as NaN for :func:`gradev`;
+  with or without a header; a PX4 ULog; an ArduPilot dataflash log; a ROS 1
+  or ROS 2 bag), gaps put back as NaN for :func:`gradev`, and several IMUs
+  of a robot log on one time grid as :func:`replay`'s chips;
 - beyond allantools' seven: :func:`mtotdev`, :func:`ttotdev`,
   :func:`htotdev`, :func:`theo1`, :func:`mtie`, :func:`tierms` and
   :func:`gradev` (equal to allantools 2024.6; ``gradev``'s bounds work);
