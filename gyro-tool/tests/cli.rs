@@ -283,3 +283,62 @@ fn stable32s_phase_file_reads_as_phase_from_the_command_line() {
     }
     assert_eq!(checked, 8);
 }
+
+/// A robot log's topic by name: `--topic` reads its three axes, or the
+/// axes `-c` names; a topic the log does not have lists the ones it has.
+#[test]
+fn a_robot_logs_topic_is_read_by_name() {
+    let v = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/vectors");
+    for (log, topic) in [
+        ("ros2/imu_bag", "/imu/data"),
+        ("ros2/imu_bag_db3", "/imu/data"),
+        ("dataflash/test.BIN", "IMU.1"),
+    ] {
+        let o = gyro()
+            .args([
+                "allan", "--format", "csv", "--gaps", "join", "--topic", topic,
+            ])
+            .arg(format!("{v}/{log}"))
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{log}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        for a in ["x", "y", "z"] {
+            assert!(
+                out.lines()
+                    .any(|l| l.starts_with(&format!("{topic}.{a},oadev,1,"))),
+                "{log} {a}: {out}"
+            );
+        }
+        let o = gyro()
+            .args([
+                "allan", "--format", "csv", "--gaps", "join", "--topic", topic, "-c", "z",
+            ])
+            .arg(format!("{v}/{log}"))
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            out.lines().all(|l| !l.starts_with(&format!("{topic}.x,"))),
+            "{out}"
+        );
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with(&format!("{topic}.z,oadev,1,"))),
+            "{out}"
+        );
+    }
+    let (code, err) = fails(
+        &["allan", "--topic", "/no/such"],
+        std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/vectors/ros2/imu_bag"
+        )),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("/imu/data.x"), "{err}");
+}

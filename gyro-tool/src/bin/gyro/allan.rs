@@ -147,6 +147,7 @@ pub fn run(a: Args) -> Res<bool> {
     if want_fit && matches!(format, OutFormat::Csv) {
         return Err("--fit has no place in the CSV of points: use --format json or table (or --kalibr for the Kalibr file)".into());
     }
+    let columns = log.columns(&columns);
     let (file, columns, kinds) = (log.file.as_path(), &columns[..], &kinds[..]);
     let (time, tau0, unit, lsb) = (log.time.as_deref(), log.tau0, log.unit, log.lsb_per_dps);
     let started = Instant::now();

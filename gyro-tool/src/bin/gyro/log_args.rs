@@ -8,10 +8,15 @@ use gyro_tool::{dev, table, Res};
 #[derive(clap::Args)]
 pub struct LogArgs {
     /// The log: comma-, semicolon-, tab- or blank-separated text, with a
-    /// header line or without one (columns c1, c2, …); or a PX4 ULog
-    /// (`.ulg`: its gyro topics, columns `sensor_gyro.0.x` …, its own
-    /// stamps).
+    /// header line or without one (columns c1, c2, …); or a robot log with
+    /// its own stamps: a PX4 ULog (`.ulg`: columns `sensor_gyro.0.x` …), an
+    /// ArduPilot dataflash log (`.bin`: `IMU.0.x` …), a ROS 1 bag or a ROS
+    /// 2 bag, MCAP or sqlite3 (`/imu/data.x` …).
     pub file: PathBuf,
+    /// A robot log's IMU topic (`/imu/data`, `IMU.1`, `sensor_gyro.0`):
+    /// its x, y and z, or the axes `-c` names (`-c z`).
+    #[arg(long)]
+    pub topic: Option<String>,
     /// The time column, s: τ0 is its median step, and gaps (steps over
     /// 1.5 τ0) and non-monotonic times are reported (a text log needs this
     /// or `--tau0`).
@@ -50,11 +55,30 @@ fn delimiter_arg(s: &str) -> Result<u8, String> {
 }
 
 impl LogArgs {
-    /// Read `columns`; with `missing`, empty cells are NaN.
+    /// The columns to read: `columns` as given, or with `--topic` the
+    /// topic's axes (all three, or those `columns` names as x, y or z).
+    pub fn columns(&self, columns: &[String]) -> Vec<String> {
+        let Some(t) = &self.topic else {
+            return columns.to_vec();
+        };
+        if columns.is_empty() {
+            return ["x", "y", "z"].map(|a| format!("{t}.{a}")).to_vec();
+        }
+        columns
+            .iter()
+            .map(|c| match c.as_str() {
+                "x" | "y" | "z" => format!("{t}.{c}"),
+                _ => c.clone(),
+            })
+            .collect()
+    }
+
+    /// Read `columns` (as [`LogArgs::columns`] makes them); with `missing`,
+    /// empty cells are NaN.
     pub fn read(&self, columns: &[String], missing: bool) -> Res<table::Series> {
         let s = table::read_layout(
             &self.file,
-            columns,
+            &self.columns(columns),
             (self.time.as_deref(), self.tau0),
             (self.unit, self.lsb_per_dps),
             missing,
