@@ -1,7 +1,7 @@
 //! E-DAVAR evaluation over scenario classes and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
-//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P]`
+//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P] [--sweep [--hops PATH]]`
 //!
 //! Every class is run over N seeds (20 by default). The error is the RMS of
 //! σ²(τ0) against the true local Allan variance at τ0, over the times every
@@ -204,6 +204,7 @@ fn sweep(args: &Args) -> ExitCode {
     let seeds = args.seeds;
     println!("E-DAVAR λ sweep: seeds {first}..{}, default ÷ best fixed window of λ1, midpoint, λ2 (mean of per-seed ratios over the mean; ± two standard errors)", first + seeds);
     let mut all_ok = true;
+    let mut all_hops = String::from("class,seed,t,window,err2_default,err2_lambda2\n");
     for &(l1, l2) in &SWEEP_LAMBDAS {
         let mut classes = Vec::new();
         for r in [1.5, 2.0, 4.0] {
@@ -227,6 +228,7 @@ fn sweep(args: &Args) -> ExitCode {
         let picks = [0, 1, 2, ms.len() - 1];
         let mut worst: Option<(String, f64, f64)> = None;
         let mut steps = Vec::new();
+        let mut hop_rows = String::new();
         println!(
             "
 λ {l1}/{l2}"
@@ -240,6 +242,23 @@ fn sweep(args: &Args) -> ExitCode {
                 for (k, &i) in picks.iter().enumerate() {
                     let r = run(ms[i].1, &w);
                     errs[k].push(rms(&r, &truth, a, b));
+                    if args.hops.is_some() && k == picks.len() - 1 {
+                        let fixed = run(ms[2].1, &w);
+                        for (h, f) in r.hops.iter().zip(&fixed.hops) {
+                            if (a..b).contains(&h.0) {
+                                let tv = truth[h.0];
+                                let _ = writeln!(
+                                    hop_rows,
+                                    "{},{seed},{},{},{:e},{:e}",
+                                    class.name.replace(',', ";"),
+                                    h.0 as i64 - 4000,
+                                    h.2,
+                                    (h.1 - tv).powi(2),
+                                    (f.1 - tv).powi(2)
+                                );
+                            }
+                        }
+                    }
                     if k == picks.len() - 1 {
                         let full = (l2 as usize / SEG * SEG) as u16;
                         short += r.hops.iter().filter(|h| h.2 < full).count() as f64
@@ -277,6 +296,7 @@ fn sweep(args: &Args) -> ExitCode {
         if let Some((name, r, se2)) = worst {
             println!("  worst: {name}: {r:.4} ± {se2:.4}");
         }
+        all_hops.push_str(&hop_rows);
         // Where a short window has room to gain: ×2 ≤ 0.87, ×4 ≤ 0.70.
         if l2 >= 4 * l1 {
             for (name, r, _) in &steps {
@@ -296,6 +316,12 @@ fn sweep(args: &Args) -> ExitCode {
                     );
                 }
             }
+        }
+    }
+    if let Some(path) = &args.hops {
+        match std::fs::write(path, &all_hops) {
+            Ok(()) => println!("\nevery scored hop written to {path}"),
+            Err(e) => eprintln!("davar-eval: cannot write {path}: {e}"),
         }
     }
     println!(
@@ -745,6 +771,12 @@ struct Args {
     /// curve, weak changes found against stationary windows shortened.
     #[arg(long, value_parser = probability)]
     p_fa: Option<f32>,
+    /// With `--sweep`: every scored hop of the default and of the fixed λ2
+    /// window as CSV rows (class, seed, t from the change's start, the
+    /// default's window, its squared error and λ2's): where a class's
+    /// ratio comes from.
+    #[arg(long)]
+    hops: Option<String>,
 }
 
 fn probability(s: &str) -> Result<f32, String> {
