@@ -67,17 +67,13 @@ static void tests(void)
         static const uint8_t want[] = {0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x99, 0x31, 0x00};
         uint8_t out[64];
         gl_command c;
-        size_t n;
+        CHECK(encodes_as(GL_REQUEST_STATUS, 0, 0, want, sizeof want));
+        /* Too small a buffer, an argument the protocol does not have. */
         memset(&c, 0, sizeof c);
         c.id = 7;
         c.op = GL_REQUEST_STATUS;
-        n = gl_encode_command(&c, 0, out, sizeof out);
-        CHECK(n == sizeof want && memcmp(out, want, n) == 0);
-        /* Too small a buffer, an argument the protocol does not have. */
         CHECK(gl_encode_command(&c, 0, out, 5) == 0);
-        c.op = GL_SET_METHOD;
-        c.arg = 3;
-        CHECK(gl_encode_command(&c, 0, out, sizeof out) == 0);
+        CHECK(!encodes_as(GL_SET_METHOD, 3, 0, NULL, 0));
     }
 
     /* The other commands with id 7, link_seq 0: the same bytes the Rust
