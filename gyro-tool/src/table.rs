@@ -186,36 +186,26 @@ pub fn read_layout(
             _ => return Err(TableError::Scale),
         },
     };
-    if crate::ros1::is_bag(path) {
-        // A ROS 1 bag: as a ROS 2 bag.
-        let mut s = crate::ros1::read(path, columns, missing)?;
-        if let Some(t) = tau0 {
-            s.tau0 = t;
-        }
-        return Ok(s);
-    }
-    if crate::ros2::is_bag(path) {
-        // A ROS 2 bag: its IMU topics' header stamps, rad/s read as °/s.
-        let mut s = crate::ros2::read(path, columns, missing)?;
-        if let Some(t) = tau0 {
-            s.tau0 = t;
-        }
-        return Ok(s);
-    }
-    if crate::dataflash::is_log(path) {
-        // An ArduPilot log: its IMUs' stamps, rad/s read as °/s.
-        let mut s = crate::dataflash::read(path, columns, missing)?;
-        if let Some(t) = tau0 {
-            s.tau0 = t;
-        }
-        return Ok(s);
-    }
-    if path
+    // A robot log: its own stamps (τ0 the median step unless `--tau0`)
+    // and units (rad/s, read as °/s); with `missing`, several IMU topics
+    // on one grid.
+    type RobotRead = fn(&Path, &[String], bool) -> Result<Series, TableError>;
+    let robot: Option<RobotRead> = if crate::ros1::is_bag(path) {
+        Some(crate::ros1::read)
+    } else if crate::ros2::is_bag(path) {
+        Some(crate::ros2::read)
+    } else if crate::dataflash::is_log(path) {
+        Some(crate::dataflash::read)
+    } else if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ulg"))
     {
-        // A PX4 flight log: its own stamps and units (rad/s, read as °/s).
-        let mut s = crate::ulog::read(path, columns, missing)?;
+        Some(crate::ulog::read)
+    } else {
+        None
+    };
+    if let Some(read) = robot {
+        let mut s = read(path, columns, missing)?;
         if let Some(t) = tau0 {
             s.tau0 = t;
         }
