@@ -273,12 +273,18 @@ pub(crate) fn series_of(
         .filter(|(t, _)| picks.iter().any(|q| q.0 == *t))
     {
         if let Some(k) = m.windows(2).position(|w| w[1].0 <= w[0].0) {
-            return Err(TableError::Time(
-                p().join(t),
-                k + 1,
-                m[k].0 as f64 * 1e-9,
-                m[k + 1].0 as f64 * 1e-9,
-            ));
+            let (a, b) = (m[k].0 as f64 * 1e-9, m[k + 1].0 as f64 * 1e-9);
+            // The grid's own topic as a time column is; another by name
+            // (its message index is not the grid's).
+            return Err(if t == topic {
+                TableError::Time(p(), k + 1, a, b)
+            } else {
+                TableError::Record(
+                    p(),
+                    k + 1,
+                    format!("{t}: stamp {b} s does not follow {a} s (non-monotonic)"),
+                )
+            });
         }
     }
     let steps: Vec<f64> = msgs
@@ -449,6 +455,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("one topic instance a read"), "{e}");
+        // A topic whose stamps go back is named, the log's path kept.
+        topics.get_mut("/b").unwrap()[5].0 = 0;
+        let e = series_of(&topics, &cols, f, IMU, true)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("x.bag:5: /b: stamp 0 s"), "{e}");
     }
 
     /// The same messages `rosbags` wrote in sqlite3 storage read exactly as
