@@ -237,7 +237,7 @@ def deviation(data, kind="oadev", rate=1.0, data_type="phase", taus=None, confid
     return dict(zip(["taus", "devs", "lo", "hi", "edf", "alpha", "ns"], cols))
 
 
-def noise_fit(data, rate=1.0, data_type="freq"):
+def noise_fit(data, rate=1.0, data_type="freq", model_taus=None):
     """The gyro noise model fitted to the data's Allan variance, as ``gyro allan --fit``.
 
     IEEE Std 952's terms (Q quantisation, N angle random walk, B flicker bias
@@ -256,6 +256,10 @@ def noise_fit(data, rate=1.0, data_type="freq"):
     rate : float
         Sample rate, Hz.
     data_type : {"freq", "phase"}
+    model_taus : array_like of float, optional
+        Where to evaluate the fitted model (s): adds ``model_taus`` and
+        ``model_adev``, the whole model's Allan deviation (every term, the
+        Gauss-Markov processes included).
 
     Returns
     -------
@@ -284,11 +288,12 @@ def noise_fit(data, rate=1.0, data_type="freq"):
     """
     import json
 
-    t = json.loads(_native.noise_fit(_series(data), float(rate), data_type))
+    t = json.loads(_native.noise_fit(_series(data), float(rate), data_type, _taus(model_taus)))
     out = dict(t)
     out["terms"] = TERMS
     # JSON carries NaN (a term out of the fit) as null: numpy reads it back.
-    for k in ("value", "sd", "tangent", "ci", "arw_ci"):
+    model = ("model_taus", "model_adev") if model_taus is not None else ()
+    for k in ("value", "sd", "tangent", "ci", "arw_ci", *model):
         out[k] = _np.array(t[k], dtype=float)
     return out
 
@@ -587,7 +592,12 @@ class Dataset:
         """The noise model of the data (:func:`noise_fit`), kept in
         ``fit_result`` and drawn by :meth:`plot`."""
         inp = self.inp
-        self.fit_result = noise_fit(inp["data"], rate=inp["rate"], data_type=inp["data_type"])
+        # The model at 8 tau a decade from tau0 to half the record, for plot().
+        n = _np.asarray(inp["data"]).shape[0]
+        taus = _np.logspace(0, _np.log10(max(n / 2, 1.0)), max(2, int(8 * _np.log10(max(n / 2, 10.0)))))
+        self.fit_result = noise_fit(
+            inp["data"], rate=inp["rate"], data_type=inp["data_type"], model_taus=taus / float(inp["rate"])
+        )
         return self.fit_result
 
     def write_results(self, filename, digits=5, header_params=None):
@@ -622,19 +632,11 @@ class Dataset:
             ok = _np.isfinite(lo) & _np.isfinite(hi)
             ax.fill_between(taus[ok], lo[ok], hi[ok], alpha=0.25, label="confidence interval")
         if fit and self.fit_result is not None and o["stat_id"] in ("adev", "oadev"):
-            model = _fit_curve(self.fit_result, taus)
-            ax.loglog(taus, model, "--", label="noise fit")
+            f = self.fit_result
+            ax.loglog(f["model_taus"], f["model_adev"], "--", label="noise fit")
         ax.set_xlabel("tau (s)")
         ax.set_ylabel(o["stat_id"])
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
         return ax
 
-
-def _fit_curve(fit, taus):
-    """The IEEE 952 terms' Allan deviation at ``taus`` (the Gauss-Markov
-    terms left out: the curve drawn is the white/flicker/random-walk part)."""
-    q, n, b, k, r = (_np.nan_to_num(v) for v in fit["value"])
-    t = _np.asarray(taus, dtype=float)
-    var = 3 * q**2 / t**2 + n**2 / t + 2 * _np.log(2) / _np.pi * b**2 + k**2 * t / 3 + r**2 * t**2 / 2
-    return _np.sqrt(var)

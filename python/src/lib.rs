@@ -441,17 +441,26 @@ fn until_interrupted<T: Send>(
 
 /// The noise model fitted to the data's overlapping Allan deviation at 8 τ
 /// per decade, as `gyro allan --fit` makes it: `gyro_tool::fit::Terms` as
-/// JSON (the Python side turns it into a dict).
+/// JSON (the Python side turns it into a dict); with `model_taus`, also
+/// the whole model's Allan deviation there (`Terms::avar`: every term,
+/// the Gauss–Markov processes included) as `model_adev`.
 #[pyfunction]
-#[pyo3(signature = (data, rate = 1.0, data_type = "freq"))]
+#[pyo3(signature = (data, rate = 1.0, data_type = "freq", model_taus = None))]
 fn noise_fit(
     py: Python<'_>,
     data: PyReadonlyArray1<'_, f64>,
     rate: f64,
     data_type: &str,
+    model_taus: Option<Vec<f64>>,
 ) -> PyResult<String> {
     let t = terms_of(py, data, rate, data_type)?;
-    serde_json::to_string(&t).map_err(value_error)
+    let mut v = serde_json::to_value(&t).map_err(value_error)?;
+    if let (Some(taus), serde_json::Value::Object(o)) = (model_taus, &mut v) {
+        let adev: Vec<f64> = taus.iter().map(|&tau| t.avar(tau).sqrt()).collect();
+        o.insert("model_taus".into(), taus.into());
+        o.insert("model_adev".into(), adev.into());
+    }
+    serde_json::to_string(&v).map_err(value_error)
 }
 
 fn terms_of(

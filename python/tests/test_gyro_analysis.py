@@ -259,6 +259,9 @@ def test_dataset_is_allantools_dataset_with_intervals_fit_table_and_plot(tmp_pat
     np.testing.assert_array_equal(ours.out["stat_edf"][: len(d["edf"])], d["edf"])
     fit = ours.fit()
     assert fit is ours.fit_result and "value" in fit
+    # The drawn model is the fit's own (Terms::avar), at tau0 the data's.
+    assert fit["model_taus"][0] == pytest.approx(0.01) and np.all(np.isfinite(fit["model_adev"]))
+    np.testing.assert_allclose(fit["model_adev"][0], ours.out["stat"][0], rtol=0.2)
     path = tmp_path / "oadev.txt"
     ours.write_results(path, header_params={"source": "test"})
     table = np.loadtxt(path)
