@@ -102,7 +102,7 @@ pub struct Point {
 impl Point {
     /// The point at factor `m` of `n` phase points, before the noise type,
     /// EDF and interval are known.
-    fn bare(m: usize, tau0: f64, dev: f64, terms: usize, n: usize) -> Self {
+    pub(crate) fn bare(m: usize, tau0: f64, dev: f64, terms: usize, n: usize) -> Self {
         Point {
             m,
             tau: m as f64 * tau0,
@@ -787,30 +787,46 @@ pub fn curve_at(
         .map(|&m| {
             deviation_checked(kind, x, tau0, m).map(|p| {
                 let alpha = *alphas.entry(m).or_insert_with(|| noise_alpha(x, m));
-                last_alpha = alpha.or(last_alpha);
-                // The Allan family converges for α > −3 and its EDF tables
-                // stop at random-walk FM: a steeper identification (drift
-                // at the longest τ) is read as −2 there; Hadamard's go to −4.
-                let floor = if matches!(kind, Kind::Hdev | Kind::Ohdev) {
-                    -4
-                } else {
-                    -2
-                };
-                let edf = last_alpha.and_then(|a| crate::edf::of(kind, a.max(floor), m, x.len()));
-                let ci = edf.and_then(|e| crate::edf::interval_with(p.dev, e, cf, chi2));
-                Point {
-                    alpha,
-                    edf,
-                    lo: ci.map(|c| c.0),
-                    hi: ci.map(|c| c.1),
-                    ..p
-                }
+                with_interval(kind, p, alpha, &mut last_alpha, x.len(), (cf, chi2))
             })
         })
         .collect::<Result<_, _>>()?;
     match points.iter().find(|p| !p.dev.is_finite()) {
         Some(p) => Err(DevError::Overflow(p.m)),
         None => Ok(points),
+    }
+}
+
+/// Point `p` of deviation `kind` over `n` phase points with its noise type
+/// `alpha` (identified at its factor), EDF and interval at confidence `cf`.
+/// A point whose noise type is None takes `last_alpha`, the one identified
+/// at the nearest shorter τ, which this updates (the curve's points go in
+/// order of τ).
+pub fn with_interval(
+    kind: Kind,
+    p: Point,
+    alpha: Option<i32>,
+    last_alpha: &mut Option<i32>,
+    n: usize,
+    (cf, chi2): (f64, crate::edf::Chi2),
+) -> Point {
+    *last_alpha = alpha.or(*last_alpha);
+    // The Allan family converges for α > −3 and its EDF tables stop at
+    // random-walk FM: a steeper identification (drift at the longest τ) is
+    // read as −2 there; Hadamard's go to −4.
+    let floor = if matches!(kind, Kind::Hdev | Kind::Ohdev) {
+        -4
+    } else {
+        -2
+    };
+    let edf = last_alpha.and_then(|a| crate::edf::of(kind, a.max(floor), p.m, n));
+    let ci = edf.and_then(|e| crate::edf::interval_with(p.dev, e, cf, chi2));
+    Point {
+        alpha,
+        edf,
+        lo: ci.map(|c| c.0),
+        hi: ci.map(|c| c.1),
+        ..p
     }
 }
 

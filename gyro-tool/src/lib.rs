@@ -4,6 +4,7 @@
 
 pub mod analyse;
 pub mod assess;
+pub mod bulk;
 pub mod dataflash;
 pub mod dev;
 pub mod edf;
@@ -16,6 +17,7 @@ pub mod ros1;
 pub mod ros2;
 pub mod screen;
 pub mod source;
+pub mod stream;
 pub mod summary;
 pub mod surface;
 pub mod table;

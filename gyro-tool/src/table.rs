@@ -126,6 +126,29 @@ impl Series {
     }
 }
 
+/// The factor that turns a column in `unit` into °/s (the value is
+/// multiplied by it).
+pub(crate) fn scale_of(unit: Unit, lsb_per_dps: Option<f64>) -> Result<f64, TableError> {
+    Ok(match unit {
+        Unit::Dps => 1.0,
+        Unit::Rads => 180.0 / std::f64::consts::PI,
+        Unit::Dph => 1.0 / 3600.0,
+        Unit::Lsb => match lsb_per_dps {
+            Some(s) if s.is_finite() && s > 0.0 => 1.0 / s,
+            _ => return Err(TableError::Scale),
+        },
+    })
+}
+
+/// A text log's separator: the first of comma, semicolon and tab that its
+/// first line holds, else blanks.
+pub(crate) fn delimiter_of(first_line: &str) -> u8 {
+    [b',', b';', b'\t']
+        .into_iter()
+        .find(|&d| first_line.as_bytes().contains(&d))
+        .unwrap_or(b' ')
+}
+
 /// Read `path`: the named `columns` (all but the time column when empty),
 /// with `time` the time column in s (or `tau0` given).
 pub fn read(
@@ -177,15 +200,7 @@ pub fn read_layout(
     missing: bool,
     layout: Layout,
 ) -> Result<Series, TableError> {
-    let scale = match unit {
-        Unit::Dps => 1.0,
-        Unit::Rads => 180.0 / std::f64::consts::PI,
-        Unit::Dph => 1.0 / 3600.0,
-        Unit::Lsb => match lsb_per_dps {
-            Some(s) if s.is_finite() && s > 0.0 => 1.0 / s,
-            _ => return Err(TableError::Scale),
-        },
-    };
+    let scale = scale_of(unit, lsb_per_dps)?;
     // A robot log: its own stamps (τ0 the median step unless `--tau0`)
     // and units (rad/s, read as °/s); with `missing`, several IMU topics
     // on one grid.
@@ -217,9 +232,9 @@ pub fn read_layout(
             .map(std::io::BufReader::new)
             .map_err(|e| TableError::Io(path.to_path_buf(), e))
     };
-    // The separator is the first of comma, semicolon and tab that the first
-    // line holds, else blanks. With semicolons a decimal comma is read as a
-    // point (the European spreadsheet's export).
+    // The separator from the first line ([`delimiter_of`]). With
+    // semicolons a decimal comma is read as a point (the European
+    // spreadsheet's export).
     let head_line = {
         use std::io::BufRead;
         let mut found = None;
@@ -233,12 +248,7 @@ pub fn read_layout(
         }
         found.ok_or_else(|| TableError::NoHeader(p()))?
     };
-    let delimiter = layout.delimiter.unwrap_or_else(|| {
-        [b',', b';', b'\t']
-            .into_iter()
-            .find(|&d| head_line.as_bytes().contains(&d))
-            .unwrap_or(b' ')
-    });
+    let delimiter = layout.delimiter.unwrap_or_else(|| delimiter_of(&head_line));
     // Blank- and tab-separated text may repeat its separator for alignment.
     let comma = matches!(delimiter, b',' | b';');
     let decimal_comma = delimiter == b';';

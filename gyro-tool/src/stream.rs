@@ -1,0 +1,948 @@
+//! Allan-family deviations of a log too long to hold, in one pass and
+//! bounded memory: ADEV, OADEV, MDEV, TDEV, HDEV, OHDEV and TIE rms at
+//! octave, decade or N-per-decade factors, with each factor's noise type
+//! and so its EDF and interval, and the points the noise fit takes.
+//!
+//! Every term of these deviations at factor m is a difference of the phase
+//! at t and at lags m, 2m and 3m behind it. The phase comes in chunks of
+//! [`CHUNK`] points; a ring holds the last `ring` points, so every lag up
+//! to `ring − CHUNK` is read from memory. A longer lag (a 72 h, 1 kHz log
+//! reaches lags of 2 × 10⁸) is read back from a spill file of the phase
+//! the pass writes behind itself (unlinked on creation; the page cache
+//! holds it while it is read, and it is not this process's memory). The
+//! ring is the memory bound: 8 bytes a point, whatever the log's length.
+//!
+//! The phase is built as [`dev::phase_from_rate`] builds it (x₀ = 0,
+//! xₖ₊₁ = xₖ + yₖ·τ0), so the terms are the in-memory ones. MDEV, TDEV
+//! and HDEV add them in the in-memory order (the same bits); OADEV, OHDEV
+//! and TIE rms in independent partial sums (the in-memory OADEV does too,
+//! in another grouping), ADEV in order: equal to rounding. The noise type of each factor is
+//! the lag-1 autocorrelation test of [`dev::noise_alpha`] on the same
+//! decimated phase, from running sums of the series and its first and
+//! second differences instead of the stored series.
+
+use std::fs::File;
+use std::io::Write;
+use std::os::unix::fs::FileExt;
+use std::path::PathBuf;
+
+use crate::dev::{self, Grid, Kind, Point};
+use crate::edf;
+
+/// Phase points a pass handles at once.
+pub const CHUNK: usize = 1 << 14;
+
+/// Independent partial sums of the overlapping kernels.
+const LANES: usize = 8;
+
+/// Whether `kind` can be computed in one pass here. TOTDEV reflects the
+/// phase about its last point, MTOTDEV, TTOTDEV and HTOTDEV detrend each
+/// 3m stretch, Theo1 sums m/2 terms per start, MTIE takes each window's
+/// range: none of them is a fixed set of lagged differences.
+pub fn streams(kind: Kind) -> bool {
+    matches!(
+        kind,
+        Kind::Adev
+            | Kind::Oadev
+            | Kind::Mdev
+            | Kind::Tdev
+            | Kind::Hdev
+            | Kind::Ohdev
+            | Kind::Tierms
+    )
+}
+
+/// Why a streamed analysis could not be made.
+#[derive(Debug)]
+pub enum StreamError {
+    /// A deviation that does not stream ([`streams`]).
+    Kind(Kind),
+    /// Every factor (`--grid all`): a pass per factor, not a stream.
+    Grid,
+    /// τ0 not a finite positive number.
+    Tau0,
+    /// Sample (0-based, of the column) not finite.
+    NonFinite(u64),
+    /// The ring holds fewer than two chunks, or is not a power of two.
+    Ring(usize),
+    /// The spill file could not be made, written or read.
+    Spill(std::io::Error),
+    /// Too few samples for any point (phase points).
+    TooShort(u64),
+}
+
+impl std::fmt::Display for StreamError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StreamError::Kind(k) => write!(
+                f,
+                "{} is not computed in one pass (adev, oadev, mdev, tdev, hdev, ohdev and tierms are): analyse it without --stream",
+                k.name().to_uppercase()
+            ),
+            StreamError::Grid => write!(f, "--grid all is a pass per factor, not a stream: octave, decade or per-decade=N"),
+            StreamError::Tau0 => write!(f, "tau0 must be a finite number of seconds > 0"),
+            StreamError::NonFinite(i) => write!(f, "sample {i} is not finite"),
+            StreamError::Ring(r) => write!(f, "a ring of {r} points: a power of two of at least {} points", 2 * CHUNK),
+            StreamError::Spill(e) => write!(f, "the phase spill file: {e}"),
+            StreamError::TooShort(n) => write!(f, "{n} phase points: too few for any factor"),
+        }
+    }
+}
+
+impl std::error::Error for StreamError {}
+
+/// What to compute.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// The deviations, on `grid`, with intervals at `ci`.
+    pub kinds: Vec<Kind>,
+    pub grid: Grid,
+    pub ci: (f64, edf::Chi2),
+    /// Also OADEV at 8 per decade with 1σ intervals: the fit's points
+    /// ([`crate::fit::fit_phase`] takes the same).
+    pub fit: bool,
+    /// Phase points the ring holds (a power of two ≥ 2·[`CHUNK`]): 8 bytes
+    /// each, the pass's memory.
+    pub ring: usize,
+    /// Where the spill file goes (the system's temporary directory if None).
+    pub spill_dir: Option<PathBuf>,
+}
+
+/// What one factor needs.
+#[derive(Clone, Copy, Debug, Default)]
+struct Need {
+    oadev: bool,
+    adev: bool,
+    mdev: bool,
+    ohdev: bool,
+    hdev: bool,
+    tie: bool,
+}
+
+impl Need {
+    fn of(kind: Kind) -> Need {
+        let mut n = Need::default();
+        match kind {
+            Kind::Oadev => n.oadev = true,
+            Kind::Adev => n.adev = true,
+            Kind::Mdev | Kind::Tdev => n.mdev = true,
+            Kind::Ohdev => n.ohdev = true,
+            Kind::Hdev => n.hdev = true,
+            Kind::Tierms => n.tie = true,
+            _ => {}
+        }
+        n
+    }
+
+    fn or(self, o: Need) -> Need {
+        Need {
+            oadev: self.oadev || o.oadev,
+            adev: self.adev || o.adev,
+            mdev: self.mdev || o.mdev,
+            ohdev: self.ohdev || o.ohdev,
+            hdev: self.hdev || o.hdev,
+            tie: self.tie || o.tie,
+        }
+    }
+
+    /// The longest lag, in factors.
+    fn reach(self) -> usize {
+        if self.mdev || self.ohdev || self.hdev {
+            3
+        } else if self.oadev || self.adev {
+            2
+        } else {
+            1
+        }
+    }
+}
+
+/// Running sums of a series for its lag-1 autocorrelation about its mean,
+/// shifted by its first value (the phase drifts far from 0; the shift
+/// keeps the sums of squares from cancelling).
+#[derive(Clone, Copy, Debug, Default)]
+struct Acf {
+    n: u64,
+    shift: f64,
+    s1: f64,
+    s2: f64,
+    s11: f64,
+    first: f64,
+    last: f64,
+}
+
+impl Acf {
+    fn push(&mut self, v: f64) {
+        if self.n == 0 {
+            self.shift = v;
+        }
+        let u = v - self.shift;
+        if self.n == 0 {
+            self.first = u;
+        } else {
+            self.s11 += self.last * u;
+        }
+        self.s1 += u;
+        self.s2 += u * u;
+        self.last = u;
+        self.n += 1;
+    }
+
+    /// r₁ = Σ(uₖ − ū)(uₖ₊₁ − ū) / Σ(uₖ − ū)², as [`dev::noise_alpha`]
+    /// computes it from the stored series; None where the series is
+    /// constant.
+    fn r1(&self) -> Option<f64> {
+        let n = self.n as f64;
+        let mean = self.s1 / n;
+        let den = self.s2 - n * mean * mean;
+        let num = self.s11 - mean * ((self.s1 - self.last) + (self.s1 - self.first))
+            + (n - 1.0) * mean * mean;
+        (den > 0.0 && den.is_finite()).then_some(num / den)
+    }
+}
+
+/// One averaging factor's sums.
+#[derive(Clone, Debug)]
+struct Factor {
+    m: usize,
+    need: Need,
+    oadev: [f64; LANES],
+    ohdev: [f64; LANES],
+    tie: [f64; LANES],
+    adev: f64,
+    hdev: f64,
+    md_inner: f64,
+    md_s: f64,
+    /// The decimated phase x[k·m] and its first two differences.
+    acf: [Acf; 3],
+    z: Option<f64>,
+    d1: Option<f64>,
+}
+
+impl Factor {
+    fn new(m: usize, need: Need) -> Self {
+        Factor {
+            m,
+            need,
+            oadev: [0.0; LANES],
+            ohdev: [0.0; LANES],
+            tie: [0.0; LANES],
+            adev: 0.0,
+            hdev: 0.0,
+            md_inner: 0.0,
+            md_s: 0.0,
+            acf: [Acf::default(); 3],
+            z: None,
+            d1: None,
+        }
+    }
+
+    fn push_decimated(&mut self, v: f64) {
+        self.acf[0].push(v);
+        if let Some(z) = self.z {
+            let d1 = v - z;
+            self.acf[1].push(d1);
+            if let Some(p) = self.d1 {
+                self.acf[2].push(d1 - p);
+            }
+            self.d1 = Some(d1);
+        }
+        self.z = Some(v);
+    }
+
+    /// [`dev::noise_alpha`] from the running sums.
+    fn alpha(&self) -> Option<i32> {
+        if self.acf[0].n < 30 {
+            return None;
+        }
+        for (d, a) in self.acf.iter().enumerate() {
+            let r1 = a.r1()?;
+            let delta = r1 / (1.0 + r1);
+            if delta < 0.25 || d == 2 {
+                return Some(2 - (2.0 * delta).round() as i32 - 2 * d as i32);
+            }
+        }
+        None
+    }
+}
+
+/// The phase behind the pass: the ring, and the spill for longer lags.
+struct History {
+    ring: Vec<f64>,
+    mask: usize,
+    /// Lags longer than this come from the spill.
+    near: usize,
+    spill: Option<File>,
+    spill_dir: Option<PathBuf>,
+    spilled: usize,
+    /// This chunk's stretches of the phase at the far lags: (lag, first
+    /// phase index, points).
+    far: Vec<(usize, usize, Vec<f64>)>,
+}
+
+impl History {
+    /// x[a − lag .. b − lag] (a ≥ lag).
+    fn view<'s>(&'s self, lag: usize, a: usize, b: usize, scratch: &'s mut Vec<f64>) -> &'s [f64] {
+        let (p, q) = (a - lag, b - lag);
+        if lag > self.near {
+            let (_, first, v) = self
+                .far
+                .iter()
+                .find(|f| f.0 == lag)
+                .expect("every far lag is fetched before the chunk is summed");
+            return &v[p - first..q - first];
+        }
+        let (i, len) = (p & self.mask, q - p);
+        if i + len <= self.ring.len() {
+            return &self.ring[i..i + len];
+        }
+        scratch.clear();
+        scratch.extend_from_slice(&self.ring[i..]);
+        scratch.extend_from_slice(&self.ring[..len - (self.ring.len() - i)]);
+        scratch
+    }
+
+    fn write_spill(&mut self, from: usize, to: usize) -> Result<(), StreamError> {
+        let Some(f) = &mut self.spill else {
+            return Ok(());
+        };
+        let mut bytes = Vec::with_capacity((to - from) * 8);
+        let mut t = from;
+        while t < to {
+            let i = t & self.mask;
+            let len = (to - t).min(self.ring.len() - i);
+            for v in &self.ring[i..i + len] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            t += len;
+        }
+        f.write_all(&bytes).map_err(StreamError::Spill)?;
+        self.spilled = to;
+        Ok(())
+    }
+}
+
+/// A one-pass analysis of one series.
+pub struct Stream {
+    plan: Plan,
+    tau0: f64,
+    phase_input: bool,
+    factors: Vec<Factor>,
+    far_lags: Vec<usize>,
+    hist: History,
+    /// Phase points received, the running phase and the points not yet
+    /// summed.
+    n: usize,
+    acc: f64,
+    pending: Vec<f64>,
+    /// Samples pushed.
+    samples: u64,
+    scratch: [Vec<f64>; 4],
+    bytes: Vec<u8>,
+}
+
+/// The finished analysis.
+#[derive(Clone, Debug)]
+pub struct Curves {
+    /// Phase points (samples + 1 for rates).
+    pub n: usize,
+    /// Each asked deviation's points, in the plan's order.
+    pub curves: Vec<(Kind, Vec<Point>)>,
+    /// OADEV at 8 per decade with 1σ intervals (the plan's `fit`).
+    pub fit_points: Vec<Point>,
+}
+
+/// The factors of `grid` that can ever be reached (the stream's length is
+/// not known ahead).
+fn grid_factors(grid: Grid) -> Vec<usize> {
+    grid.factors(1 << 48)
+}
+
+impl Stream {
+    /// A pass over rates (`phase_input` false: °/s, integrated by τ0) or
+    /// phase, sampled every `tau0` s.
+    pub fn new(plan: Plan, tau0: f64, phase_input: bool) -> Result<Self, StreamError> {
+        if let Some(k) = plan.kinds.iter().find(|k| !streams(**k)) {
+            return Err(StreamError::Kind(*k));
+        }
+        if plan.grid == Grid::All {
+            return Err(StreamError::Grid);
+        }
+        if !(tau0.is_finite() && tau0 > 0.0) {
+            return Err(StreamError::Tau0);
+        }
+        if !plan.ring.is_power_of_two() || plan.ring < 2 * CHUNK {
+            return Err(StreamError::Ring(plan.ring));
+        }
+        let mut needs: std::collections::BTreeMap<usize, Need> = Default::default();
+        for &k in &plan.kinds {
+            for m in grid_factors(plan.grid) {
+                let e = needs.entry(m).or_default();
+                *e = e.or(Need::of(k));
+            }
+        }
+        if plan.fit {
+            for m in grid_factors(Grid::PerDecade(8)) {
+                let e = needs.entry(m).or_default();
+                *e = e.or(Need::of(Kind::Oadev));
+            }
+        }
+        let factors: Vec<Factor> = needs.into_iter().map(|(m, n)| Factor::new(m, n)).collect();
+        let near = plan.ring - CHUNK;
+        let mut far_lags: Vec<usize> = factors
+            .iter()
+            .flat_map(|f| (1..=f.need.reach()).map(move |k| k * f.m))
+            .filter(|&l| l > near)
+            .collect();
+        far_lags.sort_unstable();
+        far_lags.dedup();
+        let hist = History {
+            ring: vec![0.0; plan.ring],
+            mask: plan.ring - 1,
+            near,
+            spill: None,
+            spill_dir: plan.spill_dir.clone(),
+            spilled: 0,
+            far: Vec::new(),
+        };
+        Ok(Stream {
+            plan,
+            tau0,
+            phase_input,
+            factors,
+            far_lags,
+            hist,
+            n: 0,
+            acc: 0.0,
+            samples: 0,
+            pending: Vec::with_capacity(CHUNK),
+            scratch: Default::default(),
+            bytes: Vec::new(),
+        })
+    }
+
+    /// Phase points taken so far.
+    pub fn phase_points(&self) -> usize {
+        self.n + self.pending.len()
+    }
+
+    /// Whether the phase has gone to the spill file (lags beyond the ring).
+    pub fn spilled(&self) -> bool {
+        self.hist.spill.is_some()
+    }
+
+    /// The next samples.
+    pub fn push(&mut self, values: &[f64]) -> Result<(), StreamError> {
+        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            return Err(StreamError::NonFinite(self.samples + k as u64));
+        }
+        self.samples += values.len() as u64;
+        let mut rest = values;
+        if !self.phase_input && self.phase_points() == 0 && !rest.is_empty() {
+            self.pending.push(0.0);
+        }
+        while !rest.is_empty() {
+            let take = (CHUNK - self.pending.len()).min(rest.len());
+            if self.phase_input {
+                self.pending.extend_from_slice(&rest[..take]);
+            } else {
+                for &y in &rest[..take] {
+                    self.acc += y * self.tau0;
+                    self.pending.push(self.acc);
+                }
+            }
+            rest = &rest[take..];
+            if self.pending.len() == CHUNK {
+                self.sum_chunk()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sum the pending phase points' terms.
+    fn sum_chunk(&mut self) -> Result<(), StreamError> {
+        let (t0, t1) = (self.n, self.n + self.pending.len());
+        if t0 == t1 {
+            return Ok(());
+        }
+        let h = &mut self.hist;
+        // The spill starts while the ring still holds every point (before
+        // the first lag beyond it is needed) and then follows the pass.
+        if h.spill.is_none() && t1 > h.near && !self.far_lags.is_empty() {
+            let f = match &h.spill_dir {
+                Some(d) => tempfile::tempfile_in(d),
+                None => tempfile::tempfile(),
+            }
+            .map_err(StreamError::Spill)?;
+            h.spill = Some(f);
+            h.write_spill(0, t0)?;
+        }
+        for (t, &v) in (t0..t1).zip(&self.pending) {
+            h.ring[t & h.mask] = v;
+        }
+        // This chunk's stretches at the far lags, from the spill.
+        h.far.retain(|_| false);
+        for &lag in self.far_lags.iter().filter(|&&l| l < t1) {
+            let first = t0.max(lag) - lag;
+            let len = t1 - lag - first;
+            let mut v = Vec::with_capacity(len);
+            self.bytes.resize(len * 8, 0);
+            let f = h
+                .spill
+                .as_ref()
+                .expect("a far lag is reached only past the ring");
+            f.read_exact_at(&mut self.bytes, first as u64 * 8)
+                .map_err(StreamError::Spill)?;
+            v.extend(
+                self.bytes
+                    .chunks_exact(8)
+                    .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))),
+            );
+            h.far.push((lag, first, v));
+        }
+        sum_factors(&mut self.factors, h, &mut self.scratch, t0, t1);
+        if h.spill.is_some() {
+            h.write_spill(t0, t1)?;
+        }
+        self.n = t1;
+        self.pending.clear();
+        Ok(())
+    }
+
+    /// The curves of every sample pushed.
+    pub fn finish(mut self) -> Result<Curves, StreamError> {
+        self.sum_chunk()?;
+        let n = self.n;
+        if n < 3 {
+            return Err(StreamError::TooShort(n as u64));
+        }
+        let tau0 = self.tau0;
+        let point = |kind: Kind, f: &Factor| -> Option<Point> {
+            let m = f.m;
+            if m > kind.max_factor(n) {
+                return None;
+            }
+            let tau = m as f64 * tau0;
+            let (var, terms) = match kind {
+                Kind::Oadev => {
+                    let k = n - 2 * m;
+                    (
+                        f.oadev.iter().sum::<f64>() / (2.0 * k as f64 * tau * tau),
+                        k,
+                    )
+                }
+                Kind::Adev => {
+                    let k = (n - 2 * m).div_ceil(m);
+                    (f.adev / (2.0 * k as f64 * tau * tau), k)
+                }
+                Kind::Mdev | Kind::Tdev => {
+                    let count = n - 3 * m + 1;
+                    let mvar = f.md_s / (2.0 * (m * m) as f64 * count as f64 * tau * tau);
+                    if kind == Kind::Tdev {
+                        (tau * tau / 3.0 * mvar, count)
+                    } else {
+                        (mvar, count)
+                    }
+                }
+                Kind::Ohdev => {
+                    let k = n - 3 * m;
+                    (
+                        f.ohdev.iter().sum::<f64>() / (6.0 * k as f64 * tau * tau),
+                        k,
+                    )
+                }
+                Kind::Hdev => {
+                    let k = (n - 3 * m).div_ceil(m);
+                    (f.hdev / (6.0 * k as f64 * tau * tau), k)
+                }
+                Kind::Tierms => {
+                    let k = n - m;
+                    (f.tie.iter().sum::<f64>() / k as f64, k)
+                }
+                _ => return None,
+            };
+            Some(Point::bare(m, tau0, var.sqrt(), terms, n))
+        };
+        let curve = |kind: Kind, grid: Grid, ci: (f64, edf::Chi2)| -> Vec<Point> {
+            let ms = grid_factors(grid);
+            let mut last_alpha = None;
+            self.factors
+                .iter()
+                .filter(|f| ms.binary_search(&f.m).is_ok() && kind.takes_factor(f.m))
+                .filter_map(|f| point(kind, f).map(|p| (f, p)))
+                .map(|(f, p)| dev::with_interval(kind, p, f.alpha(), &mut last_alpha, n, ci))
+                .collect()
+        };
+        let curves = self
+            .plan
+            .kinds
+            .iter()
+            .map(|&k| (k, curve(k, self.plan.grid, self.plan.ci)))
+            .collect();
+        let fit_points = if self.plan.fit {
+            curve(
+                Kind::Oadev,
+                Grid::PerDecade(8),
+                (edf::ONE_SIGMA, edf::Chi2::Exact),
+            )
+        } else {
+            Vec::new()
+        };
+        Ok(Curves {
+            n,
+            curves,
+            fit_points,
+        })
+    }
+}
+
+/// Add the terms whose newest point lies in `t0..t1` to every factor.
+fn sum_factors(
+    factors: &mut [Factor],
+    h: &History,
+    scratch: &mut [Vec<f64>; 4],
+    t0: usize,
+    t1: usize,
+) {
+    let [s0, s1, s2, s3] = scratch;
+    for f in factors.iter_mut() {
+        let m = f.m;
+        if m >= t1 {
+            // Only the decimated phase's first point, x[0], so far.
+            if t0 == 0 {
+                f.push_decimated(h.view(0, 0, 1, s0)[0]);
+            }
+            continue;
+        }
+        // The noise type's decimated phase.
+        let mut t = t0.div_ceil(m) * m;
+        if t < t1 {
+            let x = h.view(0, t0, t1, s0);
+            while t < t1 {
+                f.push_decimated(x[t - t0]);
+                t += m;
+            }
+        }
+        let need = f.need;
+        if need.oadev || need.adev || need.mdev {
+            let a = t0.max(2 * m);
+            if a < t1 {
+                let x0 = h.view(0, a, t1, s0);
+                let x1 = h.view(m, a, t1, s1);
+                let x2 = h.view(2 * m, a, t1, s2);
+                if need.oadev {
+                    add_second(&mut f.oadev, x0, x1, x2);
+                }
+                if need.adev {
+                    // The in-memory stride: terms at t ≡ 0 (mod m), summed
+                    // in order.
+                    let mut t = a.div_ceil(m) * m;
+                    while t < t1 {
+                        let i = t - a;
+                        let d = x0[i] - 2.0 * x1[i] + x2[i];
+                        f.adev += d * d;
+                        t += m;
+                    }
+                }
+                if need.mdev {
+                    let x3 = (t1 > 3 * m).then(|| h.view(3 * m, a.max(3 * m), t1, s3));
+                    mdev_terms(f, a, t1, x0, x1, x2, x3);
+                }
+            }
+        }
+        if need.ohdev || need.hdev {
+            let a = t0.max(3 * m);
+            if a < t1 {
+                let x0 = h.view(0, a, t1, s0);
+                let x1 = h.view(m, a, t1, s1);
+                let x2 = h.view(2 * m, a, t1, s2);
+                let x3 = h.view(3 * m, a, t1, s3);
+                if need.ohdev {
+                    add_third(&mut f.ohdev, x0, x1, x2, x3);
+                }
+                if need.hdev {
+                    let mut t = a.div_ceil(m) * m;
+                    while t < t1 {
+                        let i = t - a;
+                        let d = x0[i] - 3.0 * x1[i] + 3.0 * x2[i] - x3[i];
+                        f.hdev += d * d;
+                        t += m;
+                    }
+                }
+            }
+        }
+        if need.tie {
+            let a = t0.max(m);
+            if a < t1 {
+                let x0 = h.view(0, a, t1, s0);
+                let x1 = h.view(m, a, t1, s1);
+                add_first(&mut f.tie, x0, x1);
+            }
+        }
+    }
+}
+
+/// MDEV's running inner sum (as `dev`'s in-memory loop: the first m second
+/// differences summed in order, then slid by one, the same operations).
+/// `x0..x2` start at `a` (≥ 2m); `x3` at max(a, 3m).
+fn mdev_terms(
+    f: &mut Factor,
+    a: usize,
+    t1: usize,
+    x0: &[f64],
+    x1: &[f64],
+    x2: &[f64],
+    x3: Option<&[f64]>,
+) {
+    let m = f.m;
+    let d2 = |i: usize| x0[i] - 2.0 * x1[i] + x2[i];
+    let mut t = a;
+    // The first inner sum: the second differences ending at 2m .. 3m − 1.
+    while t < t1 && t < 3 * m {
+        f.md_inner += d2(t - a);
+        if t == 3 * m - 1 {
+            f.md_s = f.md_inner * f.md_inner;
+        }
+        t += 1;
+    }
+    let Some(x3) = x3 else {
+        return;
+    };
+    let b = a.max(3 * m);
+    while t < t1 {
+        let (i, j) = (t - a, t - b);
+        // The difference leaving the window ends at t − m.
+        let old = x1[i] - 2.0 * x2[i] + x3[j];
+        f.md_inner += d2(i) - old;
+        f.md_s += f.md_inner * f.md_inner;
+        t += 1;
+    }
+}
+
+/// Lane q adds (x0 − 2·x1 + x2)² of the points q, q + LANES, ….
+#[inline(always)]
+fn add_second(l: &mut [f64; LANES], x0: &[f64], x1: &[f64], x2: &[f64]) {
+    let (c0, c1, c2) = (
+        x0.chunks_exact(LANES),
+        x1.chunks_exact(LANES),
+        x2.chunks_exact(LANES),
+    );
+    let (r0, r1, r2) = (c0.remainder(), c1.remainder(), c2.remainder());
+    for ((a, b), c) in c0.zip(c1).zip(c2) {
+        for q in 0..LANES {
+            let d = a[q] - 2.0 * b[q] + c[q];
+            l[q] += d * d;
+        }
+    }
+    for ((a, b), c) in r0.iter().zip(r1).zip(r2) {
+        let d = a - 2.0 * b + c;
+        l[0] += d * d;
+    }
+}
+
+/// Lane q adds (x0 − 3·x1 + 3·x2 − x3)².
+#[inline(always)]
+fn add_third(l: &mut [f64; LANES], x0: &[f64], x1: &[f64], x2: &[f64], x3: &[f64]) {
+    let term = |a: f64, b: f64, c: f64, d: f64| {
+        let v = a - 3.0 * b + 3.0 * c - d;
+        v * v
+    };
+    let (c0, c1) = (x0.chunks_exact(LANES), x1.chunks_exact(LANES));
+    let (c2, c3) = (x2.chunks_exact(LANES), x3.chunks_exact(LANES));
+    let rest = (
+        c0.remainder(),
+        c1.remainder(),
+        c2.remainder(),
+        c3.remainder(),
+    );
+    for (((a, b), c), d) in c0.zip(c1).zip(c2).zip(c3) {
+        for (q, lane) in l.iter_mut().enumerate() {
+            *lane += term(a[q], b[q], c[q], d[q]);
+        }
+    }
+    for (((a, b), c), d) in rest.0.iter().zip(rest.1).zip(rest.2).zip(rest.3) {
+        l[0] += term(*a, *b, *c, *d);
+    }
+}
+
+/// Lane q adds (x0 − x1)².
+#[inline(always)]
+fn add_first(l: &mut [f64; LANES], x0: &[f64], x1: &[f64]) {
+    let (c0, c1) = (x0.chunks_exact(LANES), x1.chunks_exact(LANES));
+    let (r0, r1) = (c0.remainder(), c1.remainder());
+    for (a, b) in c0.zip(c1) {
+        for q in 0..LANES {
+            let d = a[q] - b[q];
+            l[q] += d * d;
+        }
+    }
+    for (a, b) in r0.iter().zip(r1) {
+        l[0] += (a - b) * (a - b);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rates with white, flicker-like and random-walk parts and a bias
+    /// (the phase drifts far from 0, as a gyro's does).
+    fn rates(n: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed;
+        let mut u = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (mut walk, mut slow) = (0.0, 0.0);
+        (0..n)
+            .map(|i| {
+                walk += 0.002 * u();
+                if i % 64 == 0 {
+                    slow = 0.3 * u();
+                }
+                0.7 + u() + slow + walk
+            })
+            .collect()
+    }
+
+    fn plan(kinds: &[Kind], grid: Grid, ring: usize) -> Plan {
+        Plan {
+            kinds: kinds.to_vec(),
+            grid,
+            ci: (edf::ONE_SIGMA, edf::Chi2::Exact),
+            fit: true,
+            ring,
+            spill_dir: None,
+        }
+    }
+
+    const KINDS: [Kind; 7] = [
+        Kind::Adev,
+        Kind::Oadev,
+        Kind::Mdev,
+        Kind::Tdev,
+        Kind::Hdev,
+        Kind::Ohdev,
+        Kind::Tierms,
+    ];
+
+    /// Every streamed deviation equals the in-memory one (`dev::curve_with`)
+    /// with the smallest ring, so that most lags come back from the spill:
+    /// MDEV, TDEV and HDEV to the bit (the same additions in the same
+    /// order), ADEV, OADEV, OHDEV and TIE rms to 1e-12 (partial sums); the
+    /// same noise types, EDFs and intervals; the fit's points too. Fed in
+    /// pieces of odd sizes, so chunk edges fall everywhere.
+    #[test]
+    fn equals_the_in_memory_curves() {
+        let tau0 = 0.01;
+        let y = rates(150_001, 7);
+        let x = dev::phase_from_rate(&y, tau0).unwrap();
+        for grid in [Grid::Octave, Grid::Decade, Grid::PerDecade(5)] {
+            let mut s = Stream::new(plan(&KINDS, grid, 2 * CHUNK), tau0, false).unwrap();
+            let mut at = 0;
+            for (k, piece) in [1usize, 7, 16_383, 40_000, 3].iter().cycle().enumerate() {
+                let end = (at + piece).min(y.len());
+                s.push(&y[at..end]).unwrap();
+                at = end;
+                if at == y.len() || k > 1000 {
+                    break;
+                }
+            }
+            assert!(s.spilled());
+            let got = s.finish().unwrap();
+            assert_eq!(got.n, x.len());
+            for (kind, points) in &got.curves {
+                let mut alphas = dev::Alphas::new();
+                let ci = (edf::ONE_SIGMA, edf::Chi2::Exact);
+                let want = dev::curve_with(*kind, &x, tau0, grid, ci, &mut alphas).unwrap();
+                assert_eq!(points.len(), want.len(), "{kind:?} {grid:?}");
+                // (ADEV at m = 1 is the overlapping kernel in memory.)
+                let exact = matches!(kind, Kind::Mdev | Kind::Tdev | Kind::Hdev);
+                for (p, w) in points.iter().zip(&want) {
+                    let what = format!("{kind:?} {grid:?} m {}", p.m);
+                    assert_eq!((p.m, p.terms, p.alpha), (w.m, w.terms, w.alpha), "{what}");
+                    if exact {
+                        assert_eq!(p.dev.to_bits(), w.dev.to_bits(), "{what}");
+                    } else {
+                        assert!(
+                            (p.dev / w.dev - 1.0).abs() < 1e-12,
+                            "{what}: {} {}",
+                            p.dev,
+                            w.dev
+                        );
+                    }
+                    let near = |a: Option<f64>, b: Option<f64>| match (a, b) {
+                        (Some(a), Some(b)) => (a / b - 1.0).abs() < 1e-9,
+                        (a, b) => a.is_none() && b.is_none(),
+                    };
+                    assert!(
+                        near(p.edf, w.edf) && near(p.lo, w.lo) && near(p.hi, w.hi),
+                        "{what}"
+                    );
+                }
+            }
+            let want = dev::curve(Kind::Oadev, &x, tau0, Grid::PerDecade(8)).unwrap();
+            assert_eq!(got.fit_points.len(), want.len());
+            for (p, w) in got.fit_points.iter().zip(&want) {
+                assert!(
+                    (p.dev / w.dev - 1.0).abs() < 1e-12 && p.alpha == w.alpha,
+                    "m {}",
+                    p.m
+                );
+            }
+        }
+    }
+
+    /// Phase input is taken as it is; a ring that holds the whole log
+    /// spills nothing; the typed refusals.
+    #[test]
+    fn phase_input_rings_and_refusals() {
+        let tau0 = 1.0;
+        let x = dev::phase_from_rate(&rates(5_000, 3), tau0).unwrap();
+        let mut s = Stream::new(
+            plan(&[Kind::Mdev, Kind::Oadev], Grid::Octave, 1 << 16),
+            tau0,
+            true,
+        )
+        .unwrap();
+        s.push(&x).unwrap();
+        assert!(!s.spilled());
+        let got = s.finish().unwrap();
+        let want = dev::curve(Kind::Mdev, &x, tau0, Grid::Octave).unwrap();
+        let mdev: Vec<u64> = got.curves[0].1.iter().map(|p| p.dev.to_bits()).collect();
+        assert_eq!(
+            mdev,
+            want.iter().map(|p| p.dev.to_bits()).collect::<Vec<_>>()
+        );
+
+        let refuse = |kinds: &[Kind], grid, ring, tau0| {
+            Stream::new(plan(kinds, grid, ring), tau0, false).err()
+        };
+        assert!(matches!(
+            refuse(&[Kind::Totdev], Grid::Octave, 1 << 16, 1.0),
+            Some(StreamError::Kind(Kind::Totdev))
+        ));
+        assert!(matches!(
+            refuse(&[Kind::Oadev], Grid::All, 1 << 16, 1.0),
+            Some(StreamError::Grid)
+        ));
+        assert!(matches!(
+            refuse(&[Kind::Oadev], Grid::Octave, 1 << 16, 0.0),
+            Some(StreamError::Tau0)
+        ));
+        assert!(matches!(
+            refuse(&[Kind::Oadev], Grid::Octave, 3 << 14, 1.0),
+            Some(StreamError::Ring(_))
+        ));
+        let mut s = Stream::new(plan(&[Kind::Oadev], Grid::Octave, 1 << 16), 1.0, false).unwrap();
+        s.push(&[1.0, 2.0]).unwrap();
+        assert!(matches!(
+            s.push(&[3.0, f64::NAN]),
+            Err(StreamError::NonFinite(3))
+        ));
+        let s = Stream::new(plan(&[Kind::Oadev], Grid::Octave, 1 << 16), 1.0, false).unwrap();
+        assert!(matches!(s.finish(), Err(StreamError::TooShort(0))));
+    }
+}
