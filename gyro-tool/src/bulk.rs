@@ -142,7 +142,16 @@ impl Reader {
     pub fn place(&self, row_in_block: usize) -> String {
         match &self.inner {
             Inner::Text(t) => format!("line {}", t.lines.get(row_in_block).copied().unwrap_or(0)),
-            Inner::Binary(b) => format!("row {}", b.pos - b.last + row_in_block),
+            Inner::Binary(b) => format!("row {}", b.pos - b.last + row_in_block + 1),
+        }
+    }
+
+    /// The line (text) or 1-based row (binary) of row `row_in_block` of
+    /// the last block.
+    pub fn line(&self, row_in_block: usize) -> usize {
+        match &self.inner {
+            Inner::Text(t) => t.lines.get(row_in_block).copied().unwrap_or(0),
+            Inner::Binary(b) => b.pos - b.last + row_in_block + 1,
         }
     }
 

@@ -306,20 +306,31 @@ impl History {
         let Some(f) = &mut self.spill else {
             return Ok(());
         };
-        let mut bytes = Vec::with_capacity((to - from) * 8);
         let mut t = from;
         while t < to {
             let i = t & self.mask;
             let len = (to - t).min(self.ring.len() - i);
-            for v in &self.ring[i..i + len] {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
+            f.write_all(as_bytes(&self.ring[i..i + len]))
+                .map_err(StreamError::Spill)?;
             t += len;
         }
-        f.write_all(&bytes).map_err(StreamError::Spill)?;
         self.spilled = to;
         Ok(())
     }
+}
+
+/// The spill holds the phase in this machine's own byte order: it is this
+/// process's scratch, read back only by it.
+fn as_bytes(v: &[f64]) -> &[u8] {
+    // SAFETY: f64 has no padding and any byte is a valid u8; the length is
+    // the slice's size in bytes and the pointer its own.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(v)) }
+}
+
+/// [`as_bytes`], to read into.
+fn as_bytes_mut(v: &mut [f64]) -> &mut [u8] {
+    // SAFETY: as for `as_bytes`, and every byte pattern is a valid f64.
+    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<u8>(), std::mem::size_of_val(v)) }
 }
 
 /// A one-pass analysis of one series.
@@ -337,8 +348,7 @@ pub struct Stream {
     pending: Vec<f64>,
     /// Samples pushed.
     samples: u64,
-    scratch: [Vec<f64>; 4],
-    bytes: Vec<u8>,
+    scratch: Scratch,
 }
 
 /// The finished analysis.
@@ -416,8 +426,7 @@ impl Stream {
             acc: 0.0,
             samples: 0,
             pending: Vec::with_capacity(CHUNK),
-            scratch: Default::default(),
-            bytes: Vec::new(),
+            scratch: std::array::from_fn(|_| Vec::new()),
         })
     }
 
@@ -480,27 +489,23 @@ impl Stream {
         for (t, &v) in (t0..t1).zip(&self.pending) {
             h.ring[t & h.mask] = v;
         }
-        // This chunk's stretches at the far lags, from the spill.
-        h.far.retain(|_| false);
-        for &lag in self.far_lags.iter().filter(|&&l| l < t1) {
-            let first = t0.max(lag) - lag;
-            let len = t1 - lag - first;
-            let mut v = Vec::with_capacity(len);
-            self.bytes.resize(len * 8, 0);
+        // This chunk's stretches at the far lags, from the spill (their
+        // buffers kept from chunk to chunk).
+        let reached = self.far_lags.iter().take_while(|&&l| l < t1).count();
+        h.far
+            .resize_with(reached, || (0, 0, Vec::with_capacity(CHUNK)));
+        for (&lag, (l, first, v)) in self.far_lags.iter().zip(h.far.iter_mut()) {
             let f = h
                 .spill
                 .as_ref()
                 .expect("a far lag is reached only past the ring");
-            f.read_exact_at(&mut self.bytes, first as u64 * 8)
+            *l = lag;
+            *first = t0.max(lag) - lag;
+            v.resize(t1 - lag - *first, 0.0);
+            f.read_exact_at(as_bytes_mut(v), *first as u64 * 8)
                 .map_err(StreamError::Spill)?;
-            v.extend(
-                self.bytes
-                    .chunks_exact(8)
-                    .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8]))),
-            );
-            h.far.push((lag, first, v));
         }
-        sum_factors(&mut self.factors, h, &mut self.scratch, t0, t1);
+        sum_factors_best(&mut self.factors, h, &mut self.scratch, t0, t1);
         if h.spill.is_some() {
             h.write_spill(t0, t1)?;
         }
@@ -596,15 +601,58 @@ impl Stream {
     }
 }
 
-/// Add the terms whose newest point lies in `t0..t1` to every factor.
-fn sum_factors(
+/// [`sum_factors`], in its AVX2 build where the CPU has AVX2 and FMA: the
+/// same operations in the same order (no contraction into fused
+/// multiply-adds), so the same bits, with 4 lanes where the baseline has 2.
+fn sum_factors_best(
     factors: &mut [Factor],
     h: &History,
-    scratch: &mut [Vec<f64>; 4],
+    scratch: &mut Scratch,
     t0: usize,
     t1: usize,
 ) {
-    let [s0, s1, s2, s3] = scratch;
+    #[cfg(target_arch = "x86_64")]
+    if gyro_array::algo::allan::has_avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above), the only
+        // requirement of the AVX2 build.
+        return unsafe { sum_factors_avx2(factors, h, scratch, t0, t1) };
+    }
+    sum_factors(factors, h, scratch, t0, t1)
+}
+
+/// [`sum_factors`] compiled for AVX2 and FMA.
+///
+/// # Safety
+///
+/// Call it only on a CPU with AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn sum_factors_avx2(
+    factors: &mut [Factor],
+    h: &History,
+    scratch: &mut Scratch,
+    t0: usize,
+    t1: usize,
+) {
+    sum_factors(factors, h, scratch, t0, t1)
+}
+
+/// Scratch for the views that wrap round the ring: four for one factor's
+/// lags, and four for each of the MDEV chains run side by side.
+type Scratch = [Vec<f64>; 4 + 4 * MDEV_SIDE];
+
+/// MDEV chains run side by side: each is a chain of dependent additions
+/// (its running inner sum), so one alone waits on each add's latency.
+const MDEV_SIDE: usize = 4;
+
+/// Add the terms whose newest point lies in `t0..t1` to every factor.
+#[inline(always)]
+fn sum_factors(factors: &mut [Factor], h: &History, scratch: &mut Scratch, t0: usize, t1: usize) {
+    let (own, side) = scratch.split_at_mut(4);
+    let [s0, s1, s2, s3] = own else {
+        return;
+    };
+
     for f in factors.iter_mut() {
         let m = f.m;
         if m >= t1 {
@@ -644,9 +692,9 @@ fn sum_factors(
                         t += m;
                     }
                 }
-                if need.mdev {
-                    let x3 = (t1 > 3 * m).then(|| h.view(3 * m, a.max(3 * m), t1, s3));
-                    mdev_terms(f, a, t1, x0, x1, x2, x3);
+                if need.mdev && a < 3 * m {
+                    // The first inner sum; the slide below.
+                    mdev_first(f, a, t1, x0, x1, x2);
                 }
             }
         }
@@ -680,42 +728,99 @@ fn sum_factors(
             }
         }
     }
+    // MDEV's slide, MDEV_SIDE factors at a time.
+    let mut sliding: Vec<&mut Factor> = factors
+        .iter_mut()
+        .filter(|f| f.need.mdev && t1 > 3 * f.m)
+        .collect();
+    for group in sliding.chunks_mut(MDEV_SIDE) {
+        mdev_slide(group, h, side, t0, t1);
+    }
 }
 
-/// MDEV's running inner sum (as `dev`'s in-memory loop: the first m second
-/// differences summed in order, then slid by one, the same operations).
-/// `x0..x2` start at `a` (≥ 2m); `x3` at max(a, 3m).
-fn mdev_terms(
-    f: &mut Factor,
-    a: usize,
-    t1: usize,
-    x0: &[f64],
-    x1: &[f64],
-    x2: &[f64],
-    x3: Option<&[f64]>,
-) {
+/// MDEV's first inner sum: the second differences ending at 2m .. 3m − 1,
+/// added in order as `dev`'s in-memory loop adds them; `x0..x2` start at
+/// `a` (≥ 2m).
+#[inline(always)]
+fn mdev_first(f: &mut Factor, a: usize, t1: usize, x0: &[f64], x1: &[f64], x2: &[f64]) {
     let m = f.m;
-    let d2 = |i: usize| x0[i] - 2.0 * x1[i] + x2[i];
-    let mut t = a;
-    // The first inner sum: the second differences ending at 2m .. 3m − 1.
-    while t < t1 && t < 3 * m {
-        f.md_inner += d2(t - a);
+    for t in a..t1.min(3 * m) {
+        let i = t - a;
+        f.md_inner += x0[i] - 2.0 * x1[i] + x2[i];
         if t == 3 * m - 1 {
             f.md_s = f.md_inner * f.md_inner;
         }
-        t += 1;
     }
-    let Some(x3) = x3 else {
-        return;
-    };
-    let b = a.max(3 * m);
-    while t < t1 {
-        let (i, j) = (t - a, t - b);
+}
+
+/// MDEV's inner sum slid by one for each t in `t0..t1` from 3m on, for up
+/// to [`MDEV_SIDE`] factors side by side: each factor's additions are
+/// `dev`'s in-memory loop's, in its order (the same bits); the side by side
+/// only lets one chain's add wait while another's runs.
+#[inline(always)]
+fn mdev_slide(group: &mut [&mut Factor], h: &History, side: &mut [Vec<f64>], t0: usize, t1: usize) {
+    // Each factor's views from its own start, max(t0, 3m); the common
+    // stretch from the latest start, the earlier ones' heads alone first.
+    let mut views: [(usize, [&[f64]; 4]); MDEV_SIDE] = [(0, [&[]; 4]); MDEV_SIDE];
+    let mut scratch = side.chunks_mut(4);
+    for (f, v) in group.iter().zip(views.iter_mut()) {
+        let (m, b) = (f.m, t0.max(3 * f.m));
+        let Some([s0, s1, s2, s3]) = scratch.next() else {
+            return;
+        };
+        *v = (
+            b,
+            [
+                h.view(0, b, t1, s0),
+                h.view(m, b, t1, s1),
+                h.view(2 * m, b, t1, s2),
+                h.view(3 * m, b, t1, s3),
+            ],
+        );
+    }
+    let common = views[..group.len()].iter().map(|v| v.0).max().unwrap_or(t1);
+    let step = |f: &mut Factor, x: &[&[f64]; 4], i: usize| {
+        let new = x[0][i] - 2.0 * x[1][i] + x[2][i];
         // The difference leaving the window ends at t − m.
-        let old = x1[i] - 2.0 * x2[i] + x3[j];
-        f.md_inner += d2(i) - old;
+        let old = x[1][i] - 2.0 * x[2][i] + x[3][i];
+        f.md_inner += new - old;
         f.md_s += f.md_inner * f.md_inner;
-        t += 1;
+    };
+    for (f, (b, x)) in group.iter_mut().zip(&views) {
+        for t in *b..common {
+            step(f, x, t - b);
+        }
+    }
+    if group.len() == MDEV_SIDE {
+        // The chains' state in locals and every view cut to the common
+        // stretch's length, so the loop holds no loads of the state and no
+        // bounds checks.
+        let len = t1 - common;
+        let xs: [[&[f64]; 4]; MDEV_SIDE] = std::array::from_fn(|j| {
+            let o = common - views[j].0;
+            std::array::from_fn(|q| &views[j].1[q][o..o + len])
+        });
+        let mut inner: [f64; MDEV_SIDE] = std::array::from_fn(|j| group[j].md_inner);
+        let mut sum: [f64; MDEV_SIDE] = std::array::from_fn(|j| group[j].md_s);
+        for k in 0..len {
+            for j in 0..MDEV_SIDE {
+                let [x0, x1, x2, x3] = xs[j];
+                let new = x0[k] - 2.0 * x1[k] + x2[k];
+                let old = x1[k] - 2.0 * x2[k] + x3[k];
+                inner[j] += new - old;
+                sum[j] += inner[j] * inner[j];
+            }
+        }
+        for (j, f) in group.iter_mut().enumerate() {
+            f.md_inner = inner[j];
+            f.md_s = sum[j];
+        }
+    } else {
+        for (f, (b, x)) in group.iter_mut().zip(&views) {
+            for t in common..t1 {
+                step(f, x, t - b);
+            }
+        }
     }
 }
 

@@ -342,3 +342,117 @@ fn a_robot_logs_topic_is_read_by_name() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("/imu/data.x"), "{err}");
 }
+
+/// A `.npy` file of f64 as NumPy writes it (version 1.0, header padded to a
+/// multiple of 64 bytes).
+fn npy(name: &str, values: &[f64]) -> std::path::PathBuf {
+    let mut h = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({},), }}",
+        values.len()
+    );
+    while !(10 + h.len() + 1).is_multiple_of(64) {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(h.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    let dir = std::env::temp_dir().join(format!("gyro-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+/// The CSV rows (deviation, m, value, alpha, edf) of `gyro allan`.
+fn allan_rows(args: &[&str]) -> Vec<(String, usize, f64, String, String)> {
+    let o = gyro().arg("allan").args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{args:?}: {err}");
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[1].to_string(),
+                f[2].parse().unwrap(),
+                f[4].parse().unwrap(),
+                f[7].to_string(),
+                f[9].to_string(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_long_log_streams_to_the_same_curves() {
+    // 300 000 samples with a 1 MiB ring (131 072 points a column): most
+    // lags of the longer factors come back from the spill file.
+    let text = noise(300_000);
+    let values: Vec<f64> = text.lines().skip(1).map(|l| l.parse().unwrap()).collect();
+    let txt = temp("long.csv", &text);
+    let bin = npy("long.npy", &values);
+    let common = [
+        "--tau0",
+        "0.01",
+        "--dev",
+        "oadev,mdev,hdev,tierms",
+        "--format",
+        "csv",
+    ];
+    let whole = allan_rows(&[&[txt.to_str().unwrap()], &common[..]].concat());
+    for (file, extra) in [(&txt, &["--stream"][..]), (&bin, &[][..])] {
+        let mut args = vec![file.to_str().unwrap(), "--memory", "1"];
+        args.extend_from_slice(&common);
+        args.extend_from_slice(extra);
+        let streamed = allan_rows(&args);
+        assert_eq!(streamed.len(), whole.len(), "{args:?}");
+        for (s, w) in streamed.iter().zip(&whole) {
+            assert_eq!((&s.0, s.1, &s.3, &s.4), (&w.0, w.1, &w.3, &w.4), "{args:?}");
+            assert!((s.2 / w.2 - 1.0).abs() < 1e-12, "{args:?} {s:?} {w:?}");
+        }
+    }
+}
+
+#[test]
+fn a_streamed_log_refuses_what_it_cannot_do_by_name() {
+    let mut values = vec![0.5; 1000];
+    values[700] = f64::NAN;
+    let bad = npy("nan.npy", &values);
+    let (code, err) = fails(&["allan", "--tau0", "1"], &bad);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("sample 700 (row 701) is not finite"), "{err}");
+    let p = temp("gap.csv", "t,z\n0,1\n1,2\n2,1\n5,2\n6,1\n7,2\n");
+    let (code, err) = fails(&["allan", "--stream", "--time", "t"], &p);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(":5: gap of 3 s") && err.contains("--gaps join"),
+        "{err}"
+    );
+    for (args, says) in [
+        (
+            &["allan", "--stream", "--tau0", "1", "--dev", "totdev"][..],
+            "TOTDEV is not computed in one pass",
+        ),
+        (
+            &["allan", "--stream", "--tau0", "1", "--grid", "all"][..],
+            "--grid all",
+        ),
+        (
+            &["allan", "--stream", "--tau0", "1", "--static"][..],
+            "--static",
+        ),
+        (
+            &["allan", "--stream", "--tau0", "1", "--memory", "0"][..],
+            "--memory 0 MiB",
+        ),
+    ] {
+        let (code, err) = fails(args, &p);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}

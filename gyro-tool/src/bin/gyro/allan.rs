@@ -2,11 +2,11 @@
 //! intervals, the IEEE 952 fit and a Kalibr `imu.yaml`.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::ValueEnum;
-use gyro_tool::{dev, edf, fit, plot, screen, short, table, Res};
+use gyro_tool::{bulk, dev, edf, fit, plot, screen, short, stream, table, Res};
 use indicatif::ProgressBar;
 
 use crate::log_args::LogArgs;
@@ -71,6 +71,25 @@ pub struct Args {
     /// screen reads rates).
     #[arg(long)]
     phase: bool,
+    /// One pass in bounded memory (taken for `.npy` and `--raw` logs): a
+    /// log of any length, its text parsed a block at a time, ADEV, OADEV,
+    /// MDEV, TDEV, HDEV, OHDEV and TIE rms on octave, decade or
+    /// per-decade factors, the fit. The columns are not screened; a gap
+    /// in the time column stops it unless `--gaps join`.
+    #[arg(long)]
+    stream: bool,
+    /// A raw little-endian binary log: f32 or f64, with xK for K values a
+    /// row (f64x3); its columns are c1, c2, ….
+    #[arg(long)]
+    raw: Option<bulk::Raw>,
+    /// Memory for the streamed pass's phase, MiB, over all columns: lags
+    /// beyond it are read back from a spill file of the phase.
+    #[arg(long, default_value_t = 256)]
+    memory: usize,
+    /// Where the streamed pass's spill file goes (8 bytes a sample; by
+    /// default the system's temporary directory).
+    #[arg(long)]
+    spill_dir: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -113,8 +132,8 @@ fn peak_mib() -> Option<f64> {
 
 /// One curve of `gyro allan`'s JSON output.
 #[derive(serde::Serialize)]
-struct CurveOut<'a> {
-    column: &'a str,
+struct CurveOut {
+    column: String,
     deviation: dev::Kind,
     unit: &'static str,
     tau0_s: f64,
@@ -130,7 +149,7 @@ pub fn run(a: Args) -> Res<bool> {
         dev: kinds,
         grid,
         format,
-        out,
+        out: out_file,
         fit: want_fit,
         kalibr,
         accel,
@@ -140,6 +159,10 @@ pub fn run(a: Args) -> Res<bool> {
         chi2,
         gaps,
         phase,
+        stream: want_stream,
+        raw,
+        memory,
+        spill_dir,
     } = a;
     if phase && (only_static || matches!(log.unit, table::Unit::Dph | table::Unit::Lsb)) {
         return Err("--phase takes angles in deg (or rad with --unit rads), and is not screened: no --static".into());
@@ -151,6 +174,48 @@ pub fn run(a: Args) -> Res<bool> {
     let (file, columns, kinds) = (log.file.as_path(), &columns[..], &kinds[..]);
     let (time, tau0, unit, lsb) = (log.time.as_deref(), log.tau0, log.unit, log.lsb_per_dps);
     let started = Instant::now();
+    if want_stream || bulk::is_binary(file, raw) {
+        if only_static || !accel.is_empty() {
+            return Err("--static and --accel read the whole log: not with a streamed (--stream, .npy, --raw) log".into());
+        }
+        let st = streamed(
+            &log,
+            columns,
+            kinds,
+            grid,
+            (cf, chi2),
+            want_fit || kalibr.is_some(),
+            phase,
+            gaps,
+            (raw, memory, spill_dir),
+        )?;
+        let out = Outputs {
+            curves: st.curves,
+            fits: st.fits,
+            tau0: st.tau0,
+            samples: st.samples,
+        };
+        emit(
+            &out,
+            file,
+            format,
+            out_file.as_deref(),
+            svg.as_deref(),
+            kalibr.as_deref(),
+            (&[], &[]),
+        )?;
+        eprintln!(
+            "gyro: {} samples x {} columns in one pass: {:.1} s, {:.0} MB/s of input ({:.0} MB){}; peak memory {}",
+            st.samples,
+            out.curves.len() / kinds.len().max(1),
+            started.elapsed().as_secs_f64(),
+            st.bytes as f64 / 1e6 / started.elapsed().as_secs_f64(),
+            st.bytes as f64 / 1e6,
+            if st.spilled { ", the longer lags read back from the spill" } else { "" },
+            peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+        );
+        return Ok(true);
+    }
     let s = table::read_layout(
         file,
         columns,
@@ -263,7 +328,7 @@ pub fn run(a: Args) -> Res<bool> {
     }
     for (name, y) in s.names.iter().zip(&filled) {
         curves.push(CurveOut {
-            column: name,
+            column: name.clone(),
             deviation: dev::Kind::Oadev,
             unit: "deg/s",
             tau0_s: s.tau0,
@@ -286,7 +351,7 @@ pub fn run(a: Args) -> Res<bool> {
         for &k in kinds {
             let points = dev::curve_with(k, x, s.tau0, grid, (cf, chi2), &mut alphas)?;
             curves.push(CurveOut {
-                column: name,
+                column: name.clone(),
                 deviation: k,
                 // TDEV, TTOTDEV, MTIE and TIE rms are in the phase's unit
                 // (°); the others in °/s.
@@ -310,37 +375,85 @@ pub fn run(a: Args) -> Res<bool> {
             }
         }
     }
-    if let Some(path) = &kalibr {
-        let mut accel_fits = Vec::new();
-        if !accel.is_empty() {
-            // Read as they are (m/s²): no rate unit applies.
-            let a = table::read_layout(
-                file,
-                &accel,
-                (time, tau0),
-                (table::Unit::Dps, None),
-                false,
-                log.layout(),
-            )?;
-            for (name, r) in a.names.iter().zip(&a.rates) {
-                let x = dev::phase_from_rate(r, a.tau0)?;
-                match fit::fit_phase(&x, a.tau0) {
-                    Ok(t) => accel_fits.push(t),
-                    Err(e) => return Err(format!("{name}: {e}").into()),
-                }
+    // The accelerometer columns' fits, for the Kalibr file.
+    let mut accel_fits = Vec::new();
+    if kalibr.is_some() && !accel.is_empty() {
+        // Read as they are (m/s²): no rate unit applies.
+        let a = table::read_layout(
+            file,
+            &accel,
+            (time, tau0),
+            (table::Unit::Dps, None),
+            false,
+            log.layout(),
+        )?;
+        for (name, r) in a.names.iter().zip(&a.rates) {
+            let x = dev::phase_from_rate(r, a.tau0)?;
+            match fit::fit_phase(&x, a.tau0) {
+                Ok(t) => accel_fits.push(t),
+                Err(e) => return Err(format!("{name}: {e}").into()),
             }
         }
-        let gyro_fits: Vec<fit::Terms> = fits
+    }
+    let out = Outputs {
+        curves,
+        fits,
+        tau0: s.tau0,
+        samples: s.rates.first().map_or(0, Vec::len),
+    };
+    emit(
+        &out,
+        file,
+        format,
+        out_file.as_deref(),
+        svg.as_deref(),
+        kalibr.as_deref(),
+        (&accel, &accel_fits),
+    )?;
+    // What the run cost: the check of a long log's handling.
+    eprintln!(
+        "gyro: {} samples x {} columns: read in {read_s:.1} s, analysed in {:.1} s in all; peak memory {}",
+        s.rates.first().map_or(0, Vec::len),
+        s.rates.len(),
+        started.elapsed().as_secs_f64(),
+        peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+    );
+    Ok(true)
+}
+
+/// What `gyro allan` found, to write.
+struct Outputs {
+    curves: Vec<CurveOut>,
+    fits: Vec<(String, fit::Terms)>,
+    tau0: f64,
+    samples: usize,
+}
+
+/// Write the curves and fits as asked: the Kalibr file, the SVG, the
+/// table, CSV or JSON.
+fn emit(
+    out: &Outputs,
+    file: &Path,
+    format: OutFormat,
+    out_file: Option<&Path>,
+    svg: Option<&Path>,
+    kalibr: Option<&Path>,
+    (accel, accel_fits): (&[String], &[fit::Terms]),
+) -> Res<()> {
+    if let Some(path) = kalibr {
+        let gyro_fits: Vec<fit::Terms> = out
+            .fits
             .iter()
             .filter(|(n, _)| !accel.contains(n))
             .map(|(_, t)| t.clone())
             .collect();
-        let text = fit::kalibr_yaml(&gyro_fits, &accel_fits, short(1.0 / s.tau0), "/imu0")
+        let text = fit::kalibr_yaml(&gyro_fits, accel_fits, short(1.0 / out.tau0), "/imu0")
             .ok_or("no gyro fit for a Kalibr file")?;
         std::fs::write(path, text)?;
     }
-    if let Some(path) = &svg {
-        let cs: Vec<plot::Curve> = curves
+    if let Some(path) = svg {
+        let cs: Vec<plot::Curve> = out
+            .curves
             .iter()
             .map(|c| plot::Curve {
                 // A time (angle) deviation: its unit is on its label.
@@ -360,12 +473,12 @@ pub fn run(a: Args) -> Res<bool> {
             "{}: {} samples at τ0 = {} s",
             file.file_name()
                 .map_or("log".into(), |f| f.to_string_lossy()),
-            s.rates.first().map_or(0, Vec::len),
-            short(s.tau0)
+            out.samples,
+            short(out.tau0)
         );
-        plot::draw(path, &title, "°/s", &cs, &fits)?;
+        plot::draw(path, &title, "°/s", &cs, &out.fits)?;
     }
-    let mut w: Box<dyn Write> = match &out {
+    let mut w: Box<dyn Write> = match out_file {
         Some(p) => Box::new(std::io::BufWriter::new(std::fs::File::create(p)?)),
         None => Box::new(std::io::stdout().lock()),
     };
@@ -379,10 +492,11 @@ pub fn run(a: Args) -> Res<bool> {
             }
             #[derive(serde::Serialize)]
             struct Out<'a> {
-                curves: &'a [CurveOut<'a>],
+                curves: &'a [CurveOut],
                 fits: Vec<FitOut<'a>>,
             }
-            let fits = fits
+            let fits = out
+                .fits
                 .iter()
                 .map(|(c, t)| FitOut {
                     column: c,
@@ -392,7 +506,7 @@ pub fn run(a: Args) -> Res<bool> {
             serde_json::to_writer_pretty(
                 &mut w,
                 &Out {
-                    curves: &curves,
+                    curves: &out.curves,
                     fits,
                 },
             )?;
@@ -414,7 +528,7 @@ pub fn run(a: Args) -> Res<bool> {
                 "lo",
                 "hi",
             ])?;
-            for cv in &curves {
+            for cv in &out.curves {
                 for p in &cv.points {
                     c.write_record([
                         cv.column.to_string(),
@@ -435,7 +549,7 @@ pub fn run(a: Args) -> Res<bool> {
             c.flush()?;
         }
         OutFormat::Table => {
-            for cv in &curves {
+            for cv in &out.curves {
                 writeln!(
                     w,
                     "{} {} ({}), {} samples at tau0 = {} s",
@@ -467,18 +581,180 @@ pub fn run(a: Args) -> Res<bool> {
                     )?;
                 }
             }
-            for (name, t) in &fits {
+            for (name, t) in &out.fits {
                 fit::write_table(&mut w, name, t)?;
             }
         }
     }
-    // What the run cost: the check of a long log's handling.
-    eprintln!(
-        "gyro: {} samples x {} columns: read in {read_s:.1} s, analysed in {:.1} s in all; peak memory {}",
-        s.rates.first().map_or(0, Vec::len),
-        s.rates.len(),
-        started.elapsed().as_secs_f64(),
-        peak_mib().map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
-    );
-    Ok(true)
+    Ok(())
+}
+
+/// A streamed run's results.
+struct Streamed {
+    curves: Vec<CurveOut>,
+    fits: Vec<(String, fit::Terms)>,
+    tau0: f64,
+    samples: usize,
+    bytes: u64,
+    spilled: bool,
+}
+
+/// Stamps τ0 is taken from when only a time column gives it: the median
+/// step of the first block ([`bulk::ROWS`] rows), as a stream cannot wait
+/// for the whole log's median.
+fn tau0_of(times: &[f64]) -> Option<f64> {
+    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    if steps.is_empty() {
+        return None;
+    }
+    steps.sort_by(f64::total_cmp);
+    Some(steps[steps.len() / 2]).filter(|t| *t > 0.0 && t.is_finite())
+}
+
+/// `gyro allan --stream`: every column through [`stream::Stream`] in one
+/// pass over the log.
+#[allow(clippy::too_many_arguments)]
+fn streamed(
+    log: &LogArgs,
+    columns: &[String],
+    kinds: &[dev::Kind],
+    grid: dev::Grid,
+    ci: (f64, edf::Chi2),
+    fit_too: bool,
+    phase: bool,
+    gaps: Gaps,
+    (raw, memory_mib, spill_dir): (Option<bulk::Raw>, usize, Option<PathBuf>),
+) -> Res<Streamed> {
+    let file = log.file.as_path();
+    let mut r = bulk::open(
+        file,
+        columns,
+        log.time.as_deref(),
+        (log.unit, log.lsb_per_dps),
+        log.layout(),
+        raw,
+    )?;
+    let k = r.names.len();
+    // The ring: the largest power of two of points the memory gives each
+    // column.
+    let per_column = (memory_mib << 20) / 8 / k.max(1);
+    let ring = if per_column >= 2 * stream::CHUNK {
+        1usize << per_column.ilog2()
+    } else {
+        return Err(format!(
+            "--memory {memory_mib} MiB over {k} columns: at least {} MiB is needed",
+            (2 * stream::CHUNK * 8 * k).div_ceil(1 << 20)
+        )
+        .into());
+    };
+    let (mut out, mut times) = (vec![Vec::new(); k], Vec::new());
+    let mut got = r.next(&mut out, &mut times)?;
+    let tau0 = match log.tau0 {
+        Some(t) => t,
+        None => tau0_of(&times).ok_or(table::TableError::NoTau0)?,
+    };
+    let plan = stream::Plan {
+        kinds: kinds.to_vec(),
+        grid,
+        ci,
+        fit: fit_too,
+        ring,
+        spill_dir,
+    };
+    let mut streams = (0..k)
+        .map(|_| stream::Stream::new(plan.clone(), tau0, phase))
+        .collect::<Result<Vec<_>, _>>()?;
+    if !phase {
+        eprintln!(
+            "gyro: --stream: the columns are not screened for a start-up value, steps or motion"
+        );
+    }
+    let bar = if r.size() >= 100_000_000 {
+        ProgressBar::new(r.size())
+    } else {
+        ProgressBar::hidden()
+    };
+    let (mut last, mut row, mut gap_count) = (None::<f64>, 0usize, 0usize);
+    while got > 0 {
+        if r.timed {
+            for (i, &t) in times.iter().enumerate() {
+                if let Some(prev) = last {
+                    let place = r.line(i);
+                    if t <= prev {
+                        return Err(
+                            table::TableError::Time(file.to_path_buf(), place, prev, t).into()
+                        );
+                    }
+                    if t - prev > 1.5 * tau0 {
+                        gap_count += 1;
+                        if gaps == Gaps::Tolerant {
+                            return Err(format!(
+                                "{}:{place}: gap of {} s ({:.1} samples): a streamed pass takes contiguous samples only; --gaps join to analyse them as contiguous, or analyse without --stream (gap-tolerant OADEV)",
+                                file.display(),
+                                t - prev,
+                                (t - prev) / tau0
+                            )
+                            .into());
+                        }
+                        eprintln!(
+                            "gyro: {}:{place}: gap of {} s ({:.1} samples), joined (--gaps join)",
+                            file.display(),
+                            t - prev,
+                            (t - prev) / tau0
+                        );
+                    }
+                }
+                last = Some(t);
+            }
+        }
+        for ((s, col), name) in streams.iter_mut().zip(&out).zip(&r.names) {
+            s.push(col).map_err(|e| match e {
+                stream::StreamError::NonFinite(i) => format!(
+                    "{}: column {name}: sample {} ({}) is not finite: a streamed pass takes finite samples only",
+                    file.display(),
+                    i,
+                    r.place(i as usize - row)
+                ),
+                e => e.to_string(),
+            })?;
+        }
+        row += got;
+        bar.set_position(r.bytes_read());
+        got = r.next(&mut out, &mut times)?;
+    }
+    bar.finish_and_clear();
+    if gap_count > 0 {
+        eprintln!("gyro: {gap_count} gap(s): the samples analysed as contiguous (--gaps join)");
+    }
+    let spilled = streams.iter().any(stream::Stream::spilled);
+    let mut curves = Vec::new();
+    let mut fits = Vec::new();
+    for (s, name) in streams.into_iter().zip(&r.names) {
+        let c = s.finish()?;
+        let samples = if phase { c.n } else { c.n - 1 };
+        for (kind, points) in c.curves {
+            curves.push(CurveOut {
+                column: name.clone(),
+                deviation: kind,
+                unit: if kind.in_phase_unit() { "deg" } else { "deg/s" },
+                tau0_s: tau0,
+                samples,
+                points,
+            });
+        }
+        if fit_too {
+            match fit::fit(&c.fit_points, c.n) {
+                Some(t) => fits.push((name.clone(), t)),
+                None => eprintln!("gyro: {name}: {}", fit::FitError::TooFewPoints),
+            }
+        }
+    }
+    Ok(Streamed {
+        curves,
+        fits,
+        tau0,
+        samples: row,
+        bytes: r.size(),
+        spilled,
+    })
 }
