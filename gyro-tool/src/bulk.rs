@@ -525,23 +525,35 @@ impl Binary {
         })
     }
 
-    fn at(&self, row: usize, col: usize) -> f64 {
-        let i = self.offset + (row * self.width + col) * self.elem;
-        let b = &self.map[i..i + self.elem];
+    /// Column `c` of rows `from..from + take` into `out`, each value times
+    /// `scale`.
+    fn column(&self, c: usize, from: usize, take: usize, scale: f64, out: &mut Vec<f64>) {
+        let row = self.width * self.elem;
+        let start = self.offset + from * row + c * self.elem;
+        let bytes = &self.map[start..start + (take - 1) * row + self.elem];
         if self.f32 {
-            f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            out.extend(
+                bytes
+                    .chunks(row)
+                    .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])) * scale),
+            );
         } else {
-            f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
+            out.extend(bytes.chunks(row).map(|b| {
+                f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) * scale
+            }));
         }
     }
 
     fn next(&mut self, out: &mut [Vec<f64>], times: &mut Vec<f64>) -> usize {
         let take = ROWS.min(self.rows - self.pos);
+        if take == 0 {
+            return 0;
+        }
         for (o, &c) in out.iter_mut().zip(&self.cols) {
-            o.extend((self.pos..self.pos + take).map(|r| self.at(r, c) * self.scale));
+            self.column(c, self.pos, take, self.scale, o);
         }
         if let Some(c) = self.tcol {
-            times.extend((self.pos..self.pos + take).map(|r| self.at(r, c)));
+            self.column(c, self.pos, take, 1.0, times);
         }
         self.pos += take;
         self.last = take;

@@ -172,6 +172,7 @@ struct Acf {
 }
 
 impl Acf {
+    #[inline(always)]
     fn push(&mut self, v: f64) {
         if self.n == 0 {
             self.shift = v;
@@ -237,17 +238,26 @@ impl Factor {
         }
     }
 
-    fn push_decimated(&mut self, v: f64) {
-        self.acf[0].push(v);
-        if let Some(z) = self.z {
-            let d1 = v - z;
-            self.acf[1].push(d1);
-            if let Some(p) = self.d1 {
-                self.acf[2].push(d1 - p);
+    /// The next points of the decimated phase. (The state in locals for
+    /// the loop: at m = 1 this runs for every point.)
+    #[inline(always)]
+    fn push_decimated<'a>(&mut self, vs: impl Iterator<Item = &'a f64>) {
+        let [mut a0, mut a1, mut a2] = self.acf;
+        let (mut z, mut d1) = (self.z, self.d1);
+        for &v in vs {
+            a0.push(v);
+            if let Some(z) = z {
+                let d = v - z;
+                a1.push(d);
+                if let Some(p) = d1 {
+                    a2.push(d - p);
+                }
+                d1 = Some(d);
             }
-            self.d1 = Some(d1);
+            z = Some(v);
         }
-        self.z = Some(v);
+        self.acf = [a0, a1, a2];
+        (self.z, self.d1) = (z, d1);
     }
 
     /// [`dev::noise_alpha`] from the running sums.
@@ -268,6 +278,8 @@ impl Factor {
 
 /// The phase behind the pass: the ring, and the spill for longer lags.
 struct History {
+    /// x[t] at t & mask, and the first CHUNK points again past the end, so
+    /// that no view of a chunk's length wraps round.
     ring: Vec<f64>,
     mask: usize,
     /// Lags longer than this come from the spill.
@@ -281,8 +293,8 @@ struct History {
 }
 
 impl History {
-    /// x[a − lag .. b − lag] (a ≥ lag).
-    fn view<'s>(&'s self, lag: usize, a: usize, b: usize, scratch: &'s mut Vec<f64>) -> &'s [f64] {
+    /// x[a − lag .. b − lag] (a ≥ lag, b − a ≤ [`CHUNK`]).
+    fn view(&self, lag: usize, a: usize, b: usize) -> &[f64] {
         let (p, q) = (a - lag, b - lag);
         if lag > self.near {
             let (_, first, v) = self
@@ -292,14 +304,9 @@ impl History {
                 .expect("every far lag is fetched before the chunk is summed");
             return &v[p - first..q - first];
         }
-        let (i, len) = (p & self.mask, q - p);
-        if i + len <= self.ring.len() {
-            return &self.ring[i..i + len];
-        }
-        scratch.clear();
-        scratch.extend_from_slice(&self.ring[i..]);
-        scratch.extend_from_slice(&self.ring[..len - (self.ring.len() - i)]);
-        scratch
+        // Never wraps: the ring's first chunk is repeated past its end.
+        let i = p & self.mask;
+        &self.ring[i..i + (q - p)]
     }
 
     fn write_spill(&mut self, from: usize, to: usize) -> Result<(), StreamError> {
@@ -309,7 +316,7 @@ impl History {
         let mut t = from;
         while t < to {
             let i = t & self.mask;
-            let len = (to - t).min(self.ring.len() - i);
+            let len = (to - t).min(self.mask + 1 - i);
             f.write_all(as_bytes(&self.ring[i..i + len]))
                 .map_err(StreamError::Spill)?;
             t += len;
@@ -348,7 +355,6 @@ pub struct Stream {
     pending: Vec<f64>,
     /// Samples pushed.
     samples: u64,
-    scratch: Scratch,
 }
 
 /// The finished analysis.
@@ -407,7 +413,7 @@ impl Stream {
         far_lags.sort_unstable();
         far_lags.dedup();
         let hist = History {
-            ring: vec![0.0; plan.ring],
+            ring: vec![0.0; plan.ring + CHUNK],
             mask: plan.ring - 1,
             near,
             spill: None,
@@ -426,7 +432,6 @@ impl Stream {
             acc: 0.0,
             samples: 0,
             pending: Vec::with_capacity(CHUNK),
-            scratch: std::array::from_fn(|_| Vec::new()),
         })
     }
 
@@ -486,8 +491,13 @@ impl Stream {
             h.spill = Some(f);
             h.write_spill(0, t0)?;
         }
-        for (t, &v) in (t0..t1).zip(&self.pending) {
-            h.ring[t & h.mask] = v;
+        // (The chunk never wraps: CHUNK divides the ring's length, and
+        // every chunk but the last is whole.)
+        let i = t0 & h.mask;
+        h.ring[i..i + (t1 - t0)].copy_from_slice(&self.pending);
+        if i == 0 {
+            let r = h.mask + 1;
+            h.ring[r..r + (t1 - t0)].copy_from_slice(&self.pending);
         }
         // This chunk's stretches at the far lags, from the spill (their
         // buffers kept from chunk to chunk).
@@ -505,7 +515,7 @@ impl Stream {
             f.read_exact_at(as_bytes_mut(v), *first as u64 * 8)
                 .map_err(StreamError::Spill)?;
         }
-        sum_factors_best(&mut self.factors, h, &mut self.scratch, t0, t1);
+        sum_factors_best(&mut self.factors, h, t0, t1);
         if h.spill.is_some() {
             h.write_spill(t0, t1)?;
         }
@@ -604,20 +614,14 @@ impl Stream {
 /// [`sum_factors`], in its AVX2 build where the CPU has AVX2 and FMA: the
 /// same operations in the same order (no contraction into fused
 /// multiply-adds), so the same bits, with 4 lanes where the baseline has 2.
-fn sum_factors_best(
-    factors: &mut [Factor],
-    h: &History,
-    scratch: &mut Scratch,
-    t0: usize,
-    t1: usize,
-) {
+fn sum_factors_best(factors: &mut [Factor], h: &History, t0: usize, t1: usize) {
     #[cfg(target_arch = "x86_64")]
     if gyro_array::algo::allan::has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above), the only
         // requirement of the AVX2 build.
-        return unsafe { sum_factors_avx2(factors, h, scratch, t0, t1) };
+        return unsafe { sum_factors_avx2(factors, h, t0, t1) };
     }
-    sum_factors(factors, h, scratch, t0, t1)
+    sum_factors(factors, h, t0, t1)
 }
 
 /// [`sum_factors`] compiled for AVX2 and FMA.
@@ -627,19 +631,9 @@ fn sum_factors_best(
 /// Call it only on a CPU with AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn sum_factors_avx2(
-    factors: &mut [Factor],
-    h: &History,
-    scratch: &mut Scratch,
-    t0: usize,
-    t1: usize,
-) {
-    sum_factors(factors, h, scratch, t0, t1)
+fn sum_factors_avx2(factors: &mut [Factor], h: &History, t0: usize, t1: usize) {
+    sum_factors(factors, h, t0, t1)
 }
-
-/// Scratch for the views that wrap round the ring: four for one factor's
-/// lags, and four for each of the MDEV chains run side by side.
-type Scratch = [Vec<f64>; 4 + 4 * MDEV_SIDE];
 
 /// MDEV chains run side by side: each is a chain of dependent additions
 /// (its running inner sum), so one alone waits on each add's latency.
@@ -647,85 +641,58 @@ const MDEV_SIDE: usize = 4;
 
 /// Add the terms whose newest point lies in `t0..t1` to every factor.
 #[inline(always)]
-fn sum_factors(factors: &mut [Factor], h: &History, scratch: &mut Scratch, t0: usize, t1: usize) {
-    let (own, side) = scratch.split_at_mut(4);
-    let [s0, s1, s2, s3] = own else {
-        return;
-    };
-
+fn sum_factors(factors: &mut [Factor], h: &History, t0: usize, t1: usize) {
     for f in factors.iter_mut() {
         let m = f.m;
+        // The noise type's decimated phase: x[0], x[m], x[2m], …
+        let t = t0.div_ceil(m) * m;
+        if t < t1 {
+            f.push_decimated(h.view(0, t0, t1).iter().skip(t - t0).step_by(m));
+        }
         if m >= t1 {
-            // Only the decimated phase's first point, x[0], so far.
-            if t0 == 0 {
-                f.push_decimated(h.view(0, 0, 1, s0)[0]);
-            }
             continue;
         }
-        // The noise type's decimated phase.
-        let mut t = t0.div_ceil(m) * m;
-        if t < t1 {
-            let x = h.view(0, t0, t1, s0);
-            while t < t1 {
-                f.push_decimated(x[t - t0]);
-                t += m;
-            }
-        }
         let need = f.need;
-        if need.oadev || need.adev || need.mdev {
-            let a = t0.max(2 * m);
-            if a < t1 {
-                let x0 = h.view(0, a, t1, s0);
-                let x1 = h.view(m, a, t1, s1);
-                let x2 = h.view(2 * m, a, t1, s2);
-                if need.oadev {
-                    add_second(&mut f.oadev, x0, x1, x2);
+        let a = t0.max(2 * m);
+        if (need.oadev || need.adev || need.mdev) && a < t1 {
+            let (x0, x1, x2) = (h.view(0, a, t1), h.view(m, a, t1), h.view(2 * m, a, t1));
+            if need.oadev {
+                add_second(&mut f.oadev, x0, x1, x2);
+            }
+            if need.adev {
+                // The in-memory stride: terms at t ≡ 0 (mod m), in order.
+                let mut t = a.div_ceil(m) * m;
+                while t < t1 {
+                    let i = t - a;
+                    let d = x0[i] - 2.0 * x1[i] + x2[i];
+                    f.adev += d * d;
+                    t += m;
                 }
-                if need.adev {
-                    // The in-memory stride: terms at t ≡ 0 (mod m), summed
-                    // in order.
-                    let mut t = a.div_ceil(m) * m;
-                    while t < t1 {
-                        let i = t - a;
-                        let d = x0[i] - 2.0 * x1[i] + x2[i];
-                        f.adev += d * d;
-                        t += m;
-                    }
-                }
-                if need.mdev && a < 3 * m {
-                    // The first inner sum; the slide below.
-                    mdev_first(f, a, t1, x0, x1, x2);
+            }
+            if need.mdev && a < 3 * m {
+                // The first inner sum; the slide below.
+                mdev_first(f, a, t1, x0, x1, x2);
+            }
+        }
+        let a = t0.max(3 * m);
+        if (need.ohdev || need.hdev) && a < t1 {
+            let x = [0, m, 2 * m, 3 * m].map(|l| h.view(l, a, t1));
+            if need.ohdev {
+                add_third(&mut f.ohdev, x[0], x[1], x[2], x[3]);
+            }
+            if need.hdev {
+                let mut t = a.div_ceil(m) * m;
+                while t < t1 {
+                    let i = t - a;
+                    let d = x[0][i] - 3.0 * x[1][i] + 3.0 * x[2][i] - x[3][i];
+                    f.hdev += d * d;
+                    t += m;
                 }
             }
         }
-        if need.ohdev || need.hdev {
-            let a = t0.max(3 * m);
-            if a < t1 {
-                let x0 = h.view(0, a, t1, s0);
-                let x1 = h.view(m, a, t1, s1);
-                let x2 = h.view(2 * m, a, t1, s2);
-                let x3 = h.view(3 * m, a, t1, s3);
-                if need.ohdev {
-                    add_third(&mut f.ohdev, x0, x1, x2, x3);
-                }
-                if need.hdev {
-                    let mut t = a.div_ceil(m) * m;
-                    while t < t1 {
-                        let i = t - a;
-                        let d = x0[i] - 3.0 * x1[i] + 3.0 * x2[i] - x3[i];
-                        f.hdev += d * d;
-                        t += m;
-                    }
-                }
-            }
-        }
-        if need.tie {
-            let a = t0.max(m);
-            if a < t1 {
-                let x0 = h.view(0, a, t1, s0);
-                let x1 = h.view(m, a, t1, s1);
-                add_first(&mut f.tie, x0, x1);
-            }
+        let a = t0.max(m);
+        if need.tie && a < t1 {
+            add_first(&mut f.tie, h.view(0, a, t1), h.view(m, a, t1));
         }
     }
     // MDEV's slide, MDEV_SIDE factors at a time.
@@ -734,7 +701,7 @@ fn sum_factors(factors: &mut [Factor], h: &History, scratch: &mut Scratch, t0: u
         .filter(|f| f.need.mdev && t1 > 3 * f.m)
         .collect();
     for group in sliding.chunks_mut(MDEV_SIDE) {
-        mdev_slide(group, h, side, t0, t1);
+        mdev_slide(group, h, t0, t1);
     }
 }
 
@@ -758,25 +725,13 @@ fn mdev_first(f: &mut Factor, a: usize, t1: usize, x0: &[f64], x1: &[f64], x2: &
 /// `dev`'s in-memory loop's, in its order (the same bits); the side by side
 /// only lets one chain's add wait while another's runs.
 #[inline(always)]
-fn mdev_slide(group: &mut [&mut Factor], h: &History, side: &mut [Vec<f64>], t0: usize, t1: usize) {
+fn mdev_slide(group: &mut [&mut Factor], h: &History, t0: usize, t1: usize) {
     // Each factor's views from its own start, max(t0, 3m); the common
     // stretch from the latest start, the earlier ones' heads alone first.
     let mut views: [(usize, [&[f64]; 4]); MDEV_SIDE] = [(0, [&[]; 4]); MDEV_SIDE];
-    let mut scratch = side.chunks_mut(4);
     for (f, v) in group.iter().zip(views.iter_mut()) {
         let (m, b) = (f.m, t0.max(3 * f.m));
-        let Some([s0, s1, s2, s3]) = scratch.next() else {
-            return;
-        };
-        *v = (
-            b,
-            [
-                h.view(0, b, t1, s0),
-                h.view(m, b, t1, s1),
-                h.view(2 * m, b, t1, s2),
-                h.view(3 * m, b, t1, s3),
-            ],
-        );
+        *v = (b, [0, m, 2 * m, 3 * m].map(|l| h.view(l, b, t1)));
     }
     let common = views[..group.len()].iter().map(|v| v.0).max().unwrap_or(t1);
     let step = |f: &mut Factor, x: &[&[f64]; 4], i: usize| {
