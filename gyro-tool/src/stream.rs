@@ -657,7 +657,14 @@ fn sum_factors(factors: &mut [Factor], h: &History, t0: usize, t1: usize) {
         if (need.oadev || need.adev || need.mdev) && a < t1 {
             let (x0, x1, x2) = (h.view(0, a, t1), h.view(m, a, t1), h.view(2 * m, a, t1));
             if need.oadev {
-                add_second(&mut f.oadev, x0, x1, x2);
+                // Where MDEV slides (t ≥ 3m), its loop adds these terms: it
+                // forms them, and the views are read once.
+                let end = if need.mdev {
+                    (3 * m).clamp(a, t1) - a
+                } else {
+                    x0.len()
+                };
+                add_second(&mut f.oadev, &x0[..end], &x1[..end], &x2[..end]);
             }
             if need.adev {
                 // The in-memory stride: terms at t ≡ 0 (mod m), in order.
@@ -740,6 +747,9 @@ fn mdev_slide(group: &mut [&mut Factor], h: &History, t0: usize, t1: usize) {
         let old = x[1][i] - 2.0 * x[2][i] + x[3][i];
         f.md_inner += new - old;
         f.md_s += f.md_inner * f.md_inner;
+        if f.need.oadev {
+            f.oadev[0] += new * new;
+        }
     };
     for (f, (b, x)) in group.iter_mut().zip(&views) {
         for t in *b..common {
@@ -757,6 +767,8 @@ fn mdev_slide(group: &mut [&mut Factor], h: &History, t0: usize, t1: usize) {
         });
         let mut inner: [f64; MDEV_SIDE] = std::array::from_fn(|j| group[j].md_inner);
         let mut sum: [f64; MDEV_SIDE] = std::array::from_fn(|j| group[j].md_s);
+        // OADEV's terms where the factor has both (0 where it has not).
+        let mut oadev = [0.0; MDEV_SIDE];
         for k in 0..len {
             for j in 0..MDEV_SIDE {
                 let [x0, x1, x2, x3] = xs[j];
@@ -764,11 +776,15 @@ fn mdev_slide(group: &mut [&mut Factor], h: &History, t0: usize, t1: usize) {
                 let old = x1[k] - 2.0 * x2[k] + x3[k];
                 inner[j] += new - old;
                 sum[j] += inner[j] * inner[j];
+                oadev[j] += new * new;
             }
         }
         for (j, f) in group.iter_mut().enumerate() {
             f.md_inner = inner[j];
             f.md_s = sum[j];
+            if f.need.oadev {
+                f.oadev[1] += oadev[j];
+            }
         }
     } else {
         for (f, (b, x)) in group.iter_mut().zip(&views) {
