@@ -189,14 +189,9 @@ pub fn run(a: Args) -> Res<bool> {
             gaps,
             (raw, memory, spill_dir),
         )?;
-        let out = Outputs {
-            curves: st.curves,
-            fits: st.fits,
-            tau0: st.tau0,
-            samples: st.samples,
-        };
+        let out = &st.out;
         emit(
-            &out,
+            out,
             file,
             format,
             out_file.as_deref(),
@@ -206,7 +201,7 @@ pub fn run(a: Args) -> Res<bool> {
         )?;
         eprintln!(
             "gyro: {} samples x {} columns in one pass: {:.1} s, {:.0} MB/s of input ({:.0} MB){}; peak memory {}",
-            st.samples,
+            out.samples,
             out.curves.len() / kinds.len().max(1),
             started.elapsed().as_secs_f64(),
             st.bytes as f64 / 1e6 / started.elapsed().as_secs_f64(),
@@ -589,12 +584,10 @@ fn emit(
     Ok(())
 }
 
-/// A streamed run's results.
+/// A streamed run's results, and the log's size and whether the phase
+/// went to the spill.
 struct Streamed {
-    curves: Vec<CurveOut>,
-    fits: Vec<(String, fit::Terms)>,
-    tau0: f64,
-    samples: usize,
+    out: Outputs,
     bytes: u64,
     spilled: bool,
 }
@@ -750,10 +743,12 @@ fn streamed(
         }
     }
     Ok(Streamed {
-        curves,
-        fits,
-        tau0,
-        samples: row,
+        out: Outputs {
+            curves,
+            fits,
+            tau0,
+            samples: row,
+        },
         bytes: r.size(),
         spilled,
     })
