@@ -69,6 +69,9 @@ pub enum StreamError {
     Spill(std::io::Error),
     /// Too few samples for any point (phase points).
     TooShort(u64),
+    /// The memory (MiB) is less than two chunks a column: the memory, the
+    /// columns, the MiB they need.
+    Memory(usize, usize, usize),
 }
 
 impl std::fmt::Display for StreamError {
@@ -85,6 +88,7 @@ impl std::fmt::Display for StreamError {
             StreamError::Ring(r) => write!(f, "a ring of {r} points: a power of two of at least {} points", 2 * CHUNK),
             StreamError::Spill(e) => write!(f, "the phase spill file: {e}"),
             StreamError::TooShort(n) => write!(f, "{n} phase points: too few for any factor"),
+            StreamError::Memory(mib, k, need) => write!(f, "{mib} MiB of memory over {k} columns: at least {need} MiB is needed"),
         }
     }
 }
@@ -855,6 +859,159 @@ fn add_first(l: &mut [f64; LANES], x0: &[f64], x1: &[f64]) {
     for (a, b) in r0.iter().zip(r1) {
         l[0] += (a - b) * (a - b);
     }
+}
+
+/// A log file to analyse in one pass ([`analyse_file`]).
+#[derive(Clone, Debug)]
+pub struct FileJob {
+    pub path: PathBuf,
+    /// Columns (all but the time column when empty).
+    pub columns: Vec<String>,
+    /// The time column: τ0 from its first block's median step unless
+    /// `tau0`; its gaps are checked.
+    pub time: Option<String>,
+    pub tau0: Option<f64>,
+    pub unit: (crate::table::Unit, Option<f64>),
+    pub layout: crate::table::Layout,
+    pub raw: Option<crate::bulk::Raw>,
+    /// The columns are phase, not rate.
+    pub phase: bool,
+    /// Analyse the samples across a gap in the time column as contiguous
+    /// (else a gap is an error).
+    pub join_gaps: bool,
+    /// Memory for the columns' rings, MiB.
+    pub memory_mib: usize,
+}
+
+/// What [`analyse_file`] found.
+#[derive(Clone, Debug)]
+pub struct FileCurves {
+    pub names: Vec<String>,
+    pub tau0: f64,
+    /// Samples (rows) read.
+    pub samples: usize,
+    /// The log's size, bytes.
+    pub bytes: u64,
+    /// Whether the phase went to the spill file.
+    pub spilled: bool,
+    /// Gaps joined (`join_gaps`): (line or row, step in s).
+    pub gaps: Vec<(usize, f64)>,
+    /// Each column's curves, in `names`' order.
+    pub columns: Vec<Curves>,
+}
+
+/// `job`'s log through [`Stream`] in one pass, every column at once, with
+/// `plan` (its `ring` set from `job.memory_mib`). `progress` is told the
+/// bytes read of the log's size after each block; `stop`, looked at as
+/// often, gives up with [`crate::Stopped`].
+pub fn analyse_file(
+    job: &FileJob,
+    mut plan: Plan,
+    progress: &mut dyn FnMut(u64, u64),
+    stop: &std::sync::atomic::AtomicBool,
+) -> crate::Res<FileCurves> {
+    let file = job.path.as_path();
+    let mut r = crate::bulk::open(
+        file,
+        &job.columns,
+        job.time.as_deref(),
+        job.unit,
+        job.layout,
+        job.raw,
+    )?;
+    let k = r.names.len();
+    // The ring: the largest power of two of points the memory gives each
+    // column.
+    let per_column = (job.memory_mib << 20) / 8 / k.max(1);
+    if per_column < 2 * CHUNK {
+        let need = (2 * CHUNK * 8 * k).div_ceil(1 << 20);
+        return Err(StreamError::Memory(job.memory_mib, k, need).into());
+    }
+    plan.ring = 1usize << per_column.ilog2();
+    let (mut out, mut times) = (vec![Vec::new(); k], Vec::new());
+    let mut got = r.next(&mut out, &mut times)?;
+    let tau0 = match job.tau0 {
+        Some(t) => t,
+        None => tau0_of(&times).ok_or(crate::table::TableError::NoTau0)?,
+    };
+    let mut streams = (0..k)
+        .map(|_| Stream::new(plan.clone(), tau0, job.phase))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (mut last, mut row, mut gaps) = (None::<f64>, 0usize, Vec::new());
+    while got > 0 {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(crate::Stopped.into());
+        }
+        if r.timed {
+            for (i, &t) in times.iter().enumerate() {
+                if let Some(prev) = last {
+                    let place = r.line(i);
+                    if t <= prev {
+                        return Err(crate::table::TableError::Time(
+                            file.to_path_buf(),
+                            place,
+                            prev,
+                            t,
+                        )
+                        .into());
+                    }
+                    if t - prev > 1.5 * tau0 {
+                        if !job.join_gaps {
+                            return Err(format!(
+                                "{}:{place}: gap of {} s ({:.1} samples): a streamed pass takes contiguous samples only; join them (--gaps join) to analyse them as contiguous, or analyse the log in memory (gap-tolerant OADEV)",
+                                file.display(),
+                                t - prev,
+                                (t - prev) / tau0
+                            )
+                            .into());
+                        }
+                        gaps.push((place, t - prev));
+                    }
+                }
+                last = Some(t);
+            }
+        }
+        for ((s, col), name) in streams.iter_mut().zip(&out).zip(&r.names) {
+            s.push(col).map_err(|e| match e {
+                StreamError::NonFinite(i) => format!(
+                    "{}: column {name}: sample {} ({}) is not finite: a streamed pass takes finite samples only",
+                    file.display(),
+                    i,
+                    r.place(i as usize - row)
+                ),
+                e => e.to_string(),
+            })?;
+        }
+        row += got;
+        progress(r.bytes_read(), r.size());
+        got = r.next(&mut out, &mut times)?;
+    }
+    let spilled = streams.iter().any(Stream::spilled);
+    let columns = streams
+        .into_iter()
+        .map(Stream::finish)
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(FileCurves {
+        names: r.names.clone(),
+        tau0,
+        samples: row,
+        bytes: r.size(),
+        spilled,
+        gaps,
+        columns,
+    })
+}
+
+/// τ0 where only a time column gives it: the median step of the first
+/// block ([`crate::bulk::ROWS`] rows), as a stream cannot wait for the
+/// whole log's median.
+fn tau0_of(times: &[f64]) -> Option<f64> {
+    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    if steps.is_empty() {
+        return None;
+    }
+    steps.sort_by(f64::total_cmp);
+    Some(steps[steps.len() / 2]).filter(|t| *t > 0.0 && t.is_finite())
 }
 
 #[cfg(test)]

@@ -448,7 +448,7 @@ fn a_streamed_log_refuses_what_it_cannot_do_by_name() {
         ),
         (
             &["allan", "--stream", "--tau0", "1", "--memory", "0"][..],
-            "--memory 0 MiB",
+            "--memory: 0 MiB of memory over 2 columns",
         ),
     ] {
         let (code, err) = fails(args, &p);

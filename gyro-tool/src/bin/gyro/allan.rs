@@ -592,20 +592,8 @@ struct Streamed {
     spilled: bool,
 }
 
-/// Stamps τ0 is taken from when only a time column gives it: the median
-/// step of the first block ([`bulk::ROWS`] rows), as a stream cannot wait
-/// for the whole log's median.
-fn tau0_of(times: &[f64]) -> Option<f64> {
-    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
-    if steps.is_empty() {
-        return None;
-    }
-    steps.sort_by(f64::total_cmp);
-    Some(steps[steps.len() / 2]).filter(|t| *t > 0.0 && t.is_finite())
-}
-
-/// `gyro allan --stream`: every column through [`stream::Stream`] in one
-/// pass over the log.
+/// `gyro allan --stream`: every column through [`stream::analyse_file`] in
+/// one pass over the log.
 #[allow(clippy::too_many_arguments)]
 fn streamed(
     log: &LogArgs,
@@ -618,121 +606,73 @@ fn streamed(
     gaps: Gaps,
     (raw, memory_mib, spill_dir): (Option<bulk::Raw>, usize, Option<PathBuf>),
 ) -> Res<Streamed> {
-    let file = log.file.as_path();
-    let mut r = bulk::open(
-        file,
-        columns,
-        log.time.as_deref(),
-        (log.unit, log.lsb_per_dps),
-        log.layout(),
+    let job = stream::FileJob {
+        path: log.file.clone(),
+        columns: columns.to_vec(),
+        time: log.time.clone(),
+        tau0: log.tau0,
+        unit: (log.unit, log.lsb_per_dps),
+        layout: log.layout(),
         raw,
-    )?;
-    let k = r.names.len();
-    // The ring: the largest power of two of points the memory gives each
-    // column.
-    let per_column = (memory_mib << 20) / 8 / k.max(1);
-    let ring = if per_column >= 2 * stream::CHUNK {
-        1usize << per_column.ilog2()
-    } else {
-        return Err(format!(
-            "--memory {memory_mib} MiB over {k} columns: at least {} MiB is needed",
-            (2 * stream::CHUNK * 8 * k).div_ceil(1 << 20)
-        )
-        .into());
-    };
-    let (mut out, mut times) = (vec![Vec::new(); k], Vec::new());
-    let mut got = r.next(&mut out, &mut times)?;
-    let tau0 = match log.tau0 {
-        Some(t) => t,
-        None => tau0_of(&times).ok_or(table::TableError::NoTau0)?,
+        phase,
+        join_gaps: gaps == Gaps::Join,
+        memory_mib,
     };
     let plan = stream::Plan {
         kinds: kinds.to_vec(),
         grid,
         ci,
         fit: fit_too,
-        ring,
+        ring: 0,
         spill_dir,
     };
-    let mut streams = (0..k)
-        .map(|_| stream::Stream::new(plan.clone(), tau0, phase))
-        .collect::<Result<Vec<_>, _>>()?;
     if !phase {
         eprintln!(
             "gyro: --stream: the columns are not screened for a start-up value, steps or motion"
         );
     }
-    let bar = if r.size() >= 100_000_000 {
-        ProgressBar::new(r.size())
-    } else {
-        ProgressBar::hidden()
+    let bar = ProgressBar::hidden();
+    let mut progress = |done: u64, size: u64| {
+        if size >= 100_000_000 && bar.is_hidden() {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+            bar.set_length(size);
+        }
+        bar.set_position(done);
     };
-    let (mut last, mut row, mut gap_count) = (None::<f64>, 0usize, 0usize);
-    while got > 0 {
-        if r.timed {
-            for (i, &t) in times.iter().enumerate() {
-                if let Some(prev) = last {
-                    let place = r.line(i);
-                    if t <= prev {
-                        return Err(
-                            table::TableError::Time(file.to_path_buf(), place, prev, t).into()
-                        );
-                    }
-                    if t - prev > 1.5 * tau0 {
-                        gap_count += 1;
-                        if gaps == Gaps::Tolerant {
-                            return Err(format!(
-                                "{}:{place}: gap of {} s ({:.1} samples): a streamed pass takes contiguous samples only; --gaps join to analyse them as contiguous, or analyse without --stream (gap-tolerant OADEV)",
-                                file.display(),
-                                t - prev,
-                                (t - prev) / tau0
-                            )
-                            .into());
-                        }
-                        eprintln!(
-                            "gyro: {}:{place}: gap of {} s ({:.1} samples), joined (--gaps join)",
-                            file.display(),
-                            t - prev,
-                            (t - prev) / tau0
-                        );
-                    }
-                }
-                last = Some(t);
-            }
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let f = stream::analyse_file(&job, plan, &mut progress, &stop).map_err(|e| {
+        // The memory's error names the option it came from.
+        match e.downcast_ref::<stream::StreamError>() {
+            Some(m @ stream::StreamError::Memory(..)) => format!("--memory: {m}").into(),
+            _ => e,
         }
-        for ((s, col), name) in streams.iter_mut().zip(&out).zip(&r.names) {
-            s.push(col).map_err(|e| match e {
-                stream::StreamError::NonFinite(i) => format!(
-                    "{}: column {name}: sample {} ({}) is not finite: a streamed pass takes finite samples only",
-                    file.display(),
-                    i,
-                    r.place(i as usize - row)
-                ),
-                e => e.to_string(),
-            })?;
-        }
-        row += got;
-        bar.set_position(r.bytes_read());
-        got = r.next(&mut out, &mut times)?;
-    }
+    })?;
     bar.finish_and_clear();
-    if gap_count > 0 {
-        eprintln!("gyro: {gap_count} gap(s): the samples analysed as contiguous (--gaps join)");
+    for (place, step) in &f.gaps {
+        eprintln!(
+            "gyro: {}:{place}: gap of {step} s ({:.1} samples), joined (--gaps join)",
+            log.file.display(),
+            step / f.tau0
+        );
     }
-    let spilled = streams.iter().any(stream::Stream::spilled);
+    if !f.gaps.is_empty() {
+        eprintln!(
+            "gyro: {} gap(s): the samples analysed as contiguous (--gaps join)",
+            f.gaps.len()
+        );
+    }
     let mut curves = Vec::new();
     let mut fits = Vec::new();
-    for (s, name) in streams.into_iter().zip(&r.names) {
-        let c = s.finish()?;
+    for (c, name) in f.columns.iter().zip(&f.names) {
         let samples = if phase { c.n } else { c.n - 1 };
-        for (kind, points) in c.curves {
+        for (kind, points) in &c.curves {
             curves.push(CurveOut {
                 column: name.clone(),
-                deviation: kind,
+                deviation: *kind,
                 unit: if kind.in_phase_unit() { "deg" } else { "deg/s" },
-                tau0_s: tau0,
+                tau0_s: f.tau0,
                 samples,
-                points,
+                points: points.clone(),
             });
         }
         if fit_too {
@@ -746,10 +686,10 @@ fn streamed(
         out: Outputs {
             curves,
             fits,
-            tau0,
-            samples: row,
+            tau0: f.tau0,
+            samples: f.samples,
         },
-        bytes: r.size(),
-        spilled,
+        bytes: f.bytes,
+        spilled: f.spilled,
     })
 }
