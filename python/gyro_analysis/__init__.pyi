@@ -34,4 +34,20 @@ def kalibr_yaml(
 def davar_surface(data: npt.ArrayLike, rate: float = ..., lambda2: Literal[256, 1024, 4096] = ...) -> Dict[str, Any]: ...
 def replay(chips: npt.ArrayLike) -> Dict[str, npt.NDArray[Any]]: ...
 def read_recording(path: Union[str, os.PathLike[str]]) -> Dict[str, Any]: ...
+def allan_file(
+    path: Union[str, os.PathLike[str]],
+    dev: Union[str, Sequence[str]] = ...,
+    taus: str = ...,
+    tau0: Optional[float] = ...,
+    columns: Optional[Sequence[str]] = ...,
+    time: Optional[str] = ...,
+    unit: str = ...,
+    lsb_per_dps: Optional[float] = ...,
+    data_type: _DataType = ...,
+    fit: bool = ...,
+    confidence: float = ...,
+    memory_mib: int = ...,
+    raw: Optional[str] = ...,
+    join_gaps: bool = ...,
+) -> Dict[str, Any]: ...
 def recording_dataframe(path_or_recording: Union[str, os.PathLike[str], Dict[str, Any]]) -> Any: ...

@@ -660,18 +660,8 @@ fn read_log<'py>(
     header: Option<bool>,
     chips: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use gyro_tool::table::{self, Layout, Unit};
-    let unit = match unit {
-        "dps" => Unit::Dps,
-        "rads" => Unit::Rads,
-        "dph" => Unit::Dph,
-        "lsb" => Unit::Lsb,
-        other => {
-            return Err(value_error(format!(
-                "unit {other:?}: expected dps, rads, dph or lsb"
-            )))
-        }
-    };
+    use gyro_tool::table::{self, Layout};
+    let unit = unit_of(unit)?;
     let delimiter = match delimiter.as_deref() {
         None => None,
         Some(d) if d.len() == 1 && d.is_ascii() => Some(d.as_bytes()[0]),
@@ -708,6 +698,114 @@ fn read_log<'py>(
     d.set_item("tau0", s.tau0)?;
     d.set_item("gaps", s.gaps.clone())?;
     Ok(d)
+}
+
+/// A rate unit by its `gyro` name.
+fn unit_of(unit: &str) -> PyResult<gyro_tool::table::Unit> {
+    use gyro_tool::table::Unit;
+    Ok(match unit {
+        "dps" => Unit::Dps,
+        "rads" => Unit::Rads,
+        "dph" => Unit::Dph,
+        "lsb" => Unit::Lsb,
+        other => {
+            return Err(value_error(format!(
+                "unit {other:?}: expected dps, rads, dph or lsb"
+            )))
+        }
+    })
+}
+
+/// A log too long to hold, in one pass and bounded memory, as `gyro allan
+/// --stream` runs it (`gyro_tool::stream::analyse_file`): JSON of `names`,
+/// `tau0`, `samples`, `spilled`, `gaps`, `curves` (per column and deviation
+/// the points, as `gyro allan --format json` writes them) and `fits` (per
+/// column the noise model, with `fit`).
+#[pyfunction]
+#[pyo3(signature = (path, dev, taus = "octave", tau0 = None, columns = None, time = None, unit = "dps", lsb_per_dps = None, data_type = "freq", fit = false, confidence = ONE_SIGMA, memory_mib = 256, raw = None, join_gaps = false))]
+#[allow(clippy::too_many_arguments)]
+fn allan_file(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    dev: Vec<String>,
+    taus: &str,
+    tau0: Option<f64>,
+    columns: Option<Vec<String>>,
+    time: Option<String>,
+    unit: &str,
+    lsb_per_dps: Option<f64>,
+    data_type: &str,
+    fit: bool,
+    confidence: f64,
+    memory_mib: usize,
+    raw: Option<String>,
+    join_gaps: bool,
+) -> PyResult<String> {
+    use gyro_tool::stream;
+    let kinds = dev
+        .iter()
+        .map(|d| Kind::from_name(d).ok_or_else(|| value_error(format!("unknown deviation {d:?}"))))
+        .collect::<PyResult<Vec<_>>>()?;
+    let grid: dev::Grid = taus.parse().map_err(value_error)?;
+    let phase = match data_type {
+        "freq" => false,
+        "phase" => true,
+        other => return Err(value_error(format!("data_type {other:?}: freq or phase"))),
+    };
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(value_error(format!("confidence {confidence}: in (0, 1)")));
+    }
+    let job = stream::FileJob {
+        path,
+        columns: columns.unwrap_or_default(),
+        time,
+        tau0,
+        unit: (unit_of(unit)?, lsb_per_dps),
+        layout: gyro_tool::table::Layout::default(),
+        raw: raw.map(|r| r.parse()).transpose().map_err(value_error)?,
+        phase,
+        join_gaps,
+        memory_mib,
+    };
+    let plan = stream::Plan {
+        kinds,
+        grid,
+        ci: (confidence, Chi2::Exact),
+        fit,
+        ring: 0,
+        spill_dir: None,
+    };
+    let f = until_interrupted(py, |stop| {
+        stream::analyse_file(&job, plan, &mut |_, _| {}, stop).map_err(sendable)
+    })?
+    .map_err(tool_error)?;
+    let mut curves = Vec::new();
+    let mut fits = Vec::new();
+    for (c, name) in f.columns.iter().zip(&f.names) {
+        for (kind, points) in &c.curves {
+            curves.push(serde_json::json!({"column": name, "deviation": kind, "points": points}));
+        }
+        if fit {
+            fits.push(match gyro_tool::fit::fit(&c.fit_points, c.n) {
+                Some(t) => serde_json::json!({"column": name, "terms": t}),
+                None => serde_json::json!({
+                    "column": name,
+                    "terms": null,
+                    "error": gyro_tool::fit::FitError::TooFewPoints.to_string(),
+                }),
+            });
+        }
+    }
+    serde_json::to_string(&serde_json::json!({
+        "names": f.names,
+        "tau0": f.tau0,
+        "samples": f.samples,
+        "spilled": f.spilled,
+        "gaps": f.gaps,
+        "curves": curves,
+        "fits": fits,
+    }))
+    .map_err(value_error)
 }
 
 /// A board recording (`gyro record`'s file) decoded: a dict of numpy
@@ -758,21 +856,48 @@ fn read_recording<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
     let sd = PyDict::new(py);
     sd.set_item(
         "state",
-        sync.iter().map(|y| y.state as u8).collect::<Vec<_>>().into_pyarray(py),
+        sync.iter()
+            .map(|y| y.state as u8)
+            .collect::<Vec<_>>()
+            .into_pyarray(py),
     )?;
-    sd.set_item("board_us", sync.iter().map(|y| y.board_us).collect::<Vec<_>>().into_pyarray(py))?;
-    sd.set_item("ctrl_us", sync.iter().map(|y| y.ctrl_us).collect::<Vec<_>>().into_pyarray(py))?;
-    sd.set_item("ppm", sync.iter().map(|y| y.ppm).collect::<Vec<_>>().into_pyarray(py))?;
+    sd.set_item(
+        "board_us",
+        sync.iter()
+            .map(|y| y.board_us)
+            .collect::<Vec<_>>()
+            .into_pyarray(py),
+    )?;
+    sd.set_item(
+        "ctrl_us",
+        sync.iter()
+            .map(|y| y.ctrl_us)
+            .collect::<Vec<_>>()
+            .into_pyarray(py),
+    )?;
+    sd.set_item(
+        "ppm",
+        sync.iter()
+            .map(|y| y.ppm)
+            .collect::<Vec<_>>()
+            .into_pyarray(py),
+    )?;
     sd.set_item(
         "residual_us",
-        sync.iter().map(|y| y.residual_us).collect::<Vec<_>>().into_pyarray(py),
+        sync.iter()
+            .map(|y| y.residual_us)
+            .collect::<Vec<_>>()
+            .into_pyarray(py),
     )?;
     out.set_item("sync", sd)?;
     // The newest info frame: the board, its firmware, its chips.
     match info {
         Some(i) => {
             let d = PyDict::new(py);
-            d.set_item("uid", i.uid.iter().map(|b| format!("{b:02x}")).collect::<String>())?;
+            d.set_item(
+                "uid",
+                i.uid.iter().map(|b| format!("{b:02x}")).collect::<String>(),
+            )?;
             d.set_item("firmware", (i.firmware[0], i.firmware[1], i.firmware[2]))?;
             d.set_item("build", format!("{:08x}", i.build))?;
             let chips = pyo3::types::PyList::empty(py);
@@ -880,7 +1005,10 @@ impl SampleCols {
         d.set_item("valid", self.valid.into_pyarray(py))?;
         d.set_item("degraded", self.degraded.into_pyarray(py))?;
         d.set_item("used", self.used.into_pyarray(py).reshape([n, 3])?)?;
-        d.set_item("angle_deg", self.angle_deg.into_pyarray(py).reshape([n, 3])?)?;
+        d.set_item(
+            "angle_deg",
+            self.angle_deg.into_pyarray(py).reshape([n, 3])?,
+        )?;
         // Health per gyro; 0xFF where a frame names fewer gyros.
         let h: Vec<u8> = self
             .health
@@ -980,6 +1108,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(gradev, m)?)?;
     m.add_function(wrap_pyfunction!(theo1, m)?)?;
     m.add_function(wrap_pyfunction!(read_log, m)?)?;
+    m.add_function(wrap_pyfunction!(allan_file, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;
     m.add_function(wrap_pyfunction!(noise_fit, m)?)?;
     m.add_function(wrap_pyfunction!(kalibr_yaml, m)?)?;

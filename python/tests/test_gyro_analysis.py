@@ -277,3 +277,39 @@ def test_dataset_is_allantools_dataset_with_intervals_fit_table_and_plot(tmp_pat
     assert png.stat().st_size > 10_000
     with pytest.raises(ValueError, match="one of"):
         ours.compute("nodev")
+
+
+def test_a_file_streams_to_the_in_memory_curves_and_fit(tmp_path):
+    # 300 000 samples with a 1 MiB ring: the longer factors' lags come back
+    # from the spill file. The same curves as the arrays give, the same fit.
+    rng = np.random.default_rng(5)
+    y = 0.05 + 0.1 * rng.standard_normal(300_000) + np.cumsum(1e-4 * rng.standard_normal(300_000))
+    path = tmp_path / "soak.npy"
+    np.save(path, np.column_stack([y, -y]))
+    r = ga.allan_file(path, dev=["oadev", "mdev"], tau0=0.001, fit=True, memory_mib=1)
+    assert r["names"] == ["c1", "c2"] and r["samples"] == y.size and r["tau0"] == 0.001
+    for kind in ("oadev", "mdev"):
+        want = ga.deviation(y, kind, rate=1000.0, data_type="freq", taus="octave")
+        got = r["curves"]["c1"][kind]
+        np.testing.assert_allclose(got["taus"], want["taus"], rtol=1e-12)
+        np.testing.assert_allclose(got["devs"], want["devs"], rtol=1e-12)
+        np.testing.assert_allclose(got["lo"], want["lo"], rtol=1e-9)
+        np.testing.assert_array_equal(got["alpha"], want["alpha"])
+        np.testing.assert_allclose(r["curves"]["c2"][kind]["devs"], want["devs"], rtol=1e-12)
+    fit = ga.noise_fit(y, rate=1000.0)
+    np.testing.assert_allclose(r["fits"]["c1"]["value"], fit["value"], rtol=1e-6, atol=1e-15)
+    # A text log as the tool reads it, and the refusals.
+    text = tmp_path / "soak.txt"
+    np.savetxt(text, y[:20_000], header="z", comments="")
+    # (TIE rms of rates: the phase as gyro builds it, the mean rate kept in
+    # it, where allantools takes the mean out first.)
+    t = ga.allan_file(text, dev="tierms", tau0=0.001)
+    x = np.concatenate([[0.0], np.cumsum(np.loadtxt(text, skiprows=1) * 0.001)])
+    want = ga.deviation(x, "tierms", rate=1000.0, data_type="phase", taus="octave")
+    np.testing.assert_allclose(t["curves"]["z"]["tierms"]["devs"], want["devs"], rtol=1e-12)
+    y[1000] = np.nan
+    np.save(path, y)
+    with pytest.raises(ValueError, match="sample 1000 .row 1001. is not finite"):
+        ga.allan_file(path, tau0=0.001)
+    with pytest.raises(ValueError, match="TOTDEV is not computed in one pass"):
+        ga.allan_file(text, dev="totdev", tau0=0.001)
