@@ -317,7 +317,7 @@ impl Text {
             .map_err(|e| TableError::Record(self.path.clone(), ln, e.to_string()))?;
         Ok(text
             .split(self.delimiter as char)
-            .map(|f| f.trim().to_string())
+            .map(|f| unquote(f.trim()).to_string())
             .filter(|f| !self.blanks || !f.is_empty())
             .map(|f| {
                 if self.decimal_comma {
@@ -401,7 +401,10 @@ impl Row<'_> {
         field: &mut Vec<u8>,
     ) -> Result<Option<Option<f64>>, TableError> {
         let l = line.trim_ascii();
-        let fields = || l.split(|&b| b == self.delimiter).map(<[u8]>::trim_ascii);
+        let fields = || {
+            l.split(|&b| b == self.delimiter)
+                .map(|f| unquote_bytes(f.trim_ascii()))
+        };
         if l.is_empty() || l.starts_with(b"#") || fields().all(<[u8]>::is_empty) {
             return Ok(None);
         }
@@ -460,6 +463,20 @@ impl Row<'_> {
                 )
             })
     }
+}
+
+/// A field without the double quotes a spreadsheet may put round it (the
+/// table reader's CSV parser drops them).
+fn unquote(f: &str) -> &str {
+    f.strip_prefix('"')
+        .and_then(|g| g.strip_suffix('"'))
+        .unwrap_or(f)
+}
+
+fn unquote_bytes(f: &[u8]) -> &[u8] {
+    f.strip_prefix(b"\"")
+        .and_then(|g| g.strip_suffix(b"\""))
+        .unwrap_or(f)
 }
 
 /// A binary log through a memory map.
@@ -671,6 +688,11 @@ mod tests {
                 Some("t"),
             ),
             ("b.tsv", "t\tz\n0\t1.5\n0.01\t2\n0.02\t-1\n", Some("t")),
+            (
+                "q.csv",
+                "\"t\",\"x\"\n\"0\",\"1.5\"\n0.01,2\n0.02,-1\n",
+                Some("t"),
+            ),
             ("c.csv", "t;z\n0;1,5\n0,01;2\n0,02;-1\n", Some("t")),
             ("d.dat", "1.5\n2.25\n-3\n4\n", None),
             ("e.txt", "  1.0   2.0\n  3.0   4.0\n5 6\n", None),
