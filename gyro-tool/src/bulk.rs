@@ -140,10 +140,11 @@ impl Reader {
     /// Where the last row read came from, for a message: "line L" of a text
     /// log, "row R" of a binary one.
     pub fn place(&self, row_in_block: usize) -> String {
-        match &self.inner {
-            Inner::Text(t) => format!("line {}", t.lines.get(row_in_block).copied().unwrap_or(0)),
-            Inner::Binary(b) => format!("row {}", b.pos - b.last + row_in_block + 1),
-        }
+        let what = match self.inner {
+            Inner::Text(_) => "line",
+            Inner::Binary(_) => "row",
+        };
+        format!("{what} {}", self.line(row_in_block))
     }
 
     /// The line (text) or 1-based row (binary) of row `row_in_block` of

@@ -294,8 +294,6 @@ struct History {
     /// Lags longer than this come from the spill.
     near: usize,
     spill: Option<File>,
-    spill_dir: Option<PathBuf>,
-    spilled: usize,
     /// This chunk's stretches of the phase at the far lags: (lag, first
     /// phase index, points).
     far: Vec<(usize, usize, Vec<f64>)>,
@@ -330,7 +328,6 @@ impl History {
                 .map_err(StreamError::Spill)?;
             t += len;
         }
-        self.spilled = to;
         Ok(())
     }
 }
@@ -426,8 +423,6 @@ impl Stream {
             mask: plan.ring - 1,
             near,
             spill: None,
-            spill_dir: plan.spill_dir.clone(),
-            spilled: 0,
             far: Vec::new(),
         };
         Ok(Stream {
@@ -492,7 +487,7 @@ impl Stream {
         // The spill starts while the ring still holds every point (before
         // the first lag beyond it is needed) and then follows the pass.
         if h.spill.is_none() && t1 > h.near && !self.far_lags.is_empty() {
-            let f = match &h.spill_dir {
+            let f = match &self.plan.spill_dir {
                 Some(d) => tempfile::tempfile_in(d),
                 None => tempfile::tempfile(),
             }
@@ -1008,15 +1003,14 @@ pub fn analyse_file(
 }
 
 /// τ0 where only a time column gives it: the median step of the first
-/// block ([`crate::bulk::ROWS`] rows), as a stream cannot wait for the
-/// whole log's median.
+/// block ([`crate::bulk::ROWS`] rows; the table reader's rule,
+/// [`crate::table::gaps_of`], over what a stream has seen before it starts).
 fn tau0_of(times: &[f64]) -> Option<f64> {
-    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    let steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
     if steps.is_empty() {
         return None;
     }
-    steps.sort_by(f64::total_cmp);
-    Some(steps[steps.len() / 2]).filter(|t| *t > 0.0 && t.is_finite())
+    Some(crate::table::gaps_of(&steps).0).filter(|t| *t > 0.0 && t.is_finite())
 }
 
 #[cfg(test)]
