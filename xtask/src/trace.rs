@@ -11,15 +11,19 @@
 //! calls a marker function at each phase of a sample; and an instruction
 //! is the emulator's, not the firmware's, when any of its inline frames
 //! (DWARF) is in `gyro_array::emu` (but for the chip-select pins, which
-//! stand in for the board's GPIO writes) or the bench's clock. On the board
-//! the CPU waits for the SPI bus instead; that time is not counted here.
+//! stand in for the board's GPIO writes) or the bench's clock, or when it
+//! runs inside a call made from such an instruction: the parse follows
+//! the calls (`bl`, `blx`) and their returns, so whatever the emulator
+//! calls (soft-float f64, libm, `core`'s helpers) is the emulator's too,
+//! and an interrupt taken meanwhile is not. On the board the CPU waits
+//! for the SPI bus instead; that time is not counted here.
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::Stdio;
 
-use object::{Object, ObjectSymbol};
+use object::{Object, ObjectSection, ObjectSymbol};
 
 /// Per sample: firmware instructions in read + calibrate + fuse, after the
 /// frame (the calibration's learning, the E-DAVARs), link; and the
@@ -55,6 +59,105 @@ struct Block {
     builtin: u64,
     /// The function id of its last instruction that is not a builtin's.
     last_id: Option<u32>,
+    /// How the block ends: a call, a return, or neither.
+    end: End,
+    /// Whether its last instruction is the emulator's (by DWARF): a call
+    /// from it enters the emulator's time.
+    last_emu: bool,
+}
+
+/// How a translated block ends (its last instruction).
+#[derive(Clone, Copy, Default, PartialEq)]
+enum End {
+    #[default]
+    Other,
+    /// `bl` or `blx`: the callee (at `target` where the instruction
+    /// names it) returns to `ret`.
+    Call { ret: u64, target: Option<u64> },
+    /// `bx lr`, or a `pop`/`ldm`/`ldr` of `pc` from the stack.
+    Return,
+}
+
+/// One open call or exception, and whose time its caller ran in.
+#[derive(Clone, Copy)]
+enum Frame {
+    Call { ret: u64, emu: bool },
+    Exception { emu: bool },
+}
+
+/// The calls open at the current block: whether it runs in the emulator's
+/// time (called, however deep, from the emulator's code).
+#[derive(Default)]
+struct Calls {
+    frames: Vec<Frame>,
+    emu: bool,
+    /// The last block was a call, to this address where it names it: a
+    /// handler's address next is its callee, not an exception taken.
+    called: Option<Option<u64>>,
+    /// The last block returned from an exception handler's own frame.
+    exception_return: bool,
+    /// The vector table's handlers (Thumb bit cleared).
+    handlers: std::collections::HashSet<u64>,
+}
+
+impl Calls {
+    /// Enter the block at `pc`: close the call it returns to, or open the
+    /// exception it starts; whether it runs in the emulator's time.
+    fn enter(&mut self, pc: u64) -> bool {
+        if std::mem::take(&mut self.exception_return) {
+            if let Some(&Frame::Exception { emu }) = self.frames.last() {
+                self.frames.pop();
+                self.emu = emu;
+            }
+        }
+        // A return lands on the newest open call's return address; a frame
+        // left open above it (a call that never returned by `bx lr`, as a
+        // tail-called diverging function) is dropped with it. The search
+        // stops at an exception: its handler's calls are its own.
+        let found = self
+            .frames
+            .iter()
+            .enumerate()
+            .rev()
+            .take(4)
+            .take_while(|(_, f)| matches!(f, Frame::Call { .. }))
+            .find(|(_, f)| matches!(f, Frame::Call { ret, .. } if *ret == pc))
+            .map(|(k, _)| k);
+        if let Some(k) = found {
+            if let Frame::Call { emu, .. } = self.frames[k] {
+                self.emu = emu;
+            }
+            self.frames.truncate(k);
+        } else if self.handlers.contains(&pc)
+            && !matches!(self.called, Some(t) if t.is_none_or(|t| t == pc))
+        {
+            self.frames.push(Frame::Exception { emu: self.emu });
+            self.emu = false;
+        }
+        self.called = None;
+        self.emu
+    }
+
+    /// Leave the block `b` (entered with [`Calls::enter`]).
+    fn leave(&mut self, b: &Block) {
+        match b.end {
+            End::Call { ret, target } => {
+                // A block cut short at a device access and run again from
+                // the cut ends in the same call twice over: one frame.
+                let again =
+                    matches!(self.frames.last(), Some(Frame::Call { ret: r, .. }) if *r == ret);
+                if !again {
+                    self.frames.push(Frame::Call { ret, emu: self.emu });
+                }
+                self.emu |= b.last_emu;
+                self.called = Some(target);
+            }
+            End::Return => {
+                self.exception_return = matches!(self.frames.last(), Some(Frame::Exception { .. }));
+            }
+            End::Other => {}
+        }
+    }
 }
 
 /// What a marker does.
@@ -70,7 +173,7 @@ enum Mark {
 /// figures (and its decoded log if it failed). False if QEMU, defmt-print
 /// or the parse failed.
 pub fn loop_counts(elf: &Path) -> bool {
-    let marks = match markers(elf) {
+    let (marks, handlers) = match markers(elf) {
         Ok(m) => m,
         Err(e) => {
             eprintln!("xtask: {}: {e}", elf.display());
@@ -106,7 +209,12 @@ pub fn loop_counts(elf: &Path) -> bool {
     };
     let elf_arg = elf.to_path_buf();
     let printer = std::thread::spawn(move || crate::defmt_print(&elf_arg, stdout));
-    let (scenarios, fn_names) = parse(BufReader::with_capacity(1 << 20, stderr), &marks, &loader);
+    let (scenarios, fn_names) = parse(
+        BufReader::with_capacity(1 << 20, stderr),
+        &marks,
+        handlers,
+        &loader,
+    );
     let q_ok = child.wait().is_ok_and(|s| s.success());
     let Ok(Ok(decoded)) = printer.join() else {
         eprintln!("xtask: defmt-print failed");
@@ -170,10 +278,25 @@ pub fn loop_counts(elf: &Path) -> bool {
     ok && !scenarios.is_empty()
 }
 
-/// The marker functions' addresses (Thumb bit cleared).
-fn markers(elf: &Path) -> Result<HashMap<u64, Mark>, String> {
+/// The marker functions' addresses, and the exception handlers' from the
+/// vector table (Thumb bit cleared).
+type Markers = (HashMap<u64, Mark>, std::collections::HashSet<u64>);
+
+fn markers(elf: &Path) -> Result<Markers, String> {
     let data = std::fs::read(elf).map_err(|e| e.to_string())?;
     let file = object::File::parse(&*data).map_err(|e| e.to_string())?;
+    // The vector table: the initial stack pointer, then the handlers
+    // (Reset among them; it is never entered from another block).
+    let table = file
+        .section_by_name(".vector_table")
+        .ok_or("no .vector_table section")?;
+    let words = table.data().map_err(|e| e.to_string())?;
+    let handlers = words
+        .chunks_exact(4)
+        .skip(1)
+        .map(|w| u64::from(u32::from_le_bytes([w[0], w[1], w[2], w[3]])) & !1)
+        .filter(|&a| a != 0)
+        .collect();
     let mut m = HashMap::new();
     for sym in file.symbols() {
         let kind = match sym.name() {
@@ -188,7 +311,7 @@ fn markers(elf: &Path) -> Result<HashMap<u64, Mark>, String> {
         m.insert(sym.address() & !1, kind);
     }
     if m.len() == 6 {
-        Ok(m)
+        Ok((m, handlers))
     } else {
         Err(format!(
             "{} of the 6 bench_mark_* symbols (built without bench-trace?)",
@@ -244,6 +367,45 @@ fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String, bool) {
     (emu, name.unwrap_or_else(|| "?".into()), builtin)
 }
 
+/// One instruction of QEMU's `in_asm` log: its address, its size in
+/// bytes and its text (mnemonic and operands), from a line such as
+/// `0x000000d8:  f029 fa4e  bl       #0x29578`.
+fn instruction(line: &[u8]) -> Option<(u64, u64, &[u8])> {
+    let hex = std::str::from_utf8(line.strip_prefix(b"0x")?.get(..8)?).ok()?;
+    let addr = u64::from_str_radix(hex, 16).ok()?;
+    let rest = line.get(10..)?.strip_prefix(b":  ")?;
+    let cut = rest.windows(2).position(|w| w == b"  ")?;
+    let size = rest[..cut].iter().filter(|c| c.is_ascii_hexdigit()).count() as u64 / 2;
+    let text = rest[cut..].trim_ascii_start();
+    Some((addr, size, text))
+}
+
+/// How an instruction at the end of a block ends it; `next` is the
+/// address after it (where a call returns).
+fn end_of(next: u64, insn: &[u8]) -> End {
+    let text = String::from_utf8_lossy(insn);
+    let mut words = text.split_whitespace();
+    let mnemonic = words.next().unwrap_or("");
+    let operands: String = words.collect();
+    match mnemonic {
+        "bl" | "blx" => End::Call {
+            ret: next,
+            target: operands
+                .strip_prefix("#0x")
+                .and_then(|h| u64::from_str_radix(h, 16).ok()),
+        },
+        "bx" if operands == "lr" => End::Return,
+        "pop" | "pop.w" if operands.contains("pc}") => End::Return,
+        "ldm" | "ldm.w" | "ldmia" | "ldmia.w"
+            if operands.starts_with("sp!") && operands.contains("pc}") =>
+        {
+            End::Return
+        }
+        "ldr" | "ldr.w" if operands.starts_with("pc,[sp]") => End::Return,
+        _ => End::Other,
+    }
+}
+
 /// A demangled path without its hash and crate-internal generics, for
 /// the worst sample's breakdown.
 fn short_name(name: &str) -> String {
@@ -260,14 +422,18 @@ fn short_name(name: &str) -> String {
 fn parse(
     r: impl BufRead,
     marks: &HashMap<u64, Mark>,
+    handlers: std::collections::HashSet<u64>,
     loader: &addr2line::Loader,
 ) -> (Vec<Scenario>, Vec<String>) {
     let mut blocks: HashMap<u64, Block> = HashMap::new();
     // Per instruction address: (emulator's?, function id, a builtin?).
     let mut at: HashMap<u64, (bool, u32, bool)> = HashMap::new();
-    // Whether the last block that was not a builtin's was the emulator's.
-    let mut caller_emu = false;
-    // And its last instruction's function id: builtins are charged to it.
+    let mut calls = Calls {
+        handlers,
+        ..Calls::default()
+    };
+    // The last instruction's function id of the last block that was not a
+    // builtin's: builtins are charged to it in the by-line breakdown.
     let mut caller_id: Option<u32> = None;
     let mut names: Vec<String> = Vec::new();
     let mut ids: HashMap<String, u32> = HashMap::new();
@@ -286,15 +452,11 @@ fn parse(
         }
         if let Some((start, block)) = building.as_mut() {
             // "0x000180ec:  b580  push {r7, lr}"
-            if let Some(addr) = line
-                .strip_prefix(b"0x")
-                .and_then(|l| l.get(..8))
-                .and_then(|h| std::str::from_utf8(h).ok())
-                .and_then(|h| u64::from_str_radix(h, 16).ok())
-            {
+            if let Some((addr, size, insn)) = instruction(&line) {
                 if *start == u64::MAX {
                     *start = addr;
                 }
+                block.end = end_of(addr + size, insn);
                 let (e, id, builtin) = *at.entry(addr).or_insert_with(|| {
                     let (e, name, builtin) = classify(loader, addr);
                     let builtin = builtin && !e;
@@ -305,6 +467,7 @@ fn parse(
                     });
                     (e, id, builtin)
                 });
+                block.last_emu = e;
                 if e {
                     block.emu += 1;
                 } else if builtin {
@@ -346,6 +509,12 @@ fn parse(
         else {
             continue;
         };
+        // Every block, markers too, opens and closes its calls.
+        let b = blocks.get(&pc);
+        let in_emu = calls.enter(pc);
+        if let Some(b) = b {
+            calls.leave(b);
+        }
         match marks.get(&pc) {
             Some(Mark::Scenario) => {
                 close_sample(scenarios.last_mut(), &mut by_fn);
@@ -362,27 +531,21 @@ fn parse(
             Some(Mark::Phase(p)) => phase = Some(*p),
             Some(Mark::Off) => phase = None,
             None => {
-                let Some(b) = blocks.get(&pc) else { continue };
-                // A block of builtins alone is its caller's.
+                let Some(b) = b else { continue };
                 let builtin_only = b.fw + b.emu == 0;
-                let builtin_emu = if builtin_only {
-                    caller_emu
-                } else {
-                    caller_emu = b.emu > b.fw;
-                    if b.last_id.is_some() {
-                        caller_id = b.last_id;
-                    }
-                    false
-                };
+                if !builtin_only && b.last_id.is_some() {
+                    caller_id = b.last_id;
+                }
                 let (Some(p), Some(s)) = (
                     phase,
                     scenarios.last_mut().and_then(|s| s.samples.last_mut()),
                 ) else {
                     continue;
                 };
-                if builtin_emu {
+                // Called from the emulator: all of it the emulator's.
+                if in_emu {
                     if p == 0 {
-                        s.bus += b.builtin;
+                        s.bus += b.fw + b.emu + b.builtin;
                     }
                     continue;
                 }
@@ -582,4 +745,91 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         "  the mean sample's frame path (or XTASK_TRACE_PHASE's), by function (innermost inline frame): {}",
         line.join(", ")
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_instructions_and_how_blocks_end() {
+        let (a, n, t) = instruction(b"0x000000d8:  f029 fa4e  bl       #0x29578").unwrap();
+        assert_eq!((a, n), (0xd8, 4));
+        assert!(
+            end_of(a + n, t)
+                == End::Call {
+                    ret: 0xdc,
+                    target: Some(0x29578)
+                }
+        );
+        let (a, n, t) = instruction(b"0x00029578:  4798       blx      r3").unwrap();
+        assert!(
+            end_of(a + n, t)
+                == End::Call {
+                    ret: 0x2957a,
+                    target: None
+                }
+        );
+        for ret in [
+            "0x00000100:  bd80       pop      {r7, pc}",
+            "0x00000100:  e8bd 8ff0  pop.w    {r4, r5, r6, r7, r8, sb, sl, fp, pc}",
+            "0x00000100:  4770       bx       lr",
+            "0x00000100:  f85d fb04  ldr      pc, [sp], #4",
+        ] {
+            let (a, n, t) = instruction(ret.as_bytes()).unwrap();
+            assert!(end_of(a + n, t) == End::Return, "{ret}");
+        }
+        for other in [
+            "0x00000100:  b580       push     {r7, lr}",
+            "0x00000100:  d3f2       blo      #0xe8",
+            "0x00000100:  4718       bx       r3",
+            "0x00000100:  bc80       pop      {r7}",
+        ] {
+            let (a, n, t) = instruction(other.as_bytes()).unwrap();
+            assert!(end_of(a + n, t) == End::Other, "{other}");
+        }
+    }
+
+    fn block(end: End, last_emu: bool) -> Block {
+        Block {
+            end,
+            last_emu,
+            ..Block::default()
+        }
+    }
+
+    #[test]
+    fn a_call_from_the_emulator_is_the_emulators_to_its_return() {
+        let mut c = Calls {
+            handlers: [0x900].into_iter().collect(),
+            ..Calls::default()
+        };
+        let call = |ret, target| End::Call {
+            ret,
+            target: Some(target),
+        };
+        // Firmware at 0x100 calls the emulator at 0x200, which calls a
+        // helper at 0x300 (not the emulator's by DWARF), which returns.
+        assert!(!c.enter(0x100));
+        c.leave(&block(call(0x104, 0x200), false));
+        assert!(!c.enter(0x200));
+        c.leave(&block(call(0x208, 0x300), true));
+        assert!(c.enter(0x300));
+        // An interrupt taken inside the helper runs in the firmware's time.
+        c.leave(&block(End::Other, false));
+        assert!(!c.enter(0x900));
+        c.leave(&block(End::Return, false));
+        assert!(c.enter(0x304));
+        c.leave(&block(End::Return, false));
+        // Back in the emulator (its own instructions the emulator's by
+        // DWARF, called from the firmware's), then back in the firmware.
+        assert!(!c.enter(0x208));
+        c.leave(&block(End::Return, true));
+        assert!(!c.enter(0x104));
+        assert!(c.frames.is_empty());
+        // A call to a handler's address is a call, not an exception.
+        c.leave(&block(call(0x108, 0x900), false));
+        assert!(!c.enter(0x900));
+        assert_eq!(c.frames.len(), 1);
+    }
 }
