@@ -12,7 +12,7 @@
 //!
 //! | priority | task | does |
 //! |---|---|---|
-//! | 3 | `uart` (USART1) | the link's bytes in (RXNE, into a queue) and out (TXE, from a queue); shares nothing, so no lock holds it off |
+//! | 3 | `uart` (USART1), `uart_dma` (DMA2 stream 7) | the link's bytes in (RXNE, into a queue) and out (by DMA2 from a queue, one transfer at a time; by TXE where DMA does not answer, as on QEMU); share only with each other, at one priority, so no lock holds them off |
 //! | 2 | `sample` (SysTick, 1 kHz) | reads the chips at the stated instant, fuses, queues the frame, the calibration's learning (deterministic: every sample, in order) |
 //! | 1 | `background` (async, fed by a channel) | the E-DAVARs, status frames, commands, logs, the stack meter |
 //!
@@ -64,7 +64,7 @@ use stm32f4xx_hal::{
     gpio::{self, Edge, ErasedPin, ExtiPin, Output},
     pac,
     prelude::*,
-    serial::{config::Config as SerialConfig, Serial, Tx},
+    serial::{config::Config as SerialConfig, Serial},
     spi::{Mode, Phase, Polarity, Spi},
     time::Hertz,
     watchdog::IndependentWatchdog,
@@ -240,6 +240,15 @@ pub struct Chips {
 #[allow(unsafe_code)]
 unsafe impl Send for Chips {}
 
+/// The link's sending side, as USART1's task and the DMA stream's share
+/// it: the transmitter, the bytes the port queued for it, and the board's
+/// µs clock (a transfer's time limit).
+pub struct TxSide {
+    link: f405::TxLink,
+    bytes: Consumer<'static, u8>,
+    clock: &'static Int1Captures,
+}
+
 /// The link as the sample task and the background share it: the port
 /// (frames, settings, commands) and the producer of the bytes the UART's
 /// interrupt sends, which owns the consumer alone, so that nothing it
@@ -274,6 +283,9 @@ mod app {
         link: Link,
         /// The E-DAVARs' newest estimates, for the sample task's frames.
         noise: NoiseSnapshot,
+        /// The link's transmitter and the bytes it sends (USART1's task and
+        /// the DMA stream's, one priority: no lock is taken).
+        tx: TxSide,
     }
 
     #[local]
@@ -288,8 +300,6 @@ mod app {
         sleep: bool,
         /// Each chip's clock after the last sample, for the status frames.
         clocks: [ChipTime; 5],
-        tx: Tx<pac::USART1>,
-        tx_bytes: Consumer<'static, u8>,
         rx_feed: f405::RxFeed,
         rx: f405::RxQueue,
         tracker: &'static mut Tracker,
@@ -308,6 +318,7 @@ mod app {
         captures_store: Option<Int1Captures> = None,
         rx_bytes: f405::RxBytes = f405::RxBytes::new(),
         tx_store: TxBytes = TxBytes::new(),
+        tx_dma_buf: [u8; f405::TX_DMA_BYTES] = [0; f405::TX_DMA_BYTES],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let record = persist::take();
@@ -453,6 +464,7 @@ mod app {
             give_up("USART1 at the link's baud rate")
         };
         let (tx, rx) = serial.split();
+        let tx = f405::TxLink::new(tx, dp.DMA2, &mut rcc, cx.local.tx_dma_buf, baud);
         let (rx_feed, rx) = f405::rx_queue(rx, cx.local.rx_bytes);
         // The saved settings (the defaults where none are saved or the record
         // does not check, said in the log and in every status frame).
@@ -628,6 +640,11 @@ mod app {
                 pipe,
                 link: Link { port, out },
                 noise: NoiseSnapshot::default(),
+                tx: TxSide {
+                    link: tx,
+                    bytes: tx_bytes,
+                    clock: captures,
+                },
             },
             Local {
                 chips,
@@ -637,8 +654,6 @@ mod app {
                 clock: SampleClock::new(now, period_us),
                 clocks: [ChipTime::default(); 5],
                 sleep,
-                tx,
-                tx_bytes,
                 rx_feed,
                 rx,
                 tracker,
@@ -729,10 +744,6 @@ mod app {
         l.watchdog.feed();
     }
 
-    /// The link's bytes: received into the background's queue, sent from
-    /// the UART's queue while the UART takes them. Above the sample task
-    /// and sharing nothing: at 6 Mbaud a byte arrives every 1.7 µs and the
-    /// USART holds one, so no lock may hold this task off.
     /// The controller's sync pulse: its edge's time on TIM5, for the
     /// sample task to hand to the port (`link::sync`).
     #[task(binds = EXTI9_5, priority = 4, local = [sync_pin, sync_captures])]
@@ -742,26 +753,27 @@ mod app {
         cx.local.sync_pin.clear_interrupt_pending_bit();
     }
 
-    #[task(binds = USART1, priority = 3, local = [tx, tx_bytes, rx_feed])]
-    fn uart(cx: uart::Context) {
-        use embedded_hal_nb::serial::Write;
-        use stm32f4xx_hal::serial::TxListen;
-        let l = cx.local;
-        l.rx_feed.on_interrupt();
-        for _ in 0..TX_TURN {
-            let Some(&b) = l.tx_bytes.peek() else { break };
-            if l.tx.write(b).is_err() {
-                break;
-            }
-            l.tx_bytes.dequeue();
-        }
-        // TXE stays set while the data register is empty: listening while
-        // bytes wait brings this task back for the next.
-        if l.tx_bytes.ready() {
-            l.tx.listen();
-        } else {
-            l.tx.unlisten();
-        }
+    /// The link's bytes: received into the background's queue; sent from
+    /// the UART's queue (a DMA transfer started, or the bytes the UART
+    /// takes). Above the sample task and sharing only with the DMA
+    /// stream's task, at its priority: at 6 Mbaud a byte arrives every
+    /// 1.7 µs and the USART holds one, so no lock may hold this task off.
+    #[task(binds = USART1, priority = 3, local = [rx_feed], shared = [tx])]
+    fn uart(mut cx: uart::Context) {
+        cx.local.rx_feed.on_interrupt();
+        cx.shared.tx.lock(|t| {
+            let now = t.clock.micros();
+            t.link.kick(&mut t.bytes, now, TX_TURN);
+        });
+    }
+
+    /// The link's DMA transfer ended: the next one.
+    #[task(binds = DMA2_STREAM7, priority = 3, shared = [tx])]
+    fn uart_dma(mut cx: uart_dma::Context) {
+        cx.shared.tx.lock(|t| {
+            let now = t.clock.micros();
+            t.link.on_dma(&mut t.bytes, now, TX_TURN);
+        });
     }
 
     /// Everything that does not have to be done within the sample

@@ -679,3 +679,264 @@ mod bus_fault {
     probe = sym super::PROBE,
     );
 }
+
+/// Bytes one DMA transfer of the link takes at most: a status frame with
+/// its sample frame and an acknowledgement fit (491 + 93 + 14 B).
+pub const TX_DMA_BYTES: usize = 640;
+
+/// Transfers that did not complete in time, and transfer errors: each
+/// moves the link to interrupts for good.
+static TX_DMA_FAULTS: AtomicU32 = AtomicU32::new(0);
+
+/// The link's transmitter: USART1 fed by DMA2 stream 7, channel 4
+/// (USART1_TX; RM0090 Table 43), one transfer at a time from a buffer
+/// the port's bytes are copied into (in SRAM: DMA cannot reach the
+/// core-coupled RAM, RM0090 2.3.1); or, where DMA does not answer (QEMU's
+/// `netduinoplus2` models none) or a transfer failed, by USART1's TXE
+/// interrupt a byte at a time.
+///
+/// Why DMA: at 6 Mbaud the UART takes a byte every 1.7 µs; by TXE a
+/// 93-byte sample frame is 93 interrupts a millisecond, each some 60
+/// cycles with its entry and exit (ARMv7-M: 12 to enter, 10 to return),
+/// about 3 % of the core at 168 MHz and as many preemptions of whatever
+/// runs. By DMA it is one copy and one interrupt.
+pub struct TxLink {
+    tx: stm32f4xx_hal::serial::Tx<USART1>,
+    /// DMA2, while the link uses it.
+    dma: Option<pac::DMA2>,
+    buf: &'static mut [u8; TX_DMA_BYTES],
+    /// Bytes of `buf` the transfer in flight sends (0: none in flight).
+    in_flight: u16,
+    /// `buf[left.0..left.1]`: what a failed transfer did not send, sent
+    /// first by the interrupt path.
+    left: (u16, u16),
+    /// The transfer's start (TIM5 µs) and how long it may take.
+    started_us: u32,
+    limit_us: u32,
+    /// A byte's time on the wire, in ns (10 bits).
+    byte_ns: u32,
+}
+
+impl TxLink {
+    /// The link's transmitter at `baud`: DMA2 stream 7 if a copy of one
+    /// word by DMA2 (memory to memory, RM0090 10.3.6) completes, else
+    /// interrupts (logged). Enables DMA2's clock.
+    #[allow(unsafe_code)]
+    pub fn new(
+        tx: stm32f4xx_hal::serial::Tx<USART1>,
+        dma: pac::DMA2,
+        rcc: &mut Rcc,
+        buf: &'static mut [u8; TX_DMA_BYTES],
+        baud: u32,
+    ) -> Self {
+        use stm32f4xx_hal::rcc::{Enable, Reset};
+        pac::DMA2::enable(rcc);
+        pac::DMA2::reset(rcc);
+        let mut link = Self {
+            tx,
+            dma: None,
+            buf,
+            in_flight: 0,
+            left: (0, 0),
+            started_us: 0,
+            limit_us: 0,
+            byte_ns: (10_000_000_000u64 / u64::from(baud.max(1))) as u32,
+        };
+        let src: u32 = 0x5a5a_a5a5;
+        let mut dst: u32 = 0;
+        let st = dma.st(7);
+        // SAFETY: the stream is off (reset above); the addresses are two
+        // words on this stack that outlive the poll below, which waits for
+        // the transfer's end or turns the stream off before returning.
+        unsafe {
+            // Memory to memory runs through the FIFO (RM0090 10.3.11: no
+            // direct mode there).
+            st.fcr().write(|w| {
+                w.dmdis().disabled();
+                w.fth().full()
+            });
+            st.par().write(|w| w.pa().bits(&raw const src as u32));
+            st.m0ar().write(|w| w.m0a().bits(&raw mut dst as u32));
+            st.ndtr().write(|w| w.ndt().bits(1));
+            st.cr().write(|w| {
+                w.dir().memory_to_memory();
+                w.pinc().incremented();
+                w.minc().incremented();
+                w.psize().bits32();
+                w.msize().bits32();
+                w.en().enabled()
+            });
+        }
+        let done = (0..1000).any(|_| dma.hisr().read().tcif7().is_complete());
+        st.cr().modify(|_, w| w.en().disabled());
+        dma.hifcr().write(|w| {
+            w.ctcif7().clear();
+            w.chtif7().clear();
+            w.cteif7().clear();
+            w.cdmeif7().clear();
+            w.cfeif7().clear()
+        });
+        // SAFETY: the transfer has ended or the stream is off: nothing
+        // writes `dst` any more.
+        let copied = unsafe { core::ptr::read_volatile(&raw const dst) } == src;
+        // Every register of the stream back to its reset value (direct
+        // mode for the UART's transfers).
+        pac::DMA2::reset(rcc);
+        if done && copied {
+            // SAFETY: USART1's DMA request for transmission (RM0090
+            // 30.6.6 CR3.DMAT); the driver sets no other CR3 bit.
+            unsafe { (*USART1::ptr()).cr3().modify(|_, w| w.dmat().set_bit()) };
+            link.dma = Some(dma);
+            defmt::info!("link: sent by DMA2 stream 7");
+        } else {
+            defmt::warn!("link: DMA2 did not copy a word; sent by USART1's interrupt");
+        }
+        link
+    }
+
+    /// Whether the link's bytes go by DMA.
+    pub fn by_dma(&self) -> bool {
+        self.dma.is_some()
+    }
+
+    /// Transfers that failed or timed out so far.
+    pub fn faults() -> u32 {
+        TX_DMA_FAULTS.load(Ordering::Relaxed)
+    }
+
+    /// Send what `queue` holds: start a transfer if none is in flight, or
+    /// end one that has overrun its time; on the interrupt path, write
+    /// while the UART takes bytes (at most `turn`). `now_us` is TIM5's.
+    /// From USART1's task and the DMA stream's, both at one priority.
+    pub fn kick(&mut self, queue: &mut Consumer<'static, u8>, now_us: u32, turn: usize) {
+        if self.in_flight > 0 {
+            if now_us.wrapping_sub(self.started_us) <= self.limit_us {
+                return;
+            }
+            self.fail();
+        }
+        let Some(dma) = &self.dma else {
+            self.by_interrupt(queue, turn);
+            return;
+        };
+        let mut n = 0;
+        while n < TX_DMA_BYTES {
+            let Some(b) = queue.dequeue() else { break };
+            self.buf[n] = b;
+            n += 1;
+        }
+        if n == 0 {
+            return;
+        }
+        let st = dma.st(7);
+        dma.hifcr().write(|w| {
+            w.ctcif7().clear();
+            w.chtif7().clear();
+            w.cteif7().clear();
+            w.cdmeif7().clear();
+            w.cfeif7().clear()
+        });
+        // SAFETY: the stream is off (no transfer in flight); the buffer is
+        // 'static and not written again until the transfer has ended or
+        // been stopped (`in_flight`); PAR is USART1's data register.
+        #[allow(unsafe_code)]
+        unsafe {
+            st.par()
+                .write(|w| w.pa().bits((*USART1::ptr()).dr().as_ptr() as u32));
+            st.m0ar().write(|w| w.m0a().bits(self.buf.as_ptr() as u32));
+            st.ndtr().write(|w| w.ndt().bits(n as u16));
+            st.cr().write(|w| {
+                w.chsel().bits(4);
+                w.dir().memory_to_peripheral();
+                w.minc().incremented();
+                w.psize().bits8();
+                w.msize().bits8();
+                w.pl().high();
+                w.tcie().enabled();
+                w.teie().enabled();
+                w.en().enabled()
+            });
+        }
+        self.in_flight = n as u16;
+        self.started_us = now_us;
+        // Twice the bytes' wire time and 200 µs: a transfer that takes
+        // longer has stopped (a stalled stream, a lost request).
+        self.limit_us = 200 + (2 * n as u64 * u64::from(self.byte_ns) / 1000) as u32;
+    }
+
+    /// The DMA stream's interrupt: the transfer ended (or failed); then
+    /// the next one.
+    pub fn on_dma(&mut self, queue: &mut Consumer<'static, u8>, now_us: u32, turn: usize) {
+        let Some(dma) = &self.dma else { return };
+        let isr = dma.hisr().read();
+        let error = isr.teif7().is_error();
+        let complete = isr.tcif7().is_complete();
+        dma.hifcr().write(|w| {
+            w.ctcif7().clear();
+            w.chtif7().clear();
+            w.cteif7().clear();
+            w.cdmeif7().clear();
+            w.cfeif7().clear()
+        });
+        if error {
+            self.fail();
+        } else if complete {
+            self.in_flight = 0;
+        }
+        self.kick(queue, now_us, turn);
+    }
+
+    /// A transfer failed or overran: stop it, keep what it did not send,
+    /// and send by interrupts from now on.
+    fn fail(&mut self) {
+        TX_DMA_FAULTS.fetch_add(1, Ordering::Relaxed);
+        if let Some(dma) = self.dma.take() {
+            let st = dma.st(7);
+            st.cr().modify(|_, w| w.en().disabled());
+            // RM0090 10.3.17: EN reads 1 until the stream has stopped.
+            let _ = (0..1000).any(|_| st.cr().read().en().is_disabled());
+            let left = st.ndtr().read().ndt().bits().min(self.in_flight);
+            self.left = (self.in_flight - left, self.in_flight);
+            #[allow(unsafe_code)]
+            // SAFETY: USART1's CR3.DMAT off: the UART stops asking DMA.
+            unsafe {
+                (*USART1::ptr()).cr3().modify(|_, w| w.dmat().clear_bit())
+            };
+            defmt::warn!(
+                "link: a DMA transfer failed or overran; sent by USART1's interrupt from now on"
+            );
+        }
+        self.in_flight = 0;
+    }
+
+    /// The interrupt path: what a failed transfer left, then the queue,
+    /// while the UART takes bytes; TXE's interrupt on while bytes wait.
+    fn by_interrupt(&mut self, queue: &mut Consumer<'static, u8>, turn: usize) {
+        use embedded_hal_nb::serial::Write;
+        use stm32f4xx_hal::serial::TxListen;
+        for _ in 0..turn {
+            let b = if self.left.0 < self.left.1 {
+                self.buf[usize::from(self.left.0)]
+            } else if let Some(&b) = queue.peek() {
+                b
+            } else {
+                break;
+            };
+            if self.tx.write(b).is_err() {
+                break;
+            }
+            if self.left.0 < self.left.1 {
+                self.left.0 += 1;
+            } else {
+                queue.dequeue();
+            }
+        }
+        // TXE stays set while the data register is empty: listening while
+        // bytes wait brings the task back for the next.
+        if self.left.0 < self.left.1 || queue.ready() {
+            self.tx.listen();
+        } else {
+            self.tx.unlisten();
+        }
+    }
+}
