@@ -14,7 +14,7 @@ use crate::algo::fusion::{
     SeedConfig,
 };
 use crate::algo::mounting::CalRecord;
-use crate::drivers::adxrs453::{self, Adxrs453};
+use crate::drivers::adxrs453::{self, Adxrs453, OnAxis};
 use crate::drivers::icm42688::{self, Config, Icm42688};
 use crate::drivers::Gyro;
 use crate::emu::{
@@ -485,7 +485,7 @@ fn adx_run(
     let bus: Bus1 = RefCell::new(EmuBus::new([Chip::Adx(chip)], &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let dev = emu_device(&bus, &cs[0]);
-    let mut g = Adxrs453::new(dev, 2);
+    let mut g = OnAxis::new(Adxrs453::new(dev), 2);
     let init = g.init(&mut delay).map_err(|e| e.map_spi(bus_err));
     with_bus(&bus, |b| b.chips[0].set_fault(fault));
     let (mut errors, mut wild) = (0, 0);

@@ -3,7 +3,7 @@
 //! never panic, and a reading that is accepted is finite.
 #![no_main]
 use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
-use gyro_array::drivers::adxrs453::Adxrs453;
+use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
 use gyro_array::drivers::icm42688::{ClockInput, Config, FifoSample, Icm42688, Odr, Sampling};
 use gyro_array::drivers::Gyro;
 use libfuzzer_sys::fuzz_target;
@@ -82,7 +82,7 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     } else {
-        let mut g = Adxrs453::new(spi, (which >> 1) as usize);
+        let mut g = OnAxis::new(Adxrs453::new(spi), (which >> 1) as usize);
         let _ = g.init(&mut NoDelay);
         for step in 0..4 {
             let _ = g.restart(step);

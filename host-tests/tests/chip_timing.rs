@@ -292,7 +292,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
 
 #[test]
 fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
-    use gyro_array::drivers::adxrs453::{Adxrs453, DELAY_US};
+    use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis, DELAY_US};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::{emu_device, AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuDelay};
     use std::cell::RefCell;
@@ -314,7 +314,7 @@ fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
     let bus = RefCell::new(EmuBus::new([Chip::Adx(m)], &cs));
     let mut delay = EmuDelay::new(&bus, 1e-3);
     let dev = emu_device(&bus, &cs[0]);
-    let mut g = Adxrs453::new(dev, 2);
+    let mut g = OnAxis::new(Adxrs453::new(dev), 2);
     g.init(&mut delay).expect("init");
     let mut read = Vec::new();
     for _ in 0..2000 {

@@ -77,7 +77,7 @@ use gyro_array::app::{self as schedule, SampleClock};
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
-use gyro_array::drivers::adxrs453::Adxrs453;
+use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{Settings, StoreState};
@@ -229,7 +229,7 @@ type Timed = TimedIcm<IcmDev, Int1Capture<'static>>;
 /// Every chip, as the sample task owns them after start-up.
 pub struct Chips {
     timed: [Timed; 4],
-    adx: AtInstant<Adxrs453<AdxDev>>,
+    adx: AtInstant<OnAxis<AdxDev>>,
 }
 
 // SAFETY: the devices borrow the two buses' RefCells (`init`'s 'static
@@ -500,7 +500,7 @@ mod app {
             Icm42688::new(d2),
             Icm42688::new(d3),
         );
-        let mut g4 = Adxrs453::new(d4, 2);
+        let mut g4 = OnAxis::new(Adxrs453::new(d4), 2);
 
         let Ok(mut pipe) = Pipeline::<5>::new(
             PipelineConfig::default(),

@@ -915,8 +915,9 @@ impl TxLink {
         use embedded_hal_nb::serial::Write;
         use stm32f4xx_hal::serial::TxListen;
         for _ in 0..turn {
-            let b = if self.left.0 < self.left.1 {
-                self.buf[usize::from(self.left.0)]
+            let left = self.buf.get(usize::from(self.left.0));
+            let b = if let (true, Some(&b)) = (self.left.0 < self.left.1, left) {
+                b
             } else if let Some(&b) = queue.peek() {
                 b
             } else {
@@ -925,9 +926,10 @@ impl TxLink {
             if self.tx.write(b).is_err() {
                 break;
             }
-            if self.left.0 < self.left.1 {
+            if self.left.0 < self.left.1 && left.is_some() {
                 self.left.0 += 1;
             } else {
+                self.left = (0, 0);
                 queue.dequeue();
             }
         }

@@ -1,8 +1,11 @@
 //! embedded-hal 1.0 SPI drivers for the gyro parts on the board.
 //!
-//! Each driver takes an [`embedded_hal::spi::SpiDevice`] and does one SPI
-//! transaction per register access (ADXRS453: one per 32-bit frame). Both
-//! implement [`Gyro`], the small trait the sampling pipeline uses.
+//! The drivers themselves are crates of their own (`drivers/icm42688p`,
+//! `drivers/adxrs453`: anyone with the part can use them); each takes an
+//! [`embedded_hal::spi::SpiDevice`] and does one SPI transaction per
+//! register access (ADXRS453: one per 32-bit frame). Here, under the same
+//! names, each part as the board uses it: behind [`Gyro`], the small trait
+//! the sampling pipeline uses (the ADXRS453 on a board axis).
 
 pub mod adxrs453;
 pub mod icm42688;

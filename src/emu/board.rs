@@ -8,7 +8,7 @@ use core::cell::RefCell;
 use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
 
 use super::{CsLine, EmuBus, EmuCs};
-use crate::drivers::adxrs453::Adxrs453;
+use crate::drivers::adxrs453::{Adxrs453, OnAxis};
 use crate::drivers::icm42688::Icm42688;
 
 /// One chip's SPI device on an emulated bus of `N` chips (the board's five
@@ -32,7 +32,7 @@ pub struct BoardDrivers<'a, 'c> {
     /// The four ICM-42688-P, chips 0–3.
     pub icm: [Icm42688<EmuDevice<'a, 'c>>; 4],
     /// The ADXRS453, chip 4.
-    pub adx: Adxrs453<EmuDevice<'a, 'c>>,
+    pub adx: OnAxis<EmuDevice<'a, 'c>>,
 }
 
 /// The drivers of the board's array on `bus`, chip `i` behind `cs[i]`.
@@ -44,6 +44,6 @@ pub fn board_drivers<'a, 'c>(
     BoardDrivers {
         icm: [0, 1, 2, 3].map(|i| Icm42688::new(dev(i))),
         // The ADXRS453 measures the board's z axis (2).
-        adx: Adxrs453::new(dev(4), 2),
+        adx: OnAxis::new(Adxrs453::new(dev(4)), 2),
     }
 }

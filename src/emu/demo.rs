@@ -24,7 +24,7 @@ use crate::algo::davar::DavarConfig;
 use crate::algo::fusion::{AdaptiveConfig, ConfigError, Method};
 use crate::algo::mounting::{CalError, CalRecord};
 use crate::algo::qualify::QualifyError;
-use crate::drivers::adxrs453::Adxrs453;
+use crate::drivers::adxrs453::OnAxis;
 use crate::drivers::icm42688::{ClockInput, Config};
 use crate::drivers::Gyro;
 use crate::pipeline::selftest;
@@ -143,7 +143,7 @@ pub struct Chips<'a, 'c> {
     pub timed: [Timed<'a, 'c>; 4],
     /// The ADXRS453, read at the array's instant (and never fused there:
     /// its reading is older).
-    pub adx: AtInstant<Adxrs453<Dev<'a, 'c>>>,
+    pub adx: AtInstant<OnAxis<Dev<'a, 'c>>>,
     /// The bus.
     pub bus: &'a Bus<'c>,
 }

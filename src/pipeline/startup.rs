@@ -35,7 +35,7 @@ use embedded_hal::spi::SpiDevice;
 use super::Pipeline;
 use crate::algo::fusion::median;
 use crate::algo::mounting::{inverse3, mul3, ChipCal};
-use crate::drivers::adxrs453::Adxrs453;
+use crate::drivers::adxrs453::OnAxis;
 use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
 
 /// What the log needs of a bus error: `defmt::Format` with the defmt
@@ -57,7 +57,7 @@ impl<T> Loggable for T {}
 /// ICM-42688-P to 24 MHz.
 pub fn start_array<SPI: SpiDevice, ADX: SpiDevice>(
     mut icm: [&mut Icm42688<SPI>; 4],
-    adx: &mut Adxrs453<ADX>,
+    adx: &mut OnAxis<ADX>,
     delay: &mut impl DelayNs,
     self_test: Option<u16>,
     pipe: &mut Pipeline<5>,

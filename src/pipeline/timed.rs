@@ -555,7 +555,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     }
 
     fn check_config(&mut self) -> Result<(), ReadFault> {
-        self.g.check_config()
+        Gyro::check_config(&mut self.g)
     }
 
     fn temperature_c(&mut self) -> Result<f32, ReadFault> {

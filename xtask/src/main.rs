@@ -1012,7 +1012,11 @@ fn panics(elf: &Path) -> usize {
         exit(1)
     });
     let chains = String::from_utf8_lossy(&out.stdout);
-    let root = root().join("src").display().to_string();
+    // Ours: the firmware crate's code and its drivers' crates.
+    let src = root().join("src").display().to_string();
+    let drivers = root().join("drivers").display().to_string();
+    let root = root().display().to_string();
+    let is_ours = |owner: &str| owner.starts_with(&src) || owner.starts_with(&drivers);
     let mut owner_of: Vec<String> = Vec::new();
     for line in chains.lines() {
         if line.starts_with("0x") {
@@ -1034,9 +1038,9 @@ fn panics(elf: &Path) -> usize {
         // async state machine's resumed-after-completion check inlined from
         // a dependency's `async fn` (sequential-storage's, driven to its end
         // by `block_on`): counted and listed apart, not as a site of ours.
-        let who = if owner.starts_with(&root) && owner.ends_with(":0") {
+        let who = if is_ours(owner) && owner.ends_with(":0") {
             format!("no source line ({})", owner.trim_start_matches(&root))
-        } else if owner.starts_with(&root) {
+        } else if is_ours(owner) {
             ours.push(format!("{} ({callee})", owner.trim_start_matches(&root)));
             "this crate".to_string()
         } else if owner.is_empty() {
@@ -1057,7 +1061,7 @@ fn panics(elf: &Path) -> usize {
         println!("  {n:>4}  {who}");
     }
     for s in &ours {
-        println!("        src{s}");
+        println!("        {}", s.trim_start_matches('/'));
     }
     ours.len()
 }

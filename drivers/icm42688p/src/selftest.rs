@@ -45,10 +45,11 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     ///
     /// This is the single-chip test of the datasheet: it needs the board
     /// still, since a change of rate between the two averages reads as
-    /// response. On a moving board, the array test
-    /// ([`crate::pipeline::startup`]) uses [`Self::self_test_begin`],
-    /// [`Self::set_self_test`] and [`Self::self_test_end`] on every chip at
-    /// once and takes the motion out with the chips whose self-test is off.
+    /// response. On a moving board, an array of chips is tested together
+    /// with [`Self::self_test_begin`], [`Self::set_self_test`] and
+    /// [`Self::self_test_end`] on every chip at once, the motion taken out
+    /// with the chips whose self-test is off (the gyro-array firmware's
+    /// start-up does this).
     pub fn self_test(
         &mut self,
         delay: &mut impl DelayNs,
@@ -117,9 +118,12 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             factory_lsb: [0.0; 3],
         };
         let mut failed = 0u8;
-        for i in 0..3 {
-            st.factory_lsb[i] = factory_response_lsb(codes[i]);
-            if !(st.response_lsb[i] > 0.5 * st.factory_lsb[i]) {
+        for (i, &code) in codes.iter().enumerate() {
+            st.factory_lsb[i] = factory_response_lsb(code);
+            // A NaN response (no samples averaged) fails too.
+            if st.response_lsb[i].partial_cmp(&(0.5 * st.factory_lsb[i]))
+                != Some(core::cmp::Ordering::Greater)
+            {
                 failed |= 1 << i;
             }
         }

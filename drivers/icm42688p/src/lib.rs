@@ -4,17 +4,40 @@
 //! rev 1.8), section 14 "Register map" (user bank 0 and bank 1). SPI reads set
 //! bit 7 of the address byte; multi-byte reads auto-increment.
 //!
-//! Here: the driver, its register access and its [`Gyro`] face (read,
-//! restart in steps, configuration read-back). Beside it, one file each:
+//! An [`embedded_hal::spi::SpiDevice`] driver: the data registers polled,
+//! or the FIFO with its timestamps read in bursts (as PX4 and ArduPilot run
+//! the part), every configuration write read back, a restart in
+//! non-blocking steps and a configuration check a little at a time (as
+//! PX4 re-checks its register table), and the datasheet's self-test.
+//!
+//! ```
+//! use embedded_hal::{delay::DelayNs, spi::SpiDevice};
+//! use icm42688p::{Config, Error, Icm42688};
+//!
+//! /// Start the part (±250 °/s at 1 kHz, every write read back) and read
+//! /// its rates, °/s.
+//! fn rates<SPI: SpiDevice>(
+//!     spi: SPI,
+//!     delay: &mut impl DelayNs,
+//! ) -> Result<[f32; 3], Error<SPI::Error>> {
+//!     let mut gyro = Icm42688::new(spi);
+//!     gyro.init(delay, Config::default())?;
+//!     gyro.read_dps()
+//! }
+//! ```
+//!
+//! Here: the driver and its register access. Beside it, one file each:
 //! `regs` (the register map), `config` (what the driver sets, and the
 //! checked writes a restart makes), `filter` (the anti-alias and UI
 //! filters and their delay), `fifo` (packets, timestamps, burst reads)
 //! and `selftest`.
 
+#![cfg_attr(not(test), no_std)]
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
 use embedded_hal::delay::DelayNs;
 use embedded_hal::spi::{Operation, SpiDevice};
-
-use super::{Gyro, ReadFault, Reading, Restart};
 
 mod config;
 mod fifo;
@@ -215,8 +238,23 @@ impl<E> Error<E> {
     }
 }
 
-/// GYRO_CONFIG_STATIC2 at reset (AAF and notch on); see `emu::icm42688`.
+/// GYRO_CONFIG_STATIC2 at reset (AAF and notch on).
 const STATIC2_RESET: u8 = 0xA0;
+
+/// One step of a non-blocking restart ([`Icm42688::restart_step`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Step {
+    /// Call again with `step` once at least `wait_us` have passed.
+    Again {
+        /// The next step.
+        step: u8,
+        /// Microseconds to wait first.
+        wait_us: u32,
+    },
+    /// The chip is configured and producing data again.
+    Done,
+}
 
 /// ICM-42688-P gyro driver.
 pub struct Icm42688<SPI> {
@@ -224,7 +262,7 @@ pub struct Icm42688<SPI> {
     full_scale: FullScale,
     /// The configuration last set (a restart sets it again).
     config: Config,
-    /// Which register group the next [`Gyro::check_config`] reads.
+    /// Which register group the next [`Icm42688::check_config`] reads.
     check_group: u8,
     /// The last FIFO timestamp (16 bits) and its extension.
     stamp: Option<u32>,
@@ -233,8 +271,8 @@ pub struct Icm42688<SPI> {
     step: u16,
     /// RESET_DONE was seen by a read that could not report it.
     reset_seen: bool,
-    /// [`Gyro::delay_us`] for the configuration set (worked out when it is
-    /// set: the loop asks every sample).
+    /// [`Icm42688::polled_delay_us`] for the configuration set (worked
+    /// out when it is set: a sampling loop asks every sample).
     delay_us: u32,
     /// FIFO packets the first burst of a read makes room for (see
     /// [`Self::read_fifo`]), worked out when the configuration is set.
@@ -284,6 +322,18 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     /// The configuration last set.
     pub fn config(&self) -> Config {
         self.config
+    }
+
+    /// WHO_AM_I as the last init read it (0 before one did).
+    pub fn who_am_i(&self) -> u8 {
+        self.who_am_i
+    }
+
+    /// Polled: how long before a data-register read its rate was the true
+    /// rate, µs: the filters' group delay and half a sample period (the
+    /// newest sample is 0 to 1 period old at the read).
+    pub fn polled_delay_us(&self) -> u32 {
+        self.delay_us
     }
 
     /// Soft-reset, check WHO_AM_I, set the signal path, clock, range, rate
@@ -454,41 +504,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     }
 }
 
-impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
-    fn read(&mut self) -> Result<Reading, ReadFault> {
-        let (raw, status) = self.read_sample().map_err(|_| ReadFault::Bus)?;
-        if status & RESET_DONE != 0 {
-            return Err(ReadFault::Reset);
-        }
-        let s = self.full_scale.lsb_per_dps();
-        let mut saturated = 0;
-        for (i, r) in raw.iter().enumerate() {
-            if *r == i16::MAX || *r == i16::MIN {
-                saturated |= 1 << i;
-            }
-        }
-        Ok(Reading {
-            raw,
-            rate_dps: [raw[0] as f32 / s, raw[1] as f32 / s, raw[2] as f32 / s],
-            axes: 0b111,
-            saturated,
-        })
-    }
-
-    fn temperature_c(&mut self) -> Result<f32, ReadFault> {
-        self.read_temperature_c().map_err(|_| ReadFault::Bus)
-    }
-
-    /// Polled: the filters' group delay and half a sample period (the
-    /// newest sample is 0 to 1 period old at the read).
-    fn delay_us(&self) -> u32 {
-        self.delay_us
-    }
-
-    fn identity(&self) -> (crate::link::msg::Part, u16) {
-        (crate::link::msg::Part::Icm42688P, u16::from(self.who_am_i))
-    }
-
+impl<SPI: SpiDevice> Icm42688<SPI> {
     /// The configuration `init` set, as PX4 re-checks its register table a
     /// little at a time: on every call REG_BANK_SEL and the burst
     /// INTF_CONFIG0 .. GYRO_ACCEL_CONFIG0 (0x4C..=0x52, ACCEL_CONFIG0
@@ -496,18 +512,34 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
     /// silently, power, AFSR, clock, UI filter), then one of three groups in
     /// turn: FIFO_CONFIG and FIFO_CONFIG1; INT_CONFIG and the burst
     /// INT_CONFIG1, INT_SOURCE0; bank 1, GYRO_CONFIG_STATIC2..5 in one burst
-    /// and INTF_CONFIG5.
-    fn check_config(&mut self) -> Result<(), ReadFault> {
+    /// and INTF_CONFIG5. A register that differs is
+    /// [`Error::ConfigMismatch`] (the first that differs; `wrote` is what
+    /// the driver set).
+    pub fn check_config(&mut self) -> Result<(), Error<SPI::Error>> {
         let cfg = self.config;
-        let bus = |_| ReadFault::Bus;
         let group = self.check_group;
         self.check_group = (self.check_group + 1) % 3;
-        let same = |ok: bool| if ok { Ok(()) } else { Err(ReadFault::Config) };
-        same(self.read(reg::REG_BANK_SEL).map_err(bus)? == 0)?;
+        // The first register of `got` that is not `want`'s, from `addr` on.
+        let same = |addr: u8, got: &[u8], want: &[u8]| match got
+            .iter()
+            .zip(want)
+            .enumerate()
+            .find(|(_, (g, w))| g != w)
+        {
+            None => Ok(()),
+            Some((k, (&read, &wrote))) => Err(Error::ConfigMismatch {
+                reg: addr + k as u8,
+                wrote,
+                read,
+            }),
+        };
+        same(reg::REG_BANK_SEL, &[self.read(reg::REG_BANK_SEL)?], &[0])?;
         let mut b = [0u8; 7];
-        self.read_burst(reg::INTF_CONFIG0, &mut b).map_err(bus)?;
+        self.read_burst(reg::INTF_CONFIG0, &mut b)?;
         same(
-            b == [
+            reg::INTF_CONFIG0,
+            &b,
+            &[
                 cfg.intf_config0(),
                 cfg.intf_config1(),
                 GYRO_MODE_LN,
@@ -519,65 +551,75 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
         )?;
         match group {
             0 => {
-                same(self.read(reg::FIFO_CONFIG).map_err(bus)? == cfg.fifo_config())?;
-                same(self.read(reg::FIFO_CONFIG1).map_err(bus)? == cfg.fifo_config1())
+                same(
+                    reg::FIFO_CONFIG,
+                    &[self.read(reg::FIFO_CONFIG)?],
+                    &[cfg.fifo_config()],
+                )?;
+                same(
+                    reg::FIFO_CONFIG1,
+                    &[self.read(reg::FIFO_CONFIG1)?],
+                    &[cfg.fifo_config1()],
+                )
             }
             1 => {
                 let [c, c1, s0] = cfg.int1();
-                same(self.read(reg::INT_CONFIG).map_err(bus)? == c)?;
+                same(reg::INT_CONFIG, &[self.read(reg::INT_CONFIG)?], &[c])?;
                 let mut b = [0u8; 2];
-                self.read_burst(reg::INT_CONFIG1, &mut b).map_err(bus)?;
-                same(b == [c1, s0])
+                self.read_burst(reg::INT_CONFIG1, &mut b)?;
+                same(reg::INT_CONFIG1, &b, &[c1, s0])
             }
             _ => {
-                let (st, pin9) = cfg.bank1().ok_or(ReadFault::Config)?;
-                self.write(reg::REG_BANK_SEL, 1).map_err(bus)?;
+                let (st, pin9) = cfg.bank1().ok_or(Error::InvalidArgument)?;
+                self.write(reg::REG_BANK_SEL, 1)?;
                 let mut b = [0u8; 4];
                 let r = self.read_burst(reg::GYRO_CONFIG_STATIC2, &mut b);
                 let p = self.read(reg::INTF_CONFIG5);
-                self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
-                r.map_err(bus)?;
-                same(b == st && p.map_err(bus)? & bits::PIN9_MASK == pin9)
+                self.write(reg::REG_BANK_SEL, 0)?;
+                r?;
+                same(reg::GYRO_CONFIG_STATIC2, &b, &st)?;
+                same(reg::INTF_CONFIG5, &[p? & bits::PIN9_MASK], &[pin9])
             }
         }
     }
 
-    /// `init` in steps of at most six transactions, so that a restart
-    /// never makes a heavy sample: soft reset; 1 ms later identify; then
-    /// the configuration's checked writes ([`Config::setup_write`]), a few a
-    /// step (bank 1 first: pin 9 is CLKIN before RTC_MODE asks for it);
-    /// the gyro started, RESET_DONE cleared; after the 45 ms gyro start-up
-    /// the FIFO flushed (with FIFO sampling), done. The configuration is
+    /// `init` in steps of at most six transactions, for a caller that
+    /// keeps sampling other chips meanwhile and must never make a heavy
+    /// sample: soft reset; 1 ms later identify; then the configuration's
+    /// checked writes ([`Config::setup_write`]), a few a step (bank 1
+    /// first: pin 9 is CLKIN before RTC_MODE asks for it); the gyro
+    /// started, RESET_DONE cleared; after the 45 ms gyro start-up the FIFO
+    /// flushed (with FIFO sampling), done. Call with step 0, then with
+    /// each step returned once its wait has passed. The configuration is
     /// the last one set.
-    fn restart(&mut self, step: u8) -> Result<Restart, ReadFault> {
-        let bus = |_| ReadFault::Bus;
-        let bad = |_| ReadFault::BadResponse;
+    pub fn restart_step(&mut self, step: u8) -> Result<Step, Error<SPI::Error>> {
         let cfg = self.config;
-        let again = |step: u8, wait_us: u32| Ok(Restart::Again { step, wait_us });
+        let again = |step: u8, wait_us: u32| Ok(Step::Again { step, wait_us });
         match step {
             0 => {
-                self.write(reg::DEVICE_CONFIG, SOFT_RESET).map_err(bus)?;
+                self.write(reg::DEVICE_CONFIG, SOFT_RESET)?;
                 again(1, 1000)
             }
             1 => {
-                self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
-                if self.read(reg::WHO_AM_I).map_err(bus)? != WHO_AM_I_VALUE {
-                    return Err(ReadFault::BadResponse);
+                self.write(reg::REG_BANK_SEL, 0)?;
+                let id = self.read(reg::WHO_AM_I)?;
+                if id != WHO_AM_I_VALUE {
+                    return Err(Error::WrongId(id));
                 }
                 again(2, 0)
             }
             RESTART_FLUSH => {
                 if cfg.sampling == Sampling::Fifo {
-                    self.flush_fifo().map_err(bus)?;
+                    self.flush_fifo()?;
                 }
-                Ok(Restart::Done)
+                Ok(Step::Done)
             }
             s => {
                 let mut pos = (s - 2) as usize;
                 let mut cost = 0;
                 let mut bank1 = false;
                 while let Some(w) = cfg.setup_write(pos) {
-                    let (bank, r, v) = w.ok_or(ReadFault::BadResponse)?;
+                    let (bank, r, v) = w.ok_or(Error::InvalidArgument)?;
                     // A write and its read-back, and a bank change (bank 1
                     // is left again before the step ends).
                     let switch = u8::from(bank == 1) != u8::from(bank1);
@@ -587,19 +629,19 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                         break;
                     }
                     if switch {
-                        self.write(reg::REG_BANK_SEL, bank).map_err(bus)?;
+                        self.write(reg::REG_BANK_SEL, bank)?;
                         bank1 = bank == 1;
                     }
                     let w = self.write_checked(r, v);
                     if w.is_err() && bank1 {
-                        self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                        self.write(reg::REG_BANK_SEL, 0)?;
                     }
-                    w.map_err(bad)?;
+                    w?;
                     cost += 2 + u8::from(switch);
                     pos += 1;
                 }
                 if bank1 {
-                    self.write(reg::REG_BANK_SEL, 0).map_err(bus)?;
+                    self.write(reg::REG_BANK_SEL, 0)?;
                 }
                 if cfg.setup_write(pos).is_some() {
                     return again(2 + pos as u8, 0);
@@ -609,7 +651,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
                 self.full_scale = cfg.full_scale;
                 self.stamp = None;
                 self.step = 0;
-                self.read(reg::INT_STATUS).map_err(bus)?;
+                self.read(reg::INT_STATUS)?;
                 again(RESTART_FLUSH, 45_000)
             }
         }

@@ -173,11 +173,11 @@ fn burst_read_scales_big_endian_counts() {
     let mut spi = Mock::new(&s);
     let mut g = Icm42688::new(spi.clone());
     g.full_scale = FullScale::Dps250;
-    let r = Gyro::read(&mut g).unwrap();
-    assert_eq!(r.raw, [131, -131, 32767]);
-    assert_eq!(r.rate_dps[0], 1.0);
-    assert_eq!(r.rate_dps[1], -1.0);
-    assert_eq!(r.saturated, 0b100);
+    let (raw, status) = g.read_sample().unwrap();
+    assert_eq!(raw, [131, -131, 32767]);
+    assert_eq!(status, 0x08);
+    let s = g.full_scale().lsb_per_dps();
+    assert_eq!((raw[0] as f32 / s, raw[1] as f32 / s), (1.0, -1.0));
     spi.done();
 }
 
@@ -212,16 +212,16 @@ fn a_silent_reset_is_reported_and_a_restart_reconfigures() {
     s.extend(rd(0x2D, &[0x10]));
     let mut spi = Mock::new(&s);
     let mut g = Icm42688::new(spi.clone());
-    assert_eq!(Gyro::read(&mut g), Err(ReadFault::Reset));
+    assert_eq!(g.read_sample().unwrap().1 & RESET_DONE, RESET_DONE);
     let mut step = 0;
     let mut waits = Vec::new();
     loop {
-        match g.restart(step) {
-            Ok(Restart::Again { step: s, wait_us }) => {
+        match g.restart_step(step) {
+            Ok(Step::Again { step: s, wait_us }) => {
                 waits.push(wait_us);
                 step = s;
             }
-            Ok(Restart::Done) => break,
+            Ok(Step::Done) => break,
             Err(e) => panic!("{e:?}"),
         }
     }
@@ -268,9 +268,31 @@ fn config_check_reads_the_core_every_time_and_three_groups_in_turn() {
     for _ in 0..3 {
         assert_eq!(g.check_config(), Ok(()));
     }
-    for _ in 0..3 {
-        assert_eq!(g.check_config(), Err(ReadFault::Config));
-    }
+    // Each names the first register that differs.
+    assert_eq!(
+        g.check_config(),
+        Err(Error::ConfigMismatch {
+            reg: 0x4D,
+            wrote: 0x51,
+            read: 0x91
+        })
+    );
+    assert_eq!(
+        g.check_config(),
+        Err(Error::ConfigMismatch {
+            reg: 0x14,
+            wrote: 0x00,
+            read: 0x03
+        })
+    );
+    assert_eq!(
+        g.check_config(),
+        Err(Error::ConfigMismatch {
+            reg: 0x0C,
+            wrote: AAF_258[1],
+            read: 13
+        })
+    );
     spi.done();
 }
 
