@@ -1,5 +1,5 @@
 //! The QEMU demo's world and its start-up, in one place: `qemu-demo` runs
-//! it on the Cortex-M4 under RTIC, `host-tests`' `demo-replay` runs the
+//! it on the Cortex-M4 under RTIC, `evaluations`' `demo-replay` runs the
 //! same world through the same schedule on the host, and `cargo xtask
 //! test` holds the two runs' fused rates to one CRC-32 (the library's code
 //! gives the same bits on both targets).

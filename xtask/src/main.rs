@@ -214,7 +214,7 @@ fn replay_digest(stress: bool) -> Option<String> {
         "--profile",
         "host",
         "-p",
-        "host-tests",
+        "evaluations",
         "--bin",
         "demo-replay",
     ]);

@@ -16,7 +16,7 @@ KEEP = 120_000
 with tempfile.TemporaryDirectory() as d:
     subprocess.run(
         [
-            "cargo", "run", "-q", "--profile", "host", "-p", "host-tests", "--bin", "pointing-eval",
+            "cargo", "run", "-q", "--profile", "host", "-p", "evaluations", "--bin", "pointing-eval",
             "--", "--seconds", "4", "--realisations", "0", "--write", d,
         ],
         check=True,

@@ -6,7 +6,7 @@
 //! and the CRC-32 of the rates they carried, as the firmware logs them;
 //! `cargo xtask test` requires the two to be equal, bit for bit.
 //!
-//! `cargo run --profile host -p host-tests --bin demo-replay [-- --stress]`
+//! `cargo run --profile host -p evaluations --bin demo-replay [-- --stress]`
 //! (`--stress`: a status frame every sample, as the demo's stress run).
 
 use gyro_array::app::{self as schedule, StatusFacts, StatusView};

@@ -15,7 +15,7 @@
 //! not a 95 % statement: two independent 95 % intervals hold together on
 //! 90.25 % of runs, fewer where (as here) the two estimates correlate.
 //!
-//! `cargo run -p host-tests --profile host --bin fit-eval -- --runs 50`
+//! `cargo run -p evaluations --profile host --bin fit-eval -- --runs 50`
 
 use clap::Parser;
 use gyro_tool::dev::{curve, phase_from_rate, Grid, Kind};

@@ -7,7 +7,7 @@
 //! over the others (`own`: what the board learns from all four, compared
 //! like with like with the fixed weights, which come from all four too).
 //!
-//! `cargo run -p host-tests --profile host --bin real-eval -- [--dir D] [--no-align]`
+//! `cargo run -p evaluations --profile host --bin real-eval -- [--dir D] [--no-align]`
 //!
 //! `D` holds `path_N/IMU_k.csv.gz` as the quadrotor recordings of Hurwitz
 //! and Klein do (CC BY 4.0, `host-tests/vectors/real/README.md`): every

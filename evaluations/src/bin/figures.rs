@@ -1,6 +1,6 @@
 //! The evaluation figures, drawn from the real code paths into SVG.
 //!
-//! `cargo run -p host-tests --profile host --bin figures -- [--out DIR] [--seed S] [FIGURE...]`
+//! `cargo run -p evaluations --profile host --bin figures -- [--out DIR] [--seed S] [FIGURE...]`
 //!
 //! - `allan`: Allan deviation of four emulated ICM-42688-P chips, still,
 //!   200 s at 1 kHz, and of their fused rate (the shipped adaptive method).

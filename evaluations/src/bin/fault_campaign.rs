@@ -2,7 +2,7 @@
 //! drivers on the emulated SPI bus, start-up, the pipeline with recovery and
 //! fusion, for many runs with random fault schedules.
 //!
-//! `cargo run -p host-tests --profile host --bin fault-campaign -- [--runs N] [--seed S] [--samples N]`
+//! `cargo run -p evaluations --profile host --bin fault-campaign -- [--runs N] [--seed S] [--samples N]`
 //!
 //! Each run draws a rate profile (constant, or a sway of up to 20 °/s at
 //! 0.2–5 Hz, running from power-up), one or two faulty chips (two at once

@@ -4,7 +4,7 @@
 //! points of random-walk phase in one run, three rounds. Both give each
 //! factor the same sum, bit for bit (checked here too).
 //!
-//! `cargo run -p host-tests --profile host --bin every-tau-speed`
+//! `cargo run -p evaluations --profile host --bin every-tau-speed`
 
 use std::time::Instant;
 

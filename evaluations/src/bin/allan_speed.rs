@@ -2,7 +2,7 @@
 //! (f64 batch path, `gyro_array::algo::allan`) against allantools on the
 //! same data, in one run; prints both times and the ratio.
 //!
-//! `cargo run -p host-tests --profile host --bin allan-speed`
+//! `cargo run -p evaluations --profile host --bin allan-speed`
 //!
 //! allantools is installed on first use into `target/allan-venv` (PyPI);
 //! this benchmark is the only thing that needs Python, and CI does not run

@@ -1,7 +1,7 @@
 //! Reproduce the experiments of seeds 002 and 003 on synthetic FOG-like
 //! data (`src/algo/qualify`).
 //!
-//! `cargo run -p host-tests --profile host --bin qualify-eval -- [002|003] [SEED]`
+//! `cargo run -p evaluations --profile host --bin qualify-eval -- [002|003] [SEED]`
 //!
 //! 002: 2048 samples at 1 s of long-memory noise (fGn, H = 0.8, by
 //! Hosking's method, scaled to the paper's std 14.6) plus a little white

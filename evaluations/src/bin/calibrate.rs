@@ -3,7 +3,7 @@
 //! real drivers and pipeline, the record they give, and its errors
 //! against the emulator's true constants.
 //!
-//! `cargo run -p host-tests --profile host --bin calibrate -- [--hold N] [--seed S] [--out FILE]`
+//! `cargo run -p evaluations --profile host --bin calibrate -- [--hold N] [--seed S] [--out FILE]`
 //!
 //! Exits 1 unless every chip's scale and misalignment are recovered to
 //! 0.05 % and its bias to 0.01 °/s.

@@ -12,7 +12,7 @@
 //! a phase-dependent size). The last lines compare the board's setting
 //! with the better of PX4's and ArduPilot's, per tone.
 //!
-//! `cargo run --profile host -p host-tests --bin timing-eval -- [--fusion |
+//! `cargo run --profile host -p evaluations --bin timing-eval -- [--fusion |
 //! --power-up | --search MS] [--seconds S] [--seed N] [--clocks N]`
 //! (`--fusion`: the fusion table through the board's own path and the
 //! power-up sweep; `--search MS`: every setting within MS to the wire,

@@ -1,6 +1,6 @@
 //! Fusion evaluation harness (seed 004 and ours).
 //!
-//! `cargo run -p host-tests --profile host --bin fusion-eval -- [SEED]`
+//! `cargo run -p evaluations --profile host --bin fusion-eval -- [SEED]`
 //! (a SEED that is not an unsigned integer is an error, not the default)
 //!
 //! Simulates a 4-gyro array with the emulated ICM-42688-P noise model

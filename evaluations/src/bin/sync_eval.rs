@@ -8,7 +8,7 @@
 //! and checks the targets: ≤ 20 µs 1σ after the lock, a stopped pulse
 //! called lost within three periods.
 //!
-//! `cargo run --profile host -p host-tests --bin sync-eval [-- SECONDS [SEEDS]]`
+//! `cargo run --profile host -p evaluations --bin sync-eval [-- SECONDS [SEEDS]]`
 
 use gyro_array::emu::controller::{run, CtrlParams};
 use gyro_array::link::sync::LOST_PERIODS;

@@ -2,7 +2,7 @@
 //! confidence intervals (EDF for the noise type read from the local
 //! slope) and the IEEE Std 952 noise terms with their units.
 //!
-//! `cargo run -p host-tests --profile host --bin allan-report -- FILE TAU0_S`
+//! `cargo run -p evaluations --profile host --bin allan-report -- FILE TAU0_S`
 //! or `-- --demo`
 //!
 //! FILE holds one rate sample (°/s) per line; TAU0_S, the sample period in

@@ -1,7 +1,7 @@
 //! E-DAVAR evaluation over scenario classes and the paper's
 //! experiment (seed 000, SEEDS.md "Experiment").
 //!
-//! `cargo run -p host-tests --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P] [--sweep [--hops PATH]]`
+//! `cargo run -p evaluations --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P] [--sweep [--hops PATH]]`
 //!
 //! Every class is run over N seeds (20 by default). The error is the RMS of
 //! σ²(τ0) against the true local Allan variance at τ0, over the times every
