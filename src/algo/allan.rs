@@ -1,4 +1,4 @@
-//! Overlapping Allan variance of rate data (SEEDS.md §0.1, IEEE Std 952
+//! Overlapping Allan variance of rate data (IEEE Std 952
 //! Annex C, NIST SP 1065 §5.2.4), its confidence intervals, and the IEEE 952
 //! noise terms read from the curve.
 //!

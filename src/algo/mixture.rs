@@ -1,4 +1,6 @@
-//! Seed 001's fusion of local filters (SEEDS.md "Seed 001"), every
+//! Seed 001's fusion of local filters ("A new navigation information
+//! fusion method based on entropy weights", SINS/USBL/DVL: the copy at
+//! hand has no authors or journal), every
 //! ambiguity a knob, next to the references a reviewer expects:
 //!
 //! - the paper's entropy-weighted Gaussian mixture: each local estimate's

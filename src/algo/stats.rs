@@ -231,7 +231,8 @@ mod tests {
 
     #[test]
     fn grubbs_values_match_seeds_digest() {
-        // SEEDS.md §0.5 analyst-checked values.
+        // Grubbs's critical values as his tables print them (Grubbs,
+        // Technometrics 11(1), 1969; NIST/SEMATECH e-Handbook 1.3.5.17).
         let cases = [
             (3, 0.05, false, 1.1531),
             (3, 0.05, true, 1.1543),

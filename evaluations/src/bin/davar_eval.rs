@@ -1,5 +1,5 @@
 //! E-DAVAR evaluation over scenario classes and the paper's
-//! experiment (seed 000, SEEDS.md "Experiment").
+//! experiment (seed 000: Tan, Wang and Zhu, 2017, its simulation).
 //!
 //! `cargo run -p evaluations --profile host --bin davar-eval -- [--seeds N] [--first-seed S] [--csv PATH] [--other-lambdas] [--lsb S] [--only NAME] [--p-fa P] [--sweep [--hops PATH]]`
 //!

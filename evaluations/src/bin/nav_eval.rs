@@ -1,4 +1,5 @@
-//! `nav-eval`: seed 001's experiment (SEEDS.md "Seed 001") on the host. A
+//! `nav-eval`: seed 001's experiment ("A new navigation information
+//! fusion method based on entropy weights") on the host. A
 //! linear 21-state SINS/USBL/DVL error model (`nav_eval/model.rs`: the
 //! paper's sea motion, initial errors, IMU, USBL and DVL errors, every
 //! parameter it left out named there) is simulated for `--epochs` 1 s

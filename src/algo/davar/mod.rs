@@ -1,6 +1,8 @@
-//! Dynamic Allan variance (DAVAR, Galleani–Tavella, SEEDS.md §0.2) and its
-//! adaptive window (E-DAVAR, seed 000), streaming in fixed memory with a
-//! bounded cost for every single sample.
+//! Dynamic Allan variance (DAVAR: Galleani and Tavella, 2003; Galleani,
+//! 2009) and its adaptive window (E-DAVAR: Tan, Wang and Zhu, "Entropy of
+//! information based dynamic Allan variance algorithm with adaptive
+//! window length", Electronics Optics & Control 24(9), 2017), streaming in
+//! fixed memory with a bounded cost for every single sample.
 //!
 //! # Time grid and cost
 //! The window moves in whole frames of [`SEG`] = 32 samples: every 32
@@ -47,7 +49,7 @@
 //!   λ2 = 1024 a worst sample of about 2 000 instructions, against some
 //!   6 900 with the hop's work on one sample).
 //!
-//! # Reading of the paper (SEEDS.md seed 000)
+//! # Reading of the paper (Tan, Wang and Zhu, 2017)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
 //!   window around t (Fig. 2 reacts ~300 s early, which only a centred
 //!   window does). Streaming, this means a latency of about λ2/2.

@@ -1,6 +1,8 @@
 //! Per-sample fusion of N gyros into one virtual gyro (one axis at a time).
 //!
-//! Methods (SEEDS.md "Seed 004"):
+//! Methods (seed 004: Zhou, Yao and Shen, "An information fusion
+//! algorithm of gyro array based on support degree and memory weighting",
+//! Electronics Optics & Control 26(12), 2019):
 //! - [`Method::Mean`]: the baseline.
 //! - [`Method::Zhang`]: support `exp(−(yi−yj)²)` (Zhang 2012, eq. 2), eq. 9.
 //! - [`Method::Seed`]: normalised distance and log support (eq. 3–9),

@@ -1,5 +1,5 @@
 //! The fusion methods and their settings: every ambiguity of the seed
-//! (SEEDS.md "Seed 004") is a knob here.
+//! (Zhou, Yao and Shen, 2019) is a knob here.
 
 /// Denominator of the normalised distance, eq. 4 (SEEDS ambiguity 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,6 +1,7 @@
 //! The support-degree methods: Zhang's `exp(−(yi−yj)²)` (Zhang 2012,
 //! eq. 2 and 9) and the seed's normalised distance with log support,
-//! Grubbs rejection and limited memory (SEEDS.md "Seed 004", eq. 3–16).
+//! Grubbs rejection and limited memory (Zhou, Yao and Shen, 2019, eq.
+//! 3–16).
 
 use super::median::median;
 use super::{

@@ -1,4 +1,4 @@
-//! The SINS/USBL/DVL error model of seed 001 (SEEDS.md eq. 1–6), linear,
+//! The SINS/USBL/DVL error model of seed 001 (the paper's eq. 1–6), linear,
 //! 1 s epochs. State (21): δv ENU (m/s), φ ENU (rad), δp ENU (m),
 //! ∇ body (m/s²), ε body (rad/s), DVL Markov velocity error body (m/s),
 //! DVL scale error (–). The SINS filter uses the first 15; the SINS/DVL
