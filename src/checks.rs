@@ -11,9 +11,9 @@ use crate::emu::with_bus;
 
 use crate::algo::fusion::{
     AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
-    SeedConfig,
+    SupportConfig,
 };
-use crate::algo::mounting::CalRecord;
+use crate::algo::static_cal::CalRecord;
 use crate::drivers::adxrs453::{self, Adxrs453, OnAxis};
 use crate::drivers::icm42688::{self, Config, Icm42688};
 use crate::drivers::Gyro;
@@ -215,7 +215,7 @@ pub fn qualify_digest() -> u64 {
 pub fn methods() -> [(&'static str, Method); 8] {
     let grubbs = Some(GrubbsConfig::default());
     let seed = |clamp, g, m| {
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             denominator: Denominator::MSquaredMinus1,
             clamp_negative: clamp,
             grubbs: g,
@@ -235,14 +235,14 @@ pub fn methods() -> [(&'static str, Method); 8] {
         ),
         (
             "seed-scaled",
-            Method::Seed(SeedConfig {
+            Method::SupportDegree(SupportConfig {
                 clamp_negative: true,
                 grubbs,
                 normaliser: Normaliser::Running {
                     k: SCALED_K,
                     alpha: 1.0 / 64.0,
                 },
-                ..SeedConfig::SUPPORT
+                ..SupportConfig::SUPPORT
             }),
         ),
         ("adaptive", Method::Adaptive(AdaptiveConfig::default())),

@@ -30,7 +30,7 @@ use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage, PostcardValue};
 use serde::{Deserialize, Serialize};
 
-use crate::algo::mounting::{self, CalError, CalRecord};
+use crate::algo::static_cal::{self, CalError, CalRecord};
 use crate::link::msg::{Settings, StoreState};
 
 /// The settings item's key.
@@ -43,7 +43,7 @@ pub const FORMAT: u16 = 1;
 
 /// Scratch for one item: its key and the largest value (a calibration
 /// record), rounded up.
-const BUF: usize = (1 + mounting::MAX_LEN).next_multiple_of(16);
+const BUF: usize = (1 + static_cal::MAX_LEN).next_multiple_of(16);
 
 #[derive(Serialize, Deserialize)]
 struct SettingsItem {
@@ -188,7 +188,7 @@ impl<F: MultiwriteNorFlash> Store<F> {
             _ => StoreError::Flash,
         };
         if let Some(rec) = calibration {
-            let mut bytes = [0u8; mounting::MAX_LEN];
+            let mut bytes = [0u8; static_cal::MAX_LEN];
             let n = rec.encode(&mut bytes).map_err(|_| StoreError::Encode)?;
             let same = matches!(
                 block_on(self.map.fetch_item::<&[u8]>(&mut self.buf, &CALIBRATION_KEY)),

@@ -80,7 +80,7 @@ pub mod calibration {
     //! - b(T) = b₂₅ + k·(T − 25): a least-squares line through the three
     //!   still runs against the temperature the drivers read.
 
-    use gyro_array::algo::mounting::{inverse3, CalRecord, ChipCal};
+    use gyro_array::algo::static_cal::{inverse3, CalRecord, ChipCal};
     use gyro_array::checks::run_array_from_seq;
     use gyro_array::emu::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
 

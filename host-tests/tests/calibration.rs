@@ -3,7 +3,7 @@
 //! whose chips are mounted every which way fuses as well as an aligned one
 //! once calibrated, through a temperature ramp.
 
-use gyro_array::algo::mounting::{CalError, CalRecord, MAX_LEN};
+use gyro_array::algo::static_cal::{CalError, CalRecord, MAX_LEN};
 use gyro_array::checks::run_array_from_seq;
 use gyro_array::emu::{mounted_board, Fault, RateProfile, TempProfile};
 use host_tests::calibration::{calibrate, errors};

@@ -22,7 +22,7 @@
 use rtic_core::prelude::*;
 use rtic_core::Mutex;
 
-use crate::algo::mounting::CalRecord;
+use crate::algo::static_cal::CalRecord;
 use crate::drivers::Gyro;
 use crate::link::msg::Reject;
 use crate::link::port::{ChipTime, NoiseSnapshot, Port, StoreRequest};

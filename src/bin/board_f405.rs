@@ -71,8 +71,8 @@ use stm32f4xx_hal::{
 };
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-use gyro_array::algo::mounting::{self, CalRecord};
 use gyro_array::algo::qualify::QualifyError;
+use gyro_array::algo::static_cal::{self, CalRecord};
 use gyro_array::app::{self as schedule, SampleClock};
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
@@ -154,7 +154,7 @@ fn calib_bytes() -> &'static [u8] {
     }
     // SAFETY: CALIB is 128 KiB of memory-mapped flash that nothing writes
     // while the firmware runs; MAX_LEN is far less.
-    unsafe { core::slice::from_raw_parts(&raw const _calib_start, mounting::MAX_LEN) }
+    unsafe { core::slice::from_raw_parts(&raw const _calib_start, static_cal::MAX_LEN) }
 }
 
 /// The settings store's sectors (`STORE` in memory.x), as offsets into

@@ -22,8 +22,8 @@ use super::{
 };
 use crate::algo::davar::DavarConfig;
 use crate::algo::fusion::{AdaptiveConfig, ConfigError, Method};
-use crate::algo::mounting::{CalError, CalRecord};
 use crate::algo::qualify::QualifyError;
+use crate::algo::static_cal::{CalError, CalRecord};
 use crate::drivers::adxrs453::OnAxis;
 use crate::drivers::icm42688::{ClockInput, Config};
 use crate::drivers::Gyro;

@@ -29,7 +29,7 @@ pub mod tracker;
 use crate::algo::calib::{CalConfig, RelCal};
 use crate::algo::fusion::{AxisState, ConfigError, FuseError, Fused, Fusion, Method};
 use crate::algo::math::at_least;
-use crate::algo::mounting::{CalError, CalRecord, ChipCal};
+use crate::algo::static_cal::{CalError, CalRecord, ChipCal};
 use crate::drivers::{Gyro, ReadFault, Reading};
 pub use health::{flag, GyroCounters, Health, Recovery};
 

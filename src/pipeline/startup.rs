@@ -34,7 +34,7 @@ use embedded_hal::spi::SpiDevice;
 
 use super::Pipeline;
 use crate::algo::fusion::median;
-use crate::algo::mounting::{inverse3, mul3, ChipCal};
+use crate::algo::static_cal::{inverse3, mul3, ChipCal};
 use crate::drivers::adxrs453::OnAxis;
 use crate::drivers::icm42688::{Config, Error, Icm42688, SavedConfig, SelfTest};
 

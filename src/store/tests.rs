@@ -1,5 +1,5 @@
 use super::*;
-use crate::algo::mounting::ChipCal;
+use crate::algo::static_cal::ChipCal;
 use crate::emu::flash::NorSim;
 use crate::link::msg::{Compensation, FusionMethod, Mode};
 use heapless::Vec;

@@ -53,7 +53,7 @@ fn main() -> ExitCode {
         if ok { "MET" } else { "NOT MET" }
     );
     if let Some(path) = args.out {
-        let mut buf = [0u8; gyro_array::algo::mounting::MAX_LEN];
+        let mut buf = [0u8; gyro_array::algo::static_cal::MAX_LEN];
         let n = match rec.encode(&mut buf) {
             Ok(n) => n,
             Err(e) => {

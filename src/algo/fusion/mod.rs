@@ -5,7 +5,7 @@
 //! Electronics Optics & Control 26(12), 2019):
 //! - [`Method::Mean`]: the baseline.
 //! - [`Method::Zhang`]: support `exp(−(yi−yj)²)` (Zhang 2012, eq. 2), eq. 9.
-//! - [`Method::Seed`]: normalised distance and log support (eq. 3–9),
+//! - [`Method::SupportDegree`]: normalised distance and log support (eq. 3–9),
 //!   optionally Grubbs rejection of abnormal supports (eq. 10–12) and
 //!   limited-memory weighting (eq. 13–16). Every ambiguity is a knob.
 //! - [`Method::Adaptive`] (ours, the default): per-gyro noise variance from
@@ -412,7 +412,7 @@ impl<const N: usize> Fusion<N> {
         }
         let mut grubbs_t = [0.0f32; MAX_GYROS + 1];
         match method {
-            Method::Seed(c) => {
+            Method::SupportDegree(c) => {
                 if let Some(g) = c.grubbs {
                     if !(g.alpha > 0.0 && g.alpha < 1.0) {
                         return Err(ConfigError::Alpha);
@@ -451,7 +451,7 @@ impl<const N: usize> Fusion<N> {
             Method::Mean | Method::Zhang => {}
         }
         let mut inv_t2 = [0.0f32; MAX_MEMORY];
-        if let Method::Seed(SeedConfig {
+        if let Method::SupportDegree(SupportConfig {
             memory: Some(mc), ..
         }) = method
         {
@@ -508,7 +508,7 @@ impl<const N: usize> Fusion<N> {
         let res = match &self.method {
             Method::Mean => (valid != 0).then(|| mean_of(y, valid)),
             Method::Zhang => self.zhang(y, valid, &mut out),
-            Method::Seed(c) => self.seed(c, st, y, valid, &mut out),
+            Method::SupportDegree(c) => self.seed(c, st, y, valid, &mut out),
             Method::Adaptive(c) => {
                 return if adaptive(c, st, y, valid, &mut out) {
                     Ok(out)

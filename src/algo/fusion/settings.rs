@@ -93,10 +93,11 @@ pub enum Normaliser {
     },
 }
 
-/// The seed's method and its readings.
+/// Seed 004's support-degree method (Zhou, Yao and Shen, 2019) and its
+/// readings of the paper.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SeedConfig {
+pub struct SupportConfig {
     /// Eq. 4 denominator.
     pub denominator: Denominator,
     /// Clamp total supports `r_i` at 0. Eq. 5 gives negative supports for
@@ -111,7 +112,7 @@ pub struct SeedConfig {
     pub normaliser: Normaliser,
 }
 
-impl SeedConfig {
+impl SupportConfig {
     /// Eq. 3–9 only, literal.
     pub const SUPPORT: Self = Self {
         denominator: Denominator::MSquaredMinus1,
@@ -164,8 +165,9 @@ pub enum Method {
     Mean,
     /// Support `exp(−(yi − yj)²)` with y in °/s.
     Zhang,
-    /// The seed's support method (eq. 3–16 as configured).
-    Seed(SeedConfig),
+    /// Support degree with Grubbs rejection and memory weighting (seed
+    /// 004, eq. 3–16 as configured).
+    SupportDegree(SupportConfig),
     /// Inverse-variance weighting with online noise estimates.
     Adaptive(AdaptiveConfig),
 }

@@ -6,7 +6,7 @@
 use super::median::median;
 use super::{
     each_pair, full, has, mean_of, weighted, AxisState, Denominator, Fused, Fusion, MemoryConfig,
-    Normaliser, SeedConfig, StdKind, MAX_GYROS, MAX_MEMORY,
+    Normaliser, StdKind, SupportConfig, MAX_GYROS, MAX_MEMORY,
 };
 use crate::algo::math::{expf, lnf};
 
@@ -33,7 +33,7 @@ impl<const N: usize> Fusion<N> {
 
     pub(super) fn seed(
         &self,
-        c: &SeedConfig,
+        c: &SupportConfig,
         st: &mut AxisState<N>,
         y: &[f32; N],
         m: u8,
@@ -51,7 +51,7 @@ impl<const N: usize> Fusion<N> {
     #[inline(always)]
     fn seed_masked(
         &self,
-        c: &SeedConfig,
+        c: &SupportConfig,
         st: &mut AxisState<N>,
         y: &[f32; N],
         m: u8,

@@ -7,7 +7,7 @@ use crate::emu::Rng;
 
 /// Every method in the reading we ship (supports clamped at 0).
 fn all_methods() -> [Method; 7] {
-    let full = SeedConfig {
+    let full = SupportConfig {
         denominator: Denominator::MSquaredMinus1,
         clamp_negative: true,
         grubbs: Some(GrubbsConfig::default()),
@@ -17,24 +17,24 @@ fn all_methods() -> [Method; 7] {
     [
         Method::Mean,
         Method::Zhang,
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             clamp_negative: true,
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         }),
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             clamp_negative: true,
             grubbs: Some(GrubbsConfig::default()),
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         }),
-        Method::Seed(full),
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(full),
+        Method::SupportDegree(SupportConfig {
             clamp_negative: true,
             grubbs: Some(GrubbsConfig::default()),
             normaliser: Normaliser::Running {
                 k: 11.0,
                 alpha: 1.0 / 64.0,
             },
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         }),
         Method::Adaptive(AdaptiveConfig::default()),
     ]
@@ -108,9 +108,9 @@ fn zero_weight_sum_falls_back_to_mean() {
     assert!(r.fallback);
     assert_eq!(r.rate_dps, 20.0);
     // The literal seed method: three values with negative total support.
-    let f = Fusion::<3>::new(Method::Seed(SeedConfig {
+    let f = Fusion::<3>::new(Method::SupportDegree(SupportConfig {
         clamp_negative: true,
-        ..SeedConfig::SUPPORT
+        ..SupportConfig::SUPPORT
     }))
     .unwrap();
     let r = f.fuse(&mut st, &[0.0, 0.0, 100.0], 0b111).unwrap();
@@ -147,14 +147,14 @@ fn all_disagreeing_gyros_still_give_a_bounded_answer() {
 /// is why the shipped reading clamps supports at 0.
 #[test]
 fn literal_seed_weights_can_leave_the_input_range() {
-    let f = Fusion::<4>::new(Method::Seed(SeedConfig::SUPPORT)).unwrap();
+    let f = Fusion::<4>::new(Method::SupportDegree(SupportConfig::SUPPORT)).unwrap();
     let mut st = AxisState::default();
     let r = f.fuse(&mut st, &[0.0, 0.01, -0.01, 10.0], 0b1111).unwrap();
     assert!(r.weights[3] < 0.0, "{:?}", r.weights);
     assert!(r.rate_dps < -0.01, "{}", r.rate_dps);
-    let f = Fusion::<4>::new(Method::Seed(SeedConfig {
+    let f = Fusion::<4>::new(Method::SupportDegree(SupportConfig {
         clamp_negative: true,
-        ..SeedConfig::SUPPORT
+        ..SupportConfig::SUPPORT
     }))
     .unwrap();
     let r = f.fuse(&mut st, &[0.0, 0.01, -0.01, 10.0], 0b1111).unwrap();
@@ -165,12 +165,12 @@ fn literal_seed_weights_can_leave_the_input_range() {
 #[test]
 fn bad_configurations_are_typed_errors() {
     let g = |alpha| {
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             grubbs: Some(GrubbsConfig {
                 alpha,
                 ..Default::default()
             }),
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         })
     };
     assert_eq!(Fusion::<4>::new(g(0.0)).err(), Some(ConfigError::Alpha));
@@ -179,12 +179,12 @@ fn bad_configurations_are_typed_errors() {
         Some(ConfigError::Alpha)
     );
     let mem = |len| {
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             memory: Some(MemoryConfig {
                 len,
                 ..Default::default()
             }),
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         })
     };
     assert_eq!(Fusion::<4>::new(mem(0)).err(), Some(ConfigError::MemoryLen));
@@ -205,9 +205,9 @@ fn bad_configurations_are_typed_errors() {
 
 #[test]
 fn grubbs_table_covers_every_array_size() {
-    let f = Fusion::<8>::new(Method::Seed(SeedConfig {
+    let f = Fusion::<8>::new(Method::SupportDegree(SupportConfig {
         grubbs: Some(GrubbsConfig::default()),
-        ..SeedConfig::SUPPORT
+        ..SupportConfig::SUPPORT
     }))
     .unwrap();
     assert_eq!(f.grubbs_critical(2), 0.0);
@@ -331,9 +331,9 @@ fn adaptive_learns_noise_and_rejects_outliers_and_frozen_outputs() {
 #[test]
 fn running_normaliser_settings_are_checked() {
     let m = |k, alpha| {
-        Method::Seed(SeedConfig {
+        Method::SupportDegree(SupportConfig {
             normaliser: Normaliser::Running { k, alpha },
-            ..SeedConfig::SUPPORT
+            ..SupportConfig::SUPPORT
         })
     };
     assert!(Fusion::<4>::new(m(11.0, 0.01)).is_ok());
@@ -832,7 +832,11 @@ fn every_methods_probe_cancels_motion() {
         // through a small ε: the rounding of a 100 °/s value moves them by
         // 0.1–0.3 % (measured; the others by 7e-6).
         let tol = match m {
-            Method::Seed(c) if c.memory.is_some() || c.normaliser != Normaliser::Instant => 5e-3,
+            Method::SupportDegree(c)
+                if c.memory.is_some() || c.normaliser != Normaliser::Instant =>
+            {
+                5e-3
+            }
             _ => 1e-4,
         };
         for k in 0..20_000u32 {

@@ -116,7 +116,7 @@ pub(super) fn bench_fusion(t: &Ticks, ipt: f32, rng: &mut Rng) -> bool {
     // The static calibration in front (`Pipeline::board_rates`: each chip's
     // 3×3 matrix, bias and bias-temperature slope), timed alone and then
     // with the rest: calibration, online calibration and fusion.
-    use gyro_array::algo::mounting::ChipCal;
+    use gyro_array::algo::static_cal::ChipCal;
     let cal_of = |i: usize| ChipCal {
         m: [
             [1.01, 0.002 * i as f32, -0.001],
