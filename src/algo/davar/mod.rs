@@ -74,7 +74,6 @@ mod sums;
 
 pub use settings::*;
 
-use place::stale;
 use segment::ln_fast;
 
 use crate::algo::allan::stream::SAMPLE_MAX;
@@ -141,6 +140,15 @@ const ROW_SAMPLES: usize = 16;
 fn cell_group(span: usize, min_frames: usize) -> usize {
     let coarse = span.div_ceil(ROW_SAMPLES).max(1);
     (min_frames / 6).clamp(1, coarse).max(span.div_ceil(CELLS))
+}
+
+/// The mark of a block that no segmentation has put a change at since it
+/// completed: a stamp half the u16 range from its own frame number. A
+/// segmentation's stamp is its first frame, within FRAMES of any block it
+/// reads (< 2¹⁵ by construction), so no recent stamp can equal it until
+/// the block's slot is reused and made stale again.
+const fn stale(block: u64) -> u16 {
+    (block as u16).wrapping_add(0x8000)
 }
 
 /// Segmented placement: samples after the hop at which the last span's

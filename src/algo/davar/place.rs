@@ -397,12 +397,3 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
 pub(super) fn hinge_half(min_frames: usize, span: usize) -> usize {
     (min_frames / 2).max(span / 4)
 }
-
-/// The mark of a block that no segmentation has put a change at since it
-/// completed: a stamp half the u16 range from its own frame number. A
-/// segmentation's stamp is its first frame, within FRAMES of any block it
-/// reads (< 2¹⁵ by construction), so no recent stamp can equal it until
-/// the block's slot is reused and made stale again.
-pub(super) const fn stale(block: u64) -> u16 {
-    (block as u16).wrapping_add(0x8000)
-}

@@ -1,8 +1,8 @@
 //! Publication: the placed window's sums, spread over three samples, and
 //! the estimate a reader sees.
 
-use super::sums::u128_to_f32;
 use super::{Davar, Published, SEG};
+use crate::algo::math::u128_to_f32;
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     Davar<CAP, FRAMES, T, STFT>

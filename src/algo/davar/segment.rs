@@ -3,8 +3,8 @@
 //! energies under a scaled-χ²_ν model, with ν and the tails learnt from
 //! the data.
 
-use super::sums::i64_to_f32;
 use super::{Davar, EntropyKind, Placement, Threshold, BINS, CELLS, QUAD_FRAMES, RHO_FRAMES};
+use crate::algo::math::i64_to_f32;
 use crate::algo::stats::chi2_quantile;
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>

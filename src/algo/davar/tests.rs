@@ -1,8 +1,9 @@
 use super::refine::{hinge_over_step, line_over_step, slope_z2};
 use super::segment::ln_floored;
-use super::sums::{carry_free, i64_to_f32, u128_to_f32};
+use super::sums::carry_free;
 use super::*;
 use crate::algo::allan::{fill_phase, oavar_phase};
+use crate::algo::math::{i64_to_f32, u128_to_f32};
 use crate::emu::Rng;
 
 type D = Davar<1024, 35, 8>;
