@@ -187,12 +187,14 @@ pub fn loop_counts(elf: &Path) -> bool {
             return false;
         }
     };
-    // Twelve scenarios traced, K and L with the chips' own clocks and
-    // FIFOs, take some 35 min on a 2-core host, longer while it is busy.
+    // The trace logs every executed block, the emulated world's too: K and
+    // L (the chips' own clocks and FIFOs, a millisecond of their world in
+    // f64 soft float each sample) take most of an hour each on a 2-core
+    // host, A–J minutes. Four hours before QEMU is stopped.
     let mut q = crate::qemu_command(
         elf,
         true,
-        5400,
+        14_400,
         &["-d", "in_asm,exec,nochain", "-D", "/dev/stderr"],
     );
     q.stderr(Stdio::piped());
