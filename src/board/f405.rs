@@ -828,6 +828,9 @@ impl TxLink {
         if n == 0 {
             return;
         }
+        // The copy above lands before the stream may read it (the register
+        // writes below are volatile; the buffer's writes are not).
+        core::sync::atomic::compiler_fence(Ordering::Release);
         let st = dma.st(7);
         dma.hifcr().write(|w| {
             w.ctcif7().clear();
