@@ -1,7 +1,9 @@
 //! Each gyro's health: its flags, counters and restart state, what a
-//! read's result does to them, and the restart with its back-off.
+//! read's result does to them, and the restart with its back-off. The
+//! pipeline holds one [`Health`] and one [`GyroCounters`] a gyro and
+//! hands each read to [`Health::account`].
 
-use super::{Pipeline, PipelineConfig, RESTART_AT, RESTART_EVERY};
+use super::{PipelineConfig, RESTART_AT, RESTART_EVERY};
 use crate::drivers::{Gyro, ReadFault, Restart};
 
 /// Health flags of one gyro (bit set = problem).
@@ -124,27 +126,32 @@ pub struct Health {
     last_raw: [i16; 3],
 }
 
-impl<const N: usize> Pipeline<N> {
-    /// Drive gyro `i`'s restart: start it when due, run the step the
-    /// driver asked for when its wait is over.
-    pub(super) fn recover(&mut self, i: usize, g: &mut dyn Gyro, seq: u32) {
-        let cfg = self.cfg;
-        let (Some(h), Some(c)) = (self.health.get_mut(i), self.counters.get_mut(i)) else {
-            return;
-        };
+impl Health {
+    /// Drive the gyro `g`'s restart at sample `seq`: start it when due, run
+    /// the step the driver asked for when its wait is over. True when the
+    /// restart has just completed (the chip configured and sampling
+    /// again).
+    pub(super) fn recover(
+        &mut self,
+        c: &mut GyroCounters,
+        cfg: PipelineConfig,
+        g: &mut dyn Gyro,
+        seq: u32,
+    ) -> bool {
+        let h = self;
         if seq % RESTART_EVERY != RESTART_AT {
-            return;
+            return false;
         }
         let due = |at: u32| (seq.wrapping_sub(at) as i32) >= 0;
         let step = match h.recovery {
-            Recovery::Running => return,
+            Recovery::Running => return false,
             Recovery::Waiting { at } if due(at) => {
                 c.restarts = c.restarts.saturating_add(1);
                 h.flags |= flag::RESTARTING;
                 0
             }
             Recovery::Restarting { step, at } if due(at) => step,
-            _ => return,
+            _ => return false,
         };
         match g.restart(step) {
             Ok(Restart::Again { step, wait_us }) => {
@@ -154,43 +161,39 @@ impl<const N: usize> Pipeline<N> {
                     step,
                     at: seq.wrapping_add(wait.max(1)),
                 };
+                false
             }
             Ok(Restart::Done) => {
                 c.restarted = c.restarted.saturating_add(1);
                 h.recovery = Recovery::Running;
-                // The chip's calibration is its part's: kept, unless it is
-                // outside the bounds (`RelCal::resume`). Fusion trusted it
-                // only while it agreed with the others, so a fault that
-                // corrupted its range is not in it.
-                for cal in self.cal.iter_mut() {
-                    cal.resume(i);
-                }
                 // Configured and verified just now: it rejoins after a run
                 // as long as the stuck check needs, not recover_after.
                 h.flags = flag::READ_ERROR | (h.flags & flag::CALIBRATION);
                 h.need = cfg.stuck_after;
                 h.good_run = 0;
                 h.bad_run = 0;
+                true
             }
             Err(_) => {
                 h.recovery = Recovery::Waiting {
                     at: seq.wrapping_add(h.backoff),
                 };
                 h.backoff = h.backoff.saturating_mul(2).min(cfg.backoff_max);
+                false
             }
         }
     }
 
-    /// Update counters and health for gyro `i`; the axes it may offer.
+    /// The gyro's read `r` at sample `seq` into its health and counters
+    /// `c`; the axes it may offer.
     pub(super) fn account(
         &mut self,
-        i: usize,
+        c: &mut GyroCounters,
+        cfg: PipelineConfig,
+        seq: u32,
         r: Result<crate::drivers::Reading, ReadFault>,
     ) -> Option<u8> {
-        let cfg = self.cfg;
-        let seq = self.seq;
-        let c = &mut self.counters[i];
-        let h = &mut self.health[i];
+        let h = self;
         let r = match r {
             Err(ReadFault::Late | ReadFault::Acquiring) => {
                 c.late = c.late.saturating_add(1);
@@ -230,13 +233,13 @@ impl<const N: usize> Pipeline<N> {
             h.same_run = 0;
         }
         h.last_raw = r.raw;
-        if h.same_run.saturating_add(1) >= self.cfg.stuck_after {
+        if h.same_run.saturating_add(1) >= cfg.stuck_after {
             h.flags |= flag::STUCK;
         }
-        if h.sat_run >= self.cfg.stuck_after {
+        if h.sat_run >= cfg.stuck_after {
             h.flags |= flag::SATURATED;
         }
-        let good = r.saturated == 0 && h.same_run.saturating_add(1) < self.cfg.stuck_after;
+        let good = r.saturated == 0 && h.same_run.saturating_add(1) < cfg.stuck_after;
         h.good_run = if good {
             h.good_run.saturating_add(1)
         } else {
@@ -245,7 +248,7 @@ impl<const N: usize> Pipeline<N> {
         if h.good_run >= h.need {
             // (The calibration's verdict is its own to clear.)
             h.flags &= flag::CALIBRATION;
-            h.need = self.cfg.recover_after;
+            h.need = cfg.recover_after;
         }
         if h.flags != 0 {
             // A good sample of a flagged gyro is on its way back: only a

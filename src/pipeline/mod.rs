@@ -455,7 +455,16 @@ impl<const N: usize> Pipeline<N> {
             let mut offered_any = false;
             if self.health[i].recovery != Recovery::Running {
                 self.counters[i].not_read = self.counters[i].not_read.saturating_add(1);
-                self.recover(i, &mut **g, seq);
+                let cfg = self.cfg;
+                if self.health[i].recover(&mut self.counters[i], cfg, &mut **g, seq) {
+                    // The chip's calibration is its part's: kept, unless it
+                    // is outside the bounds (`RelCal::resume`). Fusion
+                    // trusted it only while it agreed with the others, so a
+                    // fault that corrupted its range is not in it.
+                    for cal in self.cal.iter_mut() {
+                        cal.resume(i);
+                    }
+                }
             } else {
                 let due = i == check;
                 // One gyro in turn also has its configuration read back.
@@ -476,7 +485,8 @@ impl<const N: usize> Pipeline<N> {
                 if matches!(r, Err(ReadFault::Acquiring)) && h.flags == 0 && waited {
                     acquiring |= 1 << i;
                 }
-                if let Some(axes) = self.account(i, r) {
+                let (cfg, seq) = (self.cfg, self.seq);
+                if let Some(axes) = self.health[i].account(&mut self.counters[i], cfg, seq, r) {
                     offered_any = axes != 0;
                     for (a, off) in out.offered.iter_mut().enumerate() {
                         *off |= ((axes >> a) & 1) << i;
