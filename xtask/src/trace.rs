@@ -667,7 +667,8 @@ fn report(name: &str, scenario: &Scenario, fn_names: &[String]) {
         .max()
         .unwrap_or(0);
     println!(
-        "bench whole loop, faults {name}: exact count (execution trace): the firmware's own instructions, mean {:.0} per sample (the sample task to its frame queued {:.0}, the background's e-davars {:.0}, the sample task after its frame (learning, status frames) {:.0}; the emulated bus {:.0} more), worst {} at sample {at} ({}, {}, {}), next worst {second}",
+        "bench whole loop, faults {name}: exact count (execution trace) over {} samples: the firmware's own instructions, mean {:.0} per sample (the sample task to its frame queued {:.0}, the background's e-davars {:.0}, the sample task after its frame (learning, status frames) {:.0}; the emulated bus {:.0} more), worst {} at sample {at} ({}, {}, {}), next worst {second}",
+        samples.len(),
         mean(&total),
         mean(&|s| s.fw[0]),
         mean(&|s| s.fw[1]),
