@@ -717,6 +717,18 @@ pub struct TxLink {
     byte_ns: u32,
 }
 
+/// Clear every flag of DMA2 stream 7 (RM0090 10.5.4: a stream is enabled
+/// only with its flags clear).
+fn clear_flags(dma: &pac::DMA2) {
+    dma.hifcr().write(|w| {
+        w.ctcif7().clear();
+        w.chtif7().clear();
+        w.cteif7().clear();
+        w.cdmeif7().clear();
+        w.cfeif7().clear()
+    });
+}
+
 impl TxLink {
     /// The link's transmitter at `baud`: DMA2 stream 7 if a copy of one
     /// word by DMA2 (memory to memory, RM0090 10.3.6) completes, else
@@ -769,13 +781,7 @@ impl TxLink {
         }
         let done = (0..1000).any(|_| dma.hisr().read().tcif7().is_complete());
         st.cr().modify(|_, w| w.en().disabled());
-        dma.hifcr().write(|w| {
-            w.ctcif7().clear();
-            w.chtif7().clear();
-            w.cteif7().clear();
-            w.cdmeif7().clear();
-            w.cfeif7().clear()
-        });
+        clear_flags(&dma);
         // SAFETY: the transfer has ended or the stream is off: nothing
         // writes `dst` any more.
         let copied = unsafe { core::ptr::read_volatile(&raw const dst) } == src;
@@ -832,13 +838,7 @@ impl TxLink {
         // writes below are volatile; the buffer's writes are not).
         core::sync::atomic::compiler_fence(Ordering::Release);
         let st = dma.st(7);
-        dma.hifcr().write(|w| {
-            w.ctcif7().clear();
-            w.chtif7().clear();
-            w.cteif7().clear();
-            w.cdmeif7().clear();
-            w.cfeif7().clear()
-        });
+        clear_flags(dma);
         // SAFETY: the stream is off (no transfer in flight); the buffer is
         // 'static and not written again until the transfer has ended or
         // been stopped (`in_flight`); PAR is USART1's data register.
@@ -874,13 +874,7 @@ impl TxLink {
         let isr = dma.hisr().read();
         let error = isr.teif7().is_error();
         let complete = isr.tcif7().is_complete();
-        dma.hifcr().write(|w| {
-            w.ctcif7().clear();
-            w.chtif7().clear();
-            w.cteif7().clear();
-            w.cdmeif7().clear();
-            w.cfeif7().clear()
-        });
+        clear_flags(dma);
         if error {
             self.fail();
         } else if complete {

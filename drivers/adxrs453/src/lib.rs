@@ -369,6 +369,18 @@ mod tests {
         r
     }
 
+    /// A read response carrying `v`, with valid parity.
+    fn read_response(v: u16) -> u32 {
+        let mut r = (READ_RESPONSE << 29) | (u32::from(v) << 5);
+        if !odd(r >> 16) {
+            r |= 1 << 28;
+        }
+        if !odd(r & 0xFFFF) {
+            r |= 1;
+        }
+        r
+    }
+
     #[test]
     fn commands_have_odd_parity_as_in_the_datasheet() {
         // The datasheet's start-up command is 0x2000_0003 and the plain
@@ -383,13 +395,7 @@ mod tests {
 
     #[test]
     fn init_runs_the_check_then_reads_the_part_id() {
-        let mut pid = (0b010u32 << 29) | (0x5201u32 << 5);
-        if !odd(pid >> 16) {
-            pid |= 1 << 28;
-        }
-        if !odd(pid & 0xFFFF) {
-            pid |= 1;
-        }
+        let pid = read_response(0x5201);
         let mut s = Vec::new();
         s.extend(frame(0x2000_0003, 0));
         s.extend(frame(0x2000_0000, data(0, 0b00, fault::ALL)));
@@ -440,13 +446,7 @@ mod tests {
 
     #[test]
     fn the_restart_in_steps_is_inits_check() {
-        let mut pid = (0b010u32 << 29) | (0x5201u32 << 5);
-        if !odd(pid >> 16) {
-            pid |= 1 << 28;
-        }
-        if !odd(pid & 0xFFFF) {
-            pid |= 1;
-        }
+        let pid = read_response(0x5201);
         let mut s = Vec::new();
         s.extend(frame(0x2000_0003, 0));
         s.extend(frame(0x2000_0000, data(0, 0b00, fault::ALL)));
