@@ -684,10 +684,6 @@ mod bus_fault {
 /// its sample frame and an acknowledgement fit (491 + 93 + 14 B).
 pub const TX_DMA_BYTES: usize = 640;
 
-/// Transfers that did not complete in time, and transfer errors: each
-/// moves the link to interrupts for good.
-static TX_DMA_FAULTS: AtomicU32 = AtomicU32::new(0);
-
 /// The link's transmitter: USART1 fed by DMA2 stream 7, channel 4
 /// (USART1_TX; RM0090 Table 43), one transfer at a time from a buffer
 /// the port's bytes are copied into (in SRAM: DMA cannot reach the
@@ -800,16 +796,6 @@ impl TxLink {
         link
     }
 
-    /// Whether the link's bytes go by DMA.
-    pub fn by_dma(&self) -> bool {
-        self.dma.is_some()
-    }
-
-    /// Transfers that failed or timed out so far.
-    pub fn faults() -> u32 {
-        TX_DMA_FAULTS.load(Ordering::Relaxed)
-    }
-
     /// Send what `queue` holds: start a transfer if none is in flight, or
     /// end one that has overrun its time; on the interrupt path, write
     /// while the UART takes bytes (at most `turn`). `now_us` is TIM5's.
@@ -886,7 +872,6 @@ impl TxLink {
     /// A transfer failed or overran: stop it, keep what it did not send,
     /// and send by interrupts from now on.
     fn fail(&mut self) {
-        TX_DMA_FAULTS.fetch_add(1, Ordering::Relaxed);
         if let Some(dma) = self.dma.take() {
             let st = dma.st(7);
             st.cr().modify(|_, w| w.en().disabled());
@@ -912,18 +897,19 @@ impl TxLink {
         use embedded_hal_nb::serial::Write;
         use stm32f4xx_hal::serial::TxListen;
         for _ in 0..turn {
-            let left = self.buf.get(usize::from(self.left.0));
-            let b = if let (true, Some(&b)) = (self.left.0 < self.left.1, left) {
-                b
-            } else if let Some(&b) = queue.peek() {
-                b
+            let (from, to) = self.left;
+            let left = if from < to {
+                self.buf.get(usize::from(from)).copied()
             } else {
+                None
+            };
+            let Some(b) = left.or_else(|| queue.peek().copied()) else {
                 break;
             };
             if self.tx.write(b).is_err() {
                 break;
             }
-            if self.left.0 < self.left.1 && left.is_some() {
+            if left.is_some() {
                 self.left.0 += 1;
             } else {
                 self.left = (0, 0);

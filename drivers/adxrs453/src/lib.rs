@@ -357,9 +357,9 @@ mod tests {
         ]
     }
 
-    /// Build a sensor-data response with valid parity.
-    fn data(rate: i16, st: u32, faults: u8) -> u32 {
-        let mut r = (st << 26) | ((rate as u16 as u32) << 10) | faults as u32;
+    /// `r` with its two parity bits set: P0 (bit 28) odd over bits 31:16,
+    /// P1 (bit 0) odd over bits 15:0.
+    fn with_response_parity(mut r: u32) -> u32 {
         if !odd(r >> 16) {
             r |= 1 << 28;
         }
@@ -369,16 +369,24 @@ mod tests {
         r
     }
 
+    /// A sensor-data response with valid parity.
+    fn data(rate: i16, st: u32, faults: u8) -> u32 {
+        with_response_parity((st << 26) | ((rate as u16 as u32) << 10) | faults as u32)
+    }
+
+    /// The start-up check as the datasheet runs it and the part id after
+    /// it: CHK forced, every fault raised, none, then PID1 read as 0x5201.
+    fn startup(s: &mut Vec<T<u8>>) {
+        s.extend(frame(0x2000_0003, 0));
+        s.extend(frame(0x2000_0000, data(0, 0b00, fault::ALL)));
+        s.extend(frame(0x2000_0000, data(0, 0b01, 0)));
+        s.extend(frame(0x8018_0000, data(0, 0b01, 0)));
+        s.extend(frame(0x2000_0000, read_response(0x5201)));
+    }
+
     /// A read response carrying `v`, with valid parity.
     fn read_response(v: u16) -> u32 {
-        let mut r = (READ_RESPONSE << 29) | (u32::from(v) << 5);
-        if !odd(r >> 16) {
-            r |= 1 << 28;
-        }
-        if !odd(r & 0xFFFF) {
-            r |= 1;
-        }
-        r
+        with_response_parity((READ_RESPONSE << 29) | (u32::from(v) << 5))
     }
 
     #[test]
@@ -395,13 +403,8 @@ mod tests {
 
     #[test]
     fn init_runs_the_check_then_reads_the_part_id() {
-        let pid = read_response(0x5201);
         let mut s = Vec::new();
-        s.extend(frame(0x2000_0003, 0));
-        s.extend(frame(0x2000_0000, data(0, 0b00, fault::ALL)));
-        s.extend(frame(0x2000_0000, data(0, 0b01, 0)));
-        s.extend(frame(0x8018_0000, data(0, 0b01, 0)));
-        s.extend(frame(0x2000_0000, pid));
+        startup(&mut s);
         let mut spi = Mock::new(&s);
         let mut g = Adxrs453::new(spi.clone());
         g.init(&mut NoDelay).unwrap();
@@ -446,13 +449,8 @@ mod tests {
 
     #[test]
     fn the_restart_in_steps_is_inits_check() {
-        let pid = read_response(0x5201);
         let mut s = Vec::new();
-        s.extend(frame(0x2000_0003, 0));
-        s.extend(frame(0x2000_0000, data(0, 0b00, fault::ALL)));
-        s.extend(frame(0x2000_0000, data(0, 0b01, 0)));
-        s.extend(frame(0x8018_0000, data(0, 0b01, 0)));
-        s.extend(frame(0x2000_0000, pid));
+        startup(&mut s);
         // A second restart whose check never raises the faults.
         s.extend(frame(0x2000_0003, 0));
         s.extend(frame(0x2000_0000, data(0, 0b01, 0)));
