@@ -35,7 +35,7 @@ pub fn since(a: Instant16, b: Instant16) -> i32 {
 
 /// ⌊x⌋ for |x| < 2³¹ by the FPU's truncating conversion (libm's `floorf`
 /// is some 20 instructions of bit arithmetic on the Cortex-M4).
-fn floor_i32(x: f32) -> i32 {
+pub(crate) fn floor_i32(x: f32) -> i32 {
     let t = x as i32;
     t - i32::from((t as f32) > x)
 }

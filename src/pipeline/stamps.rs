@@ -37,6 +37,15 @@ pub const CLKIN_US_PER_COUNT: [f64; 3] = [1.0, 32.0 / 30.0, 31.25];
 const VOTE_WITHIN: f64 = 0.15;
 
 /// FIFO timestamp counts onto µs of the chip's nominal clock.
+///
+/// The samples stay in counts (the aligner's interpolation is the same in
+/// any unit linear in the chip's time); what the µs are needed for is one
+/// sample a read (the clock tracker's observation) and one instant (the
+/// read's, into counts). [`StampScale::convert`] moves the scale's base to
+/// a read's newest sample, and [`StampScale::us_of`],
+/// [`StampScale::counts16_of`] and [`StampScale::us16_of`] map near it.
+/// Converting every sample cost some 20 instructions a sample on the
+/// Cortex-M4, sixteen samples a millisecond.
 #[derive(Clone, Copy, Debug)]
 pub struct StampScale {
     /// Nominal chip µs between samples.
@@ -44,15 +53,19 @@ pub struct StampScale {
     /// µs per count × 2¹⁶ (within 10⁻⁶ of the unit: a clock error of
     /// 1 ppm, which the tracker measures with the rest). A step times it
     /// is one 32 × 32 → 64-bit multiply on the Cortex-M4 (with 2³² it was
-    /// a 64-bit multiply by call, some 640 instructions a sample on the
-    /// board's frame path).
+    /// a 64-bit multiply by call).
     k16: u32,
-    /// The last count's low 16 bits, and the µs it stands for (with the
-    /// remainder of the product, 2⁻¹⁶ µs).
-    last: Option<u16>,
+    /// µs per count and counts per µs, for the maps near the base.
+    us_per_count: f32,
+    counts_per_us: f32,
+    /// The base: the last count converted (as the driver extended it),
+    /// and the µs it stands for (with the remainder of the product,
+    /// 2⁻¹⁶ µs).
+    last: Option<u32>,
     us: u32,
     rem: u32,
-    /// While learning on CLKIN: each reading's votes.
+    /// While learning on CLKIN: the last count seen, each reading's votes.
+    seen: Option<u16>,
     votes: [u16; 3],
     decided: bool,
     /// The unit changed at the decision: µs before and after do not join.
@@ -71,22 +84,33 @@ impl StampScale {
             ClockInput::ClkIn => CLKIN_US_PER_COUNT[0],
             _ => INTERNAL_US_PER_COUNT,
         };
-        Self {
+        let mut s = Self {
             period_us,
-            k16: k16_of(guess),
+            k16: 0,
+            us_per_count: 1.0,
+            counts_per_us: 1.0,
             last: None,
             us: 0,
             rem: 0,
+            seen: None,
             votes: [0; 3],
             // On the chip's own clock the documented unit holds at once.
             decided: input != ClockInput::ClkIn,
             changed: false,
-        }
+        };
+        s.set_unit(guess);
+        s
+    }
+
+    fn set_unit(&mut self, us_per_count: f64) {
+        self.k16 = k16_of(us_per_count);
+        self.us_per_count = self.k16 as f32 / 65_536.0;
+        self.counts_per_us = 65_536.0 / self.k16 as f32;
     }
 
     /// µs of the chip's nominal clock per count.
     pub fn us_per_count(&self) -> f32 {
-        self.k16 as f32 / 65_536.0
+        self.us_per_count
     }
 
     /// One wrap of the 16-bit count, µs: what a count of unknown high bits
@@ -100,18 +124,15 @@ impl StampScale {
         self.decided
     }
 
-    /// The sample stamped `count` (its low 16 bits are the chip's; the
-    /// step from the last is taken modulo 2¹⁶, as the driver extends it),
-    /// µs of the chip's nominal clock, continuous from the first (wrapping
-    /// at 2³² µs).
-    #[inline]
+    /// The sample stamped `count` (as the driver extended it; the step
+    /// from the base is taken on its low 16 bits, as the driver extends
+    /// it, so it holds across a flush), µs of the chip's nominal clock,
+    /// continuous from the first (wrapping at 2³² µs); it becomes the
+    /// base. Once a read, for its newest sample.
     pub fn convert(&mut self, count: u32) -> u32 {
         let c = count as u16;
         if let Some(l) = self.last {
-            let d = c.wrapping_sub(l) as u32;
-            if !self.decided {
-                self.learn(d);
-            }
+            let d = c.wrapping_sub(l as u16) as u32;
             let acc = u64::from(d) * u64::from(self.k16) + u64::from(self.rem);
             self.us = self.us.wrapping_add((acc >> 16) as u32);
             self.rem = (acc & 0xFFFF) as u32;
@@ -120,15 +141,57 @@ impl StampScale {
             self.us = (acc >> 16) as u32;
             self.rem = (acc & 0xFFFF) as u32;
         }
-        self.last = Some(c);
+        self.last = Some(count);
         self.us
     }
 
-    /// A step of `d` counts while learning on CLKIN. Out of line: the
-    /// first samples only.
+    /// The µs of `count`, a sample of the base's stream within ±2³¹
+    /// counts of it (a read's other samples), as [`Self::convert`] would
+    /// have made them, without moving the base. Before any base, the
+    /// count converted alone.
+    pub fn us_of(&self, count: u32) -> u32 {
+        let Some(l) = self.last else {
+            return (u64::from(count as u16) * u64::from(self.k16) >> 16) as u32;
+        };
+        let d = i64::from(count.wrapping_sub(l) as i32);
+        let acc = d * i64::from(self.k16) + i64::from(self.rem);
+        self.us.wrapping_add((acc >> 16) as i32 as u32)
+    }
+
+    /// The instant `us16` (1/16 µs on this scale, within some 2²⁰ µs of
+    /// the base) in 1/16 counts of the base's stream, to the nearest.
+    pub fn counts16_of(&self, us16: u32) -> u32 {
+        let l = self.last.unwrap_or(0);
+        let du = us16.wrapping_sub(self.us.wrapping_mul(16)) as i32 as f32
+            - self.rem as f32 * (16.0 / 65_536.0);
+        l.wrapping_mul(16)
+            .wrapping_add(super::clock::floor_i32(du * self.counts_per_us + 0.5) as u32)
+    }
+
+    /// The inverse of [`Self::counts16_of`]: 1/16 counts of the base's
+    /// stream in 1/16 µs on this scale, to the nearest.
+    pub fn us16_of(&self, counts16: u32) -> u32 {
+        let l = self.last.unwrap_or(0);
+        let dc = counts16.wrapping_sub(l.wrapping_mul(16)) as i32 as f32;
+        let f = dc * self.us_per_count + self.rem as f32 * (16.0 / 65_536.0);
+        self.us
+            .wrapping_mul(16)
+            .wrapping_add(super::clock::floor_i32(f + 0.5) as u32)
+    }
+
+    /// One sample's count while the unit is being learnt on CLKIN (each
+    /// step votes): call it for every sample until [`Self::decided`].
     #[cold]
     #[inline(never)]
-    fn learn(&mut self, d: u32) {
+    pub fn learn(&mut self, count: u32) {
+        let c = count as u16;
+        if let Some(l) = self.seen.replace(c) {
+            self.vote(u32::from(c.wrapping_sub(l)));
+        }
+    }
+
+    /// A step of `d` counts while learning on CLKIN.
+    fn vote(&mut self, d: u32) {
         // The nearest reading, if within the band.
         let mut best = None;
         let mut off = VOTE_WITHIN;
@@ -145,7 +208,7 @@ impl StampScale {
         if self.votes[k] >= LEARN_SAMPLES {
             let k16 = k16_of(CLKIN_US_PER_COUNT[k]);
             self.changed = k16 != self.k16;
-            self.k16 = k16;
+            self.set_unit(CLKIN_US_PER_COUNT[k]);
             self.decided = true;
         }
     }
@@ -162,6 +225,15 @@ impl StampScale {
 mod tests {
     use super::*;
 
+    /// A sample's count as a read hands it on: learnt while undecided,
+    /// then converted (the scale's base).
+    fn feed(s: &mut StampScale, count: u32) -> u32 {
+        if !s.decided() {
+            s.learn(count);
+        }
+        s.convert(count)
+    }
+
     /// Stamps of a chip on its PLL at 1 kHz, a count 32/30 µs: 937.5
     /// counts a sample. The µs come out 1 000 a sample (times the unit's
     /// rounding, 1 ppm) to within the rounding of one count, for 10⁵
@@ -172,7 +244,7 @@ mod tests {
         let mut first = None;
         for k in 0..100_000u64 {
             let count = (k * 9375 / 10 + 4_294_000_000) as u32;
-            let us = s.convert(count);
+            let us = feed(&mut s, count);
             let f = *first.get_or_insert(us);
             let want = (k as f64 * 937.5 * f64::from(s.us_per_count())).round() as i64;
             let got = us.wrapping_sub(f) as i64;
@@ -192,7 +264,7 @@ mod tests {
             let mut s = StampScale::new(ClockInput::ClkIn, 1000);
             let per_tick = 31.25 / u;
             for k in 0..200u64 {
-                s.convert(((k * 32) as f64 * per_tick) as u32);
+                feed(&mut s, ((k * 32) as f64 * per_tick) as u32);
             }
             assert!(s.decided());
             assert!(
@@ -214,15 +286,46 @@ mod tests {
         for k in 0..400u32 {
             c += 32;
             let sent = if k % 4 == 3 { c ^ 0x5A5A } else { c };
-            s.convert(sent);
+            feed(&mut s, sent);
         }
         assert!(s.decided());
         assert_eq!(s.us_per_count(), 31.25);
         let mut g = StampScale::new(ClockInput::ClkIn, 1000);
         for k in 0..400u32 {
-            g.convert(k.wrapping_mul(40_503));
+            feed(&mut g, k.wrapping_mul(40_503));
         }
         assert!(!g.decided());
         assert_eq!(g.us_per_count(), 1.0);
+    }
+
+    /// A read converts its newest sample only: its other samples' µs, and
+    /// instants both ways, come out as converting each would have made
+    /// them (to the rounding of one µs, and 1/16 of a µs or a count for
+    /// instants), across the 16-bit and the 2³² wraps.
+    #[test]
+    fn the_maps_near_the_base_agree_with_converting_each() {
+        let mut each = StampScale::new(ClockInput::Internal, 250);
+        let mut lazy = StampScale::new(ClockInput::Internal, 250);
+        let start = u32::MAX - 50_000;
+        let count = |k: u32| start.wrapping_add(k * 234 + k % 3);
+        for read in 0..5_000u32 {
+            let ks = [4 * read, 4 * read + 1, 4 * read + 2, 4 * read + 3];
+            let us = ks.map(|k| each.convert(count(k)));
+            lazy.convert(count(ks[3]));
+            for (k, u) in ks.iter().zip(us) {
+                let got = lazy.us_of(count(*k));
+                assert!((got.wrapping_sub(u) as i32).abs() <= 1, "{got} vs {u}");
+                // An instant between samples, both ways.
+                let c16 = count(*k).wrapping_mul(16).wrapping_add(5);
+                let u16_ = lazy.us16_of(c16);
+                let want = u.wrapping_mul(16) as i64 + (5.0 * 32.0 / 30.0) as i64;
+                assert!(
+                    (u16_.wrapping_sub(want as u32) as i32).abs() <= 17,
+                    "read {read}"
+                );
+                let back = lazy.counts16_of(u16_);
+                assert!((back.wrapping_sub(c16) as i32).abs() <= 1, "read {read}");
+            }
+        }
     }
 }

@@ -224,8 +224,8 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// tracked. How far the newest data lie behind the read.
     pub fn newest_instant(&self) -> Option<Instant16> {
         let chip = self
-            .align
-            .newest()?
+            .scale
+            .us16_of(self.align.newest()?)
             .wrapping_add(self.stamp_offset.wrapping_mul(16))
             .wrapping_sub(self.path16);
         self.clock.board_instant16(chip)
@@ -283,7 +283,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.rebase = false;
     }
 
-    /// A sample of burst `f` (its samples' µs in `burst`) and its INT1
+    /// A sample of burst `f` (its samples' counts in `burst`) and its INT1
     /// capture, from the captures before and after the burst. The burst
     /// reads the FIFO's count before its packets, so the newest sample
     /// counted is the one whose pulse came last before the count was read:
@@ -326,10 +326,11 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         }
     }
 
-    /// The clock's observation for one FIFO read: a sample's stamp (µs of
-    /// the chip's clock, [`StampScale`]) and its INT1 capture
-    /// ([`TimedIcm::pair`]).
-    fn observe(&mut self, newest: u32, c: u32) {
+    /// The clock's observation for one FIFO read: a sample's stamp (its
+    /// count, put on µs of the chip's clock by [`StampScale`]) and its
+    /// INT1 capture ([`TimedIcm::pair`]).
+    fn observe(&mut self, count: u32, c: u32) {
+        let newest = self.scale.us_of(count);
         if self.rebase {
             self.rebase(newest, c);
             self.clock
@@ -415,19 +416,24 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 scale,
                 ..
             } = self;
-            // The burst's samples' µs, in order (at most MAX_PER_READ).
+            // The burst's samples' counts, in order (at most
+            // MAX_PER_READ). The aligner keeps counts: its means and
+            // interpolation are the same in any unit linear in the chip's
+            // time, and the one instant a read asks for is put in counts.
             let mut burst = [0u32; MAX_PER_READ];
             let mut nb = 0;
             let r = g.read_fifo_with(MAX_PER_READ, |x| {
-                // Every sample through the scale, spikes too: its µs follow
-                // the count's steps.
-                let newest = scale.convert(x.stamp);
+                if !scale.decided() {
+                    // Every step votes while the unit is learnt on CLKIN,
+                    // spikes too: their stamps are the chip's.
+                    scale.learn(x.stamp);
+                }
                 if let Some(slot) = burst.get_mut(nb) {
-                    *slot = newest;
+                    *slot = x.stamp;
                 }
                 nb += 1;
                 if spike.pass(x.raw, lim) {
-                    align.push(newest, x.raw);
+                    align.push(x.stamp, x.raw);
                 } else {
                     spiked = true;
                     counters.spikes = counters.spikes.wrapping_add(1);
@@ -442,6 +448,9 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                     self.counters.samples = self.counters.samples.wrapping_add(f.samples as u32);
                     if let Some(x) = f.last {
                         self.last_raw = x.raw;
+                        // The read's newest sample is the scale's base for
+                        // the maps near it (the pair's stamp, the instant).
+                        self.scale.convert(x.stamp);
                         if self.scale.take_changed() {
                             // The unit was decided other than guessed: the
                             // µs so far do not join the next.
@@ -515,9 +524,10 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
             return Err(ReadFault::Acquiring);
         };
-        let t = chip
-            .wrapping_sub(self.stamp_offset.wrapping_mul(16))
-            .wrapping_add(self.path16);
+        let t = self.scale.counts16_of(
+            chip.wrapping_sub(self.stamp_offset.wrapping_mul(16))
+                .wrapping_add(self.path16),
+        );
         match self.align.at(t, self.dps_per_lsb) {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;

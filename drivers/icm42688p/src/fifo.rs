@@ -70,15 +70,36 @@ pub(super) enum Stop<E> {
     Cut,
 }
 
+/// Why a packet whose header is not [`HEADER_EXPECTED`] stops a parse.
+#[cold]
+fn header_stop<E>(h: u8) -> Stop<E> {
+    if h == 0xFF {
+        // Not a header the chip sends (the empty marker is 0x80): the
+        // line idle after a cut.
+        Stop::Cut
+    } else if h & bits::HEADER_MSG != 0 {
+        Stop::Bad(Error::FifoShort)
+    } else {
+        Stop::Bad(Error::FifoBadHeader(h))
+    }
+}
+
+/// A packet's gyroscope counts (big-endian, bytes 7–12).
+#[inline(always)]
+fn gyro_of(p: &[u8; FIFO_PACKET]) -> [i16; 3] {
+    let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
+    [w(7), w(9), w(11)]
+}
+
 /// Parse whole packets from `bytes`, handing each sample to `each` and
 /// counting it in `read`; the first bad or cut packet stops it. Returns
 /// the packets taken out of `bytes` (handed over or dropped as sent
 /// again) and why it stopped early. `stamp` is the last sample's extended
 /// timestamp, `step` the last step between two (0: none yet), `lim` the
-/// largest step the configured rate allows. The counts
-/// and the stamp live in registers through the loop and are stored once
-/// (per packet they were stores the caller's closure kept the compiler
-/// from sinking: some 5 instructions a packet, 16 packets a millisecond).
+/// largest step the configured rate allows. The loop keeps to what a
+/// whole packet on time needs (one compare of its header, its stamp's
+/// step, its counts); the counts, the stamp and the newest sample are
+/// stored once, after it: sixteen packets a millisecond on the board.
 pub(super) fn parse_packets<E>(
     bytes: &[u8],
     stamp: &mut Option<u32>,
@@ -87,30 +108,26 @@ pub(super) fn parse_packets<E>(
     read: &mut FifoRead,
     each: &mut impl FnMut(FifoSample),
 ) -> (usize, Option<Stop<E>>) {
-    let (mut st, mut sp, mut n, mut taken, mut last, mut stop) = (*stamp, *step, 0, 0, None, None);
-    for (j, p) in bytes.chunks_exact(FIFO_PACKET).enumerate() {
+    let (mut st, mut sp, mut n, mut taken, mut stop) = (*stamp, *step, 0, 0, None);
+    // The newest packet handed over.
+    let mut newest = None;
+    // Whole packets as arrays: no index into one is checked.
+    let (packets, _) = bytes.as_chunks::<FIFO_PACKET>();
+    // The stamp is the packet's last two bytes: a cut anywhere in it
+    // leaves at least the last at 0xFF, and the next packet's header at
+    // 0xFF too (one that is not says the line was whole). Looked at only
+    // where a stamp is in doubt.
+    let line = |j: usize, p: &[u8; FIFO_PACKET]| {
+        p[15] == 0xFF && packets.get(j + 1).is_none_or(|q| q[0] == 0xFF)
+    };
+    for (j, p) in packets.iter().enumerate() {
         let h = p[0];
-        if h == 0xFF {
-            // Not a header the chip sends (the empty marker is 0x80): the
-            // line idle after a cut.
-            stop = Some(Stop::Cut);
-            break;
-        }
-        if h & bits::HEADER_MSG != 0 {
-            stop = Some(Stop::Bad(Error::FifoShort));
-            break;
-        }
+        // (0xFF and the message bit fail it too: `header_stop` says which.)
         if h & HEADER_MASK != HEADER_EXPECTED {
-            stop = Some(Stop::Bad(Error::FifoBadHeader(h)));
+            stop = Some(header_stop(h));
             break;
         }
-        let w = |i: usize| i16::from_be_bytes([p[i], p[i + 1]]);
         let stamp16 = u16::from_be_bytes([p[14], p[15]]);
-        // The stamp is the packet's last two bytes: a cut anywhere in it
-        // leaves at least the last at 0xFF, and the next packet's header
-        // at 0xFF too (one that is not says the line was whole).
-        let next = bytes.get((j + 1) * FIFO_PACKET).copied();
-        let line = p[15] == 0xFF && next.is_none_or(|b| b == 0xFF);
         let stamp = match st {
             Some(prev) => {
                 let d = stamp16.wrapping_sub(prev as u16);
@@ -126,7 +143,7 @@ pub(super) fn parse_packets<E>(
                 } else {
                     d.abs_diff(sp) > (sp / 32).max(2)
                 };
-                if line && off {
+                if off && line(j, p) {
                     stop = Some(Stop::Cut);
                     break;
                 }
@@ -146,27 +163,31 @@ pub(super) fn parse_packets<E>(
             // be checked against but the line: a stamp of 0xFFFF with the
             // line at 0xFF after it is a cut (a true 0xFFFF there, 1 in
             // 65 536, loses that one sample).
-            None if line && p[14] == 0xFF => {
+            None if p[14] == 0xFF && line(j, p) => {
                 stop = Some(Stop::Cut);
                 break;
             }
             None => u32::from(stamp16),
         };
         st = Some(stamp);
-        let x = FifoSample {
-            raw: [w(7), w(9), w(11)],
+        each(FifoSample {
+            raw: gyro_of(p),
             stamp,
-        };
-        last = Some(x);
-        each(x);
+        });
+        newest = Some(p);
         n += 1;
         taken += 1;
     }
     *stamp = st;
     *step = sp;
     read.samples += n;
-    if last.is_some() {
-        read.last = last;
+    // The newest handed over is the stream's last stamp (a packet sent
+    // again, or one that stops the parse, leaves it as it was).
+    if let (Some(p), Some(stamp)) = (newest, st) {
+        read.last = Some(FifoSample {
+            raw: gyro_of(p),
+            stamp,
+        });
     }
     (taken, stop)
 }
@@ -314,17 +335,32 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         if stop.is_none() && want == in_first {
             let mut at = 3 + FIFO_PACKET * in_first;
             let end = 3 + FIFO_PACKET * k;
-            while read.samples < max {
+            loop {
+                // The markers four at a time (a slot past the count is
+                // usually sixteen of them), then one at a time.
+                while self
+                    .fifo_buf
+                    .get(at..at + 4)
+                    .is_some_and(|m| at + 4 <= end && m == [EMPTY_MARKER; 4])
+                {
+                    at += 4;
+                }
                 while at < end && self.fifo_buf[at] == EMPTY_MARKER {
                     at += 1;
                 }
-                let Some(p) = self.fifo_buf.get(at..(at + FIFO_PACKET).min(end)) else {
+                // The whole packets from there, as many as `max` leaves
+                // room for, in one parse: a packet not whole, a header that
+                // is not a packet's (past the count no error) or markers
+                // stop it.
+                let room = max.saturating_sub(read.samples);
+                let whole = ((end.saturating_sub(at)) / FIFO_PACKET).min(room);
+                let Some(p) = self.fifo_buf.get(at..at + FIFO_PACKET * whole) else {
                     break;
                 };
-                if p.len() < FIFO_PACKET || p[0] & HEADER_MASK != HEADER_EXPECTED {
+                if whole == 0 {
                     break;
                 }
-                let (_, s) = parse_packets::<SPI::Error>(
+                let (t, s) = parse_packets::<SPI::Error>(
                     p,
                     &mut self.stamp,
                     &mut self.step,
@@ -332,10 +368,13 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
                     &mut read,
                     &mut each,
                 );
-                if s.is_some() {
+                at += FIFO_PACKET * t;
+                // Markers after a packet that came past the count: look on.
+                let more = matches!(s, Some(Stop::Bad(Error::FifoShort)))
+                    && self.fifo_buf.get(at) == Some(&EMPTY_MARKER);
+                if !more {
                     break;
                 }
-                at += FIFO_PACKET;
             }
         }
         // The rest, in more bursts from FIFO_DATA.

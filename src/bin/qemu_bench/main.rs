@@ -64,6 +64,9 @@ fn main() -> ! {
     if TRACE {
         exit(bench_loops(&t, ipt))
     }
+    if option_env!("BENCH_ONLY_TIMED").is_some() {
+        exit(bench_timed_read(&t, ipt))
+    }
     let mut rng = Rng::new(7);
     let mut ok = bench_fusion(&t, ipt, &mut rng);
     ok &= bench_allan(&t, ipt, &mut rng);
