@@ -169,9 +169,9 @@ pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
         // The frame first: the antenna waits for it.
         let port = link.port();
         let before = port.counters().sent;
-        // The estimates read where they lie (a copy was some 80
-        // instructions): the background that writes them runs below this
-        // task, so the lock costs nothing here.
+        // The estimates read where they lie, not copied: the background
+        // that writes them runs below this task, so the lock costs nothing
+        // here.
         noise.lock(|estimates| port.publish(&out, t_us, pipe, estimates));
         let sent = port.counters().sent != before;
         link.flush();

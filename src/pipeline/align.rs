@@ -1,8 +1,8 @@
 //! One chip's samples brought to the array's common output instants.
 //!
 //! The aligner works in the chip's own time: each sample is kept with its
-//! FIFO timestamp, raw, and the instant a read asks for is put on the
-//! chip's clock once ([`super::clock::ChipClock::chip_instant`]), not each
+//! FIFO timestamp, raw (in the chip's counts), and the instant a read asks
+//! for is put on the chip's clock and into counts once ([`super::clock::ChipClock::chip_instant`]), not each
 //! sample on the board's. The chip's signal-path delay is a fixed time on
 //! its own clock, so it is added there, exactly, whatever the clock's rate.
 //!
@@ -37,9 +37,10 @@ pub enum Aligned {
 pub const MAX_MEAN: usize = 8;
 
 /// The aligner of one chip: its last `CAP` samples, raw, each with its
-/// stamp (chip µs). The moving means are worked out when a read asks for
-/// an instant, for the two it falls between: a push is a store, and a
-/// chip gives two or more samples for each read.
+/// stamp (the chip's time in any linear unit: the board keeps the FIFO's
+/// counts). The moving means are worked out when a read asks for an
+/// instant, for the two it falls between: a push is a store, and a chip
+/// gives two or more samples for each read.
 #[derive(Clone, Copy, Debug)]
 pub struct Aligner<const CAP: usize> {
     ring: [(u32, [i16; 3]); CAP],
@@ -49,7 +50,7 @@ pub struct Aligner<const CAP: usize> {
     n: usize,
 }
 
-/// One moving mean: its instant (1/16 chip µs) and the sum of its raw
+/// One moving mean: its instant (1/16 of the stamps' unit) and the sum of its raw
 /// samples.
 type Mean = (u32, [i32; 3]);
 
@@ -100,7 +101,7 @@ impl<const CAP: usize> Aligner<CAP> {
         self.len() == 0
     }
 
-    /// One sample: its stamp (chip µs) and its raw value.
+    /// One sample: its stamp (the chip's time) and its raw value.
     pub fn push(&mut self, stamp_us: u32, raw: [i16; 3]) {
         let () = Self::POW2;
         // (Wraps by mask, CAP a power of two: no division, and no bounds
@@ -168,12 +169,12 @@ impl<const CAP: usize> Aligner<CAP> {
         self.mean_of(k, self.window(k))
     }
 
-    /// The newest mean's instant, 1/16 chip µs.
+    /// The newest mean's instant, 1/16 of the stamps' unit.
     pub fn newest(&self) -> Option<u32> {
         (self.len >= self.n).then(|| self.mean(self.len - 1).0)
     }
 
-    /// The rate at chip instant `t` (1/16 µs of the stamps): linear
+    /// The rate at chip instant `t` (1/16 of the stamps' unit): linear
     /// between the means on either side of it, °/s at `dps_per_lsb`.
     pub fn at(&self, t: u32, dps_per_lsb: f32) -> Aligned {
         let n = self.n;

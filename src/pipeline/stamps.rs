@@ -44,16 +44,15 @@ const VOTE_WITHIN: f64 = 0.15;
 /// read's, into counts). [`StampScale::convert`] moves the scale's base to
 /// a read's newest sample, and [`StampScale::us_of`],
 /// [`StampScale::counts16_of`] and [`StampScale::us16_of`] map near it.
-/// Converting every sample cost some 20 instructions a sample on the
-/// Cortex-M4, sixteen samples a millisecond.
+/// Sixteen samples a millisecond on the board each need no multiply.
 #[derive(Clone, Copy, Debug)]
 pub struct StampScale {
     /// Nominal chip µs between samples.
     period_us: u32,
     /// µs per count × 2¹⁶ (within 10⁻⁶ of the unit: a clock error of
     /// 1 ppm, which the tracker measures with the rest). A step times it
-    /// is one 32 × 32 → 64-bit multiply on the Cortex-M4 (with 2³² it was
-    /// a 64-bit multiply by call).
+    /// is one 32 × 32 → 64-bit multiply on the Cortex-M4 (a 2³² fraction
+    /// would be a 64-bit multiply by call).
     k16: u32,
     /// µs per count and counts per µs, for the maps near the base.
     us_per_count: f32,
@@ -151,7 +150,7 @@ impl StampScale {
     /// count converted alone.
     pub fn us_of(&self, count: u32) -> u32 {
         let Some(l) = self.last else {
-            return (u64::from(count as u16) * u64::from(self.k16) >> 16) as u32;
+            return ((u64::from(count as u16) * u64::from(self.k16)) >> 16) as u32;
         };
         let d = i64::from(count.wrapping_sub(l) as i32);
         let acc = d * i64::from(self.k16) + i64::from(self.rem);

@@ -283,7 +283,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.rebase = false;
     }
 
-    /// A sample of burst `f` (its samples' counts in `burst`) and its INT1
+    /// A sample of burst `f` (its stamp, a count) and its INT1
     /// capture, from the captures before and after the burst. The burst
     /// reads the FIFO's count before its packets, so the newest sample
     /// counted is the one whose pulse came last before the count was read:
@@ -299,7 +299,6 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     fn pair(
         &mut self,
         f: &FifoRead,
-        burst: &[u32; MAX_PER_READ],
         before: Option<u32>,
         after: Option<u32>,
     ) -> Option<(u32, u32)> {
@@ -307,13 +306,12 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             // Not the newest: the rest is read next.
             return None;
         }
-        let at = |i: usize| burst.get(i).copied();
-        let counted = f.counted.checked_sub(1).and_then(at);
+        let counted = f.counted_stamp;
         match after {
             Some(a) if after != before => {
                 if f.samples > f.counted {
                     // The pulse's sample came past the count.
-                    Some((at(f.samples - 1)?, a))
+                    Some((f.last?.stamp, a))
                 } else {
                     match self.g.fifo_count() {
                         Ok(0) => Some((counted?, a)),
@@ -416,22 +414,15 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 scale,
                 ..
             } = self;
-            // The burst's samples' counts, in order (at most
-            // MAX_PER_READ). The aligner keeps counts: its means and
-            // interpolation are the same in any unit linear in the chip's
-            // time, and the one instant a read asks for is put in counts.
-            let mut burst = [0u32; MAX_PER_READ];
-            let mut nb = 0;
+            // The aligner keeps counts: its means and interpolation are
+            // the same in any unit linear in the chip's time, and the one
+            // instant a read asks for is put in counts.
             let r = g.read_fifo_with(MAX_PER_READ, |x| {
                 if !scale.decided() {
                     // Every step votes while the unit is learnt on CLKIN,
                     // spikes too: their stamps are the chip's.
                     scale.learn(x.stamp);
                 }
-                if let Some(slot) = burst.get_mut(nb) {
-                    *slot = x.stamp;
-                }
-                nb += 1;
                 if spike.pass(x.raw, lim) {
                     align.push(x.stamp, x.raw);
                 } else {
@@ -457,7 +448,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                             self.clock.reset();
                             self.gap();
                         }
-                        if let Some((stamp, capture)) = self.pair(&f, &burst, before, after) {
+                        if let Some((stamp, capture)) = self.pair(&f, before, after) {
                             self.observe(stamp, capture);
                         }
                     }
@@ -532,9 +523,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;
                 for (i, r) in self.last_raw.iter().enumerate() {
-                    if *r == i16::MAX || *r == i16::MIN {
-                        saturated |= 1 << i;
-                    }
+                    saturated |= u8::from(at_range_end(*r)) << i;
                 }
                 Ok(Reading {
                     raw: self.last_raw,
@@ -579,6 +568,13 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn delay_us(&self) -> u32 {
         self.behind_us
     }
+}
+
+/// Whether a count is at either end of the range (i16::MIN or MAX, a
+/// saturated axis): one unsigned compare, the two ends moved to 0 and 1.
+#[inline(always)]
+fn at_range_end(r: i16) -> bool {
+    (r as u16).wrapping_add(0x8001) <= 1
 }
 
 /// Whether the tracker has the chip's clock.
@@ -693,6 +689,21 @@ mod tests {
         );
         assert!(new.read().is_ok());
         assert_eq!(new.delay_us(), 1200);
+    }
+
+    #[test]
+    fn only_the_ranges_ends_are_saturated() {
+        for (r, end) in [
+            (i16::MIN, true),
+            (i16::MAX, true),
+            (i16::MIN + 1, false),
+            (i16::MAX - 1, false),
+            (0, false),
+            (-1, false),
+            (1, false),
+        ] {
+            assert_eq!(at_range_end(r), end, "{r}");
+        }
     }
 
     #[test]

@@ -38,6 +38,9 @@ pub struct FifoRead {
     pub cut: bool,
     /// The newest sample handed over, if any.
     pub last: Option<FifoSample>,
+    /// The stamp of the newest sample within the count, if any (the
+    /// sample whose INT1 pulse came last before the count was latched).
+    pub counted_stamp: Option<u32>,
 }
 
 /// FIFO packet size, bytes (packet 3).
@@ -108,9 +111,6 @@ pub(super) fn parse_packets<E>(
     read: &mut FifoRead,
     each: &mut impl FnMut(FifoSample),
 ) -> (usize, Option<Stop<E>>) {
-    let (mut st, mut sp, mut n, mut taken, mut stop) = (*stamp, *step, 0, 0, None);
-    // The newest packet handed over.
-    let mut newest = None;
     // Whole packets as arrays: no index into one is checked.
     let (packets, _) = bytes.as_chunks::<FIFO_PACKET>();
     // The stamp is the packet's last two bytes: a cut anywhere in it
@@ -120,73 +120,88 @@ pub(super) fn parse_packets<E>(
     let line = |j: usize, p: &[u8; FIFO_PACKET]| {
         p[15] == 0xFF && packets.get(j + 1).is_none_or(|q| q[0] == 0xFF)
     };
-    for (j, p) in packets.iter().enumerate() {
+    let stamp16 = |p: &[u8; FIFO_PACKET]| u16::from_be_bytes([p[14], p[15]]);
+    // The newest packet handed over, the samples handed over and the
+    // packets taken (those and the ones sent again).
+    let (mut newest, mut n, mut taken) = (None, 0, 0);
+    // The last stamp: the first packet of a stream (after a flush) has
+    // nothing to be checked against but the line, so it is taken here and
+    // the loop below checks each stamp against the one before.
+    let mut prev = match *stamp {
+        Some(s) => s,
+        None => {
+            let Some(p) = packets.first() else {
+                return (0, None);
+            };
+            if p[0] & HEADER_MASK != HEADER_EXPECTED {
+                return (0, Some(header_stop(p[0])));
+            }
+            // A stamp of 0xFFFF with the line at 0xFF after it is a cut (a
+            // true 0xFFFF there, 1 in 65 536, loses that one sample).
+            if p[14] == 0xFF && line(0, p) {
+                return (0, Some(Stop::Cut));
+            }
+            let s = u32::from(stamp16(p));
+            each(FifoSample {
+                raw: gyro_of(p),
+                stamp: s,
+            });
+            (newest, n, taken) = (Some(p), 1, 1);
+            s
+        }
+    };
+    let (mut sp, mut resent, mut stop) = (*step, 0, None);
+    for (j, p) in packets.iter().enumerate().skip(taken) {
         let h = p[0];
         // (0xFF and the message bit fail it too: `header_stop` says which.)
         if h & HEADER_MASK != HEADER_EXPECTED {
             stop = Some(header_stop(h));
             break;
         }
-        let stamp16 = u16::from_be_bytes([p[14], p[15]]);
-        let stamp = match st {
-            Some(prev) => {
-                let d = stamp16.wrapping_sub(prev as u16);
-                // Such a stamp off the stream's step by more than a count
-                // or two (a PLL or CLKIN moves no more in one sample), or
-                // before a step is known beyond `lim`, is the line's, not
-                // the chip's. A clock failing over to its RC oscillator
-                // (5–8 %) steps once: its packet is taken unless its stamp
-                // ends in 0xFF (1 in 256) and it ends the burst, and then it
-                // is lost (the chip sent it whole).
-                let off = if sp == 0 {
-                    d > lim
-                } else {
-                    d.abs_diff(sp) > (sp / 32).max(2)
-                };
-                if off && line(j, p) {
-                    stop = Some(Stop::Cut);
-                    break;
-                }
-                // A step back of less than a sample period (0 included): the
-                // packet handed over last (past the count, or cut in its
-                // stamp's last byte and taken) sent again. Taken, not a
-                // sample.
-                if (d as i16) <= 0 && (d as i16) > -(lim as i16) {
-                    taken += 1;
-                    read.resent += 1;
-                    continue;
-                }
-                sp = d;
-                prev.wrapping_add(u32::from(d))
-            }
-            // The first packet of a stream (after a flush) has nothing to
-            // be checked against but the line: a stamp of 0xFFFF with the
-            // line at 0xFF after it is a cut (a true 0xFFFF there, 1 in
-            // 65 536, loses that one sample).
-            None if p[14] == 0xFF && line(j, p) => {
-                stop = Some(Stop::Cut);
-                break;
-            }
-            None => u32::from(stamp16),
+        let d = stamp16(p).wrapping_sub(prev as u16);
+        // Such a stamp off the stream's step by more than a count or two
+        // (a PLL or CLKIN moves no more in one sample), or before a step
+        // is known beyond `lim`, is the line's, not the chip's. A clock
+        // failing over to its RC oscillator (5–8 %) steps once: its packet
+        // is taken unless its stamp ends in 0xFF (1 in 256) and it ends the
+        // burst, and then it is lost (the chip sent it whole).
+        let off = if sp == 0 {
+            d > lim
+        } else {
+            d.abs_diff(sp) > (sp / 32).max(2)
         };
-        st = Some(stamp);
+        if off && line(j, p) {
+            stop = Some(Stop::Cut);
+            break;
+        }
+        // A step back of less than a sample period (0 included): the
+        // packet handed over last (past the count, or cut in its stamp's
+        // last byte and taken) sent again. Taken, not a sample.
+        if (d as i16) <= 0 && (d as i16) > -(lim as i16) {
+            taken += 1;
+            resent += 1;
+            continue;
+        }
+        sp = d;
+        prev = prev.wrapping_add(u32::from(d));
         each(FifoSample {
             raw: gyro_of(p),
-            stamp,
+            stamp: prev,
         });
         newest = Some(p);
         n += 1;
         taken += 1;
     }
-    *stamp = st;
     *step = sp;
     read.samples += n;
-    // The newest handed over is the stream's last stamp (a packet sent
-    // again, or one that stops the parse, leaves it as it was).
-    if let (Some(p), Some(stamp)) = (newest, st) {
+    read.resent += resent;
+    // The newest handed over carries the stream's last stamp (a packet
+    // sent again, or one that stops the parse, leaves it as it was).
+    if let Some(p) = newest {
+        *stamp = Some(prev);
         read.last = Some(FifoSample {
             raw: gyro_of(p),
-            stamp,
+            stamp: prev,
         });
     }
     (taken, stop)
@@ -306,6 +321,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             counted: 0,
             left: count - want,
             last: None,
+            counted_stamp: None,
             resent: 0,
             cut: false,
         };
@@ -332,6 +348,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // oscillator). Past the count nothing was promised: a bad header
         // there is no error.
         read.counted = read.samples;
+        read.counted_stamp = read.last.map(|x| x.stamp);
         if stop.is_none() && want == in_first {
             let mut at = 3 + FIFO_PACKET * in_first;
             let end = 3 + FIFO_PACKET * k;
@@ -401,6 +418,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         if want > in_first {
             // Every packet came within the count, over more bursts.
             read.counted = read.samples;
+            read.counted_stamp = read.last.map(|x| x.stamp);
         }
         match stop {
             None => Ok(read),
