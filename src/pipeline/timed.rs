@@ -21,7 +21,8 @@ use super::align::{Aligned, Aligner};
 use super::clock::{ChipClock, ClockState, Instant16, Q};
 use super::stamps::StampScale;
 use crate::drivers::icm42688::{
-    ClockInput, Config, Error, FifoRead, Icm42688, FIFO_PACKET, FIFO_RECORDS, MAX_PER_READ,
+    ClockInput, Config, Error, FifoRead, FifoSample, Icm42688, FIFO_PACKET, FIFO_RECORDS,
+    MAX_PER_READ,
 };
 use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
 
@@ -142,15 +143,14 @@ pub struct TimedIcm<SPI, C> {
     g: Icm42688<SPI>,
     capture: C,
     clock: ChipClock,
-    align: Aligner<ALIGN_CAP>,
+    /// Where the samples go as they are parsed.
+    intake: Intake,
     /// The signal path's delay, 1/16 µs of the chip's clock.
     path16: u32,
     /// Chip µs between samples.
     period_us: u32,
     /// °/s per LSB at the configured full scale.
     dps_per_lsb: f32,
-    /// The spike check's limit, LSB (see [`SPIKE_DPS`]).
-    spike_lsb: u32,
     at: Option<Instant16>,
     /// How far the instant asked for is behind the read, µs.
     behind_us: u32,
@@ -160,15 +160,12 @@ pub struct TimedIcm<SPI, C> {
     /// Reads with samples still to come before the aligner answers again
     /// after a gap (see [`REJOIN_READS`]).
     rejoin: u8,
-    /// The chip's stamp counts onto µs of its nominal clock.
-    scale: StampScale,
     /// Added to the stamps' µs: after a flush the count's high bits are
     /// lost, and the µs off by whole wraps of it; this puts them back on
     /// the tracked clock's (see [`TimedIcm::rebase`]).
     stamp_offset: u32,
     /// The next samples need [`Self::stamp_offset`] found again.
     rebase: bool,
-    spike: SpikeCheck,
     /// What was counted.
     pub counters: TimingCounters,
 }
@@ -190,20 +187,23 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             g,
             capture,
             clock: ChipClock::new(),
-            align: Aligner::new(cfg.odr.per_ms() as u8),
+            intake: Intake {
+                align: Aligner::new(cfg.odr.per_ms() as u8),
+                spike: SpikeCheck::new(),
+                spike_lsb: (SPIKE_DPS * cfg.full_scale.lsb_per_dps()) as u32,
+                scale: StampScale::new(cfg.clock, period_us),
+                spiked: 0,
+            },
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
             period_us,
             dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
-            spike_lsb: (SPIKE_DPS * cfg.full_scale.lsb_per_dps()) as u32,
             at: None,
             behind_us: 0,
             last_raw: [0; 3],
             dry: 0,
             rejoin: REJOIN_READS,
-            scale: StampScale::new(cfg.clock, period_us),
             stamp_offset: 0,
             rebase: false,
-            spike: SpikeCheck::new(),
             counters: TimingCounters::default(),
         }
     }
@@ -224,8 +224,9 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// tracked. How far the newest data lie behind the read.
     pub fn newest_instant(&self) -> Option<Instant16> {
         let chip = self
+            .intake
             .scale
-            .us16_of(self.align.newest()?)
+            .us16_of(self.intake.align.newest()?)
             .wrapping_add(self.stamp_offset.wrapping_mul(16))
             .wrapping_sub(self.path16);
         self.clock.board_instant16(chip)
@@ -248,7 +249,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
         self.clock.reset();
         self.gap();
         let cfg = self.g.config();
-        self.scale = StampScale::new(cfg.clock, self.period_us);
+        self.intake.scale = StampScale::new(cfg.clock, self.period_us);
         self.stamp_offset = 0;
         self.rebase = false;
     }
@@ -257,8 +258,8 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// again; the clock is kept, and the stamps are put back on its count
     /// by the first capture after the gap.
     fn gap(&mut self) {
-        self.align.clear();
-        self.spike = SpikeCheck::new();
+        self.intake.align.clear();
+        self.intake.spike = SpikeCheck::new();
         self.rejoin = REJOIN_READS;
         self.rebase = true;
         if self.clock.state() != ClockState::Tracking {
@@ -276,7 +277,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     fn rebase(&mut self, newest: u32, capture_us: u32) {
         if let Some(pred) = self.clock.stamp_at(capture_us) {
             let cur = newest.wrapping_add(self.stamp_offset);
-            let w = self.scale.wrap_us() as f32;
+            let w = self.intake.scale.wrap_us() as f32;
             let j = libm::roundf(pred.wrapping_sub(cur) as i32 as f32 / w);
             self.stamp_offset = self.stamp_offset.wrapping_add((j * w) as i32 as u32);
         }
@@ -328,7 +329,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
     /// count, put on µs of the chip's clock by [`StampScale`]) and its
     /// INT1 capture ([`TimedIcm::pair`]).
     fn observe(&mut self, count: u32, c: u32) {
-        let newest = self.scale.us_of(count);
+        let newest = self.intake.scale.us_of(count);
         if self.rebase {
             self.rebase(newest, c);
             self.clock
@@ -342,6 +343,40 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             .counters
             .jumps
             .wrapping_add(self.clock.jumps.wrapping_sub(jumps));
+    }
+}
+
+/// Where a read's samples go as the driver parses them: the stamps' scale
+/// while it learns its unit, the spike check, the aligner. One struct, so
+/// the parse's per-sample call reaches all of it through one pointer.
+#[derive(Clone, Copy, Debug)]
+struct Intake {
+    align: Aligner<ALIGN_CAP>,
+    spike: SpikeCheck,
+    /// The spike check's limit, LSB (see [`SPIKE_DPS`]).
+    spike_lsb: u32,
+    /// The chip's stamp counts onto µs of its nominal clock.
+    scale: StampScale,
+    /// Samples left out as spikes in this read.
+    spiked: u32,
+}
+
+impl Intake {
+    /// One sample as the driver parsed it. The aligner keeps counts: its
+    /// means and interpolation are the same in any unit linear in the
+    /// chip's time, and the one instant a read asks for is put in counts.
+    #[inline(always)]
+    fn take(&mut self, x: FifoSample) {
+        if !self.scale.decided() {
+            // Every step votes while the unit is learnt on CLKIN, spikes
+            // too: their stamps are the chip's.
+            self.scale.learn(x.stamp);
+        }
+        if self.spike.pass(x.raw, self.spike_lsb) {
+            self.align.push(x.stamp, x.raw);
+        } else {
+            self.spiked += 1;
+        }
     }
 }
 
@@ -394,9 +429,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn read(&mut self) -> Result<Reading, ReadFault> {
         let mut fresh = false;
         let lost = self.clock.lost;
-        // A spike was left out in this read.
-        let mut spiked = false;
-        let lim = self.spike_lsb;
+        self.intake.spiked = 0;
         // Bursts until the FIFO is read down: a full FIFO is
         // FIFO_RECORDS / MAX_PER_READ of them; more is a chip that keeps
         // cutting its bursts, whose samples wait for the next read.
@@ -406,30 +439,8 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             // read asks for. The capture before the burst and after it:
             // which sample the capture is of (see [`TimedIcm::pair`]).
             let before = self.capture.last_us();
-            let Self {
-                g,
-                align,
-                spike,
-                counters,
-                scale,
-                ..
-            } = self;
-            // The aligner keeps counts: its means and interpolation are
-            // the same in any unit linear in the chip's time, and the one
-            // instant a read asks for is put in counts.
-            let r = g.read_fifo_with(MAX_PER_READ, |x| {
-                if !scale.decided() {
-                    // Every step votes while the unit is learnt on CLKIN,
-                    // spikes too: their stamps are the chip's.
-                    scale.learn(x.stamp);
-                }
-                if spike.pass(x.raw, lim) {
-                    align.push(x.stamp, x.raw);
-                } else {
-                    spiked = true;
-                    counters.spikes = counters.spikes.wrapping_add(1);
-                }
-            });
+            let Self { g, intake, .. } = self;
+            let r = g.read_fifo_with(MAX_PER_READ, |x| intake.take(x));
             let after = self.capture.last_us();
             match r {
                 Ok(f) => {
@@ -441,8 +452,8 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                         self.last_raw = x.raw;
                         // The read's newest sample is the scale's base for
                         // the maps near it (the pair's stamp, the instant).
-                        self.scale.convert(x.stamp);
-                        if self.scale.take_changed() {
+                        self.intake.scale.convert(x.stamp);
+                        if self.intake.scale.take_changed() {
                             // The unit was decided other than guessed: the
                             // µs so far do not join the next.
                             self.clock.reset();
@@ -474,7 +485,8 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
                 }
             }
         }
-        if spiked {
+        self.counters.spikes = self.counters.spikes.wrapping_add(self.intake.spiked);
+        if self.intake.spiked > 0 {
             // A sample no rate could have made: a faulty chip's, as a
             // garbled frame is (the pipeline flags it).
             return Err(ReadFault::BadResponse);
@@ -515,11 +527,11 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
             self.counters.acquiring = self.counters.acquiring.wrapping_add(1);
             return Err(ReadFault::Acquiring);
         };
-        let t = self.scale.counts16_of(
+        let t = self.intake.scale.counts16_of(
             chip.wrapping_sub(self.stamp_offset.wrapping_mul(16))
                 .wrapping_add(self.path16),
         );
-        match self.align.at(t, self.dps_per_lsb) {
+        match self.intake.align.at(t, self.dps_per_lsb) {
             Aligned::Rate(rate_dps) => {
                 let mut saturated = 0;
                 for (i, r) in self.last_raw.iter().enumerate() {
