@@ -57,6 +57,8 @@ pub(super) const HEADER_EXPECTED: u8 =
 /// What FIFO_DATA reads with nothing to give (the header's FIFO-empty
 /// bit alone).
 pub(super) const EMPTY_MARKER: u8 = 0x80;
+/// Four empty markers read as one word.
+const MARKER_WORD: u32 = u32::from_ne_bytes([EMPTY_MARKER; 4]);
 /// The header bits checked against [`HEADER_EXPECTED`].
 pub(super) const HEADER_MASK: u8 = 0xFC;
 
@@ -111,6 +113,9 @@ pub(super) fn parse_packets<E>(
     read: &mut FifoRead,
     each: &mut impl FnMut(FifoSample),
 ) -> (usize, Option<Stop<E>>) {
+    let (mut st, mut sp, mut n, mut taken, mut stop) = (*stamp, *step, 0, 0, None);
+    // The newest packet handed over.
+    let mut newest = None;
     // Whole packets as arrays: no index into one is checked.
     let (packets, _) = bytes.as_chunks::<FIFO_PACKET>();
     // The stamp is the packet's last two bytes: a cut anywhere in it
@@ -120,88 +125,73 @@ pub(super) fn parse_packets<E>(
     let line = |j: usize, p: &[u8; FIFO_PACKET]| {
         p[15] == 0xFF && packets.get(j + 1).is_none_or(|q| q[0] == 0xFF)
     };
-    let stamp16 = |p: &[u8; FIFO_PACKET]| u16::from_be_bytes([p[14], p[15]]);
-    // The newest packet handed over, the samples handed over and the
-    // packets taken (those and the ones sent again).
-    let (mut newest, mut n, mut taken) = (None, 0, 0);
-    // The last stamp: the first packet of a stream (after a flush) has
-    // nothing to be checked against but the line, so it is taken here and
-    // the loop below checks each stamp against the one before.
-    let mut prev = match *stamp {
-        Some(s) => s,
-        None => {
-            let Some(p) = packets.first() else {
-                return (0, None);
-            };
-            if p[0] & HEADER_MASK != HEADER_EXPECTED {
-                return (0, Some(header_stop(p[0])));
-            }
-            // A stamp of 0xFFFF with the line at 0xFF after it is a cut (a
-            // true 0xFFFF there, 1 in 65 536, loses that one sample).
-            if p[14] == 0xFF && line(0, p) {
-                return (0, Some(Stop::Cut));
-            }
-            let s = u32::from(stamp16(p));
-            each(FifoSample {
-                raw: gyro_of(p),
-                stamp: s,
-            });
-            (newest, n, taken) = (Some(p), 1, 1);
-            s
-        }
-    };
-    let (mut sp, mut resent, mut stop) = (*step, 0, None);
-    for (j, p) in packets.iter().enumerate().skip(taken) {
+    for (j, p) in packets.iter().enumerate() {
         let h = p[0];
         // (0xFF and the message bit fail it too: `header_stop` says which.)
         if h & HEADER_MASK != HEADER_EXPECTED {
             stop = Some(header_stop(h));
             break;
         }
-        let d = stamp16(p).wrapping_sub(prev as u16);
-        // Such a stamp off the stream's step by more than a count or two
-        // (a PLL or CLKIN moves no more in one sample), or before a step
-        // is known beyond `lim`, is the line's, not the chip's. A clock
-        // failing over to its RC oscillator (5–8 %) steps once: its packet
-        // is taken unless its stamp ends in 0xFF (1 in 256) and it ends the
-        // burst, and then it is lost (the chip sent it whole).
-        let off = if sp == 0 {
-            d > lim
-        } else {
-            d.abs_diff(sp) > (sp / 32).max(2)
+        let stamp16 = u16::from_be_bytes([p[14], p[15]]);
+        let stamp = match st {
+            Some(prev) => {
+                let d = stamp16.wrapping_sub(prev as u16);
+                // Such a stamp off the stream's step by more than a count
+                // or two (a PLL or CLKIN moves no more in one sample), or
+                // before a step is known beyond `lim`, is the line's, not
+                // the chip's. A clock failing over to its RC oscillator
+                // (5–8 %) steps once: its packet is taken unless its stamp
+                // ends in 0xFF (1 in 256) and it ends the burst, and then it
+                // is lost (the chip sent it whole).
+                let off = if sp == 0 {
+                    d > lim
+                } else {
+                    d.abs_diff(sp) > (sp / 32).max(2)
+                };
+                if off && line(j, p) {
+                    stop = Some(Stop::Cut);
+                    break;
+                }
+                // A step back of less than a sample period (0 included): the
+                // packet handed over last (past the count, or cut in its
+                // stamp's last byte and taken) sent again. Taken, not a
+                // sample.
+                if (d as i16) <= 0 && (d as i16) > -(lim as i16) {
+                    taken += 1;
+                    read.resent += 1;
+                    continue;
+                }
+                sp = d;
+                prev.wrapping_add(u32::from(d))
+            }
+            // The first packet of a stream (after a flush) has nothing to
+            // be checked against but the line: a stamp of 0xFFFF with the
+            // line at 0xFF after it is a cut (a true 0xFFFF there, 1 in
+            // 65 536, loses that one sample).
+            None if p[14] == 0xFF && line(j, p) => {
+                stop = Some(Stop::Cut);
+                break;
+            }
+            None => u32::from(stamp16),
         };
-        if off && line(j, p) {
-            stop = Some(Stop::Cut);
-            break;
-        }
-        // A step back of less than a sample period (0 included): the
-        // packet handed over last (past the count, or cut in its stamp's
-        // last byte and taken) sent again. Taken, not a sample.
-        if (d as i16) <= 0 && (d as i16) > -(lim as i16) {
-            taken += 1;
-            resent += 1;
-            continue;
-        }
-        sp = d;
-        prev = prev.wrapping_add(u32::from(d));
+        st = Some(stamp);
         each(FifoSample {
             raw: gyro_of(p),
-            stamp: prev,
+            stamp,
         });
         newest = Some(p);
         n += 1;
         taken += 1;
     }
+    *stamp = st;
     *step = sp;
     read.samples += n;
-    read.resent += resent;
-    // The newest handed over carries the stream's last stamp (a packet
-    // sent again, or one that stops the parse, leaves it as it was).
-    if let Some(p) = newest {
-        *stamp = Some(prev);
+    // The newest handed over is the stream's last stamp (a packet sent
+    // again, or one that stops the parse, leaves it as it was).
+    if let (Some(p), Some(stamp)) = (newest, st) {
         read.last = Some(FifoSample {
             raw: gyro_of(p),
-            stamp: prev,
+            stamp,
         });
     }
     (taken, stop)
@@ -355,10 +345,12 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
             loop {
                 // The markers four at a time (a slot past the count is
                 // usually sixteen of them), then one at a time.
-                while self
-                    .fifo_buf
-                    .get(at..at + 4)
-                    .is_some_and(|m| at + 4 <= end && m == [EMPTY_MARKER; 4])
+                while at + 4 <= end
+                    && self
+                        .fifo_buf
+                        .get(at..at + 4)
+                        .and_then(|m| <[u8; 4]>::try_from(m).ok())
+                        .is_some_and(|m| u32::from_ne_bytes(m) == MARKER_WORD)
                 {
                     at += 4;
                 }
