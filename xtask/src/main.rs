@@ -10,7 +10,8 @@
 //! - `bench`: instruction counts on the Cortex-M4 (QEMU `-icount`); the
 //!   board's loop also counted exactly from QEMU's execution trace.
 //! - `bench-loop`: that exact count alone (some 40 minutes for the twelve
-//!   scenarios; `BENCH_SCENARIOS=KL` counts only those named, and
+//!   scenarios; `BENCH_SCENARIOS=KL` counts only those named,
+//!   `BENCH_SAMPLES=700` each scenario's first 700 samples, and
 //!   `XTASK_TRACE_LINES=1` adds the mean sample by source line;
 //!   `XTASK_TRACE_PHASE=0|1|2` breaks down one phase, `all` the whole loop). Each
 //!   scenario's whole loop and its frame's path (read + fuse, the frame;
