@@ -25,7 +25,7 @@ pub mod latency {
     //! `timing-eval` (its latency budget) and `pointing-eval` (when each
     //! sample reaches the positioner).
 
-    use gyro_array::drivers::icm42688::{ClockInput, Config};
+    use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config};
 
     /// The loop's compute on the frame's path, µs: `cargo xtask
     /// bench-loop`'s target (10 000 instructions) at the STM32F405's
@@ -61,7 +61,7 @@ pub mod latency {
     /// the board's SPI reads, the loop's worst sample and the largest
     /// frame on the wire.
     pub fn read_to_antenna_us() -> f64 {
-        loop_us(&Config::board_fifo(ClockInput::ClkIn)) + wire_us(sample_frame_bytes())
+        loop_us(&board_fifo(ClockInput::ClkIn)) + wire_us(sample_frame_bytes())
     }
 }
 pub mod stated;

@@ -13,7 +13,7 @@
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::app::{self as schedule, StatusFacts, StatusView};
-use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
+use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{
@@ -234,7 +234,7 @@ pub fn run(
         with_bus(&bus, |b| b.advance(timing.power_up_s as f32));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let cfg = Config::board_fifo(if timing.clkin {
+    let cfg = board_fifo(if timing.clkin {
         ClockInput::ClkIn
     } else {
         ClockInput::Internal

@@ -3,7 +3,9 @@
 //! reported, CLKIN locking the rate, AFSR's freeze, and the signal path's
 //! aliasing and delay against the filters' closed forms.
 
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Sampling};
+use gyro_array::drivers::icm42688::{
+    board_fifo, ClockInput, Config, Filter, Sampling, BOARD_FILTER, BOARD_FILTER_FIFO,
+};
 use gyro_array::emu::timing::{ClockParams, PathSettings, Vibration};
 use gyro_array::emu::{with_bus, ChipTiming, NoiseParams, RateProfile};
 use host_tests::single_chip::{chip, run, Reads};
@@ -44,7 +46,7 @@ fn fifo_loses_and_repeats_nothing_on_a_fast_or_slow_clock() {
         let c = chip(RateProfile::constant(5.0), NoiseParams::ICM42688, t);
         let r = run(
             c,
-            fifo_config(Filter::BOARD, ClockInput::Internal),
+            fifo_config(BOARD_FILTER, ClockInput::Internal),
             None,
             10_000,
             |_, _| {},
@@ -86,7 +88,7 @@ fn a_stalled_bus_overflows_and_the_driver_says_so() {
     // No reads for 200 ms: 2 048 bytes hold 128 packets.
     let r = run(
         c,
-        fifo_config(Filter::BOARD, ClockInput::Internal),
+        fifo_config(BOARD_FILTER, ClockInput::Internal),
         None,
         1000,
         |_, _| {},
@@ -111,7 +113,7 @@ fn clkin_sets_the_rate_and_its_loss_stops_the_chip() {
         let c = chip(RateProfile::constant(1.0), NoiseParams::ICM42688, t);
         let r = run(
             c,
-            fifo_config(Filter::BOARD, ClockInput::ClkIn),
+            fifo_config(BOARD_FILTER, ClockInput::ClkIn),
             Some(hz),
             4000,
             |_, bus| {
@@ -173,7 +175,7 @@ fn afsr_freezes_the_output_unless_turned_off() {
     let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
     let off = run(
         c,
-        fifo_config(Filter::BOARD, ClockInput::Internal),
+        fifo_config(BOARD_FILTER, ClockInput::Internal),
         None,
         3000,
         |_, _| {},
@@ -185,7 +187,7 @@ fn afsr_freezes_the_output_unless_turned_off() {
     let c = chip(profile, NoiseParams::IDEAL, ChipTiming::pll(0.0));
     let on = run(
         c,
-        fifo_config(Filter::BOARD, ClockInput::Internal),
+        fifo_config(BOARD_FILTER, ClockInput::Internal),
         None,
         3000,
         |n, bus| {
@@ -357,7 +359,7 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
             sine_hz: hz,
             sine_start_s: 0.0,
         };
-        let cfg = Config::board_fifo(ClockInput::Internal);
+        let cfg = board_fifo(ClockInput::Internal);
         let runs = [PathModel::Filters, PathModel::Delay].map(|path| {
             let t = ChipTiming {
                 path,
@@ -403,7 +405,7 @@ fn int1_marks_every_sample_at_8_khz() {
         );
         let cfg = Config {
             odr: Odr::Hz8000,
-            ..fifo_config(Filter::BOARD_FIFO, ClockInput::Internal)
+            ..fifo_config(BOARD_FILTER_FIFO, ClockInput::Internal)
         };
         let mut seen = std::collections::BTreeSet::new();
         run(

@@ -78,7 +78,7 @@ use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Ca
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
 use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
-use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
+use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{Settings, StoreState};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
@@ -589,7 +589,7 @@ mod app {
         // sampling: FIFO at 4 kHz, each sample's INT1 captured, on CLKIN where
         // the board drives it (`docs/timing.md`). A chip that failed before is
         // set up too, so its restarts bring it back to this configuration.
-        let cfg = Config::board_fifo(if clkin.is_some() {
+        let cfg = board_fifo(if clkin.is_some() {
             ClockInput::ClkIn
         } else {
             ClockInput::Internal

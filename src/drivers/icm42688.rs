@@ -7,6 +7,41 @@ pub use ::icm42688p::*;
 
 use super::{Gyro, ReadFault, Reading, Restart};
 
+/// The board's filters at 1 kHz with the data registers polled (the
+/// driver's [`Config::default`]): ArduPilot's, the least aliasing of the
+/// flight stacks' at that rate (`timing-eval`).
+pub const BOARD_FILTER: Filter = Filter::ARDUPILOT;
+
+/// The ODR the board samples its ICM-42688-Ps at through their FIFOs:
+/// four samples a millisecond (see [`BOARD_FILTER_FIFO`]).
+pub const BOARD_FIFO_ODR: Odr = Odr::Hz4000;
+
+/// The board's filters for FIFO sampling at [`BOARD_FIFO_ODR`], averaged
+/// in fours to the 1 kHz output: AAF at 394 Hz, UI filter of 2nd order at
+/// ODR/8 (500 Hz). It aliases no more than ArduPilot's and PX4's at any
+/// out-of-band tone measured, and of the settings that do, it reaches the
+/// wire soonest at 4 kHz; at 2 kHz the fastest such setting takes 200 µs
+/// longer, past the 2 ms the antenna allows (`timing-eval`; its `--search`
+/// weighs every setting the driver can write at 2, 4 and 8 kHz,
+/// `docs/timing.md`).
+pub const BOARD_FILTER_FIFO: Filter = Filter {
+    aaf_delt: 9,
+    ui_order: 2,
+    ui_bw: 3,
+};
+
+/// The board's FIFO sampling ([`BOARD_FIFO_ODR`] through
+/// [`BOARD_FILTER_FIFO`], ±250 °/s) on clock `clock`.
+pub const fn board_fifo(clock: ClockInput) -> Config {
+    Config {
+        full_scale: FullScale::Dps250,
+        odr: BOARD_FIFO_ODR,
+        filter: BOARD_FILTER_FIFO,
+        clock,
+        sampling: Sampling::Fifo,
+    }
+}
+
 impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
     /// The data registers: a silent reset (RESET_DONE in the same burst)
     /// is [`ReadFault::Reset`]; a count at either end of the range marks
@@ -17,12 +52,7 @@ impl<SPI: SpiDevice> Gyro for Icm42688<SPI> {
             return Err(ReadFault::Reset);
         }
         let s = self.full_scale().lsb_per_dps();
-        let mut saturated = 0;
-        for (i, r) in raw.iter().enumerate() {
-            if *r == i16::MAX || *r == i16::MIN {
-                saturated |= 1 << i;
-            }
-        }
+        let saturated = super::saturated_axes(&raw);
         Ok(Reading {
             raw,
             rate_dps: [raw[0] as f32 / s, raw[1] as f32 / s, raw[2] as f32 / s],

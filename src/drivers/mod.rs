@@ -61,6 +61,18 @@ pub enum Restart {
     Done,
 }
 
+/// The axes of `raw` at either end of the range (i16::MIN or MAX: a
+/// saturated axis), bit `i` for axis `i`: one unsigned compare an axis,
+/// the two ends moved to 0 and 1.
+#[inline(always)]
+pub fn saturated_axes(raw: &[i16; 3]) -> u8 {
+    let mut m = 0;
+    for (i, r) in raw.iter().enumerate() {
+        m |= u8::from((*r as u16).wrapping_add(0x8001) <= 1) << i;
+    }
+    m
+}
+
 /// One reading of a gyro in its native counts and in degrees per second.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -110,5 +122,26 @@ pub trait Gyro {
     /// configuration and datasheet give them (an ideal sampler: 0).
     fn delay_us(&self) -> u32 {
         0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_ranges_ends_are_saturated() {
+        for (r, end) in [
+            (i16::MIN, true),
+            (i16::MAX, true),
+            (i16::MIN + 1, false),
+            (i16::MAX - 1, false),
+            (0, false),
+            (-1, false),
+            (1, false),
+        ] {
+            assert_eq!(saturated_axes(&[0, r, 0]), u8::from(end) << 1, "{r}");
+        }
+        assert_eq!(saturated_axes(&[i16::MAX, 5, i16::MIN]), 0b101);
     }
 }

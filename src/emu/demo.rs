@@ -25,7 +25,7 @@ use crate::algo::fusion::{AdaptiveConfig, ConfigError, Method};
 use crate::algo::qualify::QualifyError;
 use crate::algo::static_cal::{CalError, CalRecord};
 use crate::drivers::adxrs453::OnAxis;
-use crate::drivers::icm42688::{ClockInput, Config};
+use crate::drivers::icm42688::{board_fifo, ClockInput};
 use crate::drivers::Gyro;
 use crate::pipeline::selftest;
 use crate::pipeline::startup::start_array;
@@ -219,7 +219,7 @@ pub fn start<'a, 'c>(
     };
     pipe.set_noise_priors(results.map(|r| r.ok().map(|h| h.std_dps)));
     // QEMU's board has no CLKIN to drive: the chips on their own clocks.
-    let cfg = Config::board_fifo(ClockInput::Internal);
+    let cfg = board_fifo(ClockInput::Internal);
     let mut fifo_failed = 0;
     for (i, g) in [&mut g0, &mut g1, &mut g2, &mut g3].into_iter().enumerate() {
         if g.init(&mut delay, cfg).is_err() {

@@ -699,10 +699,10 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
 
 #[test]
 fn the_horizon_allows_for_the_boards_spi_reads_and_its_loop() {
-    use crate::drivers::icm42688::{ClockInput, Config};
+    use crate::drivers::icm42688::{board_fifo, ClockInput};
     // The loop's 10 000-instruction budget at 168 MHz beside the SPI
     // transfers of the board's reads, rounded up to the µs.
-    let spi = crate::pipeline::timed::board_spi_us(&Config::board_fifo(ClockInput::ClkIn));
+    let spi = crate::pipeline::timed::board_spi_us(&board_fifo(ClockInput::ClkIn));
     let want = spi + 10_000.0 / 168.0;
     let got = super::port::LOOP_US as f32;
     assert!(got >= want && got < want + 1.0, "{got} against {want}");

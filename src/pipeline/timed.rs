@@ -24,7 +24,7 @@ use crate::drivers::icm42688::{
     ClockInput, Config, Error, FifoRead, FifoSample, Icm42688, FIFO_PACKET, FIFO_RECORDS,
     MAX_PER_READ,
 };
-use crate::drivers::{Gyro, ReadFault, Reading, Restart, SampleCapture};
+use crate::drivers::{saturated_axes, Gyro, ReadFault, Reading, Restart, SampleCapture};
 
 /// Samples kept per chip: 8 ms at 4 kHz, room for an instant up to 7 ms
 /// behind the newest sample (the ADXRS453's filter delay, for comparison,
@@ -82,10 +82,10 @@ pub struct TimingCounters {
 pub const SPIKE_DPS: f32 = 25.0;
 
 /// How far behind its read the board states each sample's instant, µs,
-/// for its chips' FIFO sampling (`Config::board_fifo`, 4 kHz through
-/// `Filter::BOARD_FIFO`): [`stated_delay_us`], 1 021 µs of path, 375 of
-/// the mean of four's half-span and a 250 µs sample period, for a chip
-/// 1 % slow.
+/// for its chips' FIFO sampling (`icm42688::board_fifo`, 4 kHz through
+/// `icm42688::BOARD_FILTER_FIFO`): [`stated_delay_us`], 1 021 µs of path,
+/// 375 of the mean of four's half-span and a 250 µs sample period, for a
+/// chip 1 % slow.
 pub const BOARD_DELAY_US: u32 = 1670;
 
 /// The board's SPI clocks, Hz (`board-f405` at 168 MHz): SPI1 to the
@@ -533,10 +533,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         );
         match self.intake.align.at(t, self.dps_per_lsb) {
             Aligned::Rate(rate_dps) => {
-                let mut saturated = 0;
-                for (i, r) in self.last_raw.iter().enumerate() {
-                    saturated |= u8::from(at_range_end(*r)) << i;
-                }
+                let saturated = saturated_axes(&self.last_raw);
                 Ok(Reading {
                     raw: self.last_raw,
                     rate_dps,
@@ -580,13 +577,6 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn delay_us(&self) -> u32 {
         self.behind_us
     }
-}
-
-/// Whether a count is at either end of the range (i16::MIN or MAX, a
-/// saturated axis): one unsigned compare, the two ends moved to 0 and 1.
-#[inline(always)]
-fn at_range_end(r: i16) -> bool {
-    (r as u16).wrapping_add(0x8001) <= 1
 }
 
 /// Whether the tracker has the chip's clock.
@@ -653,6 +643,7 @@ impl<G: Gyro> Gyro for AtInstant<G> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::drivers::icm42688::board_fifo;
 
     /// A gyro whose reading describes `delay_us` behind its read.
     struct Fixed {
@@ -704,24 +695,9 @@ mod tests {
     }
 
     #[test]
-    fn only_the_ranges_ends_are_saturated() {
-        for (r, end) in [
-            (i16::MIN, true),
-            (i16::MAX, true),
-            (i16::MIN + 1, false),
-            (i16::MAX - 1, false),
-            (0, false),
-            (-1, false),
-            (1, false),
-        ] {
-            assert_eq!(at_range_end(r), end, "{r}");
-        }
-    }
-
-    #[test]
     fn the_boards_spi_time_is_its_bytes_at_its_clocks() {
         // Four bursts of 1 + 3 + 4 × 16 bytes at 21 MHz, 4 bytes at 5.25 MHz.
-        let us = board_spi_us(&Config::board_fifo(ClockInput::ClkIn));
+        let us = board_spi_us(&board_fifo(ClockInput::ClkIn));
         let want = 4.0 * 68.0 * 8.0 / 21.0 + 32.0 / 5.25;
         assert!((us - want).abs() < 1e-3, "{us} against {want}");
     }
@@ -729,7 +705,7 @@ mod tests {
     #[test]
     fn the_board_states_the_delay_its_sampling_needs() {
         for clock in [ClockInput::Internal, ClockInput::ClkIn] {
-            assert_eq!(stated_delay_us(&Config::board_fifo(clock)), BOARD_DELAY_US);
+            assert_eq!(stated_delay_us(&board_fifo(clock)), BOARD_DELAY_US);
         }
     }
 }

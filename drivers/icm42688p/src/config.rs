@@ -42,7 +42,8 @@ pub struct Config {
 }
 
 impl Default for Config {
-    /// ±250 °/s (the board turns at up to 100 °/s), 1 kHz, ArduPilot's
+    /// ±250 °/s (the finest range, for platforms that turn at up to some
+    /// 200 °/s), 1 kHz, ArduPilot's
     /// filters at 1 kHz, AFSR off (always: it freezes the output for
     /// 1–2 ms when the rate crosses 100 °/s), the internal clock, the data
     /// registers.
@@ -50,30 +51,14 @@ impl Default for Config {
         Self {
             full_scale: FullScale::Dps250,
             odr: Odr::Hz1000,
-            filter: Filter::BOARD,
+            filter: Filter::ARDUPILOT,
             clock: ClockInput::Internal,
             sampling: Sampling::Registers,
         }
     }
 }
 
-/// The ODR the board samples its ICM-42688-Ps at through their FIFOs:
-/// four samples a millisecond (see [`Filter::BOARD_FIFO`]).
-pub const BOARD_FIFO_ODR: Odr = Odr::Hz4000;
-
 impl Config {
-    /// The board's FIFO sampling ([`BOARD_FIFO_ODR`] through
-    /// [`Filter::BOARD_FIFO`]) on clock `clock`.
-    pub const fn board_fifo(clock: ClockInput) -> Self {
-        Self {
-            full_scale: FullScale::Dps250,
-            odr: BOARD_FIFO_ODR,
-            filter: Filter::BOARD_FIFO,
-            clock,
-            sampling: Sampling::Fifo,
-        }
-    }
-
     /// The delay a polled read of this configuration carries, µs: the
     /// filters' group delay and half a sample period.
     pub fn polled_delay_us(&self) -> u32 {

@@ -37,24 +37,6 @@ impl Filter {
         ui_order: 2,
         ui_bw: 1,
     };
-    /// This board's at 1 kHz with the data registers polled (see
-    /// [`Config::default`]): ArduPilot's, the least aliasing of the flight
-    /// stacks' at that rate (`timing-eval`).
-    pub const BOARD: Self = Self::ARDUPILOT;
-    /// This board's for FIFO sampling at [`BOARD_FIFO_ODR`], averaged in
-    /// fours to the 1 kHz output: AAF at 394 Hz, UI filter of 2nd order at
-    /// ODR/8 (500 Hz). It aliases no more than ArduPilot's and PX4's at
-    /// any out-of-band tone measured, and of the settings that do, it
-    /// reaches the wire soonest at 4 kHz; at 2 kHz the fastest such
-    /// setting takes 200 µs longer, past the 2 ms the antenna allows
-    /// (`timing-eval`; its `--search` weighs every setting the driver can
-    /// write at 2, 4 and 8 kHz, `docs/timing.md`).
-    pub const BOARD_FIFO: Self = Self {
-        aaf_delt: 9,
-        ui_order: 2,
-        ui_bw: 3,
-    };
-
     /// GYRO_CONFIG1's GYRO_UI_FILT_ORD bits (3:2).
     pub(super) fn order_bits(self) -> u8 {
         (self.ui_order.clamp(1, 3) - 1) << 2

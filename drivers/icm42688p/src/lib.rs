@@ -48,7 +48,7 @@ mod selftest;
 mod tests;
 
 use config::RESTART_FLUSH;
-pub use config::{ClockInput, Config, Sampling, BOARD_FIFO_ODR};
+pub use config::{ClockInput, Config, Sampling};
 pub use fifo::{FifoRead, FifoSample, FIFO_PACKET, FIFO_RECORDS, MAX_PER_READ};
 pub use filter::{aaf_coefficients, aaf_hz, path_delay_us, ui_divisor, Filter};
 pub use regs::{bits, reg, reset};
@@ -92,10 +92,9 @@ pub enum FullScale {
 }
 
 impl FullScale {
-    /// Sensitivity in LSB per °/s (datasheet table 1). (From a `const`
-    /// table: an array literal indexed in place was built on the stack on
-    /// every read, 86 instructions per sample for the board's four chips
-    /// in `cargo xtask bench-loop`.)
+    /// Sensitivity in LSB per °/s (datasheet table 1), from a `const`
+    /// table (an array literal indexed in place is built on the stack on
+    /// every call).
     pub fn lsb_per_dps(self) -> f32 {
         const LSB_PER_DPS: [f32; 8] = [16.4, 32.8, 65.5, 131.0, 262.0, 524.3, 1048.6, 2097.2];
         LSB_PER_DPS[self as usize]
@@ -168,8 +167,8 @@ impl Odr {
         }
     }
 
-    /// Samples per millisecond, the board's output period (at least 1):
-    /// the samples each output's moving mean spans.
+    /// Samples per millisecond (at least 1): for a 1 kHz output, the
+    /// samples each output's moving mean spans.
     pub fn per_ms(self) -> usize {
         (libm::roundf(self.hz() / 1000.0) as usize).max(1)
     }

@@ -118,7 +118,7 @@ fn an_aaf_setting_outside_the_table_is_refused() {
     let cfg = Config {
         filter: Filter {
             aaf_delt: 60,
-            ..Filter::BOARD
+            ..Filter::ARDUPILOT
         },
         ..Config::default()
     };

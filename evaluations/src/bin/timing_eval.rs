@@ -18,7 +18,9 @@
 //! power-up sweep; `--search MS`: every setting within MS to the wire,
 //! against the aliasing target)
 
-use gyro_array::drivers::icm42688::{ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR};
+use gyro_array::drivers::icm42688::{
+    board_fifo, ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR, BOARD_FILTER_FIFO,
+};
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile, RtcTick};
 use host_tests::single_chip::{chip, run, Reads};
@@ -185,7 +187,7 @@ fn array_delay_us(odr: Odr, filter: Filter) -> u32 {
     gyro_array::pipeline::timed::stated_delay_us(&Config {
         odr,
         filter,
-        ..Config::board_fifo(ClockInput::Internal)
+        ..board_fifo(ClockInput::Internal)
     })
 }
 
@@ -283,7 +285,7 @@ fn board_timing(c: Clocks, vibration: Vibration, clock_seed: Option<u64>, scale:
 /// the same array as ideal lockstep samplers; and the lag that best aligns
 /// the fused rate with the truth.
 fn fusion_table(seconds: u32, (seed, clock_seed): (u64, Option<u64>)) -> usize {
-    let (odr, filter) = (BOARD_FIFO_ODR, Filter::BOARD_FIFO);
+    let (odr, filter) = (BOARD_FIFO_ODR, BOARD_FILTER_FIFO);
     let delay_us = array_delay_us(odr, filter);
     println!();
     println!(
@@ -672,7 +674,7 @@ fn main() {
         Setting {
             name: "board: 4 kHz, AAF 394 Hz, UI 2nd ODR/8, mean of 4",
             odr: BOARD_FIFO_ODR,
-            filter: Filter::BOARD_FIFO,
+            filter: BOARD_FILTER_FIFO,
         },
     ];
     let frame = sample_frame_bytes();
@@ -699,7 +701,7 @@ fn main() {
         );
         table.push((d, a));
     }
-    println!("path: the chip's filters and the moving mean, measured on a 5 Hz sine; wire: from the true rate to the sample frame's last byte ({frame} B at {} baud, the SPI reads and the loop's worst sample {:.0} µs at 4 kHz, the stated instant a path and a sample period behind the read, for a chip 1 % slow)", gyro_array::link::BAUD, loop_us(&Config::board_fifo(ClockInput::Internal)));
+    println!("path: the chip's filters and the moving mean, measured on a 5 Hz sine; wire: from the true rate to the sample frame's last byte ({frame} B at {} baud, the SPI reads and the loop's worst sample {:.0} µs at 4 kHz, the stated instant a path and a sample period behind the read, for a chip 1 % slow)", gyro_array::link::BAUD, loop_us(&board_fifo(ClockInput::Internal)));
     println!("alias: peak below 100 Hz at the 1 kHz output, °/s, of a {TONE_DPS} °/s tone");
     let board = &table[table.len() - 1];
     let mut worse = 0;
@@ -834,9 +836,9 @@ fn power_up_sweep(seed: u64) {
     );
     let settings = gyro_array::emu::timing::PathSettings {
         aaf_hz: Some(gyro_array::drivers::icm42688::aaf_hz(
-            Filter::BOARD_FIFO.aaf_delt,
+            BOARD_FILTER_FIFO.aaf_delt,
         )),
-        ui: Some((Filter::BOARD_FIFO.ui_order, 500.0)),
+        ui: Some((BOARD_FILTER_FIFO.ui_order, 500.0)),
         odr_hz: 4000.0,
         reading: PathReading::DOCUMENTED,
     };

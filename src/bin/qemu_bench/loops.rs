@@ -599,7 +599,7 @@ pub(super) fn bench_timed_loop_on(
     }
     use core::cell::RefCell;
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-    use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
+    use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::timing::ClockParams;
     use gyro_array::emu::{
@@ -637,7 +637,7 @@ pub(super) fn bench_timed_loop_on(
         with_bus(&bus, |b| b.clkin_hz = Some(32_000.0));
     }
     let mut delay = EmuDelay::new(&bus, 1e-3);
-    let cfg = Config::board_fifo(if clkin {
+    let cfg = board_fifo(if clkin {
         ClockInput::ClkIn
     } else {
         ClockInput::Internal

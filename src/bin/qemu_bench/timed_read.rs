@@ -10,7 +10,7 @@ use super::*;
 /// time on a clock 0.3 % fast, so reads find one, two or three samples.
 pub(super) fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
     use core::cell::RefCell;
-    use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688};
+    use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::{
         emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
@@ -31,7 +31,7 @@ pub(super) fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
         let dev = emu_device(&bus, &cs[0]);
         let mut g = Icm42688::new(dev);
         let cfg = if timed {
-            Config::board_fifo(ClockInput::Internal)
+            board_fifo(ClockInput::Internal)
         } else {
             Config::default()
         };
