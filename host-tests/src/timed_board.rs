@@ -13,7 +13,7 @@
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::app::{self as schedule, StatusFacts, StatusView};
-use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
+use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::timing::{ClockParams, Vibration};
 use gyro_array::emu::{

@@ -599,7 +599,7 @@ pub(super) fn bench_timed_loop_on(
     }
     use core::cell::RefCell;
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-    use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
+    use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
     use gyro_array::drivers::Gyro;
     use gyro_array::emu::timing::ClockParams;
     use gyro_array::emu::{
