@@ -6,7 +6,7 @@
 #![no_main]
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::link::msg::{Frame, Settings};
-use gyro_array::link::port::Port;
+use gyro_array::link::port::RingPort;
 use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use libfuzzer_sys::fuzz_target;
@@ -53,7 +53,7 @@ fuzz_target!(|data: &[u8]| {
     ) else {
         return;
     };
-    let mut port = Port::<4096>::new(Settings::default());
+    let mut port = RingPort::<4096>::new(Settings::default());
     let mut rx = Rx(data);
     while !rx.0.is_empty() {
         port.receive(&mut rx, &mut pipe);

@@ -32,7 +32,7 @@ use std::path::PathBuf;
 use gyro_array::algo::pointing::{fit_line, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_array::link::msg::Frame;
-use gyro_array::link::port::{Port, PREDICT_K};
+use gyro_array::link::port::{RingPort, PREDICT_K};
 
 use super::{read_recording, Res};
 
@@ -221,7 +221,7 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
         return None;
     }
     let after_us = f64::from(
-        Port::<64>::new(Default::default())
+        RingPort::<64>::new(Default::default())
             .horizon_us()
             .unwrap_or(0),
     );

@@ -21,7 +21,7 @@ use gyro_array::emu::{
     PastCount, PathReading, RateProfile, RtcTick,
 };
 use gyro_array::link::msg::Settings;
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
+use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, RingPort};
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
 use rtic_core::Exclusive;
@@ -31,7 +31,7 @@ use std::cell::RefCell;
 /// a UART that takes every byte.
 pub struct HostLink<const TX: usize = 2048> {
     /// The port.
-    pub port: Port<TX>,
+    pub port: RingPort<TX>,
     /// Bytes the UART took.
     pub bytes: u64,
 }
@@ -51,8 +51,9 @@ impl embedded_hal_nb::serial::Write<u8> for Sink {
     }
 }
 
-impl<const TX: usize> schedule::Link<TX> for HostLink<TX> {
-    fn port(&mut self) -> &mut Port<TX> {
+impl<const TX: usize> schedule::Link for HostLink<TX> {
+    type Queue = gyro_array::link::ring::ByteRing<TX>;
+    fn port(&mut self) -> &mut RingPort<TX> {
         &mut self.port
     }
     fn flush(&mut self) {
@@ -266,7 +267,7 @@ pub fn run(
         let _ = ti.driver().flush_fifo();
     }
     let mut link: HostLink = HostLink {
-        port: Port::new(Settings::default()),
+        port: RingPort::new(Settings::default()),
         bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();

@@ -26,6 +26,7 @@ use crate::algo::static_cal::CalRecord;
 use crate::drivers::Gyro;
 use crate::link::msg::Reject;
 use crate::link::port::{ChipTime, NoiseSnapshot, Port, StoreRequest};
+use crate::link::ring::TxQueue;
 use crate::pipeline::tracker::{NoiseTracker, Probe};
 use crate::pipeline::{Output, Pipeline};
 use crate::store::Store;
@@ -66,40 +67,24 @@ impl SampleClock {
     }
 }
 
-/// Where frames go: the port, and what moves its queued bytes on (the
-/// board's UART queue and interrupt; nothing where the loop drains the
-/// port itself).
-pub trait Link<const TX: usize> {
+/// Where frames go: the port, and what sends its queued bytes (the
+/// board's UART interrupt, woken; nothing where the loop drains the port
+/// itself).
+pub trait Link {
+    /// The port's transmit queue.
+    type Queue: TxQueue;
     /// The port.
-    fn port(&mut self) -> &mut Port<TX>;
+    fn port(&mut self) -> &mut Port<Self::Queue>;
     /// Bytes were queued on the port.
     fn flush(&mut self);
 }
 
-impl<const TX: usize> Link<TX> for Port<TX> {
-    fn port(&mut self) -> &mut Port<TX> {
+impl<Q: TxQueue> Link for Port<Q> {
+    type Queue = Q;
+    fn port(&mut self) -> &mut Port<Q> {
         self
     }
     fn flush(&mut self) {}
-}
-
-/// A byte queue written as a UART (full: it would block): where a
-/// [`Link::flush`] moves the port's bytes for the UART's interrupt.
-pub struct ToQueue<'a>(pub &'a mut heapless::spsc::Producer<'static, u8>);
-
-impl embedded_hal_nb::serial::ErrorType for ToQueue<'_> {
-    type Error = core::convert::Infallible;
-}
-
-impl embedded_hal_nb::serial::Write<u8> for ToQueue<'_> {
-    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        self.0
-            .enqueue(b)
-            .map_err(|_| embedded_hal_nb::nb::Error::WouldBlock)
-    }
-    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
-        Ok(())
-    }
 }
 
 /// What the sample task hands the background, in sample order: a
@@ -151,7 +136,7 @@ impl StatusView {
 /// `queued` runs the moment the sample's frame is queued (where a
 /// measurement of the response reads its clock).
 #[allow(clippy::too_many_arguments)]
-pub fn sample<const N: usize, const TX: usize, L: Link<TX>>(
+pub fn sample<const N: usize, L: Link>(
     pipe: &mut impl Mutex<T = Pipeline<N>>,
     link: &mut impl Mutex<T = L>,
     noise: &mut impl Mutex<T = NoiseSnapshot>,
@@ -229,7 +214,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Background<'_, CAP, 
 
 /// Apply the commands waiting in `rx` (bounded by the port), their
 /// acknowledgements queued.
-pub fn receive<const N: usize, const TX: usize, L: Link<TX>, R>(
+pub fn receive<const N: usize, L: Link, R>(
     rx: &mut R,
     pipe: &mut impl Mutex<T = Pipeline<N>>,
     link: &mut impl Mutex<T = L>,
@@ -247,7 +232,7 @@ pub fn receive<const N: usize, const TX: usize, L: Link<TX>, R>(
 /// the link is held only to take the request and to answer it, not while
 /// the flash is written (which stalls the core anyway, `crate::store`).
 /// `calibration`: the record in use, saved beside the settings.
-pub fn store<const TX: usize, L: Link<TX>, F>(
+pub fn store<L: Link, F>(
     store: &mut Store<F>,
     calibration: Option<&CalRecord>,
     link: &mut impl Mutex<T = L>,
@@ -272,6 +257,7 @@ pub fn store<const TX: usize, L: Link<TX>, F>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::link::port::RingPort;
 
     #[test]
     fn the_sample_clock_extends_its_counter_and_counts_missed_periods() {
@@ -344,7 +330,7 @@ mod tests {
             Method::Adaptive(AdaptiveConfig::default()),
         )
         .unwrap();
-        let mut port = Port::<2048>::new(Settings::default());
+        let mut port = RingPort::<2048>::new(Settings::default());
         let mut noise = NoiseSnapshot::default();
         let mut tracker =
             NoiseTracker::<1024, 35, 3>::new(crate::pipeline::tracker::link_config(1024)).unwrap();
@@ -509,7 +495,7 @@ mod tests {
                 Method::Adaptive(AdaptiveConfig::default()),
             )
             .unwrap();
-            let mut port = Port::<2048>::new(Settings::default());
+            let mut port = RingPort::<2048>::new(Settings::default());
             let mut noise = NoiseSnapshot::default();
             let view = StatusView {
                 taus: crate::pipeline::tracker::LINK_TAUS,

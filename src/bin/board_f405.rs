@@ -59,7 +59,6 @@ use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use defmt_rtt as _;
 
 use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
-use heapless::spsc::{Consumer, Producer, Queue};
 use stm32f4xx_hal::{
     gpio::{self, Edge, ErasedPin, ExtiPin, Output},
     pac,
@@ -82,6 +81,7 @@ use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{Settings, StoreState};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
+use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
@@ -185,8 +185,10 @@ fn give_up(what: &str) -> ! {
 /// otherwise keep it for the whole queue).
 const TX_TURN: usize = 64;
 
-/// Bytes between the port and the UART's interrupt.
-type TxBytes = Queue<u8, 2048>;
+/// The link's transmit queue: the port writes each frame into it, USART1's
+/// task and its DMA stream send the bytes from there (in SRAM: `.bss`).
+const TX_BYTES: usize = 4096;
+static TX_QUEUE: TxBuffer<TX_BYTES> = TxBuffer::new();
 
 /// The sample task's jobs for the background, in sample order.
 const JOBS: usize = 8;
@@ -244,29 +246,27 @@ unsafe impl Send for Chips {}
 /// it: the transmitter, the bytes the port queued for it, and the board's
 /// µs clock (a transfer's time limit).
 pub struct TxSide {
-    link: f405::TxLink,
-    bytes: Consumer<'static, u8>,
+    link: f405::TxLink<TX_BYTES>,
+    bytes: TxConsumer<TX_BYTES>,
     clock: &'static Int1Captures,
 }
 
 /// The link as the sample task and the background share it: the port
-/// (frames, settings, commands) and the producer of the bytes the UART's
-/// interrupt sends, which owns the consumer alone, so that nothing it
-/// does waits for a lock.
+/// (frames, settings, commands), which writes its frames into the
+/// transmit queue whose reading end USART1's task owns alone, so that
+/// nothing it does waits for a lock.
 pub struct Link {
-    port: &'static mut Port<2048>,
-    out: Producer<'static, u8>,
+    port: &'static mut Port<TxProducer<TX_BYTES>>,
 }
 
-impl schedule::Link<2048> for Link {
-    fn port(&mut self) -> &mut Port<2048> {
+impl schedule::Link for Link {
+    type Queue = TxProducer<TX_BYTES>;
+    fn port(&mut self) -> &mut Port<TxProducer<TX_BYTES>> {
         self.port
     }
 
-    /// Move the port's queued bytes to the UART's queue, as many as fit,
-    /// and wake the interrupt.
+    /// Wake USART1's task: it starts a transfer of the queued bytes.
     fn flush(&mut self) {
-        self.port.drain(&mut schedule::ToQueue(&mut self.out));
         rtic::pend(pac::Interrupt::USART1);
     }
 }
@@ -317,8 +317,6 @@ mod app {
         bus2: Option<Spi2Bus> = None,
         captures_store: Option<Int1Captures> = None,
         rx_bytes: f405::RxBytes = f405::RxBytes::new(),
-        tx_store: TxBytes = TxBytes::new(),
-        tx_dma_buf: [u8; f405::TX_DMA_BYTES] = [0; f405::TX_DMA_BYTES],
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         let record = persist::take();
@@ -464,7 +462,7 @@ mod app {
             give_up("USART1 at the link's baud rate")
         };
         let (tx, rx) = serial.split();
-        let tx = f405::TxLink::new(tx, dp.DMA2, &mut rcc, cx.local.tx_dma_buf, baud);
+        let tx = f405::TxLink::new(tx, dp.DMA2, &mut rcc, baud);
         let (rx_feed, rx) = f405::rx_queue(rx, cx.local.rx_bytes);
         // The saved settings (the defaults where none are saved or the record
         // does not check, said in the log and in every status frame).
@@ -532,7 +530,9 @@ mod app {
                 Settings::default()
             }
         };
-        let Some(port) = cortex_m::singleton!(: Port<2048> = Port::new(settings)) else {
+        let Some(port) = cortex_m::singleton!(
+            : Port<TxProducer<TX_BYTES>> = Port::with_queue(TX_QUEUE.stream_producer(), settings)
+        ) else {
             give_up("link port taken twice")
         };
         port.set_store_state(saved.state);
@@ -634,15 +634,14 @@ mod app {
         syst.clear_current();
         syst.enable_interrupt();
         let now = captures.micros();
-        let (out, tx_bytes) = cx.local.tx_store.split();
         (
             Shared {
                 pipe,
-                link: Link { port, out },
+                link: Link { port },
                 noise: NoiseSnapshot::default(),
                 tx: TxSide {
                     link: tx,
-                    bytes: tx_bytes,
+                    bytes: TX_QUEUE.stream_consumer(),
                     clock: captures,
                 },
             },

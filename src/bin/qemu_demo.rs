@@ -52,7 +52,7 @@
 
 use core::cell::RefCell;
 use core::mem::MaybeUninit;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use defmt_semihosting as _;
 use heapless::spsc::{Consumer, Producer, Queue};
@@ -64,6 +64,7 @@ use gyro_array::board::stack;
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
+use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker;
 use gyro_array::pipeline::Pipeline;
@@ -130,19 +131,25 @@ pub struct Chips(demo::Chips<'static, 'static>);
 #[allow(unsafe_code)]
 unsafe impl Send for Chips {}
 
-/// The link: the port and the producer of the UART's byte queue.
+/// The link's transmit queue: the port writes each frame into it, the
+/// UART's task sends the bytes from there.
+const TX_BYTES: usize = 4096;
+static TX_QUEUE: TxBuffer<TX_BYTES> = TxBuffer::new();
+/// The UART's task found the transmit queue empty.
+static TX_EMPTY: AtomicBool = AtomicBool::new(true);
+
+/// The link: the port (its frames written into `TX_QUEUE`).
 pub struct Link {
-    port: &'static mut Port<1024>,
-    out: Producer<'static, u8>,
+    port: &'static mut Port<TxProducer<TX_BYTES>>,
 }
 
-impl schedule::Link<1024> for Link {
-    fn port(&mut self) -> &mut Port<1024> {
+impl schedule::Link for Link {
+    type Queue = TxProducer<TX_BYTES>;
+    fn port(&mut self) -> &mut Port<TxProducer<TX_BYTES>> {
         self.port
     }
 
     fn flush(&mut self) {
-        self.port.drain(&mut schedule::ToQueue(&mut self.out));
         rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
     }
 }
@@ -276,7 +283,7 @@ mod app {
         clocks: [ChipTime; 5],
         jobs: Sender<'static, Work, JOBS>,
         run: Run,
-        tx: Consumer<'static, u8>,
+        tx: TxConsumer<TX_BYTES>,
         rx_in: Producer<'static, u8>,
         rx: RxQueue,
         tracker: &'static mut Tracker,
@@ -293,9 +300,8 @@ mod app {
     #[init(local = [
         cs: [CsLine; 5] = [CsLine::new(), CsLine::new(), CsLine::new(), CsLine::new(), CsLine::new()],
         bus_slot: Option<Bus> = None,
-        port_slot: Option<Port<1024>> = None,
+        port_slot: Option<Port<TxProducer<TX_BYTES>>> = None,
         tracker_slot: MaybeUninit<Tracker> = MaybeUninit::uninit(),
-        tx_store: Queue<u8, 2048> = Queue::new(),
         rx_store: Queue<u8, 64> = Queue::new(),
     ])]
     fn init(cx: init::Context) -> (Shared, Local) {
@@ -365,11 +371,14 @@ mod app {
         let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
         uart.listen();
         let settings = demo::link_settings(STRESS);
-        let port = cx.local.port_slot.insert(Port::new(settings));
+        let port = cx
+            .local
+            .port_slot
+            .insert(Port::with_queue(TX_QUEUE.stream_producer(), settings));
         if STRESS {
             defmt::info!("stress: the background ten times slower, a status frame every sample");
         }
-        let (out, tx) = cx.local.tx_store.split();
+        let tx = TX_QUEUE.stream_consumer();
         let (rx_in, rx) = cx.local.rx_store.split();
         let (jobs, inbox) = make_channel!(Work, JOBS);
         if background::spawn(inbox).is_err() {
@@ -387,7 +396,7 @@ mod app {
         (
             Shared {
                 pipe,
-                link: Link { port, out },
+                link: Link { port },
                 noise: NoiseSnapshot::default(),
                 uart,
             },
@@ -629,12 +638,17 @@ mod app {
             u.clear_tx_interrupt();
             // The UART holds one byte; QEMU sends it at once, and the
             // interrupt that follows brings the next.
-            for _ in 0..TX_TURN {
-                let Some(&b) = l.tx.peek() else { break };
+            let Ok(bytes) = l.tx.read() else {
+                TX_EMPTY.store(true, Ordering::Relaxed);
+                return;
+            };
+            TX_EMPTY.store(false, Ordering::Relaxed);
+            let mut k = 0;
+            for &b in bytes.iter().take(TX_TURN) {
                 if u.write(b).is_err() {
                     break;
                 }
-                l.tx.dequeue();
+                k += 1;
                 if *l.at_delimiter {
                     let periods = TICK_N
                         .load(Ordering::Relaxed)
@@ -648,6 +662,7 @@ mod app {
                 }
                 *l.at_delimiter = b == 0;
             }
+            bytes.release(k);
         });
     }
 
@@ -766,26 +781,24 @@ mod app {
         calibrated: bool,
     ) -> ! {
         let spins = IDLE_SPINS.load(Ordering::Relaxed);
-        // Send what is still queued (bounded: the UART takes a byte at a time).
+        // Send what is still queued (bounded: the UART takes a byte at a
+        // time; its task, above this one, says when it found none).
+        TX_EMPTY.store(false, Ordering::Relaxed);
         for _ in 0..100_000 {
-            let left = shared.link.lock(|l| {
-                schedule::Link::flush(l);
-                l.port.queued() + l.out.len()
-            });
-            if left == 0 {
+            rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
+            if TX_EMPTY.load(Ordering::Relaxed) {
                 break;
             }
         }
         let mut pass = self_test_ok && calibrated;
-        let (lc, left) = shared
-            .link
-            .lock(|l| (l.port.counters(), l.port.queued() + l.out.len()));
+        let lc = shared.link.lock(|l| l.port.counters());
+        let sent_all = TX_EMPTY.load(Ordering::Relaxed);
         let rx_overruns = shared.uart.lock(|u| u.rx_overruns());
         defmt::info!(
-            "link: {} frames sent, {} dropped, {} left; commands {} accepted, {} rejected; rx overruns {}",
+            "link: {} frames sent, {} dropped, everything sent {}; commands {} accepted, {} rejected; rx overruns {}",
             lc.sent,
             lc.dropped,
-            left,
+            sent_all,
             lc.accepted,
             lc.rejected,
             rx_overruns
@@ -795,7 +808,7 @@ mod app {
             v.sample_frames,
             v.crc
         );
-        pass &= lc.dropped == 0 && left == 0 && v.sample_frames == SAMPLES && v.fused_everywhere;
+        pass &= lc.dropped == 0 && sent_all && v.sample_frames == SAMPLES && v.fused_everywhere;
         let (c, overruns) = shared.pipe.lock(|p| (*p.counters(), p.overruns()));
         for (i, c) in c.iter().enumerate() {
             defmt::info!(

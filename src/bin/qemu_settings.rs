@@ -28,7 +28,7 @@ use gyro_array::app;
 use gyro_array::board::qemu::{self, exit};
 use gyro_array::emu::flash::NorSim;
 use gyro_array::link::msg::{Ack, Command, Frame, FusionMethod, Op, Reject, Settings, StoreState};
-use gyro_array::link::port::Port;
+use gyro_array::link::port::RingPort;
 use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use gyro_array::store::Store;
@@ -114,7 +114,7 @@ fn exchange(
     if pipe.set_method(settings.method.method()).is_err() {
         exit(false);
     }
-    let mut port = Port::<1024>::new(settings);
+    let mut port = RingPort::<1024>::new(settings);
     port.set_store_state(state);
     let mut bytes = [0u8; 4 * MAX_FRAME];
     let mut n = 0;

@@ -16,6 +16,8 @@ use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::rcc::{Config as RccConfig, Rcc};
 use stm32f4xx_hal::serial::Rx;
 
+use crate::link::ring::{TxConsumer, TxGrant};
+
 /// The board's crystal.
 pub const HSE_HZ: u32 = 8_000_000;
 /// The internal RC oscillator (±1 % over temperature, RM0090 6.2.2).
@@ -680,32 +682,26 @@ mod bus_fault {
     );
 }
 
-/// Bytes one DMA transfer of the link takes at most: a status frame with
-/// its sample frame and an acknowledgement fit (491 + 93 + 14 B).
-pub const TX_DMA_BYTES: usize = 640;
-
 /// The link's transmitter: USART1 fed by DMA2 stream 7, channel 4
-/// (USART1_TX; RM0090 Table 43), one transfer at a time from a buffer
-/// the port's bytes are copied into (in SRAM: DMA cannot reach the
-/// core-coupled RAM, RM0090 2.3.1); or, where DMA does not answer (QEMU's
-/// `netduinoplus2` models none) or a transfer failed, by USART1's TXE
-/// interrupt a byte at a time.
+/// (USART1_TX; RM0090 Table 43), one transfer at a time straight from the
+/// transmit queue the port wrote its frames into (a `Q`-byte
+/// [`TxBuffer`](crate::link::ring::TxBuffer), in SRAM: DMA cannot reach
+/// the core-coupled RAM, RM0090 2.3.1), its bytes released once sent; or,
+/// where DMA does not answer (QEMU's `netduinoplus2` models none) or a
+/// transfer failed, by USART1's TXE interrupt a byte at a time.
 ///
 /// Why DMA: at 6 Mbaud the UART takes a byte every 1.7 µs; by TXE a
 /// 93-byte sample frame is 93 interrupts a millisecond, each some 60
 /// cycles with its entry and exit (ARMv7-M: 12 to enter, 10 to return),
 /// about 3 % of the core at 168 MHz and as many preemptions of whatever
-/// runs. By DMA it is one copy and one interrupt.
-pub struct TxLink {
+/// runs. By DMA it is one interrupt, and no byte is copied.
+pub struct TxLink<const Q: usize> {
     tx: stm32f4xx_hal::serial::Tx<USART1>,
     /// DMA2, while the link uses it.
     dma: Option<pac::DMA2>,
-    buf: &'static mut [u8; TX_DMA_BYTES],
-    /// Bytes of `buf` the transfer in flight sends (0: none in flight).
-    in_flight: u16,
-    /// `buf[left.0..left.1]`: what a failed transfer did not send, sent
-    /// first by the interrupt path.
-    left: (u16, u16),
+    /// The queued bytes the transfer in flight sends, and how many of
+    /// them (NDTR's 16 bits).
+    in_flight: Option<(TxGrant<Q>, u16)>,
     /// The transfer's start (TIM5 µs) and how long it may take.
     started_us: u32,
     limit_us: u32,
@@ -725,7 +721,7 @@ fn clear_flags(dma: &pac::DMA2) {
     });
 }
 
-impl TxLink {
+impl<const Q: usize> TxLink<Q> {
     /// The link's transmitter at `baud`: DMA2 stream 7 if a copy of one
     /// word by DMA2 (memory to memory, RM0090 10.3.6) completes, else
     /// interrupts (logged). Enables DMA2's clock.
@@ -734,7 +730,6 @@ impl TxLink {
         tx: stm32f4xx_hal::serial::Tx<USART1>,
         dma: pac::DMA2,
         rcc: &mut Rcc,
-        buf: &'static mut [u8; TX_DMA_BYTES],
         baud: u32,
     ) -> Self {
         use stm32f4xx_hal::rcc::{Enable, Reset};
@@ -743,9 +738,7 @@ impl TxLink {
         let mut link = Self {
             tx,
             dma: None,
-            buf,
-            in_flight: 0,
-            left: (0, 0),
+            in_flight: None,
             started_us: 0,
             limit_us: 0,
             byte_ns: (10_000_000_000u64 / u64::from(baud.max(1))) as u32,
@@ -800,8 +793,8 @@ impl TxLink {
     /// end one that has overrun its time; on the interrupt path, write
     /// while the UART takes bytes (at most `turn`). `now_us` is TIM5's.
     /// From USART1's task and the DMA stream's, both at one priority.
-    pub fn kick(&mut self, queue: &mut Consumer<'static, u8>, now_us: u32, turn: usize) {
-        if self.in_flight > 0 {
+    pub fn kick(&mut self, queue: &mut TxConsumer<Q>, now_us: u32, turn: usize) {
+        if self.in_flight.is_some() {
             if now_us.wrapping_sub(self.started_us) <= self.limit_us {
                 return;
             }
@@ -811,29 +804,25 @@ impl TxLink {
             self.by_interrupt(queue, turn);
             return;
         };
-        let mut n = 0;
-        while n < TX_DMA_BYTES {
-            let Some(b) = queue.dequeue() else { break };
-            self.buf[n] = b;
-            n += 1;
-        }
-        if n == 0 {
-            return;
-        }
-        // The copy above lands before the stream may read it (the register
-        // writes below are volatile; the buffer's writes are not).
+        // The oldest contiguous run of queued bytes (the rest, past the
+        // buffer's end, is the next transfer's).
+        let Ok(bytes) = queue.read() else { return };
+        let n = bytes.len().min(usize::from(u16::MAX)) as u16;
+        // The port's writes land before the stream may read them (the
+        // register writes below are volatile; the bytes' writes are not).
         core::sync::atomic::compiler_fence(Ordering::Release);
         let st = dma.st(7);
         clear_flags(dma);
-        // SAFETY: the stream is off (no transfer in flight); the buffer is
-        // 'static and not written again until the transfer has ended or
-        // been stopped (`in_flight`); PAR is USART1's data register.
+        // SAFETY: the stream is off (no transfer in flight); the bytes are
+        // the 'static queue's, held by the read grant kept in `in_flight`
+        // until the transfer has ended or been stopped (the port cannot
+        // write them meanwhile); PAR is USART1's data register.
         #[allow(unsafe_code)]
         unsafe {
             st.par()
                 .write(|w| w.pa().bits((*USART1::ptr()).dr().as_ptr() as u32));
-            st.m0ar().write(|w| w.m0a().bits(self.buf.as_ptr() as u32));
-            st.ndtr().write(|w| w.ndt().bits(n as u16));
+            st.m0ar().write(|w| w.m0a().bits(bytes.as_ptr() as u32));
+            st.ndtr().write(|w| w.ndt().bits(n));
             st.cr().write(|w| {
                 w.chsel().bits(4);
                 w.dir().memory_to_peripheral();
@@ -846,16 +835,16 @@ impl TxLink {
                 w.en().enabled()
             });
         }
-        self.in_flight = n as u16;
+        self.in_flight = Some((bytes, n));
         self.started_us = now_us;
         // Twice the bytes' wire time and 200 µs: a transfer that takes
         // longer has stopped (a stalled stream, a lost request).
-        self.limit_us = 200 + (2 * n as u64 * u64::from(self.byte_ns) / 1000) as u32;
+        self.limit_us = 200 + (2 * u64::from(n) * u64::from(self.byte_ns) / 1000) as u32;
     }
 
-    /// The DMA stream's interrupt: the transfer ended (or failed); then
-    /// the next one.
-    pub fn on_dma(&mut self, queue: &mut Consumer<'static, u8>, now_us: u32, turn: usize) {
+    /// The DMA stream's interrupt: the transfer ended (its bytes leave the
+    /// queue) or failed; then the next one.
+    pub fn on_dma(&mut self, queue: &mut TxConsumer<Q>, now_us: u32, turn: usize) {
         let Some(dma) = &self.dma else { return };
         let isr = dma.hisr().read();
         let error = isr.teif7().is_error();
@@ -864,21 +853,24 @@ impl TxLink {
         if error {
             self.fail();
         } else if complete {
-            self.in_flight = 0;
+            if let Some((bytes, n)) = self.in_flight.take() {
+                bytes.release(usize::from(n));
+            }
         }
         self.kick(queue, now_us, turn);
     }
 
-    /// A transfer failed or overran: stop it, keep what it did not send,
-    /// and send by interrupts from now on.
+    /// A transfer failed or overran: stop it, release what it sent (what
+    /// it did not stays queued, first in line), and send by interrupts
+    /// from now on.
     fn fail(&mut self) {
+        let mut left = 0;
         if let Some(dma) = self.dma.take() {
             let st = dma.st(7);
             st.cr().modify(|_, w| w.en().disabled());
             // RM0090 10.3.17: EN reads 1 until the stream has stopped.
             let _ = (0..1000).any(|_| st.cr().read().en().is_disabled());
-            let left = st.ndtr().read().ndt().bits().min(self.in_flight);
-            self.left = (self.in_flight - left, self.in_flight);
+            left = st.ndtr().read().ndt().bits();
             #[allow(unsafe_code)]
             // SAFETY: USART1's CR3.DMAT off: the UART stops asking DMA.
             unsafe {
@@ -888,37 +880,30 @@ impl TxLink {
                 "link: a DMA transfer failed or overran; sent by USART1's interrupt from now on"
             );
         }
-        self.in_flight = 0;
+        if let Some((bytes, n)) = self.in_flight.take() {
+            bytes.release(usize::from(n.saturating_sub(left)));
+        }
     }
 
-    /// The interrupt path: what a failed transfer left, then the queue,
-    /// while the UART takes bytes; TXE's interrupt on while bytes wait.
-    fn by_interrupt(&mut self, queue: &mut Consumer<'static, u8>, turn: usize) {
+    /// The interrupt path: the queue's bytes while the UART takes them (at
+    /// most `turn`); TXE's interrupt on while bytes wait.
+    fn by_interrupt(&mut self, queue: &mut TxConsumer<Q>, turn: usize) {
         use embedded_hal_nb::serial::Write;
         use stm32f4xx_hal::serial::TxListen;
-        for _ in 0..turn {
-            let (from, to) = self.left;
-            let left = if from < to {
-                self.buf.get(usize::from(from)).copied()
-            } else {
-                None
-            };
-            let Some(b) = left.or_else(|| queue.peek().copied()) else {
-                break;
-            };
-            if self.tx.write(b).is_err() {
-                break;
+        if let Ok(bytes) = queue.read() {
+            let mut k = 0;
+            for &b in bytes.iter().take(turn) {
+                if self.tx.write(b).is_err() {
+                    break;
+                }
+                k += 1;
             }
-            if left.is_some() {
-                self.left.0 += 1;
-            } else {
-                self.left = (0, 0);
-                queue.dequeue();
-            }
+            bytes.release(k);
         }
         // TXE stays set while the data register is empty: listening while
-        // bytes wait brings the task back for the next.
-        if self.left.0 < self.left.1 || queue.ready() {
+        // bytes wait brings the task back for the next. (A grant dropped
+        // unreleased takes nothing from the queue.)
+        if queue.read().is_ok() {
             self.tx.listen();
         } else {
             self.tx.unlisten();

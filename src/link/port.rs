@@ -1,14 +1,13 @@
-//! The board's end of the link: a transmit queue drained whenever the
-//! UART can take a byte, the command decoder, and the frames built from
-//! the pipeline's output.
+//! The board's end of the link: the frames built from the pipeline's
+//! output and written into a transmit queue, and the command decoder.
 //!
-//! Nothing here blocks. The firmware calls [`Port::publish`] once per
-//! sample, and [`Port::drain`] and [`Port::receive`] while it waits for the
-//! next sample tick, so the UART is fed from the idle time of every sample
-//! period, with no interrupt and no DMA (the QEMU machines model neither
-//! for their UARTs). A frame goes into the queue whole or not at all; one
-//! that does not fit is counted in [`LinkCounters::dropped`] and leaves a
-//! gap in the link sequence number.
+//! Nothing here blocks. The sample task calls [`Port::publish`] once per
+//! sample and the background [`Port::receive`]; the frames go out from
+//! the queue they were written into (`ring`: on the board the UART's
+//! interrupt and DMA read them there; a [`RingPort`] is drained by whoever
+//! holds it). A frame goes into the queue whole or not at all; one that
+//! does not fit is counted in [`LinkCounters::dropped`] and leaves a gap in
+//! the link sequence number.
 
 use heapless::Vec;
 
@@ -17,7 +16,7 @@ use super::msg::{
     FusionMethod, GyroStatus, Info, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings,
     Status, StoreState, SyncStatus, MAX_GYROS,
 };
-use super::ring::ByteRing;
+use super::ring::{ByteRing, TxQueue};
 use super::sync::{CtrlClock, SyncState};
 use super::wire::{
     encode_in_place, encode_payload, frame_payload, framed_len, Decoded, Decoder, FrameError,
@@ -256,9 +255,9 @@ pub enum StoreRequest {
     Clear,
 }
 
-/// The board's end of the link, with a `TX`-byte transmit queue.
-pub struct Port<const TX: usize> {
-    tx: ByteRing<TX>,
+/// The board's end of the link, its frames queued in `Q`.
+pub struct Port<Q> {
+    tx: Q,
     rx: Decoder<RX_MAX>,
     link_seq: u32,
     settings: Settings,
@@ -300,11 +299,51 @@ pub struct Port<const TX: usize> {
     uid: [u8; 12],
 }
 
-impl<const TX: usize> Port<TX> {
-    /// A port with `settings`; its method must be the pipeline's.
+/// A port with a queue of its own, `TX` bytes, drained by whoever holds
+/// it ([`Port::drain`]): the host's tools and tests, the benches.
+pub type RingPort<const TX: usize> = Port<ByteRing<TX>>;
+
+impl<const TX: usize> RingPort<TX> {
+    /// A port with `settings` and an empty queue of its own; its method
+    /// must be the pipeline's.
     pub fn new(settings: Settings) -> Self {
+        Port::with_queue(ByteRing::new(), settings)
+    }
+
+    /// Bytes waiting to be sent.
+    pub fn queued(&self) -> usize {
+        self.tx.len()
+    }
+
+    /// Send queued bytes until the UART would block or the queue is empty;
+    /// the bytes sent.
+    pub fn drain<W: embedded_hal_nb::serial::Write<u8>>(&mut self, uart: &mut W) -> usize {
+        let mut n = 0;
+        while !self.tx.is_empty() {
+            let mut k = 0;
+            for &b in self.tx.front() {
+                // WouldBlock, or a UART error: try again next time.
+                if uart.write(b).is_err() {
+                    break;
+                }
+                k += 1;
+            }
+            self.tx.consume(k);
+            n += k;
+            if k == 0 {
+                break;
+            }
+        }
+        n
+    }
+}
+
+impl<Q: TxQueue> Port<Q> {
+    /// A port with `settings` that queues its frames in `tx`; its method
+    /// must be the pipeline's.
+    pub fn with_queue(tx: Q, settings: Settings) -> Self {
         let mut p = Self {
-            tx: ByteRing::new(),
+            tx,
             rx: Decoder::new(),
             link_seq: 0,
             settings,
@@ -389,11 +428,6 @@ impl<const TX: usize> Port<TX> {
         self.counters
     }
 
-    /// Bytes waiting to be sent.
-    pub fn queued(&self) -> usize {
-        self.tx.len()
-    }
-
     /// Queue `frame` whole, or drop it (counted) if the queue lacks room.
     /// Either way it uses a link sequence number. True if queued.
     pub fn send(&mut self, frame: &Frame) -> bool {
@@ -411,22 +445,17 @@ impl<const TX: usize> Port<TX> {
         // payload scratch into the room the queue finds for it.
         let placed = self
             .tx
-            .grant(IN_PLACE_MAX + 2)
-            .map(|room| encode_in_place(seq, &frame, room));
+            .put(IN_PLACE_MAX + 2, |room| encode_in_place(seq, &frame, room));
         let ok = match placed {
-            Some(Ok(n)) => {
-                self.tx.commit(n);
-                true
-            }
+            Some(Ok(_)) => true,
             _ => match encode_payload(seq, &frame, &mut self.payload) {
                 Ok(k) => {
                     let payload = self.payload.get(..k).unwrap_or(&[]);
-                    match self.tx.grant(framed_len(k)) {
-                        Some(room) => frame_payload(payload, room)
-                            .map(|n| self.tx.commit(n))
-                            .is_ok(),
-                        None => false,
-                    }
+                    matches!(
+                        self.tx
+                            .put(framed_len(k), |room| frame_payload(payload, room)),
+                        Some(Ok(_))
+                    )
                 }
                 Err(_) => false,
             },
@@ -721,28 +750,6 @@ impl<const TX: usize> Port<TX> {
             build: BUILD,
             chips,
         })
-    }
-
-    /// Send queued bytes until the UART would block or the queue is empty;
-    /// the bytes sent.
-    pub fn drain<W: embedded_hal_nb::serial::Write<u8>>(&mut self, uart: &mut W) -> usize {
-        let mut n = 0;
-        while !self.tx.is_empty() {
-            let mut k = 0;
-            for &b in self.tx.front() {
-                // WouldBlock, or a UART error: try again next time.
-                if uart.write(b).is_err() {
-                    break;
-                }
-                k += 1;
-            }
-            self.tx.consume(k);
-            n += k;
-            if k == 0 {
-                break;
-            }
-        }
-        n
     }
 
     /// Read the bytes the UART has; apply every complete command to

@@ -1,11 +1,78 @@
-//! The transmit queue: a byte ring that hands out contiguous room for a
-//! frame to be written in place (a bip buffer: a frame that does not fit
-//! before the buffer's end goes to its start, and the bytes it skipped are
-//! never sent), and contiguous runs to send. `heapless::Deque` moves one
-//! byte per call each way, which measured 2 000 instructions per sample
-//! frame on the Cortex-M4 (`cargo xtask bench`, whole loop); a ring that
-//! took a frame in two pieces around its end cost a copy of every frame
-//! that met the end (about 450 instructions once every 43 frames).
+//! The transmit queues: where the port writes each frame in place, in
+//! contiguous room (a bip buffer: a frame that does not fit before the
+//! buffer's end goes to its start, and the bytes it skipped are never
+//! sent), and whence the bytes go out in contiguous runs.
+//!
+//! Two of them, behind one [`TxQueue`]: the board's [`TxBuffer`]
+//! (`bbqueue`'s lock-free single-producer single-consumer bip buffer),
+//! whose reading end is the UART's interrupt and its DMA stream, which
+//! send the frames from where the port wrote them; and [`ByteRing`], a
+//! port's own queue where one loop both queues and sends (the host's
+//! tools and tests, the benches), drained through [`ByteRing::front`].
+//!
+//! Why no byte queues: `heapless::Deque` and `heapless::spsc::Queue` move
+//! one byte per call, which measured 2 000 instructions per sample frame
+//! on the Cortex-M4 (`cargo xtask bench`, whole loop), paid inside the
+//! sample task before its frame counted as queued; a ring that took a
+//! frame in two pieces around its end cost a copy of every frame that met
+//! the end (about 450 instructions once every 43 frames).
+
+/// Where a port queues its frames: contiguous room, written in place.
+pub trait TxQueue {
+    /// Contiguous room for at least `n` bytes, handed to `write`, which
+    /// returns how many of them it used (those are queued) or an error
+    /// (nothing is); `None` where no such room is free.
+    fn put<E>(
+        &mut self,
+        n: usize,
+        write: impl FnOnce(&mut [u8]) -> Result<usize, E>,
+    ) -> Option<Result<usize, E>>;
+}
+
+/// The board's transmit queue, `N` bytes: the port writes frames into it
+/// from the sample task and the background (one producer: they share it
+/// under the link's lock), the UART's interrupt reads them (the one
+/// consumer, which takes no lock). In SRAM, where DMA reaches (RM0090
+/// 2.3.1: not the core-coupled RAM).
+pub type TxBuffer<const N: usize> = bbqueue::nicknames::Churrasco<N>;
+/// The port's end of a [`TxBuffer`].
+pub type TxProducer<const N: usize> =
+    bbqueue::prod_cons::stream::StreamProducer<&'static TxBuffer<N>>;
+/// The UART's end of a [`TxBuffer`].
+pub type TxConsumer<const N: usize> =
+    bbqueue::prod_cons::stream::StreamConsumer<&'static TxBuffer<N>>;
+/// Bytes read from a [`TxBuffer`], held while a transfer sends them.
+pub type TxGrant<const N: usize> = bbqueue::prod_cons::stream::StreamGrantR<&'static TxBuffer<N>>;
+
+impl<const N: usize> TxQueue for TxProducer<N> {
+    fn put<E>(
+        &mut self,
+        n: usize,
+        write: impl FnOnce(&mut [u8]) -> Result<usize, E>,
+    ) -> Option<Result<usize, E>> {
+        let mut room = self.grant_exact(n).ok()?;
+        let r = write(&mut room);
+        // A grant dropped uncommitted queues nothing.
+        if let Ok(k) = r {
+            room.commit(k);
+        }
+        Some(r)
+    }
+}
+
+impl<const N: usize> TxQueue for ByteRing<N> {
+    fn put<E>(
+        &mut self,
+        n: usize,
+        write: impl FnOnce(&mut [u8]) -> Result<usize, E>,
+    ) -> Option<Result<usize, E>> {
+        let r = write(self.grant(n)?);
+        if let Ok(k) = r {
+            self.commit(k);
+        }
+        Some(r)
+    }
+}
 
 /// A ring of `N` bytes.
 pub struct ByteRing<const N: usize> {

@@ -5,7 +5,7 @@ use heapless::Vec;
 use proptest::prelude::*;
 
 use super::msg::*;
-use super::port::Port;
+use super::port::RingPort;
 use super::wire::{encode, encode_in_place, Decoded, Decoder, FrameError, IN_PLACE_MAX, MAX_FRAME};
 use super::{frame_budget, VERSION};
 use crate::algo::fusion::{AdaptiveConfig, Method};
@@ -401,7 +401,11 @@ impl embedded_hal_nb::serial::Write<u8> for Tx {
 }
 
 /// Feed `bytes` to the port as received, then decode what it sent.
-fn exchange(port: &mut Port<1024>, pipe: &mut Pipeline<4>, bytes: &[u8]) -> std::vec::Vec<Frame> {
+fn exchange(
+    port: &mut RingPort<1024>,
+    pipe: &mut Pipeline<4>,
+    bytes: &[u8],
+) -> std::vec::Vec<Frame> {
     struct Rx<'a>(&'a [u8]);
     impl embedded_hal_nb::serial::ErrorType for Rx<'_> {
         type Error = core::convert::Infallible;
@@ -432,7 +436,7 @@ fn exchange(port: &mut Port<1024>, pipe: &mut Pipeline<4>, bytes: &[u8]) -> std:
 #[test]
 fn every_command_is_acknowledged_or_rejected_with_its_reason() {
     let mut pipe = pipeline();
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     let cases = [
         (Op::SetDivider(10), Ok(())),
         (Op::SetDivider(0), Err(Reject::OutOfRange)),
@@ -480,7 +484,7 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
 #[test]
 fn a_damaged_command_changes_nothing_and_is_rejected() {
     let mut pipe = pipeline();
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     let before = port.settings();
     let good = command_bytes(3, Op::SetDivider(5));
     // Every single-byte corruption of the frame body.
@@ -514,7 +518,7 @@ fn a_damaged_command_changes_nothing_and_is_rejected() {
 
 #[test]
 fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
-    let mut port = Port::<100>::new(Settings::default());
+    let mut port = RingPort::<100>::new(Settings::default());
     let f = big_sample(5);
     assert!(port.send(&f));
     assert!(!port.send(&f), "no room for a second");
@@ -530,6 +534,77 @@ fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
         [0, 2],
         "link sequence 1 was dropped and shows as a gap"
     );
+}
+
+/// What the reading end of the board's queue holds, taken whole (both
+/// contiguous runs when it wraps).
+fn take_all(q: &super::ring::TxConsumer<600>, out: &mut std::vec::Vec<u8>) {
+    while let Ok(run) = q.read() {
+        out.extend_from_slice(&run);
+        let n = run.len();
+        run.release(n);
+    }
+}
+
+/// The board's queue (`bbqueue`'s bip buffer, read where the port wrote
+/// the frames) sends the bytes a port's own ring sends, across the
+/// buffer's end many times; behind a reader that falls back it drops
+/// whole frames only, each a gap in the link sequence.
+#[test]
+fn the_boards_queue_sends_what_a_ring_sends() {
+    use super::port::Port;
+    use super::ring::TxBuffer;
+    let buf: &'static TxBuffer<600> = std::boxed::Box::leak(std::boxed::Box::new(TxBuffer::new()));
+    let mut board = Port::with_queue(buf.stream_producer(), Settings::default());
+    let reader = buf.stream_consumer();
+    let mut ring = RingPort::<600>::new(Settings::default());
+    let (mut from_board, mut from_ring) = (std::vec::Vec::new(), Tx(std::vec::Vec::new()));
+    // A reader that keeps up: the same bytes, frame sizes varied so that
+    // frames meet the buffer's end at many offsets.
+    for k in 0..200 {
+        let f = big_sample(k % 5 + 1);
+        assert!(board.send(&f) && ring.send(&f), "frame {k}");
+        if k % 3 == 2 {
+            take_all(&reader, &mut from_board);
+            ring.drain(&mut from_ring);
+        }
+    }
+    take_all(&reader, &mut from_board);
+    ring.drain(&mut from_ring);
+    assert_eq!(from_board, from_ring.0);
+    assert_eq!(decode_all(&from_board).0.len(), 200);
+    // A reader that takes a frame's worth every other frame: the queue
+    // fills, whole frames are dropped, what is sent decodes.
+    let f = big_sample(5);
+    let size = {
+        let mut one = Tx(std::vec::Vec::new());
+        let mut p = RingPort::<600>::new(Settings::default());
+        p.send(&f);
+        p.drain(&mut one);
+        one.0.len()
+    };
+    let mut sent = std::vec::Vec::new();
+    for k in 0..300 {
+        board.send(&f);
+        if k % 2 == 0 {
+            if let Ok(run) = reader.read() {
+                let n = run.len().min(size);
+                sent.extend_from_slice(&run[..n]);
+                run.release(n);
+            }
+        }
+    }
+    take_all(&reader, &mut sent);
+    let c = board.counters();
+    assert!(c.dropped > 50, "the reader must fall back: {c:?}");
+    let (got, _) = decode_all(&sent);
+    let seqs: std::vec::Vec<u32> = got.iter().map(|r| r.as_ref().unwrap().link_seq).collect();
+    // Link sequence 200 on (the first 200 frames above): every frame
+    // either arrived whole or was counted dropped.
+    assert_eq!(seqs.len() as u32 + c.dropped, 300);
+    assert_eq!(seqs.len() as u32, c.sent - 200);
+    assert!(seqs.first().is_some_and(|&s| s >= 200));
+    assert!(seqs.windows(2).all(|w| w[0] < w[1]));
 }
 
 /// The two worked examples of `docs/link.md`, byte for byte.
@@ -628,7 +703,10 @@ fn output(seq: u32, rate: [f32; 3], age_us: u32) -> crate::pipeline::Output<4> {
 }
 
 /// The sample frames `port` sends for `outs`.
-fn samples(port: &mut Port<1024>, outs: &[crate::pipeline::Output<4>]) -> std::vec::Vec<Sample> {
+fn samples(
+    port: &mut RingPort<1024>,
+    outs: &[crate::pipeline::Output<4>],
+) -> std::vec::Vec<Sample> {
     let pipe = pipeline();
     let mut got = std::vec::Vec::new();
     for (k, o) in outs.iter().enumerate() {
@@ -647,7 +725,7 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
     // A rate rising 2 °/s per ms on x, falling 1 on z, measured 2 ms late.
     let ramp = |k: u32| [2.0 * k as f32, 5.0, -(k as f32)];
     let outs: std::vec::Vec<_> = (0..10).map(|k| output(k, ramp(k), 2000)).collect();
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     let got = samples(&mut port, &outs);
     assert_eq!(got.len(), 10);
     let d = port.horizon_us().expect("on by default");
@@ -674,14 +752,14 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
         }
     }
     // Off: the measured rates. A missed sample starts the fit again.
-    let mut port = Port::<1024>::new(Settings {
+    let mut port = RingPort::<1024>::new(Settings {
         compensation: Compensation::Off,
         ..Settings::default()
     });
     assert!(samples(&mut port, &outs)
         .iter()
         .all(|s| s.predicted_us.is_none()));
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     let gap = [
         output(0, ramp(0), 2000),
         output(1, ramp(1), 2000),
@@ -711,7 +789,7 @@ fn the_horizon_allows_for_the_boards_spi_reads_and_its_loop() {
 #[test]
 fn the_horizon_follows_the_core_clock() {
     use super::msg::Compensation;
-    let mut port = Port::<512>::new(Settings {
+    let mut port = RingPort::<512>::new(Settings {
         compensation: Compensation::ToFrame,
         ..Settings::default()
     });
@@ -735,7 +813,7 @@ fn a_store_command_is_acknowledged_once_the_store_has_done_it() {
         })
     };
     let mut pipe = pipeline();
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     // A build without a store refuses, and changes nothing.
     let got = exchange(&mut port, &mut pipe, &command_bytes(1, Op::SaveSettings));
     assert_eq!(got, [ack(1, Err(Reject::Refused))]);
@@ -790,7 +868,7 @@ fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
             (0.01 + 1e-4 * f64::from(k)) as f32,
         ]
     };
-    let mut port = Port::<1024>::new(Settings {
+    let mut port = RingPort::<1024>::new(Settings {
         divider: 3,
         angle: true,
         ..Settings::default()
@@ -845,7 +923,7 @@ fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
 #[test]
 fn sync_time_messages_give_the_controllers_clock_and_a_stopped_pulse_is_said() {
     let mut pipe = pipeline();
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     let ctrl = |b: u64| 9_000_000_000 + b + b / 20_000; // 50 ppm fast
     let mut syncs = std::vec::Vec::new();
     for k in 1..=5u64 {
@@ -909,7 +987,7 @@ fn the_info_frame_names_the_board_the_build_and_each_chip() {
     pipe.set_start(2, Start::SelfTestFailed);
     pipe.mark_init_failed(2);
     pipe.mark_init_failed(3);
-    let mut port = Port::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default());
     port.set_uid([7; 12]);
     // Due half way between status frames, and on request.
     assert!(!port.info_due(0) && port.info_due(500) && !port.info_due(501));
@@ -948,7 +1026,7 @@ fn a_command_is_checked_for_its_own_value_not_the_ports_others() {
     // The demo's stress run builds its port with a status frame every
     // sample, a period no command may set: other commands still apply.
     let mut pipe = pipeline();
-    let mut port = Port::<1024>::new(Settings {
+    let mut port = RingPort::<1024>::new(Settings {
         status_every: 1,
         ..Settings::default()
     });
