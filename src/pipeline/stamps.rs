@@ -54,8 +54,8 @@ pub struct StampScale {
     /// is one 32 × 32 → 64-bit multiply on the Cortex-M4 (a 2³² fraction
     /// would be a 64-bit multiply by call).
     k16: u32,
-    /// µs per count and counts per µs, for the maps near the base.
-    us_per_count: f32,
+    /// Counts per µs (the inverse of [`Self::k16`], kept: a division),
+    /// for the map of an instant into counts.
     counts_per_us: f32,
     /// The base: the last count converted (as the driver extended it),
     /// and the µs it stands for (with the remainder of the product,
@@ -86,7 +86,6 @@ impl StampScale {
         let mut s = Self {
             period_us,
             k16: 0,
-            us_per_count: 1.0,
             counts_per_us: 1.0,
             last: None,
             us: 0,
@@ -103,13 +102,12 @@ impl StampScale {
 
     fn set_unit(&mut self, us_per_count: f64) {
         self.k16 = k16_of(us_per_count);
-        self.us_per_count = self.k16 as f32 / 65_536.0;
         self.counts_per_us = 65_536.0 / self.k16 as f32;
     }
 
     /// µs of the chip's nominal clock per count.
     pub fn us_per_count(&self) -> f32 {
-        self.us_per_count
+        self.k16 as f32 / 65_536.0
     }
 
     /// One wrap of the 16-bit count, µs: what a count of unknown high bits
@@ -172,7 +170,7 @@ impl StampScale {
     pub fn us16_of(&self, counts16: u32) -> u32 {
         let l = self.last.unwrap_or(0);
         let dc = counts16.wrapping_sub(l.wrapping_mul(16)) as i32 as f32;
-        let f = dc * self.us_per_count + self.rem as f32 * (16.0 / 65_536.0);
+        let f = dc * self.us_per_count() + self.rem as f32 * (16.0 / 65_536.0);
         self.us
             .wrapping_mul(16)
             .wrapping_add(super::clock::floor_i32(f + 0.5) as u32)
@@ -209,9 +207,9 @@ impl StampScale {
         };
         self.votes[k] += 1;
         if self.votes[k] >= LEARN_SAMPLES {
-            let k16 = k16_of(CLKIN_US_PER_COUNT[k]);
-            self.changed = k16 != self.k16;
+            let guess = self.k16;
             self.set_unit(CLKIN_US_PER_COUNT[k]);
+            self.changed = self.k16 != guess;
             self.decided = true;
         }
     }

@@ -363,12 +363,12 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
                 // stop it.
                 let room = max.saturating_sub(read.samples);
                 let whole = ((end.saturating_sub(at)) / FIFO_PACKET).min(room);
-                let Some(p) = self.fifo_buf.get(at..at + FIFO_PACKET * whole) else {
-                    break;
-                };
                 if whole == 0 {
                     break;
                 }
+                let Some(p) = self.fifo_buf.get(at..at + FIFO_PACKET * whole) else {
+                    break;
+                };
                 let (t, s) = parse_packets::<SPI::Error>(
                     p,
                     &mut self.stamp,
