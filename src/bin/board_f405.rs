@@ -36,7 +36,10 @@
 //! loses CLKIN moves to its own clock, tracked. The status frames carry
 //! each chip's clock and its error. The ADXRS453's reading is older than
 //! that instant (3.9 ms): read and watched, not fused (`AtInstant`).
-//! Logs go out over RTT (defmt); flash and run with `cargo run-board`.
+//! Logs go out over RTT (defmt), never holding off a higher task: no
+//! critical section (a frame that meets another task's is dropped) and no
+//! waiting on a probe that holds RTT in blocking mode (a frame that does
+//! not fit is dropped); flash and run with `cargo run-board`.
 //!
 //! Clocks (`board::f405::start_clocks`): the 8 MHz crystal and the PLL to
 //! 168 MHz; if the crystal does not start, the internal oscillator with
