@@ -1,0 +1,339 @@
+//! link-timing: when each of the board's frames leaves, after its sample's
+//! tick, on a wire-time model. The frames are the port's own (`link::port`,
+//! through the board's schedule `gyro_array::app`, on the QEMU demo's
+//! world: four timed ICM-42688-Ps and the ADXRS453, their faults), with a
+//! controller asking for status, for the board's info and sending a
+//! command it refuses, each on its own period; the times they are queued
+//! at come from the board's measured worst cases (below); the wire takes
+//! them in order at the UART's rate, one byte every 10 bits, whether DMA2
+//! sends them (one transfer of what is queued, the next when it ends) or
+//! the TXE interrupt (a byte as the data register empties): both leave
+//! the wire idle only when nothing is queued.
+//!
+//! Times after the tick, µs, at 168 MHz, one instruction a cycle:
+//! - the sample frame queued at [`FRAME_US`]: the four chips' FIFO bursts
+//!   (the SPI's 110 µs, `link::port`'s `LOOP_SPI_US`) and the sample task's
+//!   worst response on the timed board (K, 11 113 instructions, 66 µs,
+//!   `BENCH_SCENARIOS=K cargo xtask bench-loop`);
+//! - a status or info frame [`AFTER_US`] later (the sample task after its
+//!   frame at its worst, 4 672 instructions, 28 µs, the status frame's
+//!   build among them);
+//! - an acknowledgement [`ACK_US`] after the frame (the background's
+//!   E-DAVAR job, some 2 000 instructions at worst, and the command's
+//!   handling, after the sample task).
+//!
+//! The run fails (exit code 1) unless at the board's 6 Mbaud every sample
+//! frame's first byte leaves when it is queued (no frame ahead of it on the
+//! wire) and its last byte within 1 µs of the instant the delay
+//! compensation predicts its rates to (`Port::horizon_us`).
+//!
+//! `cargo run --profile host -p evaluations --bin link-timing [-- --samples N]`
+
+use std::cell::RefCell;
+use std::collections::VecDeque;
+
+use gyro_array::app::{self as schedule, StatusFacts, StatusView};
+use gyro_array::drivers::Gyro;
+use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
+use gyro_array::link::msg::{Command, Frame, Op, Settings};
+use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, RingPort};
+use gyro_array::link::ring::ByteRing;
+use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
+use gyro_array::link::{BAUD, FALLBACK_BAUD};
+use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
+use rtic_core::Exclusive;
+
+/// The sample frame queued, µs after the tick (see the module's text).
+const FRAME_US: f64 = 110.0 + 11_113.0 / 168.0;
+/// A status or info frame queued after the sample frame, µs.
+const AFTER_US: f64 = 4_672.0 / 168.0;
+/// An acknowledgement queued after the sample frame, µs.
+const ACK_US: f64 = AFTER_US + 2_000.0 / 168.0 + 10.0;
+
+const VIEW: StatusView = StatusView {
+    taus: demo::NOISE_TAU,
+    sample_us: 1_000_000 / demo::FS_HZ,
+};
+
+/// One frame the port queued: the sample's number, its kind (an index
+/// of [`KINDS`]), its bytes, and whether the background queued it.
+#[derive(Clone, Copy)]
+struct Queued {
+    n: u32,
+    kind: usize,
+    bytes: usize,
+    background: bool,
+}
+
+const KINDS: [&str; 4] = ["sample", "status", "info", "acknowledgement or sync"];
+
+/// The board's port, each frame it queued recorded.
+struct Recorder {
+    port: RingPort<4096>,
+    n: u32,
+    background: bool,
+    decoder: Decoder<MAX_FRAME>,
+    log: Vec<Queued>,
+}
+
+/// The flushed bytes, decoded frame by frame.
+struct Frames<'a> {
+    r: &'a mut Decoder<MAX_FRAME>,
+    n: u32,
+    background: bool,
+    bytes: usize,
+    log: &'a mut Vec<Queued>,
+}
+
+impl embedded_hal_nb::serial::ErrorType for Frames<'_> {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Write<u8> for Frames<'_> {
+    fn write(&mut self, b: u8) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        self.bytes += 1;
+        if let Some(Ok(d)) = self.r.feed::<Frame>(b) {
+            let kind = match d.body {
+                Frame::Sample(_) | Frame::Raw(_) => 0,
+                Frame::Status(_) => 1,
+                Frame::Info(_) => 2,
+                Frame::Ack(_) | Frame::Sync(_) => 3,
+            };
+            self.log.push(Queued {
+                n: self.n,
+                kind,
+                bytes: self.bytes,
+                background: self.background,
+            });
+            self.bytes = 0;
+        }
+        Ok(())
+    }
+    fn flush(&mut self) -> embedded_hal_nb::nb::Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+impl schedule::Link for Recorder {
+    type Queue = ByteRing<4096>;
+    fn port(&mut self) -> &mut RingPort<4096> {
+        &mut self.port
+    }
+    fn flush(&mut self) {
+        let mut f = Frames {
+            r: &mut self.decoder,
+            n: self.n,
+            background: self.background,
+            bytes: 0,
+            log: &mut self.log,
+        };
+        self.port.drain(&mut f);
+    }
+}
+
+/// Bytes from the controller, as the receive interrupt queues them.
+struct Rx(VecDeque<u8>);
+
+impl embedded_hal_nb::serial::ErrorType for Rx {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal_nb::serial::Read<u8> for Rx {
+    fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
+        self.0
+            .pop_front()
+            .ok_or(embedded_hal_nb::nb::Error::WouldBlock)
+    }
+}
+
+fn command(id: u8, op: Op) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(u32::from(id), &Command { id, op }, &mut buf).unwrap_or(0);
+    buf[..n].to_vec()
+}
+
+/// The board's run: every frame it queued, and the compensation's
+/// horizon at `baud`.
+fn run(samples: u32, baud: u32) -> (Vec<Queued>, f64) {
+    let cs: [CsLine; 5] = Default::default();
+    let bus = RefCell::new(EmuBus::new(demo::chips(), &cs));
+    let Ok(mut pipe) = demo::pipeline() else {
+        eprintln!("link-timing: the pipeline refused its settings");
+        std::process::exit(1);
+    };
+    let demo::Started { chips, .. } = demo::start(&bus, &cs, &mut pipe);
+    let demo::Chips {
+        mut timed, mut adx, ..
+    } = chips;
+    let mut link = Recorder {
+        port: RingPort::new(Settings::default()),
+        n: 0,
+        background: false,
+        decoder: Decoder::new(),
+        log: Vec::new(),
+    };
+    link.port.set_timing(baud, 1_000_000 / demo::FS_HZ);
+    let horizon = f64::from(link.port.horizon_us().unwrap_or(0));
+    let mut noise = NoiseSnapshot::default();
+    let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
+    let mut clock = schedule::SampleClock::new(now_us, 1_000_000 / demo::FS_HZ);
+    let mut clocks = [ChipTime::default(); 5];
+    let mut rx = Rx(VecDeque::new());
+    for n in 0..samples {
+        with_bus(&bus, |b| {
+            demo::inject(n, b);
+            b.advance(1.0 / demo::FS_HZ as f32);
+        });
+        // The controller: status every 250 ms, the board's info every
+        // 700 ms, a divider of 0 (refused) every 330 ms.
+        if n % 250 == 7 {
+            rx.0.extend(command(1, Op::RequestStatus));
+        }
+        if n % 700 == 11 {
+            rx.0.extend(command(2, Op::RequestInfo));
+        }
+        if n % 330 == 13 {
+            rx.0.extend(command(3, Op::SetDivider(0)));
+        }
+        let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
+        let (t_us, missed) = clock.tick(now_us);
+        let at = timed::array_instant(now_us, BOARD_DELAY_US);
+        for t in timed.iter_mut() {
+            t.set_instant(at, BOARD_DELAY_US);
+        }
+        link.n = n;
+        link.background = false;
+        {
+            let [c0, c1, c2, c3] = &mut timed;
+            let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, &mut adx];
+            schedule::sample(
+                &mut Exclusive(&mut pipe),
+                &mut Exclusive(&mut link),
+                &mut Exclusive(&mut noise),
+                &mut gyros,
+                (t_us, missed),
+                &VIEW,
+                || {},
+                || StatusFacts {
+                    clocks,
+                    stack_peak: 0,
+                },
+            );
+        }
+        for (slot, t) in clocks.iter_mut().zip(timed.iter()) {
+            *slot = timed_clock(t);
+        }
+        link.background = true;
+        schedule::receive(
+            &mut rx,
+            &mut Exclusive(&mut pipe),
+            &mut Exclusive(&mut link),
+        );
+    }
+    (link.log, horizon)
+}
+
+/// Per kind: frames, worst and mean first byte after the tick, worst last
+/// byte; the sample frames' worst first byte behind their queueing; the
+/// wire's busy share.
+struct Wire {
+    count: [u32; 4],
+    first_worst: [f64; 4],
+    first_sum: [f64; 4],
+    last_worst: [f64; 4],
+    last_best: [f64; 4],
+    waited_worst: f64,
+    busy: f64,
+}
+
+fn on_wire(log: &[Queued], baud: u32, samples: u32) -> Wire {
+    let byte_us = 10.0e6 / f64::from(baud);
+    let mut w = Wire {
+        count: [0; 4],
+        first_worst: [0.0; 4],
+        first_sum: [0.0; 4],
+        last_worst: [0.0; 4],
+        last_best: [f64::INFINITY; 4],
+        waited_worst: 0.0,
+        busy: 0.0,
+    };
+    // The wire is free from `free` on, µs of the run.
+    let mut free = 0.0f64;
+    for q in log {
+        let tick = f64::from(q.n) * 1000.0;
+        let queued = tick
+            + match (q.background, q.kind) {
+                (true, _) => FRAME_US + ACK_US,
+                (false, 0) => FRAME_US,
+                (false, _) => FRAME_US + AFTER_US,
+            };
+        let first = free.max(queued);
+        let wire = q.bytes as f64 * byte_us;
+        free = first + wire;
+        w.busy += wire;
+        let k = q.kind;
+        w.count[k] += 1;
+        w.first_worst[k] = w.first_worst[k].max(first - tick);
+        w.first_sum[k] += first - tick;
+        w.last_worst[k] = w.last_worst[k].max(free - tick);
+        w.last_best[k] = w.last_best[k].min(free - tick);
+        if k == 0 {
+            w.waited_worst = w.waited_worst.max(first - queued);
+        }
+    }
+    w.busy /= f64::from(samples) * 1000.0;
+    w
+}
+
+fn main() {
+    let mut samples = 5_000u32;
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--samples") {
+        samples = args
+            .get(i + 1)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(samples);
+    }
+    println!(
+        "link-timing: {samples} samples of the demo's world through the board's schedule; queued {FRAME_US:.0} µs after the tick (a sample frame), {:.0} (a status or info frame), {:.0} (an acknowledgement)",
+        FRAME_US + AFTER_US,
+        FRAME_US + ACK_US
+    );
+    let mut pass = true;
+    for (baud, name) in [
+        (BAUD, "the board's"),
+        (FALLBACK_BAUD, "the fallback on the internal oscillator"),
+    ] {
+        let (log, horizon) = run(samples, baud);
+        let w = on_wire(&log, baud, samples);
+        println!(
+            "{baud} baud ({name}); the wire busy {:.1} % of the time:",
+            100.0 * w.busy
+        );
+        for (k, kind) in KINDS.iter().enumerate() {
+            if w.count[k] == 0 {
+                continue;
+            }
+            println!(
+                "  {kind} frames: {}, first byte after the tick mean {:.0} µs, worst {:.0}; last byte {:.0} to {:.0}",
+                w.count[k],
+                w.first_sum[k] / f64::from(w.count[k]),
+                w.first_worst[k],
+                w.last_best[k],
+                w.last_worst[k]
+            );
+        }
+        let late = w.last_worst[0] - horizon;
+        println!(
+            "  sample frames: at worst {:.0} µs behind a frame ahead of them on the wire; the last byte at worst {late:+.0} µs from the {horizon:.0} µs the compensation predicts the rates to",
+            w.waited_worst
+        );
+        if baud == BAUD && (w.waited_worst > 0.0 || late > 1.0) {
+            println!("  FAIL: a sample frame leaves later than the compensation assumes");
+            pass = false;
+        }
+    }
+    if !pass {
+        std::process::exit(1);
+    }
+}
