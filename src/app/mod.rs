@@ -24,8 +24,8 @@ use rtic_core::Mutex;
 
 use crate::algo::static_cal::CalRecord;
 use crate::drivers::Gyro;
-use crate::link::msg::Reject;
-use crate::link::port::{ChipTime, NoiseSnapshot, Port, StoreRequest};
+use crate::link::msg::{ClockSource, FifoAnomalies, FusionMethod, GyroStatus, Reject, Start};
+use crate::link::port::{Array, ChipTime, NoiseSnapshot, Port, StoreRequest};
 use crate::link::ring::TxQueue;
 use crate::pipeline::tracker::{NoiseTracker, Probe};
 use crate::pipeline::{Output, Pipeline};
@@ -85,6 +85,73 @@ impl<Q: TxQueue> Link for Port<Q> {
         self
     }
     fn flush(&mut self) {}
+}
+
+/// The pipeline as the link's port states it (`link::port::Array`): the
+/// link knows the array only through this.
+impl<const N: usize> Array for Pipeline<N> {
+    #[inline]
+    fn flags(&self, i: usize) -> u8 {
+        self.health().get(i).map_or(0, |h| h.flags)
+    }
+
+    #[inline]
+    fn gyros(&self) -> usize {
+        N
+    }
+
+    fn gyro_status(&self, i: usize) -> GyroStatus {
+        let c = self.counters().get(i).copied().unwrap_or_default();
+        let cal = self.calibration();
+        // (Saturating float-to-int casts; NaN gives 0.)
+        let scale_ppm = cal.each_ref().map(|a| {
+            let s = a.scale().get(i).copied().unwrap_or(1.0);
+            ((s - 1.0) * 1e6) as i32
+        });
+        let bias_mdps = cal.each_ref().map(|a| {
+            let b = a.bias().get(i).copied().unwrap_or(0.0);
+            (b * 1e3) as i16
+        });
+        GyroStatus {
+            flags: self.flags(i),
+            reads: c.reads,
+            errors: c.errors,
+            excluded: c.excluded,
+            restarts: c.restarts,
+            restarted: c.restarted,
+            scale_ppm,
+            bias_mdps,
+            clock: ClockSource::Polled,
+            clock_ppm: 0,
+            late: c.late,
+            fifo: FifoAnomalies::default(),
+        }
+    }
+
+    #[inline]
+    fn shared_errors(&self) -> u8 {
+        Pipeline::shared_errors(self)
+    }
+
+    #[inline]
+    fn calibrated(&self) -> bool {
+        Pipeline::calibrated(self)
+    }
+
+    fn overruns(&self) -> u32 {
+        Pipeline::overruns(self)
+    }
+
+    fn start(&self, i: usize) -> (Start, Option<f32>) {
+        (
+            self.starts().get(i).copied().unwrap_or_default(),
+            self.temperatures().get(i).copied().flatten(),
+        )
+    }
+
+    fn set_method(&mut self, method: FusionMethod) -> Result<(), Reject> {
+        Pipeline::set_method(self, method.method()).map_err(|_| Reject::Refused)
+    }
 }
 
 /// What the sample task hands the background, in sample order: a

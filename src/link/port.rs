@@ -14,7 +14,7 @@ use heapless::Vec;
 use super::msg::{
     Ack, Angle, ChipInfo, ClockSource, Command, Compensation, FifoAnomalies, Frame, FrameRef,
     FusionMethod, GyroStatus, Info, LinkCounters, Mode, Noise, Op, Raw, Reject, Sample, Settings,
-    Status, StoreState, SyncStatus, MAX_GYROS,
+    Start, Status, StoreState, SyncStatus, MAX_GYROS,
 };
 use super::ring::{ByteRing, TxQueue};
 use super::sync::{CtrlClock, SyncState};
@@ -26,7 +26,34 @@ use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::algo::predict::Predictor;
 use crate::drivers::Gyro;
 use crate::pipeline::tracker::LinkNoise;
-use crate::pipeline::{Output, Pipeline};
+use crate::pipeline::Output;
+
+/// The array the port speaks for, as its frames state it, and the one
+/// command the port hands on to it (the fusion method). The port knows the
+/// array only through this: the board's pipeline is one (`app` implements
+/// it), a test's fixture can be another.
+pub trait Array {
+    /// Gyro `i`'s health flags (0 past the last gyro).
+    fn flags(&self, i: usize) -> u8;
+    /// Gyros.
+    fn gyros(&self) -> usize;
+    /// Gyro `i` as a status frame states it, its clock aside (the port
+    /// fills [`GyroStatus::clock`], `clock_ppm` and `fifo` from the sample
+    /// task's timed reads).
+    fn gyro_status(&self, i: usize) -> GyroStatus;
+    /// Per axis (bit `a`): the axis's chips share an error their noise
+    /// figures cannot see.
+    fn shared_errors(&self) -> u8;
+    /// A static calibration record is in use.
+    fn calibrated(&self) -> bool;
+    /// Samples the sample task missed.
+    fn overruns(&self) -> u32;
+    /// Gyro `i`'s start-up and its die's temperature, °C, if known.
+    fn start(&self, i: usize) -> (Start, Option<f32>);
+    /// Fuse with `method` from now on (its noise model starts again), or
+    /// refuse it.
+    fn set_method(&mut self, method: FusionMethod) -> Result<(), Reject>;
+}
 
 /// Where the E-DAVAR estimates come from (the pipeline's noise tracker).
 pub trait NoiseSource {
@@ -475,7 +502,7 @@ impl<Q: TxQueue> Port<Q> {
         &mut self,
         out: &Output<N>,
         t_us: u64,
-        pipe: &Pipeline<N>,
+        array: &impl Array,
         noise: &impl NoiseSource,
     ) {
         // Every sample goes to the predictor, sent or not; a missed sample
@@ -507,8 +534,8 @@ impl<Q: TxQueue> Port<Q> {
             return;
         }
         let mut health = Vec::<u8, MAX_GYROS>::new();
-        for h in pipe.health().iter().take(MAX_GYROS) {
-            let _ = health.push(h.flags);
+        for i in 0..array.gyros().min(MAX_GYROS) {
+            let _ = health.push(array.flags(i));
         }
         match self.settings.mode {
             Mode::Fused => {
@@ -549,8 +576,8 @@ impl<Q: TxQueue> Port<Q> {
                 // Bits 3–5: the axis's chips share an error its noise
                 // figures cannot see. Bit 7: no static calibration record
                 // in use.
-                s.degraded |= pipe.shared_errors() << 3;
-                s.degraded |= u8::from(!pipe.calibrated()) << 7;
+                s.degraded |= array.shared_errors() << 3;
+                s.degraded |= u8::from(!array.calibrated()) << 7;
                 // The newest estimate not sent yet (a copy the background
                 // left, on the board: no E-DAVAR work on the frame's path).
                 s.noise = self.next_noise(noise);
@@ -654,9 +681,9 @@ impl<Q: TxQueue> Port<Q> {
     /// against the board's, ppm, and its FIFO's anomalies; missing entries
     /// read as polled).
     #[allow(clippy::too_many_arguments)]
-    pub fn status<const N: usize>(
+    pub fn status(
         &self,
-        pipe: &Pipeline<N>,
+        array: &impl Array,
         seq: u32,
         t_us: u64,
         noise_tau: [u16; 3],
@@ -665,36 +692,12 @@ impl<Q: TxQueue> Port<Q> {
         clocks: &[ChipTime],
     ) -> Frame {
         let mut gyros = Vec::<GyroStatus, MAX_GYROS>::new();
-        let cal = pipe.calibration();
-        for (i, (h, c)) in pipe
-            .health()
-            .iter()
-            .zip(pipe.counters())
-            .enumerate()
-            .take(MAX_GYROS)
-        {
-            // (Saturating float-to-int casts; NaN gives 0.)
-            let scale_ppm = cal.each_ref().map(|a| {
-                let s = a.scale().get(i).copied().unwrap_or(1.0);
-                ((s - 1.0) * 1e6) as i32
-            });
-            let bias_mdps = cal.each_ref().map(|a| {
-                let b = a.bias().get(i).copied().unwrap_or(0.0);
-                (b * 1e3) as i16
-            });
+        for i in 0..array.gyros().min(MAX_GYROS) {
             let _ = gyros.push(GyroStatus {
-                flags: h.flags,
-                reads: c.reads,
-                errors: c.errors,
-                excluded: c.excluded,
-                restarts: c.restarts,
-                restarted: c.restarted,
-                scale_ppm,
-                bias_mdps,
                 clock: clocks.get(i).map_or(ClockSource::Polled, |c| c.source),
                 clock_ppm: clocks.get(i).map_or(0, |c| c.ppm),
-                late: c.late,
                 fifo: clocks.get(i).map_or(FifoAnomalies::default(), |c| c.fifo),
+                ..array.gyro_status(i)
             });
         }
         Frame::Status(Status {
@@ -703,7 +706,7 @@ impl<Q: TxQueue> Port<Q> {
             settings: self.settings,
             noise_tau,
             sample_us,
-            overruns: pipe.overruns(),
+            overruns: array.overruns(),
             link: self.counters,
             stack_peak,
             store: self.store,
@@ -731,16 +734,17 @@ impl<Q: TxQueue> Port<Q> {
 
     /// The info frame: the board, the firmware, and each gyro as `gyros`
     /// and the pipeline know it.
-    pub fn info<const N: usize>(&self, pipe: &Pipeline<N>, gyros: &[&mut dyn Gyro; N]) -> Frame {
+    pub fn info<const N: usize>(&self, array: &impl Array, gyros: &[&mut dyn Gyro; N]) -> Frame {
         let mut chips = Vec::<ChipInfo, MAX_GYROS>::new();
-        for ((g, start), t) in gyros.iter().zip(pipe.starts()).zip(pipe.temperatures()) {
+        for (i, g) in gyros.iter().enumerate() {
+            let (start, t) = array.start(i);
             let (part, id) = g.identity();
             // (A saturating cast: ±327 °C is beyond any die.)
             let temp_cc = t.map(|t| (t * 100.0) as i16);
             let _ = chips.push(ChipInfo {
                 part,
                 id,
-                start: *start,
+                start,
                 temp_cc,
             });
         }
@@ -752,29 +756,26 @@ impl<Q: TxQueue> Port<Q> {
         })
     }
 
-    /// Read the bytes the UART has; apply every complete command to
-    /// `pipe` and the settings, and queue its [`Ack`]. A command that
-    /// cannot be read or applied changes nothing and is rejected.
-    pub fn receive<R: embedded_hal_nb::serial::Read<u8>, const N: usize>(
+    /// Read the bytes the UART has; apply every complete command to the
+    /// settings (and the fusion method to `array`), and queue its [`Ack`].
+    /// A command that cannot be read or applied changes nothing and is
+    /// rejected.
+    pub fn receive<R: embedded_hal_nb::serial::Read<u8>>(
         &mut self,
         uart: &mut R,
-        pipe: &mut Pipeline<N>,
+        array: &mut impl Array,
     ) {
         // Bounded: a UART that always has a byte cannot hold the loop.
         for _ in 0..RX_MAX {
             let Ok(b) = uart.read() else { break };
             if let Some(r) = self.rx.feed::<Command>(b) {
-                self.handle(r, pipe);
+                self.handle(r, array);
             }
         }
     }
 
     /// Apply one received frame (see [`Port::receive`]).
-    pub fn handle<const N: usize>(
-        &mut self,
-        r: Result<Decoded<Command>, FrameError>,
-        pipe: &mut Pipeline<N>,
-    ) {
+    pub fn handle(&mut self, r: Result<Decoded<Command>, FrameError>, array: &mut impl Array) {
         let (id, result) = match r {
             Err(e) => (
                 None,
@@ -786,7 +787,7 @@ impl<Q: TxQueue> Port<Q> {
                 }),
             ),
             Ok(d) => {
-                let r = self.apply(d.body, pipe);
+                let r = self.apply(d.body, array);
                 if r.is_ok() && matches!(d.body.op, Op::SaveSettings | Op::FactoryReset) {
                     // Acknowledged by `store_done`.
                     return;
@@ -857,7 +858,7 @@ impl<Q: TxQueue> Port<Q> {
         }
     }
 
-    fn apply<const N: usize>(&mut self, c: Command, pipe: &mut Pipeline<N>) -> Result<(), Reject> {
+    fn apply(&mut self, c: Command, array: &mut impl Array) -> Result<(), Reject> {
         let mut next = self.settings;
         match c.op {
             Op::SetMode(m) => next.mode = m,
@@ -895,8 +896,7 @@ impl<Q: TxQueue> Port<Q> {
         set.check()?;
         // A method selected again starts its noise model again.
         if matches!(c.op, Op::SetMethod(_)) || next.method != self.settings.method {
-            pipe.set_method(next.method.method())
-                .map_err(|_| Reject::Refused)?;
+            array.set_method(next.method)?;
         }
         self.settings = next;
         self.retime();

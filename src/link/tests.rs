@@ -536,6 +536,115 @@ fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
     );
 }
 
+/// An array that is not the pipeline: two gyros, one method it refuses.
+struct Fixture {
+    method: FusionMethod,
+}
+
+impl super::port::Array for Fixture {
+    fn flags(&self, i: usize) -> u8 {
+        [0b1, 0b100][i]
+    }
+    fn gyros(&self) -> usize {
+        2
+    }
+    fn gyro_status(&self, i: usize) -> GyroStatus {
+        GyroStatus {
+            flags: self.flags(i),
+            reads: 10 * i as u32 + 1,
+            errors: 0,
+            excluded: 0,
+            restarts: 0,
+            restarted: 0,
+            scale_ppm: [0; 3],
+            bias_mdps: [0; 3],
+            clock: ClockSource::Polled,
+            clock_ppm: 0,
+            late: 0,
+            fifo: FifoAnomalies::default(),
+        }
+    }
+    fn shared_errors(&self) -> u8 {
+        0b010
+    }
+    fn calibrated(&self) -> bool {
+        false
+    }
+    fn overruns(&self) -> u32 {
+        7
+    }
+    fn start(&self, _: usize) -> (Start, Option<f32>) {
+        (Start::Passed, Some(25.0))
+    }
+    fn set_method(&mut self, method: FusionMethod) -> Result<(), Reject> {
+        if method == FusionMethod::Zhang {
+            return Err(Reject::Refused);
+        }
+        self.method = method;
+        Ok(())
+    }
+}
+
+/// The port states what its array says and hands it the method, whatever
+/// the array is: a method the array refuses is acknowledged as refused and
+/// leaves the settings as they were.
+#[test]
+fn the_port_speaks_for_any_array() {
+    let mut array = Fixture {
+        method: FusionMethod::Adaptive,
+    };
+    let mut port = RingPort::<1024>::new(Settings::default());
+    let before = port.settings();
+    let mut rx = std::collections::VecDeque::new();
+    rx.extend(command_bytes(1, Op::SetMethod(FusionMethod::Zhang)));
+    rx.extend(command_bytes(2, Op::SetMethod(FusionMethod::Mean)));
+    struct Rx(std::collections::VecDeque<u8>);
+    impl embedded_hal_nb::serial::ErrorType for Rx {
+        type Error = core::convert::Infallible;
+    }
+    impl embedded_hal_nb::serial::Read<u8> for Rx {
+        fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
+            self.0
+                .pop_front()
+                .ok_or(embedded_hal_nb::nb::Error::WouldBlock)
+        }
+    }
+    let mut rx = Rx(rx);
+    port.receive(&mut rx, &mut array);
+    assert_eq!(array.method, FusionMethod::Mean);
+    assert_eq!(port.settings().method, FusionMethod::Mean);
+    assert_eq!(port.settings().divider, before.divider);
+    let Frame::Status(st) = port.status(&array, 5, 5_000, [1, 16, 256], 1000, 0, &[]) else {
+        panic!("a status frame");
+    };
+    assert_eq!(st.gyros.len(), 2);
+    assert_eq!((st.gyros[0].flags, st.gyros[1].reads), (0b1, 11));
+    assert_eq!(st.overruns, 7);
+    let mut tx = Tx(std::vec::Vec::new());
+    port.drain(&mut tx);
+    let acks: std::vec::Vec<_> = decode_all(&tx.0)
+        .0
+        .into_iter()
+        .filter_map(|r| match r.ok()?.body {
+            Frame::Ack(a) => Some(a),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        acks,
+        [
+            Ack {
+                id: Some(1),
+                result: Err(Reject::Refused)
+            },
+            Ack {
+                id: Some(2),
+                result: Ok(())
+            }
+        ]
+    );
+}
+
 /// What the reading end of the board's queue holds, taken whole (both
 /// contiguous runs when it wraps).
 fn take_all(q: &super::ring::TxConsumer<600>, out: &mut std::vec::Vec<u8>) {
