@@ -3,6 +3,7 @@
 // numeric code indexes several arrays by the same chip index.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
+pub mod demo_host;
 pub mod noise_classes;
 pub mod real;
 pub mod single_chip;

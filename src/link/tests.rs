@@ -403,7 +403,7 @@ impl embedded_hal_nb::serial::Write<u8> for Tx {
 /// Feed `bytes` to the port as received, then decode what it sent.
 fn exchange(
     port: &mut RingPort<1024>,
-    pipe: &mut Pipeline<4>,
+    pipe: &mut impl super::port::Array,
     bytes: &[u8],
 ) -> std::vec::Vec<Frame> {
     struct Rx<'a>(&'a [u8]);
@@ -595,37 +595,11 @@ fn the_port_speaks_for_any_array() {
     };
     let mut port = RingPort::<1024>::new(Settings::default());
     let before = port.settings();
-    let mut rx = std::collections::VecDeque::new();
-    rx.extend(command_bytes(1, Op::SetMethod(FusionMethod::Zhang)));
-    rx.extend(command_bytes(2, Op::SetMethod(FusionMethod::Mean)));
-    struct Rx(std::collections::VecDeque<u8>);
-    impl embedded_hal_nb::serial::ErrorType for Rx {
-        type Error = core::convert::Infallible;
-    }
-    impl embedded_hal_nb::serial::Read<u8> for Rx {
-        fn read(&mut self) -> embedded_hal_nb::nb::Result<u8, Self::Error> {
-            self.0
-                .pop_front()
-                .ok_or(embedded_hal_nb::nb::Error::WouldBlock)
-        }
-    }
-    let mut rx = Rx(rx);
-    port.receive(&mut rx, &mut array);
-    assert_eq!(array.method, FusionMethod::Mean);
-    assert_eq!(port.settings().method, FusionMethod::Mean);
-    assert_eq!(port.settings().divider, before.divider);
-    let Frame::Status(st) = port.status(&array, 5, 5_000, [1, 16, 256], 1000, 0, &[]) else {
-        panic!("a status frame");
-    };
-    assert_eq!(st.gyros.len(), 2);
-    assert_eq!((st.gyros[0].flags, st.gyros[1].reads), (0b1, 11));
-    assert_eq!(st.overruns, 7);
-    let mut tx = Tx(std::vec::Vec::new());
-    port.drain(&mut tx);
-    let acks: std::vec::Vec<_> = decode_all(&tx.0)
-        .0
+    let mut commands = command_bytes(1, Op::SetMethod(FusionMethod::Zhang));
+    commands.extend(command_bytes(2, Op::SetMethod(FusionMethod::Mean)));
+    let acks: std::vec::Vec<_> = exchange(&mut port, &mut array, &commands)
         .into_iter()
-        .filter_map(|r| match r.ok()?.body {
+        .filter_map(|f| match f {
             Frame::Ack(a) => Some(a),
             _ => None,
         })
@@ -643,6 +617,15 @@ fn the_port_speaks_for_any_array() {
             }
         ]
     );
+    assert_eq!(array.method, FusionMethod::Mean);
+    assert_eq!(port.settings().method, FusionMethod::Mean);
+    assert_eq!(port.settings().divider, before.divider);
+    let Frame::Status(st) = port.status(&array, 5, 5_000, [1, 16, 256], 1000, 0, &[]) else {
+        panic!("a status frame");
+    };
+    assert_eq!(st.gyros.len(), 2);
+    assert_eq!((st.gyros[0].flags, st.gyros[1].reads), (0b1, 11));
+    assert_eq!(st.overruns, 7);
 }
 
 /// What the reading end of the board's queue holds, taken whole (both

@@ -32,15 +32,14 @@
 use std::cell::RefCell;
 use std::collections::VecDeque;
 
-use gyro_array::app::{self as schedule, StatusFacts, StatusView};
-use gyro_array::drivers::Gyro;
-use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
+use gyro_array::app as schedule;
+use gyro_array::emu::demo;
 use gyro_array::link::msg::{Command, Frame, Op, Settings};
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, RingPort};
+use gyro_array::link::port::{NoiseSnapshot, RingPort};
 use gyro_array::link::ring::ByteRing;
 use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
-use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
+use host_tests::demo_host;
 use rtic_core::Exclusive;
 
 /// The sample frame queued, µs after the tick (see the module's text).
@@ -49,11 +48,6 @@ const FRAME_US: f64 = 110.0 + 11_113.0 / 168.0;
 const AFTER_US: f64 = 4_672.0 / 168.0;
 /// An acknowledgement queued after the sample frame, µs.
 const ACK_US: f64 = AFTER_US + 2_000.0 / 168.0 + 10.0;
-
-const VIEW: StatusView = StatusView {
-    taus: demo::NOISE_TAU,
-    sample_us: 1_000_000 / demo::FS_HZ,
-};
 
 /// One frame the port queued: the sample's number, its kind (an index
 /// of [`KINDS`]), its bytes, and whether the background queued it.
@@ -155,16 +149,6 @@ fn command(id: u8, op: Op) -> Vec<u8> {
 /// The board's run: every frame it queued, and the compensation's
 /// horizon at `baud`.
 fn run(samples: u32, baud: u32) -> (Vec<Queued>, f64) {
-    let cs: [CsLine; 5] = Default::default();
-    let bus = RefCell::new(EmuBus::new(demo::chips(), &cs));
-    let Ok(mut pipe) = demo::pipeline() else {
-        eprintln!("link-timing: the pipeline refused its settings");
-        std::process::exit(1);
-    };
-    let demo::Started { chips, .. } = demo::start(&bus, &cs, &mut pipe);
-    let demo::Chips {
-        mut timed, mut adx, ..
-    } = chips;
     let mut link = Recorder {
         port: RingPort::new(Settings::default()),
         n: 0,
@@ -174,62 +158,37 @@ fn run(samples: u32, baud: u32) -> (Vec<Queued>, f64) {
     };
     link.port.set_timing(baud, 1_000_000 / demo::FS_HZ);
     let horizon = f64::from(link.port.horizon_us().unwrap_or(0));
-    let mut noise = NoiseSnapshot::default();
-    let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
-    let mut clock = schedule::SampleClock::new(now_us, 1_000_000 / demo::FS_HZ);
-    let mut clocks = [ChipTime::default(); 5];
     let mut rx = Rx(VecDeque::new());
-    for n in 0..samples {
-        with_bus(&bus, |b| {
-            demo::inject(n, b);
-            b.advance(1.0 / demo::FS_HZ as f32);
-        });
-        // The controller: status every 250 ms, the board's info every
-        // 700 ms, a divider of 0 (refused) every 330 ms.
-        if n % 250 == 7 {
-            rx.0.extend(command(1, Op::RequestStatus));
-        }
-        if n % 700 == 11 {
-            rx.0.extend(command(2, Op::RequestInfo));
-        }
-        if n % 330 == 13 {
-            rx.0.extend(command(3, Op::SetDivider(0)));
-        }
-        let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
-        let (t_us, missed) = clock.tick(now_us);
-        let at = timed::array_instant(now_us, BOARD_DELAY_US);
-        for t in timed.iter_mut() {
-            t.set_instant(at, BOARD_DELAY_US);
-        }
-        link.n = n;
-        link.background = false;
-        {
-            let [c0, c1, c2, c3] = &mut timed;
-            let mut gyros: [&mut dyn Gyro; 5] = [c0, c1, c2, c3, &mut adx];
-            schedule::sample(
-                &mut Exclusive(&mut pipe),
-                &mut Exclusive(&mut link),
-                &mut Exclusive(&mut noise),
-                &mut gyros,
-                (t_us, missed),
-                &VIEW,
-                || {},
-                || StatusFacts {
-                    clocks,
-                    stack_peak: 0,
-                },
-            );
-        }
-        for (slot, t) in clocks.iter_mut().zip(timed.iter()) {
-            *slot = timed_clock(t);
-        }
-        link.background = true;
-        schedule::receive(
-            &mut rx,
-            &mut Exclusive(&mut pipe),
-            &mut Exclusive(&mut link),
-        );
-    }
+    let commands = RefCell::new(VecDeque::new());
+    demo_host::run(
+        samples,
+        &mut link,
+        &mut NoiseSnapshot::default(),
+        |_| {},
+        |n| {
+            // The controller: status every 250 ms, the board's info every
+            // 700 ms, a divider of 0 (refused) every 330 ms.
+            let mut c = commands.borrow_mut();
+            if n % 250 == 7 {
+                c.extend(command(1, Op::RequestStatus));
+            }
+            if n % 700 == 11 {
+                c.extend(command(2, Op::RequestInfo));
+            }
+            if n % 330 == 13 {
+                c.extend(command(3, Op::SetDivider(0)));
+            }
+        },
+        |n, _, link, pipe, _| {
+            link.n = n;
+            link.background = true;
+            rx.0.append(&mut commands.borrow_mut());
+            schedule::receive(&mut rx, &mut Exclusive(pipe), &mut Exclusive(&mut *link));
+            // The next sample's frames are the sample task's.
+            link.n = n + 1;
+            link.background = false;
+        },
+    );
     (link.log, horizon)
 }
 
