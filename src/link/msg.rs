@@ -425,6 +425,62 @@ pub enum Compensation {
     Horizon(u16),
 }
 
+impl Status {
+    /// The status frame of `n` gyros (at most [`MAX_GYROS`]) with every
+    /// field at its widest encoding (every counter at its largest, as after
+    /// months): the longest a board of `n` gyros sends, what the link's
+    /// budget and its wire time allow for.
+    pub fn widest(n: usize) -> Self {
+        let gyro = GyroStatus {
+            flags: 0xFF,
+            reads: u32::MAX,
+            errors: u32::MAX,
+            excluded: u32::MAX,
+            restarts: u32::MAX,
+            restarted: u32::MAX,
+            scale_ppm: [i32::MIN; 3],
+            bias_mdps: [i16::MIN; 3],
+            clock: ClockSource::ClkIn,
+            clock_ppm: i32::MIN,
+            late: u32::MAX,
+            fifo: FifoAnomalies {
+                overflows: u32::MAX,
+                bad: u32::MAX,
+                cuts: u32::MAX,
+                resent: u32::MAX,
+            },
+        };
+        let mut gyros = Vec::new();
+        for _ in 0..n.min(MAX_GYROS) {
+            let _ = gyros.push(gyro);
+        }
+        Self {
+            seq: u32::MAX,
+            t_us: u64::MAX,
+            settings: Settings {
+                mode: Mode::Raw,
+                method: FusionMethod::Adaptive,
+                divider: 1000,
+                status_every: u32::MAX,
+                compensation: Compensation::Horizon(u16::MAX),
+                angle: true,
+            },
+            noise_tau: [u16::MAX; 3],
+            sample_us: u32::MAX,
+            overruns: u32::MAX,
+            link: LinkCounters {
+                sent: u32::MAX,
+                dropped: u32::MAX,
+                accepted: u32::MAX,
+                rejected: u32::MAX,
+            },
+            stack_peak: u32::MAX,
+            store: StoreState::Corrupt,
+            gyros,
+        }
+    }
+}
+
 impl Settings {
     /// Whether every value is inside the range a command may set (a
     /// stored record is checked the same way before it is used).

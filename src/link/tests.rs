@@ -57,51 +57,7 @@ fn big_raw(n: usize) -> Frame {
 }
 
 fn big_status(n: usize) -> Frame {
-    Frame::Status(Status {
-        seq: u32::MAX,
-        t_us: u64::MAX,
-        settings: Settings {
-            mode: Mode::Raw,
-            method: FusionMethod::Adaptive,
-            divider: 1000,
-            status_every: u32::MAX,
-            compensation: Compensation::Horizon(u16::MAX),
-            angle: true,
-        },
-        noise_tau: [u16::MAX; 3],
-        sample_us: u32::MAX,
-        overruns: u32::MAX,
-        link: LinkCounters {
-            sent: u32::MAX,
-            dropped: u32::MAX,
-            accepted: u32::MAX,
-            rejected: u32::MAX,
-        },
-        stack_peak: u32::MAX,
-        store: StoreState::Corrupt,
-        gyros: vec(
-            GyroStatus {
-                flags: 0xFF,
-                reads: u32::MAX,
-                errors: u32::MAX,
-                excluded: u32::MAX,
-                restarts: u32::MAX,
-                restarted: u32::MAX,
-                scale_ppm: [i32::MIN; 3],
-                bias_mdps: [i16::MIN; 3],
-                clock: ClockSource::ClkIn,
-                clock_ppm: i32::MIN,
-                late: u32::MAX,
-                fifo: FifoAnomalies {
-                    overflows: u32::MAX,
-                    bad: u32::MAX,
-                    cuts: u32::MAX,
-                    resent: u32::MAX,
-                },
-            },
-            n,
-        ),
-    })
+    Frame::Status(Status::widest(n))
 }
 
 fn wire_len(f: &Frame) -> usize {
