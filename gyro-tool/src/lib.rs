@@ -10,6 +10,7 @@ pub mod dev;
 pub mod edf;
 pub mod fit;
 pub mod kind;
+pub mod pipe;
 pub mod plot;
 pub mod pointing;
 pub mod replay;

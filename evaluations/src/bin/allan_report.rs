@@ -31,6 +31,7 @@ struct Cli {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let cli = <Cli as clap::Parser>::parse();
     let (rate, tau0, model) = match (cli.file.as_ref(), cli.tau0) {
         (Some(path), Some(tau0)) => {

@@ -166,6 +166,7 @@ for t, d in zip(taus, dev):
 "#;
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let target = root.join("target");
     let venv = target.join("allan-venv");

@@ -28,6 +28,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = Args::parse();
     let Some(rec) = calibrate(args.hold.max(100), args.seed) else {
         eprintln!("calibrate: a chip's matrix is singular");

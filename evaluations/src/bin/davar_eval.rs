@@ -787,6 +787,7 @@ fn probability(s: &str) -> Result<f32, String> {
 }
 
 fn main() -> ExitCode {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = <Args as clap::Parser>::parse();
     if let Some(l) = args.lsb {
         let _ = LSB.set(l);

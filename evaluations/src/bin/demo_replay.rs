@@ -19,6 +19,7 @@ use rtic_core::Exclusive;
 static CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let stress = std::env::args().any(|a| a == "--stress");
     // The demo's port size, its bytes taken at once.
     let mut link = HostLink::<1024> {

@@ -34,6 +34,7 @@ fn grouped(x: &[f64], m0: usize, sums: &mut [f64]) {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let mut rng = Rng::new(1);
     let mut x = vec![0.0f64; N];
     for i in 1..N {

@@ -700,6 +700,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = <Args as clap::Parser>::parse();
     // Panics are caught per run and counted; keep their default message off
     // the terminal.

@@ -65,6 +65,7 @@ struct Args {
 }
 
 fn main() -> Result<(), Err> {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = Args::parse();
     std::fs::create_dir_all(&args.out)?;
     let all = [

@@ -166,6 +166,7 @@ fn judge(t: &Terms, truth: &Truth, tally: &mut Tally) {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = Args::parse();
     println!(
         "{:<14} {:>6} {:>4} {:>6}  visible / inside its 95 % interval: Q N B K R GM-sigma GM-tau_c  false visible",

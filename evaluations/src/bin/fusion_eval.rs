@@ -701,6 +701,7 @@ fn pair_class(seed: u64) -> (f64, f64, f64, f64) {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let seed = Cli::parse().seed;
     println!("fusion-eval: seed {seed}, 4 gyros, {SAMPLES} samples at {FS} Hz per scenario, errors in deg/s");
     let scenarios = [

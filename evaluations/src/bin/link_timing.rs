@@ -253,6 +253,7 @@ fn on_wire(log: &[Queued], baud: u32, samples: u32, widest: &[Option<usize>; 4])
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let mut samples = 5_000u32;
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--samples") {

@@ -454,6 +454,7 @@ fn draw(
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = Args::parse();
     let t0 = std::time::Instant::now();
     let mut results = Vec::new();

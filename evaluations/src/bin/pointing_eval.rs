@@ -531,6 +531,7 @@ fn pooled_fault_ratios(
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = Args::parse();
     let lp_params = LoopParams::VEHICLE;
     let lp = Loop::new(lp_params);

@@ -322,6 +322,7 @@ struct Cli {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     use clap::Parser;
     let cli = Cli::parse();
     match cli.experiment {

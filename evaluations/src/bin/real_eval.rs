@@ -42,6 +42,7 @@ struct Cli {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let cli = Cli::parse();
     let dir = cli.dir.unwrap_or_else(host_tests::real::committed);
     let mut logs = match load(&dir) {

@@ -14,6 +14,7 @@ use gyro_array::emu::controller::{run, CtrlParams};
 use gyro_array::link::sync::LOST_PERIODS;
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let mut args = std::env::args().skip(1);
     let seconds: u32 = args.next().and_then(|a| a.parse().ok()).unwrap_or(600);
     let seeds: u64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(10);

@@ -643,6 +643,7 @@ struct Args {
 }
 
 fn main() {
+    gyro_tool::pipe::quiet_on_closed_pipe();
     let args = <Args as clap::Parser>::parse();
     let seeds = (args.seed, args.clocks);
     if let Some(ms) = args.search {

@@ -103,28 +103,17 @@ enum Cmd {
     Replay(replay::Args),
 }
 
-/// A panic of `print!` on a closed pipe (`gyro … | head`): the reader has
-/// what it wanted; the tool stops quietly, as Unix tools do.
-fn broken_pipe(payload: &(dyn std::any::Any + Send)) -> bool {
-    let msg = payload
-        .downcast_ref::<String>()
-        .map(String::as_str)
-        .or_else(|| payload.downcast_ref::<&str>().copied())
-        .unwrap_or("");
-    msg.contains("failed printing to stdout") && msg.contains("Broken pipe")
-}
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if !broken_pipe(info.payload()) {
+        if !gyro_tool::pipe::broken_pipe(info.payload()) {
             default_hook(info)
         }
     }));
     let r = match std::panic::catch_unwind(|| run(cli)) {
         Ok(r) => r,
-        Err(p) if broken_pipe(&*p) => return ExitCode::SUCCESS,
+        Err(p) if gyro_tool::pipe::broken_pipe(&*p) => return ExitCode::SUCCESS,
         Err(p) => std::panic::resume_unwind(p),
     };
     match r {
