@@ -80,9 +80,7 @@ impl<SPI: SpiDevice> Gyro for OnAxis<SPI> {
         let axis = self.axis.min(2);
         r.raw[axis] = d.rate;
         r.rate_dps[axis] = d.rate as f32 / LSB_PER_DPS;
-        if d.rate == i16::MAX || d.rate == i16::MIN {
-            r.saturated = 1 << self.axis;
-        }
+        r.saturated = super::saturated_axes(&r.raw);
         Ok(r)
     }
 
