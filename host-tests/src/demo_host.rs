@@ -5,19 +5,13 @@
 
 use std::cell::RefCell;
 
-use gyro_array::app::{self as schedule, Sampled, StatusFacts, StatusView};
+use gyro_array::app::{self as schedule, Sampled, StatusFacts};
 use gyro_array::drivers::Gyro;
 use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot};
 use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
 use gyro_array::pipeline::Pipeline;
 use rtic_core::Exclusive;
-
-/// What the status frames say of the demo's schedule.
-pub const VIEW: StatusView = StatusView {
-    taus: demo::NOISE_TAU,
-    sample_us: 1_000_000 / demo::FS_HZ,
-};
 
 /// Gyros in the demo's array (four ICM-42688-P, one ADXRS453).
 pub const GYROS: usize = 5;
@@ -88,7 +82,7 @@ pub fn run<L: schedule::Link>(
                 &mut Exclusive(&mut *noise),
                 &mut gyros,
                 (t_us, missed),
-                &VIEW,
+                &demo::STATUS_VIEW,
                 || {},
                 || StatusFacts {
                     clocks,

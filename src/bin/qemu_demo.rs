@@ -78,11 +78,6 @@ const RELOAD: u32 = CORE_HZ / FS_HZ - 1;
 const JOBS: usize = 8;
 /// The link's bytes the UART's task writes in one turn at most.
 const TX_TURN: usize = 16;
-/// What the status frames say of the schedule.
-const STATUS_VIEW: schedule::StatusView = schedule::StatusView {
-    taus: NOISE_TAU,
-    sample_us: 1_000_000 / FS_HZ,
-};
 /// The stack's deepest use, for the status frames (the background scans).
 static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 /// The stress run (`--features demo-stress`): the background made ten
@@ -505,7 +500,7 @@ mod app {
             &mut cx.shared.noise,
             &mut gyros,
             (t_us, missed),
-            &STATUS_VIEW,
+            &demo::STATUS_VIEW,
             || queued = since_tick(),
             || schedule::StatusFacts {
                 clocks,

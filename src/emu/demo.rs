@@ -59,6 +59,11 @@ pub const PLL: [f64; 4] = [0.006, -0.009, 0.003, -0.004];
 
 /// σ of the link's noise estimates at τ = 1, 8, 64 ms.
 pub const NOISE_TAU: [usize; 3] = [0, 3, 6];
+/// What the status frames say of the demo's schedule.
+pub const STATUS_VIEW: crate::app::StatusView = crate::app::StatusView {
+    taus: NOISE_TAU,
+    sample_us: 1_000_000 / FS_HZ,
+};
 /// E-DAVAR per axis: λ2 = 512 samples, the link's τ alone (1, 8 and 64 ms:
 /// every third octave).
 pub type Tracker = NoiseTracker<512, 19, 3>;
