@@ -9,14 +9,15 @@
 //! - [`algo`]: pure numerical methods (fusion, Allan variance, E-DAVAR). They
 //!   know nothing of hardware.
 //! - [`drivers`]: embedded-hal 1.0 drivers for the ICM-42688-P and ADXRS453.
-//! - [`emu`]: register- and SPI-byte-level models of those chips, so the real
-//!   drivers run unchanged where the hardware is missing.
 //! - [`pipeline`]: the per-sample loop: read every gyro, account for every
 //!   sample, flag and exclude faulty chips, fuse.
 //! - [`link`]: the output link to the antenna controller (frames over a
 //!   UART, commands back) and its decoder, shared with the host tools.
-//! - [`board`]: bindings for the QEMU machine and the STM32F405 board
-//!   (firmware builds only), and the reset record that survives a fault.
+//! - [`board`]: bindings for the STM32F405 board (firmware builds only),
+//!   and the reset record that survives a fault.
+//!
+//! The chips' emulation, the self-checks and the QEMU binaries live in
+//! the `gyro-sim` crate (`sim/`); nothing of them is in the board's build.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -28,9 +29,7 @@
 pub mod algo;
 pub mod app;
 pub mod board;
-pub mod checks;
 pub mod drivers;
-pub mod emu;
 pub mod link;
 pub mod pipeline;
 pub mod store;

@@ -2,7 +2,7 @@
 //! N = 2, 4 and 5: it returns, and a fused value is finite.
 #![no_main]
 use gyro_array::algo::fusion::{AxisState, Fusion};
-use gyro_array::checks::methods;
+use gyro_sim::checks::methods;
 use libfuzzer_sys::fuzz_target;
 mod common;
 use common::Bytes;

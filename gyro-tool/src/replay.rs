@@ -297,7 +297,7 @@ pub fn draw(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use gyro_array::emu::Rng;
+    use gyro_sim::Rng;
 
     /// One chip per `sd`: `truth` plus white noise of that σ (drawn chip
     /// after chip).

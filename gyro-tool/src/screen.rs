@@ -133,7 +133,7 @@ mod tests {
     use super::*;
 
     fn noise(n: usize, sigma: f64, seed: u64) -> Vec<f64> {
-        let mut rng = gyro_array::emu::Rng::new(seed);
+        let mut rng = gyro_sim::Rng::new(seed);
         (0..n).map(|_| sigma * f64::from(rng.gaussian())).collect()
     }
 
@@ -189,12 +189,12 @@ mod tests {
     /// 100 Hz are not called motion.
     #[test]
     fn a_wandering_bias_is_not_motion() {
-        let p = gyro_array::emu::NoiseParams {
+        let p = gyro_sim::NoiseParams {
             rrw_deg_h_rt_h: 40.0,
-            ..gyro_array::emu::NoiseParams::ICM42688
+            ..gyro_sim::NoiseParams::ICM42688
         };
-        let mut rng = gyro_array::emu::Rng::new(5);
-        let mut axis = gyro_array::emu::noise::AxisNoise::default();
+        let mut rng = gyro_sim::Rng::new(5);
+        let mut axis = gyro_sim::noise::AxisNoise::default();
         let y: Vec<f64> = (0..1_440_000)
             .map(|_| f64::from(axis.step(&p, &mut rng, 0.0, 0.01)))
             .collect();

@@ -267,7 +267,7 @@ mod tests {
     /// the spike is clipped and counted.
     #[test]
     fn one_wild_sample_does_not_quantise_the_rest_away() {
-        let mut rng = gyro_array::emu::Rng::new(9);
+        let mut rng = gyro_sim::Rng::new(9);
         let mut rate: Vec<f64> = (0..50_000)
             .map(|_| 0.01 * f64::from(rng.gaussian()))
             .collect();
@@ -286,7 +286,7 @@ mod tests {
 
     #[test]
     fn the_surface_follows_a_noise_step() {
-        let mut rng = gyro_array::emu::Rng::new(8);
+        let mut rng = gyro_sim::Rng::new(8);
         let n = 40_000;
         let sigma = |t: f64| if t < 20.0 { 0.01 } else { 0.02 };
         let rate: Vec<f64> = (0..n)

@@ -1,4 +1,4 @@
-//! The QEMU demo's world on the host (`gyro_array::emu::demo`: the array,
+//! The QEMU demo's world on the host (`gyro_sim::demo`: the array,
 //! its start-up, its faults) through the board's schedule
 //! (`gyro_array::app::sample`), sample by sample, as `demo-replay` and
 //! `link-timing` run it.
@@ -7,10 +7,10 @@ use std::cell::RefCell;
 
 use gyro_array::app::{self as schedule, Sampled, StatusFacts};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot};
 use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
 use gyro_array::pipeline::Pipeline;
+use gyro_sim::{demo, with_bus, CsLine, EmuBus};
 use rtic_core::Exclusive;
 
 /// Gyros in the demo's array (four ICM-42688-P, one ADXRS453).

@@ -82,8 +82,8 @@ pub mod calibration {
     //!   still runs against the temperature the drivers read.
 
     use gyro_array::algo::static_cal::{inverse3, CalRecord, ChipCal};
-    use gyro_array::checks::run_array_from_seq;
-    use gyro_array::emu::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
+    use gyro_sim::checks::run_array_from_seq;
+    use gyro_sim::{board_array, mounted_board, Fault, Mount, RateProfile, TempProfile};
 
     /// Rate of the rate-table runs, °/s.
     pub const OMEGA: f32 = 100.0;
@@ -263,9 +263,9 @@ pub mod motion {
     //! still), its fused rate, its fused error against the emulator's true
     //! rate, and the tracker's E-DAVAR estimates.
 
-    use gyro_array::checks::run_board_array_from;
-    use gyro_array::emu::{Fault, RateProfile};
     use gyro_array::pipeline::tracker::{self, sigma_dps, NoiseTracker};
+    use gyro_sim::checks::run_board_array_from;
+    use gyro_sim::{Fault, RateProfile};
 
     /// The vehicle's motion.
     pub const PROFILE: RateProfile = RateProfile {

@@ -7,7 +7,7 @@
 //! Control Symposium), whose spectrum is B²/(2 sin πf) per cycle a
 //! sample: B²/(2πf) at low f, IEEE 952's flicker of coefficient B.
 
-use gyro_array::emu::Rng;
+use gyro_sim::Rng;
 
 /// The terms of a record, in °/s units as `gyro_tool::fit` reports them:
 /// Q °, N °/√s, B °/s, K °/s/√s, R °/s², and Gauss–Markov (σ °/s, τc s).

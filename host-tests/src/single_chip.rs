@@ -3,7 +3,7 @@
 //! the chip-timing tests and of `timing-eval`.
 
 use gyro_array::drivers::icm42688::{Config, Error, FifoSample, Icm42688};
-use gyro_array::emu::{
+use gyro_sim::{
     emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuDelay, Icm42688Model, NoiseParams,
     RateProfile,
 };

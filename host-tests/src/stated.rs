@@ -11,13 +11,13 @@ use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::app::{self as schedule, StatusFacts};
 use gyro_array::drivers::icm42688::{Config, Icm42688};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::{
-    emu_device, with_bus, Chip, CsLine, EmuBus, EmuDelay, Fault, Icm42688Model, NoiseParams,
-    RateProfile,
-};
 use gyro_array::link::msg::Settings;
 use gyro_array::link::port::{NoiseSnapshot, Port};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use gyro_sim::{
+    emu_device, with_bus, Chip, CsLine, EmuBus, EmuDelay, Fault, Icm42688Model, NoiseParams,
+    RateProfile,
+};
 use rtic_core::Exclusive;
 use std::cell::RefCell;
 
@@ -182,7 +182,7 @@ fn timed(r: &Run, out: &mut Outcome) -> Vec<(f64, [f64; 3])> {
 fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
     let chips: [Chip; N] = core::array::from_fn(|i| {
         let p = NoiseParams {
-            bias_dps: gyro_array::emu::TIMED_ARRAY_BIAS_DPS[i],
+            bias_dps: gyro_sim::TIMED_ARRAY_BIAS_DPS[i],
             scale_error: r.timing.scale_error[i],
             ..NoiseParams::ICM42688
         };
@@ -317,7 +317,7 @@ fn rms(x: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::lag_fit;
-    use gyro_array::emu::Rng;
+    use gyro_sim::Rng;
 
     /// Rows of the lag fit for a rate `w(t)` read `lag` late with white
     /// noise `sd`, a bias and a scale error, at 1 kHz for `secs`.

@@ -4,8 +4,8 @@
 //! once calibrated, through a temperature ramp.
 
 use gyro_array::algo::static_cal::{CalError, CalRecord, MAX_LEN};
-use gyro_array::checks::run_array_from_seq;
-use gyro_array::emu::{mounted_board, Fault, RateProfile, TempProfile};
+use gyro_sim::checks::run_array_from_seq;
+use gyro_sim::{mounted_board, Fault, RateProfile, TempProfile};
 use host_tests::calibration::{calibrate, errors};
 
 /// RMS of the fused error on each axis over `n` samples (after 500).

@@ -6,8 +6,8 @@
 use gyro_array::drivers::icm42688::{
     board_fifo, ClockInput, Config, Filter, Sampling, BOARD_FILTER, BOARD_FILTER_FIFO,
 };
-use gyro_array::emu::timing::{ClockParams, PathSettings, Vibration};
-use gyro_array::emu::{with_bus, ChipTiming, NoiseParams, RateProfile};
+use gyro_sim::timing::{ClockParams, PathSettings, Vibration};
+use gyro_sim::{with_bus, ChipTiming, NoiseParams, RateProfile};
 use host_tests::single_chip::{chip, run, Reads};
 
 fn fifo_config(filter: Filter, clock: ClockInput) -> Config {
@@ -296,7 +296,7 @@ fn the_path_delays_a_slow_signal_by_its_group_delay() {
 fn the_adxrs453_on_its_own_clock_is_as_late_as_its_driver_states() {
     use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis, DELAY_US};
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{emu_device, AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuDelay};
+    use gyro_sim::{emu_device, AdxTiming, Adxrs453Model, Chip, CsLine, EmuBus, EmuDelay};
     use std::cell::RefCell;
     // A 2 Hz, 50 °/s sine on z; no noise. The rate leaves the part's
     // 77.5 Hz filter late, and each response carries the rate latched at
@@ -351,7 +351,7 @@ fn the_delay_model_is_the_filters_for_a_vehicles_motion() {
     // stamps, their rates within 0.025 °/s, 3 LSB at ±250 °/s (measured:
     // 2 LSB; the filters' phase beyond their DC delay at 12 Hz, and their
     // gain droop, are a few mdeg/s).
-    use gyro_array::emu::PathModel;
+    use gyro_sim::PathModel;
     for (amp, hz) in [(95.0, 2.0), (20.0, 12.0)] {
         let profile = RateProfile {
             base_dps: [0.0; 3],
@@ -415,8 +415,7 @@ fn int1_marks_every_sample_at_8_khz() {
             100,
             |n, bus| {
                 with_bus(bus, |b| {
-                    if let (true, 0, gyro_array::emu::Chip::Icm(m)) =
-                        (old_int_config1, n, &mut b.chips[0])
+                    if let (true, 0, gyro_sim::Chip::Icm(m)) = (old_int_config1, n, &mut b.chips[0])
                     {
                         // INT_CONFIG1 (0x64) as the driver wrote it before.
                         m.poke(0, 0x64, 0x00);

@@ -6,9 +6,9 @@
 //! kept out, and the noise tracker keeps its window across the wrap, each
 //! estimate naming the sample it describes.
 
-use gyro_array::checks::run_array_from_seq;
-use gyro_array::emu::{with_bus, Fault, RateProfile};
 use gyro_array::pipeline::tracker::{config, NoiseTracker};
+use gyro_sim::checks::run_array_from_seq;
+use gyro_sim::{with_bus, Fault, RateProfile};
 
 #[test]
 fn the_sample_number_wraps_without_a_seam() {

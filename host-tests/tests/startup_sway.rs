@@ -6,8 +6,8 @@
 //! `cargo test -p host-tests --test startup_sway -- --nocapture` prints the
 //! counts.
 
-use gyro_array::checks::run_board_array_with;
-use gyro_array::emu::{Fault, RateProfile, Rng};
+use gyro_sim::checks::run_board_array_with;
+use gyro_sim::{Fault, RateProfile, Rng};
 
 #[test]
 fn no_healthy_chip_fails_start_up_under_sway_and_a_dead_one_always_does() {

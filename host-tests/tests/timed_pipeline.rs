@@ -8,12 +8,12 @@
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::drivers::icm42688::{ClockInput, Config, Icm42688, Odr};
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::timing::{Tone, Vibration};
-use gyro_array::emu::{
+use gyro_array::pipeline::{Pipeline, PipelineConfig};
+use gyro_sim::timing::{Tone, Vibration};
+use gyro_sim::{
     emu_device, with_bus, Chip, CsLine, EmuBus, EmuDelay, Fault, Icm42688Model, NoiseParams,
     PastCount, RateProfile, RtcTick,
 };
-use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use std::cell::RefCell;
 
 const N: usize = 4;
@@ -103,7 +103,7 @@ fn run_timed_on(
         rtc_tick,
         past_count,
         power_up_s: 0.0,
-        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+        path_reading: gyro_sim::PathReading::DOCUMENTED,
         pll: timed_board::plls(),
         scale_error: [0.0; N],
         rc_fallback: None,
@@ -511,7 +511,7 @@ fn every_power_up_phase_states_the_instant() {
             clkin,
             RtcTick::ALL[k as usize % 3],
             PastCount::ALL[(k as usize / 3) % 3],
-            gyro_array::emu::PathReading::DOCUMENTED,
+            gyro_sim::PathReading::DOCUMENTED,
             f64::from(k) * 250e-6 / 96.0,
         );
         let r = timed_board::power_up(sway(), 40 + u64::from(k), timing, 900, 400);

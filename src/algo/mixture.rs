@@ -212,7 +212,7 @@ mod tests {
     fn chip_filter_equals_the_general_filter() {
         use crate::algo::kalman::Kf;
         use nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
-        let mut rng = crate::emu::Rng::new(77);
+        let mut rng = gyro_sim::Rng::new(77);
         let mut worst = 0.0f32;
         for n in 0..2000 {
             let mut g = || rng.gaussian();

@@ -1,7 +1,7 @@
 //! The per-sample schedule, written once: what the sample task does at
 //! each tick, and what the background does with what it hands on. The
 //! board's RTIC 2 tasks (`src/bin/board_f405.rs`) and the QEMU demo's loop
-//! (`src/bin/qemu_demo.rs`) both run these functions; what differs between
+//! (`sim/src/bin/qemu_demo.rs`) both run these functions; what differs between
 //! them is only how the pieces are shared (RTIC's priority-ceiling locks,
 //! or plain `&mut` through [`rtic_core::Exclusive`] where one loop owns
 //! everything).
@@ -340,9 +340,9 @@ mod tests {
     }
 
     use crate::drivers::{ReadFault, Reading, Restart};
-    use crate::emu::Rng;
     use crate::link::msg::{Frame, Settings};
     use crate::link::wire::{Decoder, MAX_FRAME};
+    use gyro_sim::Rng;
     use rtic_core::Exclusive;
 
     /// A gyro reading a still board's noise.

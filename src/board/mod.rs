@@ -1,18 +1,13 @@
-//! Board bindings: what differs between the QEMU machine and the real
-//! STM32F405 board, and the fault containment both share.
+//! Board bindings: the STM32F405 board's, and the fault containment and
+//! stack meter every firmware build shares (the board's, and the QEMU
+//! binaries' in `gyro-sim`).
 
-#[cfg(feature = "qemu")]
-pub mod an386;
-#[cfg(feature = "qemu")]
-pub mod cmsdk_uart;
 #[cfg(feature = "board")]
 pub mod f405;
-#[cfg(any(feature = "qemu", feature = "board"))]
+#[cfg(feature = "cortex-m")]
 pub mod idle;
 #[cfg(feature = "persist")]
 pub mod persist;
-#[cfg(feature = "qemu")]
-pub mod qemu;
 pub mod record;
-#[cfg(any(feature = "qemu", feature = "persist"))]
+#[cfg(any(feature = "cortex-m", feature = "persist"))]
 pub mod stack;

@@ -160,7 +160,7 @@ mod tests {
     fn blank_or_random_ram_is_no_record() {
         assert_eq!(Record::decode(&[0; WORDS]), None);
         assert_eq!(Record::decode(&[u32::MAX; WORDS]), None);
-        let mut rng = crate::emu::Rng::new(3);
+        let mut rng = gyro_sim::Rng::new(3);
         for _ in 0..10_000 {
             let w = core::array::from_fn(|_| rng.next_u32());
             assert_eq!(Record::decode(&w), None);

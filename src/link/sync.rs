@@ -252,6 +252,3 @@ impl CtrlClock {
         };
     }
 }
-
-#[cfg(test)]
-mod tests;

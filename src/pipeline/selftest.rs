@@ -212,7 +212,7 @@ fn against_peers<const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emu::Rng;
+    use gyro_sim::Rng;
 
     #[test]
     fn white_noise_passes_and_a_trend_or_a_dead_axis_does_not() {

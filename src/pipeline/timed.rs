@@ -127,7 +127,7 @@ pub fn stated_delay_us(cfg: &Config) -> u32 {
 /// Reads without a sample after which a chip on CLKIN is taken to have lost
 /// it (at 4 kHz, 20 reads without one of 80 expected samples) and is moved
 /// to its own clock: the chip's grid stops without CLKIN (see
-/// `emu::timing`), and its own PLL keeps it sampling.
+/// `gyro_sim::timing`), and its own PLL keeps it sampling.
 pub const CLKIN_LOST_READS: u16 = 20;
 
 /// Reads with samples after a gap (an overflow, a restart, a stream out

@@ -460,7 +460,7 @@ pub fn sigma_dps<const T: usize>(e: &DavarStep<T>, j: usize) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emu::Rng;
+    use gyro_sim::Rng;
 
     /// White noise on three axes, the same on each: x whole, y missing one
     /// sample in 130 (within the budget), z one in 10 (beyond it). y keeps

@@ -1,7 +1,7 @@
 use super::*;
 use crate::algo::static_cal::ChipCal;
-use crate::emu::flash::NorSim;
 use crate::link::msg::{Compensation, FusionMethod, Mode};
+use gyro_sim::flash::NorSim;
 use heapless::Vec;
 
 /// Three sectors of 1 KiB: a calibration record (about 340 B) and the

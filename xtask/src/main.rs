@@ -116,14 +116,23 @@ fn ensure_tools() {
     }
 }
 
-/// Build one firmware binary for the Cortex-M4 with `feature`; its ELF path.
+/// Build one firmware binary for the Cortex-M4 with `feature`; its ELF
+/// path. The board's binary is the firmware crate's; the QEMU ones are
+/// `gyro-sim`'s (they run the firmware against the emulated chips).
 fn build_firmware(feature: &str, bin: &str) -> PathBuf {
+    let package = if bin.starts_with("qemu-") {
+        "gyro-sim"
+    } else {
+        "gyro-array"
+    };
     must(
         run(Command::new("cargo").args([
             "build",
             "--release",
             "--target",
             TARGET,
+            "-p",
+            package,
             "--features",
             feature,
             "--bin",

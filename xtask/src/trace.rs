@@ -10,7 +10,7 @@
 //! a block (`Trace`); the bench's trace build (feature `bench-trace`)
 //! calls a marker function at each phase of a sample; and an instruction
 //! is the emulator's, not the firmware's, when any of its inline frames
-//! (DWARF) is in `gyro_array::emu` (but for the chip-select pins, which
+//! (DWARF) is in `gyro_sim`'s emulated world (but for the chip-select pins, which
 //! stand in for the board's GPIO writes) or the bench's clock, or when it
 //! runs inside a call made from such an instruction: the parse follows
 //! the calls (`bl`, `blx`) and their returns, so whatever the emulator
@@ -323,8 +323,8 @@ fn markers(elf: &Path) -> Result<Markers, String> {
 }
 
 /// Whether the instruction at `addr` is the emulator's (or the bench
-/// clock's): any inline frame in `gyro_array::emu` (not `EmuCs`) or
-/// `board::qemu::ticks`; and its innermost frame's function.
+/// clock's): any inline frame in `gyro_sim` but its chip-select pins
+/// (`EmuCs`), its checks and its QEMU support, or in `gyro_sim::qemu::ticks`; and its innermost frame's function.
 fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String, bool) {
     let Ok(mut frames) = loader.find_frames(addr) else {
         return (false, "?".into(), true);
@@ -337,9 +337,11 @@ fn classify(loader: &addr2line::Loader, addr: u64) -> (bool, String, bool) {
         if let Some(name) = f.function.as_ref().and_then(|n| n.demangle().ok()) {
             // The emulated chip-select pins stay the firmware's: a few
             // instructions each, as a GPIO write is on the board.
-            if (name.contains("gyro_array::emu::") && !name.contains("EmuCs"))
-                || name.contains("gyro_array::board::qemu::ticks")
-            {
+            let sim = name.contains("gyro_sim::")
+                && !name.contains("EmuCs")
+                && !name.contains("gyro_sim::checks::")
+                && !name.contains("gyro_sim::qemu::");
+            if sim || name.contains("gyro_sim::qemu::ticks") {
                 emu = true;
             }
             // `XTASK_TRACE_LINES=1`: by the line of this crate's code the

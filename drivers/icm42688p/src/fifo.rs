@@ -329,7 +329,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
         // does not say what comes: the empty marker, a packet that came
         // during the burst and left the FIFO with it, or one handed over
         // and sent again next time (the emulator takes each,
-        // `emu::PastCount`). A packet that came while the marker was being
+        // `gyro_sim::PastCount`). A packet that came while the marker was being
         // read starts where it came, not on a packet's boundary: it begins
         // at the first byte that is not the marker (a header is never
         // 0x80). Such a packet is kept while its header is whole, and one

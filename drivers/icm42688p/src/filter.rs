@@ -22,7 +22,7 @@ pub struct Filter {
 
 impl Filter {
     /// The chip's reset values: AAF at 585 Hz (assumed; see
-    /// `emu::icm42688`), UI filter of 2nd order at ODR/4.
+    /// `gyro_sim::icm42688`), UI filter of 2nd order at ODR/4.
     pub const RESET: Self = Self {
         aaf_delt: 13,
         ui_order: 2,

@@ -12,8 +12,8 @@
 //! place of a FILE whose TAU0 is missing (that is a usage error).
 
 use gyro_array::algo::allan::{edf, local_slope, noise_terms, oavar_octave, AdevPoint, NoiseType};
-use gyro_array::emu::noise::AxisNoise;
-use gyro_array::emu::{NoiseParams, Rng};
+use gyro_sim::noise::AxisNoise;
+use gyro_sim::{NoiseParams, Rng};
 
 /// Allan deviation report of a rate log.
 #[derive(clap::Parser)]

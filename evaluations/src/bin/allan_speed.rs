@@ -18,7 +18,7 @@ use gyro_array::algo::allan::second_diff_sums_avx2;
 use gyro_array::algo::allan::{
     fill_phase, oavar_octave, second_diff_sums, AdevPoint, OctaveSums, GROUP,
 };
-use gyro_array::emu::Rng;
+use gyro_sim::Rng;
 
 const N: usize = 10_000_000;
 

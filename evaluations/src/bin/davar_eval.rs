@@ -37,7 +37,7 @@
 use gyro_array::algo::davar::{
     Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold, SEG,
 };
-use gyro_array::emu::Rng;
+use gyro_sim::Rng;
 use std::fmt::Write as _;
 use std::process::ExitCode;
 

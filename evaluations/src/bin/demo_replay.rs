@@ -1,5 +1,5 @@
 //! demo-replay: the QEMU demo's run on the host. The same world
-//! (`gyro_array::emu::demo`: the array, its start-up, its faults) through
+//! (`gyro_sim::demo`: the array, its start-up, its faults) through
 //! the same schedule (`gyro_array::app`: the sample task, then the
 //! background's E-DAVARs, in the order RTIC runs them when the background
 //! keeps up), with the demo's link settings. Prints the sample frames sent
@@ -10,8 +10,8 @@
 //! (`--stress`: a status frame every sample, as the demo's stress run).
 
 use gyro_array::app as schedule;
-use gyro_array::emu::demo;
 use gyro_array::link::port::{NoiseSnapshot, Port};
+use gyro_sim::demo;
 use host_tests::demo_host;
 use host_tests::timed_board::HostLink;
 use rtic_core::Exclusive;

@@ -11,7 +11,7 @@ use std::time::Instant;
 use gyro_array::algo::allan::{second_diff_sum, second_diff_sums, GROUP};
 #[cfg(target_arch = "x86_64")]
 use gyro_array::algo::allan::{second_diff_sum_avx2, second_diff_sums_avx2};
-use gyro_array::emu::Rng;
+use gyro_sim::Rng;
 
 const N: usize = 100_001;
 

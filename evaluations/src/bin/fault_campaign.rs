@@ -39,8 +39,8 @@
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use gyro_array::checks::run_board_array_from;
-use gyro_array::emu::{Fault, RateProfile, Rng};
+use gyro_sim::checks::run_board_array_from;
+use gyro_sim::{Fault, RateProfile, Rng};
 
 const SAMPLES: u32 = 3000;
 
@@ -161,7 +161,7 @@ fn draw(seed: u64, samples: u32) -> (RateProfile, Vec<Injection>) {
 
 /// Inject for the next sample (the chips advance before it): each fault at
 /// its start, cleared at its end.
-fn inject<const N: usize>(b: &mut gyro_array::emu::EmuBus<'_, N>, inj: &[Injection], n: u32) {
+fn inject<const N: usize>(b: &mut gyro_sim::EmuBus<'_, N>, inj: &[Injection], n: u32) {
     for i in inj {
         if n + 1 == i.start {
             match i.kind {
@@ -226,12 +226,11 @@ fn run(seed: u64, samples: u32) -> Vec<String> {
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         run_board_array_from(profile, seed, samples, at_power_up, |n, bus, out, pipe| {
             // Inject for the next sample (the chips advance before it).
-            gyro_array::emu::with_bus(bus, |b| inject(b, &inj, n));
+            gyro_sim::with_bus(bus, |b| inject(b, &inj, n));
             if out.seq != n {
                 bad.push(format!("2: sequence {} at sample {n}", out.seq));
             }
-            let truth =
-                gyro_array::emu::with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
+            let truth = gyro_sim::with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
             for (k, i) in inj.iter().enumerate() {
                 let used = out.offered.iter().any(|m| m & (1 << i.chip) != 0);
                 let flagged = pipe.health()[i.chip].flags != 0;
@@ -416,7 +415,7 @@ fn draw_timed(
     Vec<Injection>,
     Vec<TimingEvent>,
 ) {
-    use gyro_array::emu::timing::ClockParams;
+    use gyro_sim::timing::ClockParams;
     let (profile, inj) = draw(seed, samples);
     let inj: Vec<Injection> = inj.into_iter().filter(|i| i.chip < 4).collect();
     let mut rng = Rng::new(seed ^ 0x5EED_71AE);
@@ -449,11 +448,11 @@ fn draw_timed(
             end,
         });
     }
-    let rtc_tick = gyro_array::emu::RtcTick::ALL[(rng.next_u32() % 3) as usize];
+    let rtc_tick = gyro_sim::RtcTick::ALL[(rng.next_u32() % 3) as usize];
     // What a burst past the FIFO count gets (the datasheet is silent), and
     // a few bursts cut inside their packets, anywhere in a burst of four
     // (the first packet's header is its fourth byte).
-    let past_count = gyro_array::emu::PastCount::ALL[(rng.next_u32() % 3) as usize];
+    let past_count = gyro_sim::PastCount::ALL[(rng.next_u32() % 3) as usize];
     for _ in 0..rng.next_u32() % 4 {
         let start = 200 + rng.next_u32() % (samples - 300);
         let chip = (rng.next_u32() % 4) as usize;
@@ -470,11 +469,11 @@ fn draw_timed(
         host_tests::timed_board::Timing {
             clkin,
             pll,
-            vibration: gyro_array::emu::timing::Vibration::NONE,
+            vibration: gyro_sim::timing::Vibration::NONE,
             rtc_tick,
             past_count,
             power_up_s: 0.0,
-            path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+            path_reading: gyro_sim::PathReading::DOCUMENTED,
             scale_error: [0.0; 4],
             rc_fallback: None,
         },
@@ -522,7 +521,7 @@ fn run_timed(seed: u64, samples: u32) -> Vec<String> {
             |n| stall_at(&ev, n),
             |smp| {
                 let n = smp.n;
-                gyro_array::emu::with_bus(smp.bus, |b| {
+                gyro_sim::with_bus(smp.bus, |b| {
                     inject(b, &inj, n);
                     for e in &ev {
                         match e.what {

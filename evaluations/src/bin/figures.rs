@@ -30,9 +30,9 @@ use clap::{Parser, ValueEnum};
 use gyro_array::algo::allan::{oavar_octave, AdevPoint};
 use gyro_array::algo::davar::{Davar, DavarConfig};
 use gyro_array::algo::fusion::{AdaptiveConfig, AxisState, Fusion, Method};
-use gyro_array::checks::run_board_array_from;
-use gyro_array::emu::noise::{quantise, AxisNoise};
-use gyro_array::emu::{with_bus, Fault, NoiseParams, RateProfile, Rng, RtcTick};
+use gyro_sim::checks::run_board_array_from;
+use gyro_sim::noise::{quantise, AxisNoise};
+use gyro_sim::{with_bus, Fault, NoiseParams, RateProfile, Rng, RtcTick};
 use gyro_tool::surface;
 use host_tests::motion::{self, Run};
 use plotters::prelude::*;
@@ -720,7 +720,7 @@ fn motion(out: &Path, seed: u64) -> Result<(), Err> {
 type Curve<'a> = (&'a str, Vec<(f64, f64)>, RGBColor);
 
 fn timing(out: &Path, seed: u64) -> Result<(), Err> {
-    use gyro_array::emu::timing::ClockParams;
+    use gyro_sim::timing::ClockParams;
     use host_tests::stated;
     use host_tests::timed_board::Timing;
     let profile = RateProfile {
@@ -745,8 +745,8 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
                 ..Timing::sweep(
                     clkin,
                     RtcTick::Microsecond,
-                    gyro_array::emu::PastCount::HandOver,
-                    gyro_array::emu::PathReading::DOCUMENTED,
+                    gyro_sim::PastCount::HandOver,
+                    gyro_sim::PathReading::DOCUMENTED,
                     0.0,
                 )
             },

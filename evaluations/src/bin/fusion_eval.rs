@@ -11,9 +11,9 @@
 #![allow(clippy::needless_range_loop)] // scenario indices key the result map too
 use clap::Parser;
 use gyro_array::algo::fusion::{AxisState, Fusion};
-use gyro_array::checks::methods;
-use gyro_array::emu::noise::{quantise, AxisNoise};
-use gyro_array::emu::{NoiseParams, Rng};
+use gyro_sim::checks::methods;
+use gyro_sim::noise::{quantise, AxisNoise};
+use gyro_sim::{NoiseParams, Rng};
 
 #[path = "fusion_eval/array.rs"]
 mod array;

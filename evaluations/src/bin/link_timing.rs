@@ -39,12 +39,12 @@ use std::cell::RefCell;
 use std::collections::VecDeque;
 
 use gyro_array::app as schedule;
-use gyro_array::emu::demo;
 use gyro_array::link::msg::{Command, Frame, Op, Settings, Status};
 use gyro_array::link::port::{NoiseSnapshot, RingPort, SAMPLE_FRAME_MAX};
 use gyro_array::link::ring::ByteRing;
 use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
+use gyro_sim::demo;
 use host_tests::demo_host;
 use rtic_core::Exclusive;
 

@@ -39,8 +39,8 @@ use std::path::PathBuf;
 use clap::Parser;
 use gyro_array::algo::pointing::{self, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
-use gyro_array::emu::timing::{ClockParams, Tone, Vibration};
-use gyro_array::emu::{Fault, RateProfile};
+use gyro_sim::timing::{ClockParams, Tone, Vibration};
+use gyro_sim::{Fault, RateProfile};
 use host_tests::latency::read_to_antenna_us;
 use host_tests::timed_board::{self, Timing, DELAY_US, N};
 
@@ -197,12 +197,12 @@ fn board_run_to(
     let plan = if faulty { faults(ms) } else { vec![] };
     let timing = Timing {
         clkin: false,
-        rtc_tick: gyro_array::emu::RtcTick::Microsecond,
+        rtc_tick: gyro_sim::RtcTick::Microsecond,
         // One reading of what comes past a burst's count; the timed fault
         // campaign and the timed tests run every one.
-        past_count: gyro_array::emu::PastCount::HandOver,
+        past_count: gyro_sim::PastCount::HandOver,
         power_up_s: 0.0,
-        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+        path_reading: gyro_sim::PathReading::DOCUMENTED,
         pll: [0.004, -0.007, 0.002, -0.01].map(|o| ClockParams {
             offset: o,
             drift_per_s: 1e-5,
@@ -230,10 +230,10 @@ fn board_run_to(
         |x| {
             for &(at, chip, f) in &plan {
                 if at == x.n {
-                    let _ = gyro_array::emu::with_bus(x.bus, |b| b.chips[chip].set_fault(f));
+                    let _ = gyro_sim::with_bus(x.bus, |b| b.chips[chip].set_fault(f));
                 }
             }
-            let now = gyro_array::emu::with_bus(x.bus, |b| b.time64_s()).unwrap_or(0.0);
+            let now = gyro_sim::with_bus(x.bus, |b| b.time64_s()).unwrap_or(0.0);
             for (a, f) in x.out.fused.iter().enumerate() {
                 if let Some(f) = f {
                     if f.rate_dps.is_finite() {

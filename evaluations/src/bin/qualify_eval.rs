@@ -27,8 +27,8 @@ use gyro_array::algo::qualify::pipeline::{
 };
 use gyro_array::algo::qualify::trend::{detrend_poly, reverse_arrangement};
 use gyro_array::algo::qualify::wavelet::{DB4, DB5};
-use gyro_array::emu::noise::fgn_hosking;
-use gyro_array::emu::Rng;
+use gyro_sim::noise::fgn_hosking;
+use gyro_sim::Rng;
 
 fn fgn(h: f64, n: usize, rng: &mut Rng) -> Vec<f64> {
     let (mut x, mut phi, mut prev) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);

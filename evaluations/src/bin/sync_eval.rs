@@ -1,6 +1,6 @@
 //! sync-eval: the board's tracking of the antenna controller's clock
 //! (`gyro_array::link::sync`), against emulated controllers
-//! (`gyro_array::emu::controller`): crystals from −50 to +50 ppm drifting
+//! (`gyro_sim::controller`): crystals from −50 to +50 ppm drifting
 //! 0 to 10 ppm an hour, 10 µs of timestamp jitter, a pulse a second, the
 //! board's capture up to 2 µs late; lost messages and missed pulses; a
 //! pulse that stops. Prints the error of the instants the board states in
@@ -10,8 +10,8 @@
 //!
 //! `cargo run --profile host -p evaluations --bin sync-eval [-- SECONDS [SEEDS]]`
 
-use gyro_array::emu::controller::{run, CtrlParams};
 use gyro_array::link::sync::LOST_PERIODS;
+use gyro_sim::controller::{run, CtrlParams};
 
 fn main() {
     gyro_tool::pipe::quiet_on_closed_pipe();

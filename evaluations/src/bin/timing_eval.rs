@@ -21,8 +21,8 @@
 use gyro_array::drivers::icm42688::{
     board_fifo, ClockInput, Config, Filter, Odr, Sampling, BOARD_FIFO_ODR, BOARD_FILTER_FIFO,
 };
-use gyro_array::emu::timing::{ClockParams, Vibration};
-use gyro_array::emu::{ChipTiming, NoiseParams, RateProfile, RtcTick};
+use gyro_sim::timing::{ClockParams, Vibration};
+use gyro_sim::{ChipTiming, NoiseParams, RateProfile, RtcTick};
 use host_tests::single_chip::{chip, run, Reads};
 use host_tests::stated;
 use host_tests::timed_board::{self, Timing};
@@ -240,7 +240,7 @@ fn board_timing(c: Clocks, vibration: Vibration, clock_seed: Option<u64>, scale:
     ];
     let mut rc = -0.07;
     if let Some(seed) = clock_seed {
-        let mut rng = gyro_array::emu::Rng::new(seed);
+        let mut rng = gyro_sim::Rng::new(seed);
         let mut u = |lo: f64, hi: f64| lo + (hi - lo) * f64::from(rng.uniform());
         for p in free.iter_mut() {
             *p = ClockParams {
@@ -265,8 +265,8 @@ fn board_timing(c: Clocks, vibration: Vibration, clock_seed: Option<u64>, scale:
         },
         vibration,
         rtc_tick,
-        past_count: gyro_array::emu::PastCount::HandOver,
-        path_reading: gyro_array::emu::PathReading::DOCUMENTED,
+        past_count: gyro_sim::PastCount::HandOver,
+        path_reading: gyro_sim::PathReading::DOCUMENTED,
         power_up_s: 0.0,
         scale_error: if scale {
             [0.01, -0.01, 0.004, -0.006]
@@ -353,7 +353,7 @@ fn fusion_table(seconds: u32, (seed, clock_seed): (u64, Option<u64>)) -> usize {
     ];
     let tones = [600.0, 950.0, 1100.0, 3000.0];
     let vib = Vibration {
-        tones: tones.map(|hz| gyro_array::emu::timing::Tone {
+        tones: tones.map(|hz| gyro_sim::timing::Tone {
             amp_dps: [TONE_DPS; 3],
             hz,
         }),
@@ -505,11 +505,11 @@ fn budget(s: &Setting, frame: usize) -> (f64, f64) {
 /// stated delay against the array's (`array_us` behind the read), the
 /// latency z would have if the array waited for it, and the most any
 /// fusion of it could gain (inverse-variance weights of independent
-/// noises, the emulated parts' figures, `emu::NoiseParams`: angle random
+/// noises, the emulated parts' figures, `gyro_sim::NoiseParams`: angle random
 /// walk and the bias-instability floor, against the mean of the four
 /// ICM-42688-P).
 fn adxrs453_on_z((array_us, wire_us): (f64, f64)) {
-    use gyro_array::emu::NoiseParams;
+    use gyro_sim::NoiseParams;
     const ICMS: f64 = 4.0;
     let adx_us = gyro_array::drivers::adxrs453::DELAY_US as f64;
     let (icm, adx) = (NoiseParams::ICM42688, NoiseParams::ADXRS453);
@@ -737,8 +737,8 @@ fn main() {
 /// each chip's lag at the stated instant (a chip tracked a sample period
 /// off reads 250 µs) and its late reads once the trackers hold.
 fn power_up_sweep(seed: u64) {
-    use gyro_array::emu::timing::PathSettings;
-    use gyro_array::emu::{PastCount, PathReading};
+    use gyro_sim::timing::PathSettings;
+    use gyro_sim::{PastCount, PathReading};
     use host_tests::timed_board::{par_map, power_up, PowerUp, Timing};
     const PHASES: u32 = 96;
     let profile = RateProfile {
@@ -835,7 +835,7 @@ fn power_up_sweep(seed: u64) {
         "{:<40} {:>14} {:>16} {:>14}",
         "reading", "model delay µs", "mean lag µs", "worst |lag| µs"
     );
-    let settings = gyro_array::emu::timing::PathSettings {
+    let settings = gyro_sim::timing::PathSettings {
         aaf_hz: Some(gyro_array::drivers::icm42688::aaf_hz(
             BOARD_FILTER_FIFO.aaf_delt,
         )),

@@ -250,7 +250,7 @@ mod tests {
     fn covariance_matches_monte_carlo() {
         let (n, runs) = (20_000usize, 400);
         let ms = [8usize, 16];
-        let mut rng = gyro_array::emu::Rng::new(5);
+        let mut rng = gyro_sim::Rng::new(5);
         let mut est = vec![[0.0f64; 2]; runs];
         for e in est.iter_mut() {
             let mut x = vec![0.0f64; n];

@@ -101,7 +101,7 @@ mod tests {
     /// least residual is the NNLS solution), on random problems.
     #[test]
     fn equals_the_best_feasible_subset() {
-        let mut rng = gyro_array::emu::Rng::new(3);
+        let mut rng = gyro_sim::Rng::new(3);
         for _ in 0..200 {
             let (rows, k) = (12usize, 5usize);
             let a = DMatrix::from_fn(rows, k, |_, _| f64::from(rng.gaussian()));

@@ -169,7 +169,7 @@ fn exact_avar(w: &[i32], m: usize) -> f64 {
 #[test]
 fn streaming_equals_exact_recompute_after_1e7_samples() {
     const N: usize = 10_000_000;
-    let mut rng = crate::emu::Rng::new(3);
+    let mut rng = gyro_sim::Rng::new(3);
     let mut s = StreamAdev::<10, 1024>::new().unwrap();
     let mut w = Vec::with_capacity(N);
     // Biased, noisy, with a random walk: the worst case for float sums.
@@ -199,7 +199,7 @@ fn noise_terms_recover_arw_and_rrw() {
     // White rate noise σ = 0.1 °/s at 100 Hz gives N = 0.1·√0.01 °/√s
     // = 0.6 °/√h; a rate random walk of 1e-4 °/s per √s is
     // K = 1e-4·3600·60 = 21.6 °/h/√h.
-    let mut rng = crate::emu::Rng::new(9);
+    let mut rng = gyro_sim::Rng::new(9);
     let tau0: f64 = 0.01;
     let n = 2_000_000;
     let mut rw = 0.0f64;
@@ -232,9 +232,9 @@ fn noise_terms_recover_the_emulated_icm42688() {
     // 4 h at 100 Hz of the chip model: N and B must come back; K is below
     // the bias-instability hump at every reliable τ, so it must be reported
     // as an upper bound that is still above the true value.
-    let p = crate::emu::NoiseParams::ICM42688;
-    let mut rng = crate::emu::Rng::new(2024);
-    let mut ax = crate::emu::noise::AxisNoise::default();
+    let p = gyro_sim::NoiseParams::ICM42688;
+    let mut rng = gyro_sim::Rng::new(2024);
+    let mut ax = gyro_sim::noise::AxisNoise::default();
     let n = 4 * 3600 * 100;
     let y: Vec<f64> = (0..n)
         .map(|_| ax.step(&p, &mut rng, 0.0, 0.01) as f64)
@@ -266,7 +266,7 @@ fn noise_terms_recover_the_emulated_icm42688() {
 
 #[test]
 fn streaming_arbitrary_tau_list_matches_batch() {
-    let mut rng = crate::emu::Rng::new(8);
+    let mut rng = gyro_sim::Rng::new(8);
     let ms = [1u32, 3, 10, 100, 333, 1000];
     let mut s = StreamAdev::<6, 2048>::with_ms(ms).unwrap();
     let w: Vec<i32> = (0..50_000)
@@ -316,7 +316,7 @@ fn avx2_build_gives_the_same_bits() {
     if !has_avx2_fma() {
         return;
     }
-    let mut rng = crate::emu::Rng::new(5);
+    let mut rng = gyro_sim::Rng::new(5);
     let mut rw = 0.0f64;
     let y: Vec<f64> = (0..20_011)
         .map(|_| {
@@ -369,7 +369,7 @@ fn avx2_build_gives_the_same_bits() {
 #[test]
 #[allow(unsafe_code)]
 fn grouped_sums_are_the_one_factor_sums() {
-    let mut rng = crate::emu::Rng::new(5);
+    let mut rng = gyro_sim::Rng::new(5);
     for n in [3usize, 17, 40, 513, 1030, 1100, 3001] {
         let mut x = vec![0.0f64; n];
         for i in 1..n {
@@ -410,7 +410,7 @@ fn grouped_sums_are_the_one_factor_sums() {
 /// host: both round a·b + c once, so the sums are the same bits in both.
 #[test]
 fn libm_fma_is_std_mul_add() {
-    let mut rng = crate::emu::Rng::new(11);
+    let mut rng = gyro_sim::Rng::new(11);
     for _ in 0..100_000 {
         let d = 1e3 * rng.gaussian() as f64 + rng.gaussian() as f64 * 1e-9;
         let acc = 1e6 * f64::from(rng.uniform()) + 1e-7 * rng.gaussian() as f64;

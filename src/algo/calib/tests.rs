@@ -1,5 +1,5 @@
 use super::*;
-use crate::emu::Rng;
+use gyro_sim::Rng;
 
 /// Four chips with scale errors of +1/−1/+1.5/−2 % and biases on a
 /// 95 °/s, 2 Hz sway: after 10 s the corrected chips agree with each

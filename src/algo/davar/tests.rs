@@ -4,7 +4,7 @@ use super::sums::carry_free;
 use super::*;
 use crate::algo::allan::{fill_phase, oavar_phase};
 use crate::algo::math::{i64_to_f32, u128_to_f32};
-use crate::emu::Rng;
+use gyro_sim::Rng;
 
 type D = Davar<1024, 35, 8>;
 

@@ -3,7 +3,7 @@ use super::adaptive::{adaptive_active, HUBER_C2, HUBER_KAPPA};
 use super::frozen::frozen_check;
 use super::gate::consensus_gate;
 use super::*;
-use crate::emu::Rng;
+use gyro_sim::Rng;
 
 /// Every method in the reading we ship (supports clamped at 0).
 fn all_methods() -> [Method; 7] {

@@ -54,7 +54,7 @@ fn fgn(h: f64, n: usize, seed: u64) -> Vec<f64> {
         (-2.0 * u[2 * i].ln()).sqrt() * (2.0 * core::f64::consts::PI * u[2 * i + 1]).cos()
     });
     let (mut x, mut phi, mut prev) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    crate::emu::noise::fgn_hosking(h, || g.next().unwrap_or(0.0), &mut x, &mut phi, &mut prev);
+    gyro_sim::noise::fgn_hosking(h, || g.next().unwrap_or(0.0), &mut x, &mut phi, &mut prev);
     x
 }
 

@@ -7,9 +7,9 @@
 
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::fusion::AxisState;
-use gyro_array::checks::run_board_array_with;
-use gyro_array::emu::noise::{quantise, AxisNoise};
-use gyro_array::emu::{Fault, NoiseParams, RateProfile, Rng};
+use gyro_sim::checks::run_board_array_with;
+use gyro_sim::noise::{quantise, AxisNoise};
+use gyro_sim::{Fault, NoiseParams, RateProfile, Rng};
 
 use super::{mean_zhang_adaptive, method, report, FS, LSB, SAMPLES};
 
@@ -217,8 +217,8 @@ fn board_faults(name: &str, seed: u64, faults: [Fault; 5]) -> BoardResult {
             faults,
             Some(20),
             |_, bus, out, _| {
-                let truth = gyro_array::emu::with_bus(bus, |b| b.chips[0].true_rate_dps())
-                    .unwrap_or([0.0; 3]);
+                let truth =
+                    gyro_sim::with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
                 for a in 0..3 {
                     if !majority[a] {
                         continue;
@@ -313,8 +313,8 @@ pub fn boot_classes(seed: u64) -> Vec<(String, u32, u32, f64)> {
                 [Fault::None; 5],
                 Some(20),
                 |_, bus, out, _| {
-                    let truth = gyro_array::emu::with_bus(bus, |b| b.chips[0].true_rate_dps())
-                        .unwrap_or([0.0; 3]);
+                    let truth =
+                        gyro_sim::with_bus(bus, |b| b.chips[0].true_rate_dps()).unwrap_or([0.0; 3]);
                     for a in 0..3 {
                         if let Some(f) = out.fused[a] {
                             se += ((f.rate_dps - truth[a]) as f64).powi(2);

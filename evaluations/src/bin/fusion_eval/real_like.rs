@@ -9,7 +9,7 @@
 //! weights' spread, and on the static rig the Allan ratios and the noise
 //! probe).
 
-use gyro_array::emu::Rng;
+use gyro_sim::Rng;
 use gyro_tool::{assess, replay};
 
 /// One class's result over its seeds.

@@ -51,8 +51,8 @@ pub fn run(a: Args) -> Res<bool> {
         out,
     } = a;
     let out = out.as_path();
-    use gyro_array::emu::noise::AxisNoise;
-    use gyro_array::emu::{NoiseParams, Rng};
+    use gyro_sim::noise::AxisNoise;
+    use gyro_sim::{NoiseParams, Rng};
     if !(hours > 0.0 && hours <= 1000.0 && hz > 0.0 && hz <= 1e5) {
         return Err("hours must be in (0, 1000] and hz in (0, 1e5]".into());
     }

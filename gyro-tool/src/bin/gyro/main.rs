@@ -92,7 +92,7 @@ enum Cmd {
     /// blank-separated text, with a header line or without one, one column
     /// per series.
     Allan(allan::Args),
-    /// Write a rate log of an emulated chip at rest (`emu::noise`), one
+    /// Write a rate log of an emulated chip at rest (`gyro_sim::noise`), one
     /// axis: the analysis tools' test input, of any length.
     Emulate(emulate::Args),
     /// The E-DAVAR t–τ–σ surface of one column of a rate log (the board's

@@ -1,4 +1,10 @@
-//! Chip emulation at register and SPI-byte level.
+//! The gyro board's world, emulated: the ICM-42688-P and the ADXRS453 at
+//! register and SPI-byte level, the bus between them and the board, the
+//! board's flash, a controller's clock, the motion and noise the chips see,
+//! the demo's scenario, and the self-checks run on the host and in QEMU.
+//! None of it is flashed onto the board: the firmware crate (`gyro-array`)
+//! builds without it, and this crate's QEMU binaries run the firmware's own
+//! code on QEMU's `mps2-an386` against it.
 //!
 //! [`EmuBus`] implements [`embedded_hal::spi::SpiBus`] and [`EmuCs`]
 //! implements [`embedded_hal::digital::OutputPin`], so an
@@ -6,6 +12,15 @@
 //! `SpiDevice` and the real drivers run on it unchanged. Each chip sees the
 //! bytes of a frame exactly as the silicon would, starting at the chip-select
 //! falling edge.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+#![allow(clippy::needless_range_loop)]
+
+pub mod checks;
+#[cfg(feature = "qemu")]
+pub mod qemu;
 
 pub mod adxrs453;
 pub mod board;
@@ -440,7 +455,7 @@ impl<'a, const N: usize> EmuBus<'a, N> {
         self.frame_bytes[i] = n.saturating_add(1);
         if n == 0 {
             let (read, a) = (mosi & 0x80 != 0, mosi & 0x7F);
-            use crate::drivers::icm42688::reg;
+            use gyro_array::drivers::icm42688::reg;
             self.fifo_frame[i] = read && (a == reg::INT_STATUS || a == reg::FIFO_DATA);
         }
         let miso = match self.cut[i] {
@@ -473,7 +488,7 @@ pub struct EmuCapture<'a, 'b, const N: usize> {
     pub index: usize,
 }
 
-impl<const N: usize> crate::drivers::SampleCapture for EmuCapture<'_, '_, N> {
+impl<const N: usize> gyro_array::drivers::SampleCapture for EmuCapture<'_, '_, N> {
     fn last_us(&mut self) -> Option<u32> {
         with_bus(self.bus, |b| b.int1_capture_us(self.index)).flatten()
     }

@@ -8,8 +8,8 @@ use core::cell::RefCell;
 use embedded_hal_bus::spi::{NoDelay, RefCellDevice};
 
 use super::{CsLine, EmuBus, EmuCs};
-use crate::drivers::adxrs453::{Adxrs453, OnAxis};
-use crate::drivers::icm42688::Icm42688;
+use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
+use gyro_array::drivers::icm42688::Icm42688;
 
 /// One chip's SPI device on an emulated bus of `N` chips (the board's five
 /// by default).

@@ -23,9 +23,9 @@ use gyro_array::algo::allan::stream::StreamAdev;
 use gyro_array::algo::calib::{CalConfig, RelCal};
 use gyro_array::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
 use gyro_array::algo::fusion::{noise_probe, AxisState, Fusion, Method};
-use gyro_array::board::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
-use gyro_array::checks::methods;
-use gyro_array::emu::Rng;
+use gyro_sim::checks::methods;
+use gyro_sim::qemu::{exit, instructions_per_tick, Ticks, WRAPS};
+use gyro_sim::Rng;
 
 const FRAMES: usize = 256;
 

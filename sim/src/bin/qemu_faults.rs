@@ -19,11 +19,11 @@
 
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
-use gyro_array::board::qemu::{self, exit};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
+use gyro_sim::qemu::{self, exit};
 
-/// This binary's guard for its stage word (`board::qemu::stage`).
+/// This binary's guard for its stage word (`gyro_sim::qemu::stage`).
 const GUARD: u32 = 0x57A6_E000;
 
 fn stage() -> u32 {

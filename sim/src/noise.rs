@@ -1,7 +1,7 @@
 //! MEMS gyro error model (IEEE Std 952 terms) and the true-rate profile.
 
 use super::Rng;
-use crate::algo::math::{expf, sqrtf};
+use gyro_array::algo::math::{expf, sqrtf};
 
 /// Error terms of one gyro axis, in the units of a datasheet.
 #[derive(Clone, Copy, Debug, PartialEq)]

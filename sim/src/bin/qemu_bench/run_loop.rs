@@ -26,7 +26,7 @@ pub(super) fn run_loop<const N: usize>(
     all: bool,
     pipe: &mut gyro_array::pipeline::Pipeline<N>,
     noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 3>,
-    meter: &dyn Fn() -> (gyro_array::emu::Meter, u32),
+    meter: &dyn Fn() -> (gyro_sim::Meter, u32),
     mut before: impl FnMut(u32),
     mut step: impl FnMut(
         &mut dyn FnMut(&mut [&mut dyn gyro_array::drivers::Gyro; N]) -> gyro_array::app::Sampled<N>,
@@ -61,7 +61,7 @@ pub(super) fn run_loop<const N: usize>(
         const READS: u32 = 4096;
         let t0 = t.now();
         for _ in 0..READS {
-            black_box(gyro_array::board::qemu::ticks());
+            black_box(gyro_sim::qemu::ticks());
         }
         (t.now() - t0) as f32 / READS as f32
     };

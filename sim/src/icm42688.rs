@@ -7,7 +7,7 @@ use super::timing::{
     SignalPath, Vibration, AFSR_FREEZE_S, AFSR_SWITCH_DPS, ICM_INTERNAL_HZ,
 };
 use super::{corrupt, Fault, Rng};
-use crate::drivers::icm42688::{
+use gyro_array::drivers::icm42688::{
     bits, factory_response_lsb, reg, reset, FullScale, Odr, RESET_DONE, TEMP_LSB_PER_C,
     WHO_AM_I_VALUE,
 };

@@ -1,7 +1,7 @@
 //! The self-check suite that also runs inside QEMU (`qemu-tests`), run here
 //! on the host. Golden digests live in `vectors/digests.in`; with
 //! `UPDATE_SNAPSHOTS=1` this test rewrites them after a deliberate change.
-use gyro_array::checks;
+use gyro_sim::checks;
 
 #[test]
 fn host_runs_the_on_target_suite() {

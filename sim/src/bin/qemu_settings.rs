@@ -3,7 +3,7 @@
 //! the port, `app::store`, the settings store) to a flash that keeps its
 //! cells across a system reset. QEMU models no flash controller for either
 //! of its boards, so the store's flash is the emulated NOR flash
-//! (`emu::flash::NorSim`, the STM32F4's programming rules) over the
+//! (`gyro_sim::flash::NorSim`, the STM32F4's programming rules) over the
 //! `STORE` region of memory.x, which on this machine is RAM outside the
 //! image: QEMU restores the image at a reset and leaves the rest.
 //!
@@ -25,15 +25,15 @@ use rtic_core::Exclusive;
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::app;
-use gyro_array::board::qemu::{self, exit};
-use gyro_array::emu::flash::NorSim;
 use gyro_array::link::msg::{Ack, Command, Frame, FusionMethod, Op, Reject, Settings, StoreState};
 use gyro_array::link::port::RingPort;
 use gyro_array::link::wire::{encode, Decoder, MAX_FRAME};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use gyro_array::store::Store;
+use gyro_sim::flash::NorSim;
+use gyro_sim::qemu::{self, exit};
 
-/// This binary's guard for its stage word (`board::qemu::stage`).
+/// This binary's guard for its stage word (`gyro_sim::qemu::stage`).
 const GUARD: u32 = 0x5E77_1000;
 
 fn stage() -> u32 {

@@ -5,6 +5,9 @@
 //! advances a fixed number of executed instructions per tick; the bench
 //! calibrates that ratio against a loop of known length at start-up.
 
+pub mod an386;
+pub mod cmsdk_uart;
+
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;

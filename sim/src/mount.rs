@@ -4,7 +4,7 @@
 //! default is a chip aligned with the board at a constant 25 °C, which
 //! leaves every earlier result bit for bit as it was.
 
-use crate::algo::static_cal::mul3;
+use gyro_array::algo::static_cal::mul3;
 
 /// Mounting and temperature terms of one chip.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -7,8 +7,8 @@ use super::*;
 /// with the variance step of the emulated motion at 3 s, C and D on other
 /// boards in motion.
 /// Scenario C's faults (sample, gyro, fault), which D repeats.
-pub(super) const C_FAULTS: [(u32, usize, gyro_array::emu::Fault); 12] = {
-    use gyro_array::emu::Fault;
+pub(super) const C_FAULTS: [(u32, usize, gyro_sim::Fault); 12] = {
+    use gyro_sim::Fault;
     [
         (1200, 3, Fault::Saturated),
         (1500, 3, Fault::None),
@@ -33,7 +33,7 @@ pub(super) const C_FAULTS: [(u32, usize, gyro_array::emu::Fault); 12] = {
 };
 
 pub(super) fn bench_loops(t: &Ticks, ipt: f32) -> bool {
-    use gyro_array::emu::{Fault, RateProfile};
+    use gyro_sim::{Fault, RateProfile};
     let mut ok = bench_loop(
         t,
         ipt,
@@ -448,12 +448,12 @@ pub(super) fn bench_loop(
     t: &Ticks,
     ipt: f32,
     faults: &str,
-    plan: &[(u32, usize, gyro_array::emu::Fault)],
+    plan: &[(u32, usize, gyro_sim::Fault)],
     all: bool,
 ) -> bool {
     // A still board but for a small 250 Hz vibration from 3 s: the
     // E-DAVARs' variance step.
-    let profile = gyro_array::emu::RateProfile {
+    let profile = gyro_sim::RateProfile {
         base_dps: [0.5, -0.2, 10.0],
         sine_dps: [0.3, 0.3, 0.3],
         sine_hz: 250.0,
@@ -479,9 +479,9 @@ pub(super) fn bench_loop_on(
     t: &Ticks,
     ipt: f32,
     faults: &str,
-    profile: gyro_array::emu::RateProfile,
+    profile: gyro_sim::RateProfile,
     seed: u64,
-    plan: &[(u32, usize, gyro_array::emu::Fault)],
+    plan: &[(u32, usize, gyro_sim::Fault)],
     all: bool,
 ) -> bool {
     if !selected(faults) {
@@ -490,12 +490,10 @@ pub(super) fn bench_loop_on(
     use core::cell::RefCell;
     use gyro_array::algo::fusion::AdaptiveConfig;
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{
-        board_array, board_drivers, with_bus, BoardDrivers, CsLine, EmuBus, EmuDelay,
-    };
     use gyro_array::pipeline::startup::start_array;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
+    use gyro_sim::{board_array, board_drivers, with_bus, BoardDrivers, CsLine, EmuBus, EmuDelay};
 
     let cs: [CsLine; 5] = Default::default();
     let bus = RefCell::new(EmuBus::new(board_array(profile, seed), &cs));
@@ -543,7 +541,7 @@ pub(super) fn bench_loop_on(
     // stand in for the SPI peripheral and the silicon, so their
     // instructions are not the firmware's (on the board the CPU waits for
     // the bus instead: the bus time is printed with the figures).
-    with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
+    with_bus(&bus, |b| b.clock = Some(gyro_sim::qemu::ticks));
     let meter = || with_bus(&bus, |b| (b.meter, b.bytes)).unwrap_or_default();
     let meter = &meter;
     run_loop(
@@ -579,7 +577,7 @@ pub(super) fn bench_loop_on(
 /// [`TimedIcm`] (INT1 captures, clock tracker, aligner), each sample at
 /// one stated instant 1 670 µs behind the read, fused on 3 axes, the
 /// E-DAVARs and the link as in [`bench_loop_on`]. The chips' paths are
-/// the delay model (`emu::PathModel::Delay`: the 32 kHz filters are too
+/// the delay model (`gyro_sim::PathModel::Delay`: the 32 kHz filters are too
 /// slow for QEMU). The ADXRS453 is not read: at the array's instant its
 /// rate is always late (docs/timing.md).
 #[allow(clippy::too_many_arguments)]
@@ -588,11 +586,11 @@ pub(super) fn bench_timed_loop_on(
     t: &Ticks,
     ipt: f32,
     faults: &str,
-    profile: gyro_array::emu::RateProfile,
+    profile: gyro_sim::RateProfile,
     seed: u64,
     clkin: bool,
     pll: [f64; 4],
-    plan: &[(u32, usize, gyro_array::emu::Fault)],
+    plan: &[(u32, usize, gyro_sim::Fault)],
 ) -> bool {
     if !selected(faults) {
         return true;
@@ -601,14 +599,14 @@ pub(super) fn bench_timed_loop_on(
     use gyro_array::algo::fusion::{AdaptiveConfig, Method};
     use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::timing::ClockParams;
-    use gyro_array::emu::{
-        emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
-        PathModel,
-    };
     use gyro_array::pipeline::timed::TimedIcm;
     use gyro_array::pipeline::tracker::{self, NoiseTracker};
     use gyro_array::pipeline::{Pipeline, PipelineConfig};
+    use gyro_sim::timing::ClockParams;
+    use gyro_sim::{
+        emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
+        PathModel,
+    };
     const DELAY_US: u32 = gyro_array::pipeline::timed::BOARD_DELAY_US;
 
     let chips = timed_array(
@@ -677,7 +675,7 @@ pub(super) fn bench_timed_loop_on(
     let Ok(noise) = NoiseTracker::init_in(&mut slot, tracker::link_config(1024)) else {
         exit(false)
     };
-    with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
+    with_bus(&bus, |b| b.clock = Some(gyro_sim::qemu::ticks));
     let meter = || with_bus(&bus, |b| (b.meter, b.bytes)).unwrap_or_default();
     let ok = run_loop(
         t,

@@ -1,7 +1,7 @@
 //! A small deterministic generator (xoshiro128++ seeded by SplitMix64), so a
 //! seed reproduces a run bit for bit on the host and on the target.
 
-use crate::algo::math::{lnf, sqrtf};
+use gyro_array::algo::math::{lnf, sqrtf};
 
 /// xoshiro128++ with a cached second Gaussian from Box–Muller.
 #[derive(Clone)]

@@ -48,7 +48,7 @@
 //!   samples with a clock that is fast by the same ratio. With RTC_MODE and
 //!   TMST_RES = 1 a count is one CLKIN period.
 
-pub use crate::drivers::icm42688::{aaf_hz, ui_divisor};
+pub use gyro_array::drivers::icm42688::{aaf_hz, ui_divisor};
 
 /// Nominal internal sample rate of the ICM-42688-P gyro (datasheet 5.1).
 pub const ICM_INTERNAL_HZ: f64 = 32_000.0;
@@ -300,7 +300,7 @@ impl Default for PathReading {
 
 impl PathSettings {
     /// The group delay at DC of the path these settings make, s: the
-    /// driver's formula ([`crate::drivers::icm42688::path_delay_us`]) on
+    /// driver's formula ([`gyro_array::drivers::icm42688::path_delay_us`]) on
     /// the documented reading, which the model's simulated filters are
     /// checked against; on another, a second-order low-pass's 1/(Q·ω) and
     /// the UI filter's delay over its bandwidth's scale.
@@ -310,7 +310,7 @@ impl PathSettings {
             let w0 = 2.0 * core::f64::consts::PI * natural_hz(f64::from(hz), r.aaf_q);
             1.0 / (r.aaf_q * w0)
         });
-        let ui = crate::drivers::icm42688::path_delay_us(None, self.ui) as f64 * 1e-6;
+        let ui = gyro_array::drivers::icm42688::path_delay_us(None, self.ui) as f64 * 1e-6;
         aaf + ui / r.ui_bw_scale
     }
 }

@@ -12,11 +12,11 @@ pub(super) fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
     use core::cell::RefCell;
     use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Config, Icm42688};
     use gyro_array::drivers::Gyro;
-    use gyro_array::emu::{
+    use gyro_array::pipeline::timed::TimedIcm;
+    use gyro_sim::{
         emu_device, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
         Icm42688Model, NoiseParams, RateProfile,
     };
-    use gyro_array::pipeline::timed::TimedIcm;
 
     const READS: u32 = 400;
     let mut ok = true;
@@ -39,7 +39,7 @@ pub(super) fn bench_timed_read(t: &Ticks, ipt: f32) -> bool {
             defmt::error!("timed read bench: init failed");
             return false;
         }
-        with_bus(&bus, |b| b.clock = Some(gyro_array::board::qemu::ticks));
+        with_bus(&bus, |b| b.clock = Some(gyro_sim::qemu::ticks));
         let meter = || with_bus(&bus, |b| b.meter).unwrap_or_default();
         let pair = pair_cost(t);
         let mut timed_g = TimedIcm::new(

@@ -1,4 +1,4 @@
-//! On-target test suite: runs `gyro_array::checks` inside QEMU. The digest
+//! On-target test suite: runs `gyro_sim::checks` inside QEMU. The digest
 //! checks compare with the golden values the host also matches, so a pass
 //! here means host and Cortex-M4 agree bit for bit. Exit code 0 only if
 //! every check passes.
@@ -7,8 +7,8 @@
 
 use cortex_m_rt::entry;
 use defmt_semihosting as _;
-use gyro_array::board::qemu::exit;
-use gyro_array::checks;
+use gyro_sim::checks;
+use gyro_sim::qemu::exit;
 
 #[entry]
 fn main() -> ! {

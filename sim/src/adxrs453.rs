@@ -5,7 +5,7 @@ use super::mount::Mount;
 use super::noise::{quantise, AxisNoise, NoiseParams, RateProfile};
 use super::timing::{Biquad, ClockParams, Vibration};
 use super::{corrupt, Fault, Rng};
-use crate::drivers::adxrs453::{c_to_tem, cmd, fault, reg, BANDWIDTH_HZ, LSB_PER_DPS};
+use gyro_array::drivers::adxrs453::{c_to_tem, cmd, fault, reg, BANDWIDTH_HZ, LSB_PER_DPS};
 
 /// Give a response its parity bits: P0 (bit 28) odd over 31:16, P1 (bit 0)
 /// odd over 15:0.

@@ -11,7 +11,7 @@
 //! self-test runs across the array, and the noise-health self-test takes
 //! 2048 samples of every gyro's z axis and checks trend, long memory and
 //! normality of each against the median of the others.
-//! The ICM-42688-Ps keep their own time (`emu::timing`): free-running PLLs
+//! The ICM-42688-Ps keep their own time (`gyro_sim::timing`): free-running PLLs
 //! 0.6 % fast, 0.9 % slow, 0.3 % fast and 0.4 % slow, drifting and
 //! wandering, chip 3's failing over to its RC oscillator (5 % fast) from
 //! 3.0 s to 4.0 s. After the self-tests (data registers) they sample into
@@ -20,7 +20,7 @@
 //! `BOARD_DELAY_US` behind the read), as `board-f405` reads them; the
 //! ADXRS453, whose reading is older than that instant, is read and
 //! watched, not fused. The chips' signal paths are the delay model
-//! (`emu::PathModel::Delay`: the 32 kHz filters are too slow for a minute
+//! (`gyro_sim::PathModel::Delay`: the 32 kHz filters are too slow for a minute
 //! of QEMU), their clocks, FIFOs, stamps and INT1 the full model's.
 //! Every sample goes out over UART0 as an output-link frame (`link`),
 //! with a status frame every second and an acknowledgement for every
@@ -58,16 +58,16 @@ use defmt_semihosting as _;
 use heapless::spsc::{Consumer, Producer, Queue};
 
 use gyro_array::app as schedule;
-use gyro_array::board::cmsdk_uart::{CmsdkUart, UART0};
-use gyro_array::board::qemu::exit;
 use gyro_array::board::stack;
 use gyro_array::drivers::Gyro;
-use gyro_array::emu::{demo, with_bus, CsLine, EmuBus};
 use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
 use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker;
 use gyro_array::pipeline::Pipeline;
+use gyro_sim::qemu::cmsdk_uart::{CmsdkUart, UART0};
+use gyro_sim::qemu::exit;
+use gyro_sim::{demo, with_bus, CsLine, EmuBus};
 
 use demo::{Tracker, FS_HZ, NOISE_TAU, SAMPLES};
 /// mps2-an386 core clock.
@@ -145,7 +145,7 @@ impl schedule::Link for Link {
     }
 
     fn flush(&mut self) {
-        rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
+        rtic::pend(gyro_sim::qemu::an386::Interrupt::UART0TX);
     }
 }
 
@@ -255,7 +255,7 @@ fn make_bus(slot: &'static mut Option<Bus>, cs: &'static [CsLine; 5]) -> &'stati
     slot.insert(RefCell::new(EmuBus::new(demo::chips(), cs)))
 }
 
-#[rtic::app(device = gyro_array::board::an386, peripherals = false, dispatchers = [SPI2, SPI34])]
+#[rtic::app(device = gyro_sim::qemu::an386, peripherals = false, dispatchers = [SPI2, SPI34])]
 mod app {
     use super::*;
     use rtic::Mutex;
@@ -780,7 +780,7 @@ mod app {
         // time; its task, above this one, says when it found none).
         TX_EMPTY.store(false, Ordering::Relaxed);
         for _ in 0..100_000 {
-            rtic::pend(gyro_array::board::an386::Interrupt::UART0TX);
+            rtic::pend(gyro_sim::qemu::an386::Interrupt::UART0TX);
             if TX_EMPTY.load(Ordering::Relaxed) {
                 break;
             }

@@ -2,34 +2,34 @@
 //! (`qemu-tests`). Each drives the real drivers against emulated chips or
 //! runs the algorithms on seeded data. The digest checks hash every output
 //! bit and compare with the committed golden values in
-//! `host-tests/vectors/digests.in`; since host and target both must match
+//! `sim/vectors/digests.in`; since host and target both must match
 //! them, their results are bit-identical.
 
 use core::cell::RefCell;
 
-use crate::emu::with_bus;
+use crate::with_bus;
 
-use crate::algo::fusion::{
-    AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
-    SupportConfig,
-};
-use crate::algo::static_cal::CalRecord;
-use crate::drivers::adxrs453::{self, Adxrs453, OnAxis};
-use crate::drivers::icm42688::{self, Config, Icm42688};
-use crate::drivers::Gyro;
-use crate::emu::{
+use crate::{
     board_array, board_drivers, emu_device, Adxrs453Model, BoardDrivers, Chip, CsLine, EmuBus,
     EmuDelay, Fault, Icm42688Model, Mount, NoiseParams, RateProfile, Rng,
 };
-use crate::pipeline::startup::start_array;
-use crate::pipeline::{flag, Output, Pipeline, PipelineConfig};
+use gyro_array::algo::fusion::{
+    AdaptiveConfig, AxisState, Denominator, Fusion, GrubbsConfig, MemoryConfig, Method, Normaliser,
+    SupportConfig,
+};
+use gyro_array::algo::static_cal::CalRecord;
+use gyro_array::drivers::adxrs453::{self, Adxrs453, OnAxis};
+use gyro_array::drivers::icm42688::{self, Config, Icm42688};
+use gyro_array::drivers::Gyro;
+use gyro_array::pipeline::startup::start_array;
+use gyro_array::pipeline::{flag, Output, Pipeline, PipelineConfig};
 
 /// `math::sqrtf` against `libm::sqrtf` over 0, subnormals, every binade
 /// of the normal range (a spread of mantissas in each) and ∞; a negative
 /// input must give NaN in both. On the board `sqrtf` is the FPU's
 /// instruction, so this is what makes it the same function.
 pub fn sqrt_matches_libm() -> bool {
-    use crate::algo::math::sqrtf;
+    use gyro_array::algo::math::sqrtf;
     let same = |x: f32| sqrtf(x).to_bits() == libm::sqrtf(x).to_bits();
     let mut ok = same(0.0) && same(-0.0) && same(f32::INFINITY) && same(f32::MIN_POSITIVE);
     ok &= sqrtf(-1.0).is_nan() && libm::sqrtf(-1.0).is_nan();
@@ -45,7 +45,7 @@ pub fn sqrt_matches_libm() -> bool {
 
 /// Golden digests (generated on the host, checked on both sides).
 pub mod golden {
-    include!("../host-tests/vectors/digests.in");
+    include!("../vectors/digests.in");
 }
 
 /// FNV-1a over 32-bit words.
@@ -82,8 +82,10 @@ impl Default for Digest {
 /// Exercises the integer sums, the soft-float f64 output, microfft and the
 /// entropies, so host and Cortex-M4 must agree bit for bit.
 pub fn allan_digest() -> u64 {
-    use crate::algo::allan::stream::StreamAdev;
-    use crate::algo::davar::{Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold};
+    use gyro_array::algo::allan::stream::StreamAdev;
+    use gyro_array::algo::davar::{
+        Davar, DavarConfig, EntropyKind, Placement, StepMode, Threshold,
+    };
     let mut d = Digest::new();
     let mut rng = Rng::new(77);
     let Ok(mut adev) = StreamAdev::<10, 1024>::new() else {
@@ -149,10 +151,10 @@ pub const SCALED_K: f32 = 11.0;
 /// BayesShrink, an EMD and a Burg AR(4) fit. Host and Cortex-M4 must agree
 /// bit for bit.
 pub fn qualify_digest() -> u64 {
-    use crate::algo::qualify::ar::burg;
-    use crate::algo::qualify::emd::{emd, work_len, EmdConfig};
-    use crate::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB5};
-    use crate::pipeline::selftest::{noise_health, BLOCK};
+    use gyro_array::algo::qualify::ar::burg;
+    use gyro_array::algo::qualify::emd::{emd, work_len, EmdConfig};
+    use gyro_array::algo::qualify::wavelet::{bayes_shrink, wavedec, waverec, DB5};
+    use gyro_array::pipeline::selftest::{noise_health, BLOCK};
     const N: usize = 512;
     let mut d = Digest::new();
     let mut rng = Rng::new(2718);
@@ -281,7 +283,7 @@ pub fn fusion_digest() -> u64 {
     }
     // Seed 001's local filters (entropy and covariance weights, f32 through
     // nalgebra) on the same kind of frames.
-    use crate::algo::mixture::{ChipFilters, ChipWeights};
+    use gyro_array::algo::mixture::{ChipFilters, ChipWeights};
     for weights in [ChipWeights::Entropy, ChipWeights::Covariance] {
         let Ok(mut cf) = ChipFilters::<4>::new([0.05, 0.05, 0.05, 0.25], 6.3, 1e-4, weights) else {
             return 0;
@@ -450,15 +452,15 @@ pub fn pipeline_digest() -> u64 {
 type Bus1<'a> = RefCell<EmuBus<'a, 1>>;
 
 fn bus_err(
-    e: embedded_hal_bus::spi::DeviceError<crate::emu::BusError, core::convert::Infallible>,
-) -> crate::emu::BusError {
+    e: embedded_hal_bus::spi::DeviceError<crate::BusError, core::convert::Infallible>,
+) -> crate::BusError {
     match e {
         embedded_hal_bus::spi::DeviceError::Spi(b) => b,
         embedded_hal_bus::spi::DeviceError::Cs(i) => match i {},
     }
 }
 
-fn icm_init(fault: Fault) -> Result<icm42688::SelfTest, icm42688::Error<crate::emu::BusError>> {
+fn icm_init(fault: Fault) -> Result<icm42688::SelfTest, icm42688::Error<crate::BusError>> {
     let cs: [CsLine; 1] = Default::default();
     let mut chip = Icm42688Model::new(NoiseParams::ICM42688, RateProfile::constant(3.0), 1, 80);
     chip.fault = fault;
@@ -471,10 +473,7 @@ fn icm_init(fault: Fault) -> Result<icm42688::SelfTest, icm42688::Error<crate::e
     g.self_test(&mut delay, 50).map_err(|e| e.map_spi(bus_err))
 }
 
-fn adx_run(
-    fault: Fault,
-    reads: u32,
-) -> (Result<(), adxrs453::Error<crate::emu::BusError>>, u32, u32) {
+fn adx_run(fault: Fault, reads: u32) -> (Result<(), adxrs453::Error<crate::BusError>>, u32, u32) {
     let cs: [CsLine; 1] = Default::default();
     let mut chip = Adxrs453Model::new(NoiseParams::ADXRS453, RateProfile::constant(-5.0), 2, 2);
     chip.fault = if fault == Fault::WrongId {

@@ -20,18 +20,18 @@ use super::{
     board_array, mounted_board, with_bus, Chip, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
     EmuDevice, Fault, PathModel, RateProfile, TempProfile,
 };
-use crate::algo::davar::DavarConfig;
-use crate::algo::fusion::{AdaptiveConfig, ConfigError, Method};
-use crate::algo::qualify::QualifyError;
-use crate::algo::static_cal::{CalError, CalRecord};
-use crate::drivers::adxrs453::OnAxis;
-use crate::drivers::icm42688::{board_fifo, ClockInput};
-use crate::drivers::Gyro;
-use crate::pipeline::selftest;
-use crate::pipeline::startup::start_array;
-use crate::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
-use crate::pipeline::tracker::{self, NoiseTracker};
-use crate::pipeline::{Pipeline, PipelineConfig};
+use gyro_array::algo::davar::DavarConfig;
+use gyro_array::algo::fusion::{AdaptiveConfig, ConfigError, Method};
+use gyro_array::algo::qualify::QualifyError;
+use gyro_array::algo::static_cal::{CalError, CalRecord};
+use gyro_array::drivers::adxrs453::OnAxis;
+use gyro_array::drivers::icm42688::{board_fifo, ClockInput};
+use gyro_array::drivers::Gyro;
+use gyro_array::pipeline::selftest;
+use gyro_array::pipeline::startup::start_array;
+use gyro_array::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::tracker::{self, NoiseTracker};
+use gyro_array::pipeline::{Pipeline, PipelineConfig};
 
 /// Samples a second.
 pub const FS_HZ: u32 = 1000;
@@ -60,7 +60,7 @@ pub const PLL: [f64; 4] = [0.006, -0.009, 0.003, -0.004];
 /// σ of the link's noise estimates at τ = 1, 8, 64 ms.
 pub const NOISE_TAU: [usize; 3] = [0, 3, 6];
 /// What the status frames say of the demo's schedule.
-pub const STATUS_VIEW: crate::app::StatusView = crate::app::StatusView {
+pub const STATUS_VIEW: gyro_array::app::StatusView = gyro_array::app::StatusView {
     taus: NOISE_TAU,
     sample_us: 1_000_000 / FS_HZ,
 };
@@ -156,15 +156,15 @@ pub struct Chips<'a, 'c> {
 /// The demo's link settings: the defaults with the integrated angle on
 /// (every field of the sample frame exercised); under stress, a status
 /// frame every sample.
-pub fn link_settings(stress: bool) -> crate::link::msg::Settings {
-    crate::link::msg::Settings {
+pub fn link_settings(stress: bool) -> gyro_array::link::msg::Settings {
+    gyro_array::link::msg::Settings {
         status_every: if stress {
             1
         } else {
-            crate::link::msg::Settings::default().status_every
+            gyro_array::link::msg::Settings::default().status_every
         },
         angle: true,
-        ..crate::link::msg::Settings::default()
+        ..gyro_array::link::msg::Settings::default()
     }
 }
 
