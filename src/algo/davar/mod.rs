@@ -65,6 +65,7 @@
 //! tests; `place` the window's placement (segmented or centred); `publish`
 //! the window's sums and the estimate.
 
+mod dof;
 mod place;
 mod publish;
 mod refine;
@@ -74,11 +75,13 @@ mod sums;
 
 pub use settings::*;
 
+use dof::{FrameDof, NU_WHITE};
+use sums::Sums;
+
 use segment::ln_fast;
 
 use crate::algo::allan::stream::SAMPLE_MAX;
 use crate::algo::allan::AllanError;
-use crate::algo::math::sqrtf;
 
 /// Frame (block, STFT hop) length, samples.
 pub const SEG: usize = 32;
@@ -180,27 +183,6 @@ const PUB_PARTS: usize = 3;
 
 const START_AT: usize = PUBLISH_AT + PUB_PARTS;
 
-/// Memory of the lag-correlation estimates, frames.
-const RHO_FRAMES: f32 = 32.0;
-
-/// Memory of the fourth-moment estimates, frames: the tails of a sensor's
-/// noise change slowly, and their estimates are noisier than ρ's (ν from
-/// them has sd ≈ 3 % over 512 frames on white noise).
-const QUAD_FRAMES: f32 = 512.0;
-
-/// Frames before the fourth moments are used at all.
-const QUAD_MIN: u32 = 32;
-
-/// ν falls below the Gaussian value only where the fourth-moment one lies
-/// this far below it ([`Davar::nu`], continuous at the gate): its noise
-/// then never moves a Gaussian signal's ν, while heavy tails or sub-LSB
-/// rounding (ν_4 at half ν_G or less) get theirs.
-const TAIL_GATE: f32 = 0.85;
-
-/// Prior for ν before enough frames are seen: 32 first differences of white
-/// noise (lag-1 correlation −½ gives ν = 32²/(32 + 62/4) ≈ 21.6).
-const NU_WHITE: f32 = 21.6;
-
 /// One published row of the t–τ–σ surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DavarStep<const T: usize> {
@@ -258,33 +240,10 @@ struct Published<const T: usize> {
 pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize = FRAMES>
 {
     cfg: DavarConfig,
-    ring: [i32; CAP],
-    n: u64,
+    /// The samples and the exact sums of their Allan terms.
+    sums: Sums<CAP, FRAMES, T>,
     /// Sample of the 32-sample hop on which the hop's work is done (1..=31).
     hop_phase: u8,
-    /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
-    /// is not a power of two is a library call on the Cortex-M4).
-    cur_slot: usize,
-    /// Per τ, the next term to add to the blocks, and the sums of the term
-    /// before it: b = Σ w[k..k+m), a = Σ w[k+m..k+2m).
-    next: [u64; T],
-    a: [i32; T],
-    b: [i32; T],
-    /// Per τ, the sums of its first term (b over samples 0..m, a over
-    /// m..2m), kept as the samples arrive from a running sum read at
-    /// each power of two, so that the first term is not summed from
-    /// scratch: 2m samples on one sample of the loop (some 7 000
-    /// instructions for τ = 1024 after a restart).
-    first_a: [i32; T],
-    first_b: [i32; T],
-    /// Σ of the samples so far (wrapping: a difference of two of them is
-    /// exact), while the first terms are being gathered.
-    prefix: i32,
-    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
-    /// and the prefix a window ending in this block needs.
-    lo: [[u64; FRAMES]; T],
-    /// τ0 block sums as f32, once complete (the segmentation's input).
-    x0: [f32; FRAMES],
     /// Per block, the stamp (first frame, as u16) of the last
     /// segmentation that put a change at it (`marks`), or within a frame of
     /// it (`marks_near`); a stale stamp from the time the block completed
@@ -296,8 +255,6 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     marks_near: [u16; FRAMES],
     /// Prefix sums of x0 over the span being segmented.
     px: [f32; FRAMES],
-    hi: [[u8; FRAMES]; T],
-    pre: [[u64; FRAMES]; T],
     /// STFT power of bins 1..=15 per frame, its energy and e·ln e
     /// (Centred windows only).
     frames: [[f32; BINS]; STFT],
@@ -310,18 +267,8 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     len: u16,
     score: f32,
     threshold: f32,
-    /// Σd², Σd·d₋₁, Σd·d₋₂ of the τ0 differences d over the current frame
-    /// (exact), the last two d, and the running lag-1, lag-2 correlations.
-    lag: [i64; 3],
-    dprev: [i32; 2],
-    rho: [f32; 2],
-    /// The τ0 terms (d) of the last frame, for [`Davar::learn_tails`].
-    tail_terms: Option<(u64, u64)>,
-    /// Running (over [`QUAD_FRAMES`]) covariances of q at lags 0, 1, 2 and
-    /// σ⁴ (the mean q·q₊₃), each frame's in its own scale (the ratios taken
-    /// in `nu` weigh frames by σ⁴), and the frames seen.
-    cov_q: [f32; 4],
-    quad_frames: u32,
+    /// ν of a frame's τ0 energy, learnt from the data.
+    dof: FrameDof,
     /// Threshold per frame count (Centred: K frames in the window;
     /// Segmented: a segment of K frames).
     thresholds: [f32; FRAMES],
@@ -329,11 +276,6 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Times `last` has changed (published or cleared), wrapping: what a
     /// reader keeping something made of it compares.
     edition: u32,
-    /// The last published window's first block, and per τ the end of its
-    /// whole blocks and their sum (for the next window's update).
-    win_f0: Option<u64>,
-    win_q: [u64; T],
-    win_sum: [u128; T],
     /// Centred: the window placed at the last hop (span's first frame and
     /// window frames), published at the next.
     pending: Option<(u64, usize, usize)>,
@@ -438,23 +380,11 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let mut d = Self {
             cfg,
-            ring: [0; CAP],
-            n: 0,
+            sums: Sums::new(cfg.tau_octaves),
             hop_phase: 1,
-            cur_slot: 0,
-            next: [0; T],
-            a: [0; T],
-            b: [0; T],
-            first_a: [0; T],
-            first_b: [0; T],
-            prefix: 0,
-            lo: [[0; FRAMES]; T],
-            x0: [0.0; FRAMES],
             marks: [stale(0); FRAMES],
             marks_near: [stale(0); FRAMES],
             px: [0.0; FRAMES],
-            hi: [[0; FRAMES]; T],
-            pre: [[0; FRAMES]; T],
             frames: [[0.0; BINS]; STFT],
             energy: [0.0; STFT],
             eloge: [0.0; STFT],
@@ -463,18 +393,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             len: cfg.l_init,
             score: 0.0,
             threshold: 0.0,
-            lag: [0; 3],
-            dprev: [0; 2],
-            rho: [-0.5, 0.0],
-            tail_terms: None,
-            cov_q: [0.0; 4],
-            quad_frames: 0,
+            dof: FrameDof::new(),
             thresholds: [0.0; FRAMES],
             last: None,
             edition: 0,
-            win_f0: None,
-            win_q: [0; T],
-            win_sum: [0; T],
             pending: None,
             ln_n: [0.0; FRAMES],
             dp: Segmentation {
@@ -518,24 +440,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// Forget every sample (after a gap in the input), keeping the settings
     /// and the tabulated thresholds.
     pub fn reset(&mut self) {
-        self.n = 0;
-        self.cur_slot = 0;
-        self.next = [0; T];
-        self.a = [0; T];
-        self.b = [0; T];
-        self.prefix = 0;
+        self.sums.reset();
         self.len = self.cfg.l_init;
         self.score = 0.0;
         self.threshold = self.threshold_for(self.span);
-        self.lag = [0; 3];
-        self.dprev = [0; 2];
-        self.rho = [-0.5, 0.0];
-        self.tail_terms = None;
-        self.cov_q = [0.0; 4];
-        self.quad_frames = 0;
+        self.dof = FrameDof::new();
         self.last = None;
         self.edition = self.edition.wrapping_add(1);
-        self.win_f0 = None;
         self.pending = None;
         self.dp.first = None;
         self.dp.next_first = None;
@@ -595,47 +506,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.hop_phase = phase.clamp(1, SEG as u8 - 1);
     }
 
-    /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
-    /// 32 first differences d: for Gaussian d, ν = 2E\[x\]²/Var x =
-    /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
-    /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
-    /// change, however frequent, does not bias them. White noise: ρ₁ = −½,
-    /// ν = 21.6 (the prior); random walk: ρ = 0, ν = 32; quantisation of
-    /// an angle (blue rate noise): ρ₁ = −⅔, ρ₂ = ⅙, ν ≈ 16.7.
-    ///
-    /// That form holds for Gaussian d only. In general Var x =
-    /// Σ_h (32 − |h|)·Cov(q, q₊ₕ) over the squares q = d², which
-    /// `learn_tails` measures (lags 0–2, σ⁴ from lag 3), and
-    /// ν₄ = 2·32²σ⁴/Var x. Heavy tails (Student's t with 5 dof: Var q =
-    /// 20σ⁴ and lag-1 Cov 8σ⁴ against 8 and 2, so ν₄ = 7.2) or rounding
-    /// below half an LSB (σ = 0.3 LSB: ν₄ ≈ 6) make it far smaller, and a
-    /// threshold set with the Gaussian ν then sees changes everywhere
-    /// (9.7 % and 36 % of windows shortened on stationary input).
-    ///
-    /// With r = ν₄/(0.85·ν_G) (`TAIL_GATE`: ν₄ is the noisier, and on
-    /// Gaussian frames r ≥ 1 and ν stays ν_G), ν = ν_G·r^1.5 below the
-    /// gate. The power is for the tails themselves: Var q rests on the
-    /// eighth moment's tail, and its running estimate falls short the more
-    /// the heavier the tail, so the measured ν₄ reads high (t with 5 dof:
-    /// 9.4 for the true 7.2; the power gives 7.9). With ν₄ as measured,
-    /// 2.4 % of the windows on that noise are short and the estimate loses
-    /// to λ2 (`davar-eval --first-seed 55555 --seeds 60 --only heavy`:
-    /// 1.015); with the power 0.8 % and 1.005.
+    /// Effective degrees of freedom of one frame's τ0 energy, learnt
+    /// from the data ([`FrameDof::nu`] has the model).
     pub fn nu(&self) -> f32 {
-        let [r1, r2] = self.rho;
-        let s = SEG as f32;
-        let gauss = s * s / (s + 2.0 * (s - 1.0) * r1 * r1 + 2.0 * (s - 2.0) * r2 * r2);
-        let [c0, c1, c2, sig4] = self.cov_q;
-        let var = s * c0 + 2.0 * (s - 1.0) * c1 + 2.0 * (s - 2.0) * c2;
-        if self.quad_frames < QUAD_MIN || !(var > 0.0) || !(sig4 > 0.0) {
-            return gauss;
-        }
-        let r = 2.0 * s * s * sig4 / var / TAIL_GATE / gauss;
-        if r >= 1.0 {
-            gauss
-        } else {
-            gauss * r * sqrtf(r)
-        }
+        self.dof.nu()
     }
 
     /// Add one sample (integer, |w| < 2²⁰; quantise rates with
@@ -647,16 +521,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if !(-SAMPLE_MAX..=SAMPLE_MAX).contains(&w) {
             return Err(AllanError::SampleRange);
         }
-        let n = self.n;
-        self.ring[n as usize & (CAP - 1)] = w;
-        self.n = n + 1;
-        if n < self.term_span() {
-            self.gather_first_terms(w);
-        }
-        let n = self.n;
-        if n.is_multiple_of(SEG as u64) {
-            self.cur_slot = Self::next(self.cur_slot);
-        }
+        self.sums.push(w);
+        let n = self.sums.n;
         let centred_adaptive =
             self.cfg.placement == Placement::Centred && self.min_frames < self.span;
         // The work of a hop is spread over its 32 samples (rel 0 is the
@@ -672,10 +538,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let terms = (1..T).contains(&rel);
         if terms {
-            self.add_terms(rel);
+            self.sums.add_terms(rel);
         }
         if rel == TAILS_AT {
-            self.learn_tails();
+            if let Some((from, to)) = self.sums.tail_terms.take() {
+                self.dof.learn_tails(self.sums.ring(), from, to);
+            }
         }
         if rel != 0 {
             let segmented = self.cfg.placement == Placement::Segmented;
@@ -698,7 +566,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 let taus = T * part / PUB_PARTS..T * (part + 1) / PUB_PARTS;
                 if let Some((prev, lo, hi)) = self.dp.placed {
                     let (t, f0, f1) = self.placed_window(prev, lo, hi);
-                    self.window_sums(f0, f1, taus);
+                    self.sums.window_sums(f0, f1, taus);
                     if part + 1 == PUB_PARTS {
                         self.dp.placed = None;
                         return Ok(Some(self.finish_publish(t, f0, f1)));
@@ -721,16 +589,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         // The hop, at least one sample after a frame boundary: the τ0
         // terms of the last frame end on its first sample.
-        self.add_terms(0);
+        let (marks, near) = (&mut self.marks, &mut self.marks_near);
+        self.sums.add_tau0(|block, slot| {
+            marks[slot] = stale(block);
+            near[slot] = stale(block);
+        });
         if n < (self.span * SEG + hop_phase) as u64 {
             // (The tails are learnt once the span has filled: during the
             // fill their samples would meet the first, from-scratch terms
             // of the long τ.)
-            self.tail_terms = None;
+            self.sums.tail_terms = None;
             return Ok(None);
         }
         let c = n / SEG as u64; // frames 0..c are complete
-        self.learn_nu();
+        self.dof.learn_lags(core::mem::take(&mut self.sums.lag));
         let first = c - self.span as u64;
         let done = match self.cfg.placement {
             // The window placed at the last hop is published now: by then
@@ -758,8 +630,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
 
     /// The last sample pushed, if any since the start or a reset.
     pub fn last_sample(&self) -> Option<i32> {
-        let n = self.n.checked_sub(1)?;
-        self.ring.get(n as usize & (CAP - 1)).copied()
+        let n = self.sums.n.checked_sub(1)?;
+        self.sums.ring().get(n as usize & (CAP - 1)).copied()
     }
 
     /// The last published row of the t–τ–σ surface; `None` until the span

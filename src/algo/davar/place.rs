@@ -4,6 +4,7 @@
 
 use super::refine::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::segment::{seg_cost, transition_cost};
+use super::sums::{ahead, slot};
 use super::{
     Davar, EntropyKind, StepMode, BINS, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, SEG,
     SLOPE_Z2, STRONG,
@@ -36,9 +37,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // Keep the changes that one of the last LAG segmentations had too,
         // or strong ones, and then stamp this hop's (its stamp over the
         // oldest's).
-        let s0 = self.slot_of(first).min(FRAMES - 1);
+        let s0 = self.sums.slot_of(first).min(FRAMES - 1);
         // The block c frames into the span (c ≤ k < FRAMES).
-        let slot = |c: usize| Self::ahead(s0, c);
+        let slot = |c: usize| ahead::<FRAMES>(s0, c);
         // The recent stamps; where fewer than LAG segmentations ran since
         // the start, this one's own stamp, which no block carries yet.
         let stamp = first as u16;
@@ -282,12 +283,12 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// FFT of the frame that just completed; keep the power of bins 1..=15.
     pub(super) fn store_frame(&mut self) {
         let mut x = [0.0f32; SEG];
-        let first = self.n - SEG as u64;
+        let first = self.sums.n - SEG as u64;
         for (i, v) in x.iter_mut().enumerate() {
-            *v = self.w(first + i as u64) as f32;
+            *v = self.sums.w(first + i as u64) as f32;
         }
         let spec = microfft::real::rfft_32(&mut x);
-        let slot = Self::slot(first / SEG as u64);
+        let slot = slot::<FRAMES>(first / SEG as u64);
         let (Some(frame), Some(energy), Some(eloge)) = (
             self.frames.get_mut(slot),
             self.energy.get_mut(slot),
@@ -309,7 +310,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if k < 2 {
             return;
         }
-        let s0 = self.slot_of(f_lo);
+        let s0 = self.sums.slot_of(f_lo);
         let slots = (0..k).map(move |i| {
             if s0 + i >= FRAMES {
                 s0 + i - FRAMES

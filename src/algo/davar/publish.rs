@@ -21,20 +21,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     }
     /// Sum the exact window sums of frames [f0, f1), keep them, return t.
     pub(super) fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
-        self.window_sums(f0, f1, 0..T);
+        self.sums.window_sums(f0, f1, 0..T);
         self.finish_publish(t, f0, f1)
     }
     /// Publish window [f0, f1) at time t from its whole-block sums (all τ
-    /// done by [`Self::window_sums`]) and the last blocks' prefixes.
+    /// done by `Sums::window_sums`) and the last blocks' prefixes.
     pub(super) fn finish_publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
-        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
-        let mut acc = [0u128; T];
-        for (j, a) in acc.iter_mut().enumerate() {
-            let q = self.win_q[j];
-            *a =
-                self.win_sum[j] + self.pre[j][Self::slot_near(f0, s_f0, q).min(FRAMES - 1)] as u128;
-        }
-        self.win_f0 = Some(f0);
+        let acc = self.sums.window_total(f0);
         self.last = Some(Published {
             t,
             start: f0 * SEG as u64,

@@ -3,6 +3,7 @@
 //! slope).
 
 use super::segment::seg_cost;
+use super::sums::ahead;
 use super::{Davar, CELLS, LAG, REFINE_PARTS};
 use crate::algo::math::at_least;
 
@@ -52,7 +53,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let first = self.dp.first.unwrap_or(0);
         let last =
             (self.dp.recent_len > 0).then(|| self.dp.recent[(self.dp.recent_at + LAG - 1) % LAG]);
-        let s0 = self.slot_of(first).min(FRAMES - 1);
+        let s0 = self.sums.slot_of(first).min(FRAMES - 1);
         // Over the span's frame prefix sums (from `dp_start`).
         let (px, ln_n, nu) = (&self.px, &self.ln_n, self.dp.nu);
         let bounds = &mut self.dp.bounds;
@@ -60,7 +61,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let bd = |b: &[u16; CELLS + 1], i: usize| b.get(i).copied().unwrap_or(0) as usize;
         let marks = &self.marks;
         let placed_last =
-            |q: usize| last.is_some_and(|l| marks.get(Self::ahead(s0, q)) == Some(&l));
+            |q: usize| last.is_some_and(|l| marks.get(ahead::<FRAMES>(s0, q)) == Some(&l));
         for i in which.start.max(1)..which.end.min(nb) {
             let (l, c, r) = (bd(bounds, i - 1), bd(bounds, i), bd(bounds, i + 1));
             let (lo, hi) = (c.saturating_sub(g - 1).max(l + 1), (c + g).min(r));

@@ -3,8 +3,7 @@
 //! energies under a scaled-χ²_ν model, with ν and the tails learnt from
 //! the data.
 
-use super::{Davar, EntropyKind, Placement, Threshold, BINS, CELLS, QUAD_FRAMES, RHO_FRAMES};
-use crate::algo::math::i64_to_f32;
+use super::{Davar, EntropyKind, Placement, Threshold, BINS, CELLS};
 use crate::algo::stats::chi2_quantile;
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
@@ -43,59 +42,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             }
         }
     }
-    /// Fold the frame's lag sums into the running correlations.
-    pub(super) fn learn_nu(&mut self) {
-        let [s0, s1, s2] = self.lag;
-        self.lag = [0; 3];
-        if s0 > 0 {
-            let s0 = i64_to_f32(s0);
-            for (r, s) in self.rho.iter_mut().zip([s1, s2]) {
-                *r += (i64_to_f32(s) / s0 - *r) / RHO_FRAMES;
-            }
-        }
-    }
-    /// Fold the last frame's fourth moments into the running covariances
-    /// of q = d² (ν from them: [`Davar::nu`]), on a sample of the hop of
-    /// its own. Out of line, like `refine_part`: inlined in `push`, it cost
-    /// every sample ~30 instructions.
-    #[inline(never)]
-    pub(super) fn learn_tails(&mut self) {
-        let Some((from, to)) = self.tail_terms.take() else {
-            return;
-        };
-        // (usize indices: a u64 loop cost twice the instructions.)
-        let (from, count, mask) = (from as usize, (to - from) as usize + 1, CAP - 1);
-        let ([mut u0, mut u1, mut u2, mut u3], [mut q1, mut q2, mut q3]) =
-            ([0.0f32; 4], [0.0f32; 3]);
-        for i in from..from + count {
-            let d = (self.ring[(i + 1) & mask] - self.ring[i & mask]) as f32;
-            let q = d * d;
-            u0 += q * q;
-            u1 += q * q1;
-            u2 += q * q2;
-            u3 += q * q3;
-            (q1, q2, q3) = (q, q1, q2);
-        }
-        // Pairs at lag 3 are independent (d = w₁ − w₀ shares no sample
-        // with d₊₃, and rate noise is near white at that lag), so their
-        // mean is σ⁴ = (E q)², taken inside the frame so that a variance
-        // change between frames does not enter; lags 0–2 less σ⁴ are the
-        // covariances of q.
-        let n = count as u32 as f32;
-        if n >= 8.0 {
-            let sig4 = u3 / (n - 3.0);
-            let c = [
-                u0 / n - sig4,
-                u1 / (n - 1.0) - sig4,
-                u2 / (n - 2.0) - sig4,
-                sig4,
-            ];
-            for (m, c) in self.cov_q.iter_mut().zip(c) {
-                *m += (c - *m) / QUAD_FRAMES;
-            }
-            self.quad_frames = self.quad_frames.saturating_add(1);
-        }
-    }
     /// Start segmenting the span of frames `first..first + span`: snapshot
     /// the cells' energies and compute the first row.
     pub(super) fn dp_start(&mut self, first: u64) {
@@ -104,7 +50,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let (g, k) = (self.dp.group, self.span.min(FRAMES - 1));
         // Prefix sums of the span's τ0 frame energies, kept for
         // `segment_window`; the cells' sums are read off them.
-        let s0 = self.slot_of(first).min(FRAMES - 1);
+        let s0 = self.sums.slot_of(first).min(FRAMES - 1);
         let run = k.min(FRAMES - s0);
         let mut acc = 0.0f32;
         self.px[0] = 0.0;
@@ -112,8 +58,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // (a chained iterator cost ~1 000 more instructions at λ2 = 4096).
         let (head, tail) = self.px[1..=k].split_at_mut(run.min(k));
         let xs = (
-            self.x0.get(s0..s0 + run).unwrap_or(&[]),
-            self.x0.get(..k - run).unwrap_or(&[]),
+            self.sums.x0.get(s0..s0 + run).unwrap_or(&[]),
+            self.sums.x0.get(..k - run).unwrap_or(&[]),
         );
         for (p, &x) in head.iter_mut().zip(xs.0) {
             acc += x;

@@ -2,20 +2,137 @@
 //! square is added, exactly, to its 32-term block; a window is whole
 //! blocks plus one block prefix per τ.
 
-use super::{stale, Davar, SEG};
+use super::SEG;
 use crate::algo::allan::stream::SAMPLE_MAX;
 use crate::algo::math::u64_to_f32;
 
-impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
-    Davar<CAP, FRAMES, T, STFT>
-{
+/// The exact streaming sums of one axis: the last `CAP` samples, each
+/// Allan term's square added to its 32-term block (`FRAMES` blocks, `T`
+/// τ), the τ0 blocks' energies and lag sums that the segmentation and ν
+/// read, and the whole-block sums of the last published window.
+#[derive(Clone, Debug)]
+pub(super) struct Sums<const CAP: usize, const FRAMES: usize, const T: usize> {
+    /// Octaves between consecutive τ.
+    octaves: u8,
+    ring: [i32; CAP],
+    /// Samples pushed since the start or a reset.
+    pub(super) n: u64,
+    /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
+    /// is not a power of two is a library call on the Cortex-M4).
+    cur_slot: usize,
+    /// Per τ, the next term to add to the blocks, and the sums of the term
+    /// before it: b = Σ w[k..k+m), a = Σ w[k+m..k+2m).
+    next: [u64; T],
+    a: [i32; T],
+    b: [i32; T],
+    /// Per τ, the sums of its first term (b over samples 0..m, a over
+    /// m..2m), kept as the samples arrive from a running sum read at
+    /// each power of two, so that the first term is not summed from
+    /// scratch: 2m samples on one sample of the loop.
+    first_a: [i32; T],
+    first_b: [i32; T],
+    /// Σ of the samples so far (wrapping: a difference of two of them is
+    /// exact), while the first terms are being gathered.
+    prefix: i32,
+    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
+    /// and the prefix a window ending in this block needs.
+    lo: [[u64; FRAMES]; T],
+    hi: [[u8; FRAMES]; T],
+    pre: [[u64; FRAMES]; T],
+    /// τ0 block sums as f32, once complete (the segmentation's input).
+    pub(super) x0: [f32; FRAMES],
+    /// Σd², Σd·d₋₁, Σd·d₋₂ of the τ0 differences d since ν last took
+    /// them (exact), and the last two d.
+    pub(super) lag: [i64; 3],
+    dprev: [i32; 2],
+    /// The τ0 terms (d) of the last whole frame, for ν's tails.
+    pub(super) tail_terms: Option<(u64, u64)>,
+    /// The last published window's first block, and per τ the end of its
+    /// whole blocks and their sum (for the next window's update).
+    win_f0: Option<u64>,
+    win_q: [u64; T],
+    win_sum: [u128; T],
+}
+
+/// Slot of block `block`.
+#[inline(always)]
+pub(super) fn slot<const FRAMES: usize>(block: u64) -> usize {
+    (block % FRAMES as u64) as usize
+}
+
+/// The slot `c` blocks after slot `s0` (c < FRAMES: one wrap at most).
+#[inline(always)]
+pub(super) fn ahead<const FRAMES: usize>(s0: usize, c: usize) -> usize {
+    let s = s0 + c;
+    if s >= FRAMES {
+        s - FRAMES
+    } else {
+        s
+    }
+}
+
+impl<const CAP: usize, const FRAMES: usize, const T: usize> Sums<CAP, FRAMES, T> {
+    /// Empty sums for τ spaced `octaves` apart.
+    pub(super) fn new(octaves: u8) -> Self {
+        Self {
+            octaves,
+            ring: [0; CAP],
+            n: 0,
+            cur_slot: 0,
+            next: [0; T],
+            a: [0; T],
+            b: [0; T],
+            first_a: [0; T],
+            first_b: [0; T],
+            prefix: 0,
+            lo: [[0; FRAMES]; T],
+            hi: [[0; FRAMES]; T],
+            pre: [[0; FRAMES]; T],
+            x0: [0.0; FRAMES],
+            lag: [0; 3],
+            dprev: [0; 2],
+            tail_terms: None,
+            win_f0: None,
+            win_q: [0; T],
+            win_sum: [0; T],
+        }
+    }
+    /// Forget every sample. (The blocks, first terms and energies are
+    /// written again before they are read.)
+    pub(super) fn reset(&mut self) {
+        self.n = 0;
+        self.cur_slot = 0;
+        self.next = [0; T];
+        self.a = [0; T];
+        self.b = [0; T];
+        self.prefix = 0;
+        self.lag = [0; 3];
+        self.dprev = [0; 2];
+        self.tail_terms = None;
+        self.win_f0 = None;
+    }
+    /// Take sample `w` (|w| ≤ [`SAMPLE_MAX`], checked by the caller) into
+    /// the ring; its terms are added at the hop ([`Self::add_terms`]).
+    #[inline(always)]
+    pub(super) fn push(&mut self, w: i32) {
+        let n = self.n;
+        self.ring[n as usize & (CAP - 1)] = w;
+        self.n = n + 1;
+        if n < self.term_span() {
+            self.gather_first_terms(w);
+        }
+        if self.n.is_multiple_of(SEG as u64) {
+            self.cur_slot = Self::next(self.cur_slot);
+        }
+    }
+    /// The last `CAP` samples, sample i at `i & (CAP − 1)`.
+    #[inline(always)]
+    pub(super) fn ring(&self) -> &[i32; CAP] {
+        &self.ring
+    }
     #[inline(always)]
     pub(super) fn w(&self, i: u64) -> i32 {
         self.ring[i as usize & (CAP - 1)]
-    }
-    #[inline(always)]
-    pub(super) fn slot(block: u64) -> usize {
-        (block % FRAMES as u64) as usize
     }
     /// Slot of block n/32 − back (back < FRAMES).
     #[inline(always)]
@@ -31,16 +148,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     pub(super) fn slot_of(&self, f: u64) -> usize {
         self.back_slot((self.n / SEG as u64 - f) as usize)
     }
-    /// The slot `c` blocks after slot `s0` (c < FRAMES: one wrap at most).
-    #[inline(always)]
-    pub(super) fn ahead(s0: usize, c: usize) -> usize {
-        let s = s0 + c;
-        if s >= FRAMES {
-            s - FRAMES
-        } else {
-            s
-        }
-    }
     /// The next slot after `s`.
     #[inline(always)]
     pub(super) fn next(s: usize) -> usize {
@@ -53,7 +160,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// τ_j in samples: 2^(j·octaves).
     #[inline(always)]
     pub(super) fn tau(&self, j: usize) -> u64 {
-        1u64 << (j * self.cfg.tau_octaves as usize)
+        1u64 << (j * self.octaves as usize)
     }
     /// Samples the longest τ's first term spans: 2·τ_{T−1}.
     #[inline(always)]
@@ -69,7 +176,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let n = self.n;
         if n.is_power_of_two() {
             let i = n.trailing_zeros() as usize;
-            let oct = self.cfg.tau_octaves as usize;
+            let oct = self.octaves as usize;
             if i.is_multiple_of(oct) {
                 if let Some(b) = i.checked_div(oct).and_then(|k| self.first_b.get_mut(k)) {
                     *b = self.prefix;
@@ -94,10 +201,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// τ0's terms need no sums, [`Self::add_tau0`]).
     pub(super) fn add_terms(&mut self, j: usize) {
         let n = self.n;
-        if j == 0 {
-            return self.add_tau0();
-        }
-        if j >= T {
+        if j == 0 || j >= T {
             return;
         }
         {
@@ -168,8 +272,9 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// differences d_k = w[k + 1] − w[k], in the same pass as the lag
     /// sums of d that ν is learnt from (`learn_nu`), which need the same
     /// d. Two passes over the hop's samples cost one axis's hop some 300
-    /// instructions more on the Cortex-M4.
-    fn add_tau0(&mut self) {
+    /// instructions more on the Cortex-M4. `completed` hears of each block
+    /// whose terms are now all in (its number and slot).
+    pub(super) fn add_tau0(&mut self, mut completed: impl FnMut(u64, usize)) {
         let Some(last) = self.n.checked_sub(2) else {
             return; // no complete term yet
         };
@@ -235,8 +340,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             self.lo[0][slot] = lo;
             if end % SEG as u64 == SEG as u64 - 1 {
                 self.x0[slot] = u64_to_f32(lo);
-                self.marks[slot] = stale(block);
-                self.marks_near[slot] = stale(block);
+                completed(block, slot);
             }
             k = end + 1;
         }
@@ -319,7 +423,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     }
     /// The whole-block sums of window [f0, f1) for the τ in `taus`, kept in
     /// `win_q`/`win_sum`; the board spreads the τ over `PUB_PARTS` samples. Until
-    /// [`Self::finish_publish`] the last window (`win_f0`) stays the base
+    /// the publication ([`Self::window_total`]) the last window (`win_f0`) stays the base
     /// of the update, for every τ alike.
     pub(super) fn window_sums(&mut self, f0: u64, f1: u64, taus: core::ops::Range<usize>) {
         let e = f1 * SEG as u64;
@@ -353,6 +457,20 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             self.win_q[j] = q;
             self.win_sum[j] = full;
         }
+    }
+    /// The exact sums of window [f0, ·) for every τ, from the whole-block
+    /// sums [`Self::window_sums`] left and the last blocks' prefixes; the
+    /// window is the base of the next one's update from now on.
+    pub(super) fn window_total(&mut self, f0: u64) -> [u128; T] {
+        let s_f0 = self.slot_of(f0).min(FRAMES - 1);
+        let mut acc = [0u128; T];
+        for (j, a) in acc.iter_mut().enumerate() {
+            let q = self.win_q[j];
+            *a =
+                self.win_sum[j] + self.pre[j][Self::slot_near(f0, s_f0, q).min(FRAMES - 1)] as u128;
+        }
+        self.win_f0 = Some(f0);
+        acc
     }
     /// Σ of `count` blocks of τ j from slot `s0` on, exactly. They wrap at
     /// most once: two contiguous runs. Low words with their carries
