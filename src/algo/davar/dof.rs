@@ -16,7 +16,7 @@ const QUAD_FRAMES: f32 = 512.0;
 const QUAD_MIN: u32 = 32;
 
 /// ν falls below the Gaussian value only where the fourth-moment one lies
-/// this far below it ([`FrameDof::nu`], continuous at the gate): its noise
+/// this far below it ([`super::Davar::nu`], continuous at the gate): its noise
 /// then never moves a Gaussian signal's ν, while heavy tails or sub-LSB
 /// rounding (ν_4 at half ν_G or less) get theirs.
 const TAIL_GATE: f32 = 0.85;
@@ -98,32 +98,7 @@ impl FrameDof {
         }
     }
 
-    /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
-    /// 32 first differences d: for Gaussian d, ν = 2E\[x\]²/Var x =
-    /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
-    /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
-    /// change, however frequent, does not bias them. White noise: ρ₁ = −½,
-    /// ν = 21.6 (the prior); random walk: ρ = 0, ν = 32; quantisation of
-    /// an angle (blue rate noise): ρ₁ = −⅔, ρ₂ = ⅙, ν ≈ 16.7.
-    ///
-    /// That form holds for Gaussian d only. In general Var x =
-    /// Σ_h (32 − |h|)·Cov(q, q₊ₕ) over the squares q = d², which
-    /// [`Self::learn_tails`] measures (lags 0–2, σ⁴ from lag 3), and
-    /// ν₄ = 2·32²σ⁴/Var x. Heavy tails (Student's t with 5 dof: Var q =
-    /// 20σ⁴ and lag-1 Cov 8σ⁴ against 8 and 2, so ν₄ = 7.2) or rounding
-    /// below half an LSB (σ = 0.3 LSB: ν₄ ≈ 6) make it far smaller, and a
-    /// threshold set with the Gaussian ν then sees changes everywhere
-    /// (9.7 % and 36 % of windows shortened on stationary input).
-    ///
-    /// With r = ν₄/(0.85·ν_G) (`TAIL_GATE`: ν₄ is the noisier, and on
-    /// Gaussian frames r ≥ 1 and ν stays ν_G), ν = ν_G·r^1.5 below the
-    /// gate. The power is for the tails themselves: Var q rests on the
-    /// eighth moment's tail, and its running estimate falls short the more
-    /// the heavier the tail, so the measured ν₄ reads high (t with 5 dof:
-    /// 9.4 for the true 7.2; the power gives 7.9). With ν₄ as measured,
-    /// 2.4 % of the windows on that noise are short and the estimate loses
-    /// to λ2 (`davar-eval --first-seed 55555 --seeds 60 --only heavy`:
-    /// 1.015); with the power 0.8 % and 1.005.
+    /// ν: the model is on the public [`super::Davar::nu`].
     pub(super) fn nu(&self) -> f32 {
         let [r1, r2] = self.rho;
         let s = SEG as f32;

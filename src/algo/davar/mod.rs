@@ -57,31 +57,36 @@
 //!   (the shortest window), but never above λ2's rounding.
 //! - Eq. 4's step: [`StepMode`]. Thresholds: [`Threshold`].
 //!
-//! # Files
-//! This one holds the estimator ([`Davar`]), its per-sample schedule
-//! ([`Davar::push`]) and what it publishes; `settings` the knobs; `sums`
-//! the exact streaming sums; `segment` the optimal partitioning of the
-//! span; `refine` the change points' refinement and the step-or-gradual
-//! tests; `place` the window's placement (segmented or centred); `publish`
-//! the window's sums and the estimate.
+//! # Types, a file each
+//! This one holds the estimator ([`Davar`]): its per-sample schedule
+//! ([`Davar::push`]), the thresholds, and what it publishes. Each part it
+//! holds owns its state: `sums::Sums` the samples and the exact streaming
+//! sums; `dof::FrameDof` a frame's ν, learnt from the data;
+//! `segmented::Segmentation` the segmented placement (the span's optimal
+//! partitioning, its changes refined, the window chosen), with the tests
+//! that tell a step from a gradual change in `shape`; `centred::Centred`
+//! the paper's centred placement; `publish::Published` a published
+//! window's sums and σ². The knobs are in `settings`.
 
+mod centred;
 mod dof;
-mod place;
 mod publish;
-mod refine;
-mod segment;
+mod segmented;
 mod settings;
+mod shape;
 mod sums;
 
 pub use settings::*;
 
-use dof::{FrameDof, NU_WHITE};
+use centred::Centred;
+use dof::FrameDof;
+use publish::Published;
+use segmented::Segmentation;
 use sums::Sums;
-
-use segment::ln_fast;
 
 use crate::algo::allan::stream::SAMPLE_MAX;
 use crate::algo::allan::AllanError;
+use crate::algo::stats::chi2_quantile;
 
 /// Frame (block, STFT hop) length, samples.
 pub const SEG: usize = 32;
@@ -94,7 +99,7 @@ pub const BINS: usize = SEG / 2 - 1;
 /// it is, while a one-off false alarm does not come back. (Requiring the
 /// same place exactly 4 hops earlier, which also filtered the changes a
 /// variance ramp produces, moving with the span, missed weak steps: the
-/// ramps are now told apart by a line, in `segment_window`.)
+/// ramps are now told apart by a line, in `Segmentation::window`.)
 const LAG: usize = 2;
 
 /// A change whose likelihood gain exceeds STRONG × β bounds a window
@@ -102,7 +107,7 @@ const LAG: usize = 2;
 const STRONG: f32 = 3.0;
 
 /// A change gaining less than GRADUAL·β may be read as gradual
-/// ([`Davar::segment_window`]).
+/// (`Segmentation::window`).
 const GRADUAL: f32 = 2.0;
 
 /// A change alone in the span is gradual where two lines joined at their
@@ -222,15 +227,6 @@ fn tau_index(octaves: u8, e: usize, count: usize) -> Option<usize> {
     (e.is_multiple_of(oct) && e / oct < count).then_some(e / oct)
 }
 
-/// Exact window sums of one published hop.
-#[derive(Clone, Copy, Debug)]
-struct Published<const T: usize> {
-    t: u64,
-    start: u64,
-    end: u64,
-    acc: [u128; T],
-}
-
 /// Fixed-capacity DAVAR / E-DAVAR for one axis: `CAP` (power of two ≥ λ2)
 /// samples of ring, `FRAMES` (≥ CAP/32 + 3) blocks, `T` octave τ, and
 /// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
@@ -244,27 +240,10 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     sums: Sums<CAP, FRAMES, T>,
     /// Sample of the 32-sample hop on which the hop's work is done (1..=31).
     hop_phase: u8,
-    /// Per block, the stamp (first frame, as u16) of the last
-    /// segmentation that put a change at it (`marks`), or within a frame of
-    /// it (`marks_near`); a stale stamp from the time the block completed
-    /// otherwise ([`stale`]). Whether one of the last [`LAG`]
-    /// segmentations had a change within a frame of c is then one read,
-    /// where walking each segmentation's change list costs some 700
-    /// instructions on a sample whose span holds fifteen changes.
-    marks: [u16; FRAMES],
-    marks_near: [u16; FRAMES],
-    /// Prefix sums of x0 over the span being segmented.
-    px: [f32; FRAMES],
-    /// STFT power of bins 1..=15 per frame, its energy and e·ln e
-    /// (Centred windows only).
-    frames: [[f32; BINS]; STFT],
-    energy: [f32; STFT],
-    eloge: [f32; STFT],
     /// Frames in the span (λ2 rounded down) and the shortest window.
     span: usize,
     min_frames: usize,
-    /// Centred: current length in samples (eq. 4 state).
-    len: u16,
+    /// The last placement's score and threshold.
     score: f32,
     threshold: f32,
     /// ν of a frame's τ0 energy, learnt from the data.
@@ -276,52 +255,10 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Times `last` has changed (published or cleared), wrapping: what a
     /// reader keeping something made of it compares.
     edition: u32,
-    /// Centred: the window placed at the last hop (span's first frame and
-    /// window frames), published at the next.
-    pending: Option<(u64, usize, usize)>,
-    /// ln n for n = 0..FRAMES (ln 0 unused).
-    ln_n: [f32; FRAMES],
-    dp: Segmentation,
-}
-
-/// Optimal partitioning of one span (Segmented placement), computed one
-/// row per sample over the hop after the span completed.
-#[derive(Clone, Debug)]
-struct Segmentation {
-    /// First frame of the span being segmented, if any.
-    first: Option<u64>,
-    /// First frame of the span to segment next (noted at the hop, started
-    /// [`START_AT`] samples later).
-    next_first: Option<u64>,
-    /// The window placed at [`PLACE_AT`] (span's first frame, window
-    /// frames), published at [`PUBLISH_AT`].
-    placed: Option<(u64, usize, usize)>,
-    /// The refinement under way from [`REFINE_AT`] (span's first frame,
-    /// the count of `bounds` less one, the next change to refine).
-    refined: Option<(u64, usize, usize)>,
-    /// The segment bounds of the segmentation being refined (or placed),
-    /// in place: copies of them cost a refinement sample some 50
-    /// instructions each at 33 bounds.
-    bounds: [u16; CELLS + 1],
-    /// Frames per cell and cells.
-    group: usize,
-    cells: usize,
-    /// Prefix sums of the cells' τ0 energies.
-    sum: [f32; CELLS + 1],
-    /// Optimal cost of cells 0..j and the start of its last segment.
-    cost: [f32; CELLS + 1],
-    arg: [u8; CELLS + 1],
-    /// Next row to compute (1..=cells; cells + 1 when done).
-    row: usize,
-    nu: f32,
-    beta: f32,
-    /// Stamps of the last [`LAG`] segmentations (their first frames, as
-    /// u16; the first `recent_len` of them valid, the next written at
-    /// `recent_at`): their changes are the blocks whose `marks` carry one
-    /// of them.
-    recent: [u16; LAG],
-    recent_len: u8,
-    recent_at: usize,
+    /// The centred placement's state.
+    centred: Centred<FRAMES, STFT>,
+    /// The segmented placement's state.
+    seg: Segmentation<FRAMES>,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
@@ -336,6 +273,39 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// 1–2 cost 1 600 with both, where samples 6–11 had nothing to do.
     const ROWS_YIELD: bool = T + ROW_SAMPLES - (SEG - START_AT - 1) < TAILS_AT;
 
+    /// The tabulated threshold for `k` frames (every k a window of this
+    /// configuration can have is tabulated at construction).
+    pub(super) fn threshold_for(&self, k: usize) -> f32 {
+        self.thresholds.get(k).copied().unwrap_or(f32::INFINITY)
+    }
+    /// Threshold for `frames` frames (see [`Threshold`]).
+    pub(super) fn quantile_for(&self, frames: usize) -> f32 {
+        let p_fa = match self.cfg.threshold {
+            Threshold::Fixed(v) => return v,
+            Threshold::Auto { p_fa } => p_fa as f64,
+        };
+        let k = frames.max(2) as f64;
+        let b = BINS as f64;
+        match (self.cfg.placement, self.cfg.entropy) {
+            (Placement::Segmented, _) => {
+                // Penalty per change: the χ²₁ likelihood ratio of one split,
+                // Bonferroni over the k − 1 splits of a k-frame span.
+                chi2_quantile(1.0 - p_fa / (k - 1.0), 1.0).unwrap_or(10.0) as f32
+            }
+            (Placement::Centred, EntropyKind::Temporal) => {
+                // D ≈ χ²_{K−1} / (K ν), ν = 2·BINS (white noise).
+                let q = chi2_quantile(1.0 - p_fa, k - 1.0).unwrap_or(k);
+                (q / (k * 2.0 * b)) as f32
+            }
+            (Placement::Centred, EntropyKind::Spectral) => {
+                // Deficit ≈ χ²_{B−1}/(B·2K); E = 1 − deficit/ln B, and the
+                // paper's rule shrinks on *large* E: use the upper quantile
+                // of E, i.e. the lower quantile of the deficit.
+                let q = chi2_quantile(p_fa, b - 1.0).unwrap_or(1.0);
+                (1.0 - q / (b * 2.0 * k) / libm::log(b)) as f32
+            }
+        }
+    }
     /// Check the settings against the capacities.
     pub fn new(cfg: DavarConfig) -> Result<Self, DavarError> {
         let (l1, l2) = (cfg.lambda1 as usize, cfg.lambda2 as usize);
@@ -352,7 +322,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         }
         let span = l2 / SEG;
         let min_frames = l1.div_ceil(SEG).min(span);
-        let group = cell_group(span, min_frames);
         // Terms are added once per hop, so the ring must still hold the
         // oldest sample of a term 2·τ_max + 32 samples back; τ ≤ 2¹⁰ keeps
         // every sum exact (see the module's head).
@@ -382,45 +351,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             cfg,
             sums: Sums::new(cfg.tau_octaves),
             hop_phase: 1,
-            marks: [stale(0); FRAMES],
-            marks_near: [stale(0); FRAMES],
-            px: [0.0; FRAMES],
-            frames: [[0.0; BINS]; STFT],
-            energy: [0.0; STFT],
-            eloge: [0.0; STFT],
             span,
             min_frames,
-            len: cfg.l_init,
             score: 0.0,
             threshold: 0.0,
             dof: FrameDof::new(),
             thresholds: [0.0; FRAMES],
             last: None,
             edition: 0,
-            pending: None,
-            ln_n: [0.0; FRAMES],
-            dp: Segmentation {
-                first: None,
-                next_first: None,
-                placed: None,
-                refined: None,
-                bounds: [0; CELLS + 1],
-                group,
-                cells: span.div_ceil(group),
-                sum: [0.0; CELLS + 1],
-                cost: [0.0; CELLS + 1],
-                arg: [0; CELLS + 1],
-                row: 0,
-                nu: NU_WHITE,
-                beta: 0.0,
-                recent: [0; LAG],
-                recent_len: 0,
-                recent_at: 0,
-            },
+            centred: Centred::new(span, min_frames, cfg.l_init),
+            seg: Segmentation::new(span, min_frames, l1),
         };
-        for (i, v) in d.ln_n.iter_mut().enumerate().skip(1) {
-            *v = ln_fast(i as f32);
-        }
         // Soft-float χ² quantiles, once: only the frame counts that can
         // occur are tabulated.
         let lo = match cfg.placement {
@@ -441,24 +382,13 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// and the tabulated thresholds.
     pub fn reset(&mut self) {
         self.sums.reset();
-        self.len = self.cfg.l_init;
+        self.centred.reset(self.cfg.l_init);
         self.score = 0.0;
         self.threshold = self.threshold_for(self.span);
         self.dof = FrameDof::new();
         self.last = None;
         self.edition = self.edition.wrapping_add(1);
-        self.pending = None;
-        self.dp.first = None;
-        self.dp.next_first = None;
-        self.dp.placed = None;
-        self.dp.refined = None;
-        self.dp.row = 0;
-        // (The valid stamps are the first `recent_len`: start at 0.)
-        (self.dp.recent_len, self.dp.recent_at) = (0, 0);
-        // (Every block a later segmentation reads completes after this and
-        // is made stale then; cleared here all the same.)
-        self.marks = [stale(0); FRAMES];
-        self.marks_near = [stale(0); FRAMES];
+        self.seg.reset();
     }
 
     /// The settings.
@@ -506,8 +436,32 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         self.hop_phase = phase.clamp(1, SEG as u8 - 1);
     }
 
-    /// Effective degrees of freedom of one frame's τ0 energy, learnt
-    /// from the data ([`FrameDof::nu`] has the model).
+    /// Effective degrees of freedom of one frame's τ0 energy x = Σd² over
+    /// 32 first differences d: for Gaussian d, ν = 2E\[x\]²/Var x =
+    /// 32²/Σ_h (32 − |h|)ρ_h² ≈ 32²/(32 + 62ρ₁² + 60ρ₂²), with the lag
+    /// correlations ρ₁, ρ₂ of d measured inside each frame, so a variance
+    /// change, however frequent, does not bias them. White noise: ρ₁ = −½,
+    /// ν = 21.6 (the prior); random walk: ρ = 0, ν = 32; quantisation of
+    /// an angle (blue rate noise): ρ₁ = −⅔, ρ₂ = ⅙, ν ≈ 16.7.
+    ///
+    /// That form holds for Gaussian d only. In general Var x =
+    /// Σ_h (32 − |h|)·Cov(q, q₊ₕ) over the squares q = d², which
+    /// `FrameDof::learn_tails` measures (lags 0–2, σ⁴ from lag 3), and
+    /// ν₄ = 2·32²σ⁴/Var x. Heavy tails (Student's t with 5 dof: Var q =
+    /// 20σ⁴ and lag-1 Cov 8σ⁴ against 8 and 2, so ν₄ = 7.2) or rounding
+    /// below half an LSB (σ = 0.3 LSB: ν₄ ≈ 6) make it far smaller, and a
+    /// threshold set with the Gaussian ν then sees changes everywhere
+    /// (9.7 % and 36 % of windows shortened on stationary input).
+    ///
+    /// With r = ν₄/(0.85·ν_G) (`TAIL_GATE`: ν₄ is the noisier, and on
+    /// Gaussian frames r ≥ 1 and ν stays ν_G), ν = ν_G·r^1.5 below the
+    /// gate. The power is for the tails themselves: Var q rests on the
+    /// eighth moment's tail, and its running estimate falls short the more
+    /// the heavier the tail, so the measured ν₄ reads high (t with 5 dof:
+    /// 9.4 for the true 7.2; the power gives 7.9). With ν₄ as measured,
+    /// 2.4 % of the windows on that noise are short and the estimate loses
+    /// to λ2 (`davar-eval --first-seed 55555 --seeds 60 --only heavy`:
+    /// 1.015); with the power 0.8 % and 1.005.
     pub fn nu(&self) -> f32 {
         self.dof.nu()
     }
@@ -534,7 +488,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // Samples since the hop.
         let rel = (phase + SEG - hop_phase) % SEG;
         if phase == 0 && centred_adaptive {
-            self.store_frame();
+            self.centred.store_frame(&self.sums);
         }
         let terms = (1..T).contains(&rel);
         if terms {
@@ -548,52 +502,55 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         if rel != 0 {
             let segmented = self.cfg.placement == Placement::Segmented;
             if segmented && (REFINE_AT..PLACE_AT).contains(&rel) {
-                self.refine_part(rel - REFINE_AT);
+                let s0 = self.seg.first.map_or(0, |f| self.sums.slot_of(f));
+                self.seg.refine_part(rel - REFINE_AT, s0);
             } else if segmented && rel == PLACE_AT {
                 // The last segmentation's window (its rows finished long
                 // ago; `while` only guards the invariant).
-                if let (Some(prev), Some(_)) = (self.dp.first, self.dp.next_first) {
-                    while self.dp.row <= self.dp.cells {
-                        self.dp_row();
+                if let (Some(prev), Some(_)) = (self.seg.first, self.seg.next_first) {
+                    while self.seg.row <= self.seg.cells {
+                        self.seg.next_row();
                     }
-                    let (lo, hi) = self.segment_window(prev);
-                    self.dp.placed = Some((prev, lo, hi));
+                    let (lo, hi) = self.seg.window(prev, self.sums.slot_of(prev));
+                    (self.score, self.threshold) = self.seg.score();
+                    self.seg.placed = Some((prev, lo, hi));
                 }
             } else if segmented && (PUBLISH_AT..START_AT).contains(&rel) {
                 // The window sums, a third of the τ on each of three
                 // samples; the estimate is out on the last.
                 let part = rel - PUBLISH_AT;
                 let taus = T * part / PUB_PARTS..T * (part + 1) / PUB_PARTS;
-                if let Some((prev, lo, hi)) = self.dp.placed {
+                if let Some((prev, lo, hi)) = self.seg.placed {
                     let (t, f0, f1) = self.placed_window(prev, lo, hi);
                     self.sums.window_sums(f0, f1, taus);
                     if part + 1 == PUB_PARTS {
-                        self.dp.placed = None;
+                        self.seg.placed = None;
                         return Ok(Some(self.finish_publish(t, f0, f1)));
                     }
                 }
             } else if segmented && rel == START_AT {
-                if let Some(first) = self.dp.next_first.take() {
-                    self.dp_start(first);
+                if let Some(first) = self.seg.next_first.take() {
+                    let beta = self.threshold_for(self.span.min(FRAMES - 1));
+                    let s0 = self.sums.slot_of(first);
+                    self.seg
+                        .start(first, s0, &self.sums.x0, self.dof.nu(), beta);
                 }
-            } else if self.dp.row >= 1
-                && self.dp.row <= self.dp.cells
+            } else if self.seg.row >= 1
+                && self.seg.row <= self.seg.cells
                 && !(terms && Self::ROWS_YIELD)
             {
-                self.dp_row();
-                if self.dp.cells > ROW_SAMPLES && self.dp.row <= self.dp.cells {
-                    self.dp_row();
+                self.seg.next_row();
+                if self.seg.cells > ROW_SAMPLES && self.seg.row <= self.seg.cells {
+                    self.seg.next_row();
                 }
             }
             return Ok(None);
         }
         // The hop, at least one sample after a frame boundary: the τ0
         // terms of the last frame end on its first sample.
-        let (marks, near) = (&mut self.marks, &mut self.marks_near);
-        self.sums.add_tau0(|block, slot| {
-            marks[slot] = stale(block);
-            near[slot] = stale(block);
-        });
+        let seg = &mut self.seg;
+        self.sums
+            .add_tau0(|block, slot| seg.block_completed(block, slot));
         if n < (self.span * SEG + hop_phase) as u64 {
             // (The tails are learnt once the span has filled: during the
             // fill their samples would meet the first, from-scratch terms
@@ -609,10 +566,17 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             // the terms of every τ up to its end have been added.
             Placement::Centred => {
                 let done = self
+                    .centred
                     .pending
                     .map(|(prev, lo, hi)| self.publish_placed(prev, lo, hi));
-                let (lo, hi) = self.centred(first, centred_adaptive);
-                self.pending = Some((first, lo, hi));
+                let s0 = self.sums.slot_of(first);
+                let (lo, hi) =
+                    self.centred
+                        .place(first, s0, centred_adaptive, &self.cfg, &self.thresholds);
+                if let Some((score, threshold)) = self.centred.score {
+                    (self.score, self.threshold) = (score, threshold);
+                }
+                self.centred.pending = Some((first, lo, hi));
                 done
             }
             Placement::Segmented => {
@@ -621,13 +585,43 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // new segmentation starts on the sample after, so no
                 // sample carries all three (5 650 instructions on one
                 // sample at λ2 = 1024 when they did).
-                self.dp.next_first = Some(first);
+                self.seg.next_first = Some(first);
                 None
             }
         };
         Ok(done)
     }
 
+    /// Publish the window [lo, hi) (frames) of the span starting at frame
+    /// `prev`: its estimate describes the span's centre.
+    pub(super) fn publish_placed(&mut self, prev: u64, lo: usize, hi: usize) -> u64 {
+        let (t, f0, f1) = self.placed_window(prev, lo, hi);
+        self.publish(t, f0, f1)
+    }
+    /// The time and frames [f0, f1) of window [lo, hi) of the span at
+    /// `prev`.
+    pub(super) fn placed_window(&self, prev: u64, lo: usize, hi: usize) -> (u64, u64, u64) {
+        let half = (SEG * self.span / 2) as u64;
+        (SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
+    }
+    /// Sum the exact window sums of frames [f0, f1), keep them, return t.
+    pub(super) fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
+        self.sums.window_sums(f0, f1, 0..T);
+        self.finish_publish(t, f0, f1)
+    }
+    /// Publish window [f0, f1) at time t from its whole-block sums (all τ
+    /// done by `Sums::window_sums`) and the last blocks' prefixes.
+    pub(super) fn finish_publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
+        let acc = self.sums.window_total(f0);
+        self.last = Some(Published {
+            t,
+            start: f0 * SEG as u64,
+            end: f1 * SEG as u64,
+            acc,
+        });
+        self.edition = self.edition.wrapping_add(1);
+        t
+    }
     /// The last sample pushed, if any since the start or a reset.
     pub fn last_sample(&self) -> Option<i32> {
         let n = self.sums.n.checked_sub(1)?;
@@ -641,7 +635,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         let len = p.end - p.start;
         let mut avar = [0.0f32; T];
         for (j, v) in avar.iter_mut().enumerate() {
-            *v = Self::avar_of(p, j, self.cfg.tau_octaves);
+            *v = p.avar(j, self.cfg.tau_octaves);
         }
         Some(DavarStep {
             t: p.t,
@@ -685,7 +679,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         // By reference: a copy of the published row (its u128 sums) cost
         // some 170 instructions a call on the Cortex-M4.
         let p = self.last.as_ref()?;
-        (j < T).then(|| Self::avar_of(p, j, self.cfg.tau_octaves))
+        (j < T).then(|| p.avar(j, self.cfg.tau_octaves))
     }
 }
 

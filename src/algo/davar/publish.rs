@@ -1,45 +1,21 @@
-//! Publication: the placed window's sums, spread over three samples, and
-//! the estimate a reader sees.
+//! A published window: its time, edges and exact sums, and σ² from them.
 
-use super::{Davar, Published, SEG};
 use crate::algo::math::u128_to_f32;
 
-impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
-    Davar<CAP, FRAMES, T, STFT>
-{
-    /// Publish the window [lo, hi) (frames) of the span starting at frame
-    /// `prev`: its estimate describes the span's centre.
-    pub(super) fn publish_placed(&mut self, prev: u64, lo: usize, hi: usize) -> u64 {
-        let (t, f0, f1) = self.placed_window(prev, lo, hi);
-        self.publish(t, f0, f1)
-    }
-    /// The time and frames [f0, f1) of window [lo, hi) of the span at
-    /// `prev`.
-    pub(super) fn placed_window(&self, prev: u64, lo: usize, hi: usize) -> (u64, u64, u64) {
-        let half = (SEG * self.span / 2) as u64;
-        (SEG as u64 * prev + half, prev + lo as u64, prev + hi as u64)
-    }
-    /// Sum the exact window sums of frames [f0, f1), keep them, return t.
-    pub(super) fn publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
-        self.sums.window_sums(f0, f1, 0..T);
-        self.finish_publish(t, f0, f1)
-    }
-    /// Publish window [f0, f1) at time t from its whole-block sums (all τ
-    /// done by `Sums::window_sums`) and the last blocks' prefixes.
-    pub(super) fn finish_publish(&mut self, t: u64, f0: u64, f1: u64) -> u64 {
-        let acc = self.sums.window_total(f0);
-        self.last = Some(Published {
-            t,
-            start: f0 * SEG as u64,
-            end: f1 * SEG as u64,
-            acc,
-        });
-        self.edition = self.edition.wrapping_add(1);
-        t
-    }
-    /// σ² at τ_j = 2^(j·`octaves`) from a published window's exact sums
-    /// (0 where the window has no term at that τ).
-    pub(super) fn avar_of(p: &Published<T>, j: usize, octaves: u8) -> f32 {
+/// Exact window sums of one published hop.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Published<const T: usize> {
+    pub(super) t: u64,
+    pub(super) start: u64,
+    pub(super) end: u64,
+    pub(super) acc: [u128; T],
+}
+
+impl<const T: usize> Published<T> {
+    /// σ² at τ_j = 2^(j·`octaves`) from the window's exact sums (0 where
+    /// the window has no term at that τ).
+    pub(super) fn avar(&self, j: usize, octaves: u8) -> f32 {
+        let p = self;
         let len = p.end - p.start;
         let e = j * octaves as usize;
         let m = 1u64 << e;

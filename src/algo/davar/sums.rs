@@ -270,7 +270,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Sums<CAP, FRAMES, T>
     }
     /// The terms of τ0 = 1 sample since the last hop: the squared first
     /// differences d_k = w[k + 1] − w[k], in the same pass as the lag
-    /// sums of d that ν is learnt from (`learn_nu`), which need the same
+    /// sums of d that ν is learnt from (`FrameDof::learn_lags`), which need the same
     /// d. Two passes over the hop's samples cost one axis's hop some 300
     /// instructions more on the Cortex-M4. `completed` hears of each block
     /// whose terms are now all in (its number and slot).
