@@ -53,7 +53,7 @@ fuzz_target!(|data: &[u8]| {
     ) else {
         return;
     };
-    let mut port = RingPort::<4096>::new(Settings::default());
+    let mut port = RingPort::<4096>::new(Settings::default(), gyro_array::app::BOARD_FRAME_PATH);
     let mut rx = Rx(data);
     while !rx.0.is_empty() {
         port.receive(&mut rx, &mut pipe);

@@ -221,7 +221,7 @@ pub fn analyse(frames: &[Frame], truth: Option<&Series>) -> Option<Report> {
         return None;
     }
     let after_us = f64::from(
-        RingPort::<64>::new(Default::default())
+        RingPort::<64>::new(Default::default(), gyro_array::app::BOARD_FRAME_PATH)
             .horizon_us()
             .unwrap_or(0),
     );

@@ -210,7 +210,7 @@ fn lockstep(r: &Run) -> Vec<(f64, [f64; 3])> {
         panic!("pipeline settings")
     };
     let mut link: HostLink = HostLink {
-        port: Port::new(Settings::default()),
+        port: Port::new(Settings::default(), gyro_array::app::BOARD_FRAME_PATH),
         bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();

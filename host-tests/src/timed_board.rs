@@ -267,7 +267,7 @@ pub fn run(
         let _ = ti.driver().flush_fifo();
     }
     let mut link: HostLink = HostLink {
-        port: RingPort::new(Settings::default()),
+        port: RingPort::new(Settings::default(), gyro_array::app::BOARD_FRAME_PATH),
         bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();

@@ -25,11 +25,23 @@ use rtic_core::Mutex;
 use crate::algo::static_cal::CalRecord;
 use crate::drivers::Gyro;
 use crate::link::msg::{ClockSource, FifoAnomalies, FusionMethod, GyroStatus, Reject, Start};
-use crate::link::port::{Array, ChipTime, NoiseSnapshot, Port, StoreRequest};
+use crate::link::port::{Array, ChipTime, FramePath, NoiseSnapshot, Port, StoreRequest};
 use crate::link::ring::TxQueue;
 use crate::pipeline::tracker::{NoiseTracker, Probe};
 use crate::pipeline::{Output, Pipeline};
 use crate::store::Store;
+
+/// The board's frame path, as the delay compensation allows for it: the
+/// SPI transfers of its reads at its 4 kHz FIFO sampling
+/// (`pipeline::timed::board_spi_us`: 110 µs) and a budget of 10 000
+/// instructions from the reads to the frame queued, at the STM32F405's
+/// 168 MHz (60 µs; `cargo xtask bench-loop` counts the path). A board on
+/// its fallback clock says so with its own `core_hz`.
+pub const BOARD_FRAME_PATH: FramePath = FramePath {
+    spi_us: 110,
+    instructions: 10_000,
+    core_hz: 168_000_000,
+};
 
 /// The board's time for its samples: one µs counter (TIM5 on the board,
 /// the emulated bus's timer in QEMU) read at each tick, extended to 64
@@ -327,6 +339,22 @@ mod tests {
     use crate::link::port::RingPort;
 
     #[test]
+    fn the_boards_frame_path_allows_for_its_spi_reads_and_its_budget() {
+        use crate::drivers::icm42688::{board_fifo, ClockInput};
+        // The SPI transfers of the board's reads, rounded up to the µs,
+        // and the 10 000-instruction budget at 168 MHz.
+        let spi = crate::pipeline::timed::board_spi_us(&board_fifo(ClockInput::ClkIn));
+        let p = BOARD_FRAME_PATH;
+        assert!(
+            p.spi_us as f32 >= spi && (p.spi_us as f32) < spi + 1.0,
+            "{p:?}: {spi}"
+        );
+        let want = spi + 10_000.0 / 168.0;
+        let got = p.us() as f32;
+        assert!(got >= want && got < want + 2.0, "{got} against {want}");
+    }
+
+    #[test]
     fn the_sample_clock_extends_its_counter_and_counts_missed_periods() {
         // Started just before the 32-bit µs counter wraps.
         let mut c = SampleClock::new(u32::MAX - 1500, 1000);
@@ -397,7 +425,7 @@ mod tests {
             Method::Adaptive(AdaptiveConfig::default()),
         )
         .unwrap();
-        let mut port = RingPort::<2048>::new(Settings::default());
+        let mut port = RingPort::<2048>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
         let mut noise = NoiseSnapshot::default();
         let mut tracker =
             NoiseTracker::<1024, 35, 3>::new(crate::pipeline::tracker::link_config(1024)).unwrap();
@@ -562,7 +590,7 @@ mod tests {
                 Method::Adaptive(AdaptiveConfig::default()),
             )
             .unwrap();
-            let mut port = RingPort::<2048>::new(Settings::default());
+            let mut port = RingPort::<2048>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
             let mut noise = NoiseSnapshot::default();
             let view = StatusView {
                 taus: crate::pipeline::tracker::LINK_TAUS,

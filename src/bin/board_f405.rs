@@ -75,7 +75,7 @@ use stm32f4xx_hal::{
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::algo::static_cal::{self, CalRecord};
-use gyro_array::app::{self as schedule, SampleClock};
+use gyro_array::app::{self as schedule, SampleClock, BOARD_FRAME_PATH};
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
@@ -83,7 +83,7 @@ use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
 use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{Settings, StoreState};
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
+use gyro_array::link::port::{timed_clock, ChipTime, FramePath, NoiseSnapshot, Port};
 use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
@@ -534,7 +534,7 @@ mod app {
             }
         };
         let Some(port) = cortex_m::singleton!(
-            : Port<TxProducer<TX_BYTES>> = Port::with_queue(TX_QUEUE.stream_producer(), settings)
+            : Port<TxProducer<TX_BYTES>> = Port::with_queue(TX_QUEUE.stream_producer(), settings, gyro_array::app::BOARD_FRAME_PATH)
         ) else {
             give_up("link port taken twice")
         };
@@ -542,7 +542,10 @@ mod app {
         // The delay compensation predicts each frame's rates to its last byte
         // at the rate the link runs.
         port.set_timing(baud, 1_000_000 / FS_HZ);
-        port.set_core_hz(core_hz);
+        port.set_frame_path(FramePath {
+            core_hz,
+            ..BOARD_FRAME_PATH
+        });
         let failed = start_array(
             [&mut g0, &mut g1, &mut g2, &mut g3],
             &mut g4,

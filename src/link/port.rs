@@ -203,22 +203,30 @@ pub const ANGLE_BYTES: u32 = 12;
 /// integrated while the angle is off.
 const TURN_UNITS: f32 = (4_294_967_296.0 / 360.0 / 1e6) as f32;
 
-/// The loop's time from the sample's read (`t_us`) to its frame being
-/// queued, µs, that [`Compensation::ToFrame`] allows for: the SPI
-/// transfers of the board's reads (`pipeline::timed::board_spi_us`, 110 µs
-/// at its 4 kHz FIFO sampling) and the frame's path, its
-/// [`FRAME_PATH_INSTRUCTIONS`] at the STM32F405's 168 MHz (60 µs; `cargo
-/// xtask bench-loop` counts it). The E-DAVARs run after the frame is
-/// queued and are not on it. `link::tests` checks the sum. A board on
-/// another core clock says so ([`Port::set_core_hz`]).
-pub const LOOP_US: u32 = 170;
+/// What [`Compensation::ToFrame`] allows for between a sample's read
+/// (`t_us`) and its frame being queued: the bus's time for the reads, and
+/// the frame path's instructions at the core's clock (taken as cycles: a
+/// Cortex-M4 with flash wait states and its cache runs about one an
+/// instruction). The board's own is `app::BOARD_FRAME_PATH`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FramePath {
+    /// The SPI transfers of the sample's reads, µs.
+    pub spi_us: u32,
+    /// The frame path's budget, instructions.
+    pub instructions: u32,
+    /// The core clock the path runs at, Hz.
+    pub core_hz: u32,
+}
 
-/// The SPI part of [`LOOP_US`], µs: the bus's time, whatever the core's.
-const LOOP_SPI_US: u32 = 110;
-
-/// The frame path's budget, instructions (taken as cycles: the Cortex-M4
-/// at 168 MHz with flash wait states runs about one an instruction).
-pub const FRAME_PATH_INSTRUCTIONS: u32 = 10_000;
+impl FramePath {
+    /// The read to the frame queued, µs (the path's part rounded up).
+    pub fn us(&self) -> u32 {
+        let path =
+            (u64::from(self.instructions) * 1_000_000).div_ceil(u64::from(self.core_hz.max(1)));
+        self.spi_us
+            .saturating_add(path.min(u64::from(u32::MAX)) as u32)
+    }
+}
 
 /// What a status frame says of a chip's time ([`Port::status`]'s
 /// `clocks`; the default: a polled chip).
@@ -308,7 +316,7 @@ pub struct Port<Q> {
     baud: u32,
     /// 1 / the sample period, 1/µs.
     per_sample: f32,
-    /// The sample's read to its frame queued, µs ([`LOOP_US`] at 168 MHz).
+    /// The sample's read to its frame queued, µs ([`FramePath::us`]).
     loop_us: u32,
     /// [`Self::horizon_us`], worked out when the settings or the timing
     /// change, not each sample.
@@ -331,10 +339,11 @@ pub struct Port<Q> {
 pub type RingPort<const TX: usize> = Port<ByteRing<TX>>;
 
 impl<const TX: usize> RingPort<TX> {
-    /// A port with `settings` and an empty queue of its own; its method
-    /// must be the pipeline's.
-    pub fn new(settings: Settings) -> Self {
-        Port::with_queue(ByteRing::new(), settings)
+    /// A port with `settings` and an empty queue of its own, its frames
+    /// queued `path` after their samples' reads; its method must be the
+    /// pipeline's.
+    pub fn new(settings: Settings, path: FramePath) -> Self {
+        Port::with_queue(ByteRing::new(), settings, path)
     }
 
     /// Bytes waiting to be sent.
@@ -366,9 +375,9 @@ impl<const TX: usize> RingPort<TX> {
 }
 
 impl<Q: TxQueue> Port<Q> {
-    /// A port with `settings` that queues its frames in `tx`; its method
-    /// must be the pipeline's.
-    pub fn with_queue(tx: Q, settings: Settings) -> Self {
+    /// A port with `settings` that queues its frames in `tx`, `path` after
+    /// their samples' reads; its method must be the pipeline's.
+    pub fn with_queue(tx: Q, settings: Settings, path: FramePath) -> Self {
         let mut p = Self {
             tx,
             rx: Decoder::new(),
@@ -385,7 +394,7 @@ impl<Q: TxQueue> Port<Q> {
             predictor_seq: None,
             baud: super::BAUD,
             per_sample: 1e-3,
-            loop_us: LOOP_US,
+            loop_us: path.us(),
             horizon: None,
             last_rates: None,
             angle: [0; 3],
@@ -412,13 +421,11 @@ impl<Q: TxQueue> Port<Q> {
         self.retime();
     }
 
-    /// The core clock the frame path runs at, Hz: the horizon's loop part
-    /// scales with it (the board's fallback on its internal oscillator
-    /// runs at 16 MHz, where the frame path takes 625 µs, not 60).
-    pub fn set_core_hz(&mut self, core_hz: u32) {
-        let path =
-            (u64::from(FRAME_PATH_INSTRUCTIONS) * 1_000_000).div_ceil(u64::from(core_hz.max(1)));
-        self.loop_us = LOOP_SPI_US.saturating_add(path.min(u64::from(u32::MAX)) as u32);
+    /// The frame path, when it changes (the board's fallback on its
+    /// internal oscillator runs at 16 MHz, where the path's instructions
+    /// take 625 µs, not 60).
+    pub fn set_frame_path(&mut self, path: FramePath) {
+        self.loop_us = path.us();
         self.retime();
     }
 

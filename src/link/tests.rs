@@ -392,7 +392,7 @@ fn exchange(
 #[test]
 fn every_command_is_acknowledged_or_rejected_with_its_reason() {
     let mut pipe = pipeline();
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let cases = [
         (Op::SetDivider(10), Ok(())),
         (Op::SetDivider(0), Err(Reject::OutOfRange)),
@@ -440,7 +440,7 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
 #[test]
 fn a_damaged_command_changes_nothing_and_is_rejected() {
     let mut pipe = pipeline();
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let before = port.settings();
     let good = command_bytes(3, Op::SetDivider(5));
     // Every single-byte corruption of the frame body.
@@ -474,7 +474,7 @@ fn a_damaged_command_changes_nothing_and_is_rejected() {
 
 #[test]
 fn a_full_queue_drops_whole_frames_and_the_gap_shows() {
-    let mut port = RingPort::<100>::new(Settings::default());
+    let mut port = RingPort::<100>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let f = big_sample(5);
     assert!(port.send(&f));
     assert!(!port.send(&f), "no room for a second");
@@ -549,7 +549,7 @@ fn the_port_speaks_for_any_array() {
     let mut array = Fixture {
         method: FusionMethod::Adaptive,
     };
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let before = port.settings();
     let mut commands = command_bytes(1, Op::SetMethod(FusionMethod::Zhang));
     commands.extend(command_bytes(2, Op::SetMethod(FusionMethod::Mean)));
@@ -603,9 +603,13 @@ fn the_boards_queue_sends_what_a_ring_sends() {
     use super::port::Port;
     use super::ring::TxBuffer;
     let buf: &'static TxBuffer<600> = std::boxed::Box::leak(std::boxed::Box::new(TxBuffer::new()));
-    let mut board = Port::with_queue(buf.stream_producer(), Settings::default());
+    let mut board = Port::with_queue(
+        buf.stream_producer(),
+        Settings::default(),
+        crate::app::BOARD_FRAME_PATH,
+    );
     let reader = buf.stream_consumer();
-    let mut ring = RingPort::<600>::new(Settings::default());
+    let mut ring = RingPort::<600>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let (mut from_board, mut from_ring) = (std::vec::Vec::new(), Tx(std::vec::Vec::new()));
     // A reader that keeps up: the same bytes, frame sizes varied so that
     // frames meet the buffer's end at many offsets.
@@ -626,7 +630,7 @@ fn the_boards_queue_sends_what_a_ring_sends() {
     let f = big_sample(5);
     let size = {
         let mut one = Tx(std::vec::Vec::new());
-        let mut p = RingPort::<600>::new(Settings::default());
+        let mut p = RingPort::<600>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
         p.send(&f);
         p.drain(&mut one);
         one.0.len()
@@ -773,7 +777,7 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
     // A rate rising 2 °/s per ms on x, falling 1 on z, measured 2 ms late.
     let ramp = |k: u32| [2.0 * k as f32, 5.0, -(k as f32)];
     let outs: std::vec::Vec<_> = (0..10).map(|k| output(k, ramp(k), 2000)).collect();
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let got = samples(&mut port, &outs);
     assert_eq!(got.len(), 10);
     let d = port.horizon_us().expect("on by default");
@@ -800,14 +804,17 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
         }
     }
     // Off: the measured rates. A missed sample starts the fit again.
-    let mut port = RingPort::<1024>::new(Settings {
-        compensation: Compensation::Off,
-        ..Settings::default()
-    });
+    let mut port = RingPort::<1024>::new(
+        Settings {
+            compensation: Compensation::Off,
+            ..Settings::default()
+        },
+        crate::app::BOARD_FRAME_PATH,
+    );
     assert!(samples(&mut port, &outs)
         .iter()
         .all(|s| s.predicted_us.is_none()));
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let gap = [
         output(0, ramp(0), 2000),
         output(1, ramp(1), 2000),
@@ -824,30 +831,30 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
 }
 
 #[test]
-fn the_horizon_allows_for_the_boards_spi_reads_and_its_loop() {
-    use crate::drivers::icm42688::{board_fifo, ClockInput};
-    // The loop's 10 000-instruction budget at 168 MHz beside the SPI
-    // transfers of the board's reads, rounded up to the µs.
-    let spi = crate::pipeline::timed::board_spi_us(&board_fifo(ClockInput::ClkIn));
-    let want = spi + 10_000.0 / 168.0;
-    let got = super::port::LOOP_US as f32;
-    assert!(got >= want && got < want + 1.0, "{got} against {want}");
-}
-
-#[test]
 fn the_horizon_follows_the_core_clock() {
     use super::msg::Compensation;
-    let mut port = RingPort::<512>::new(Settings {
-        compensation: Compensation::ToFrame,
-        ..Settings::default()
-    });
+    use super::port::FramePath;
+    let mut port = RingPort::<512>::new(
+        Settings {
+            compensation: Compensation::ToFrame,
+            ..Settings::default()
+        },
+        crate::app::BOARD_FRAME_PATH,
+    );
     port.set_timing(super::BAUD, 1000);
     let at_168 = port.horizon_us().unwrap();
-    port.set_core_hz(168_000_000);
+    let path = crate::app::BOARD_FRAME_PATH;
+    port.set_frame_path(FramePath {
+        core_hz: 168_000_000,
+        ..path
+    });
     assert_eq!(port.horizon_us().unwrap(), at_168);
     // The internal oscillator alone: the frame path's 10 000 instructions
     // take 625 µs, not 60.
-    port.set_core_hz(16_000_000);
+    port.set_frame_path(FramePath {
+        core_hz: 16_000_000,
+        ..path
+    });
     assert_eq!(port.horizon_us().unwrap(), at_168 + 625 - 60);
 }
 
@@ -861,7 +868,7 @@ fn a_store_command_is_acknowledged_once_the_store_has_done_it() {
         })
     };
     let mut pipe = pipeline();
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     // A build without a store refuses, and changes nothing.
     let got = exchange(&mut port, &mut pipe, &command_bytes(1, Op::SaveSettings));
     assert_eq!(got, [ack(1, Err(Reject::Refused))]);
@@ -916,11 +923,14 @@ fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
             (0.01 + 1e-4 * f64::from(k)) as f32,
         ]
     };
-    let mut port = RingPort::<1024>::new(Settings {
-        divider: 3,
-        angle: true,
-        ..Settings::default()
-    });
+    let mut port = RingPort::<1024>::new(
+        Settings {
+            divider: 3,
+            angle: true,
+            ..Settings::default()
+        },
+        crate::app::BOARD_FRAME_PATH,
+    );
     let pipe = pipeline();
     let mut reference = [0.0f64; 3];
     let mut last: Option<(u64, [f32; 3])> = None;
@@ -971,7 +981,7 @@ fn the_angles_add_up_to_the_integrated_rate_across_skipped_and_lost_frames() {
 #[test]
 fn sync_time_messages_give_the_controllers_clock_and_a_stopped_pulse_is_said() {
     let mut pipe = pipeline();
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     let ctrl = |b: u64| 9_000_000_000 + b + b / 20_000; // 50 ppm fast
     let mut syncs = std::vec::Vec::new();
     for k in 1..=5u64 {
@@ -1035,7 +1045,7 @@ fn the_info_frame_names_the_board_the_build_and_each_chip() {
     pipe.set_start(2, Start::SelfTestFailed);
     pipe.mark_init_failed(2);
     pipe.mark_init_failed(3);
-    let mut port = RingPort::<1024>::new(Settings::default());
+    let mut port = RingPort::<1024>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
     port.set_uid([7; 12]);
     // Due half way between status frames, and on request.
     assert!(!port.info_due(0) && port.info_due(500) && !port.info_due(501));
@@ -1074,10 +1084,13 @@ fn a_command_is_checked_for_its_own_value_not_the_ports_others() {
     // The demo's stress run builds its port with a status frame every
     // sample, a period no command may set: other commands still apply.
     let mut pipe = pipeline();
-    let mut port = RingPort::<1024>::new(Settings {
-        status_every: 1,
-        ..Settings::default()
-    });
+    let mut port = RingPort::<1024>::new(
+        Settings {
+            status_every: 1,
+            ..Settings::default()
+        },
+        crate::app::BOARD_FRAME_PATH,
+    );
     let mut bytes = command_bytes(0, Op::SetDivider(2));
     bytes.extend(command_bytes(1, Op::SetStatusEvery(1)));
     let got = exchange(&mut port, &mut pipe, &bytes);

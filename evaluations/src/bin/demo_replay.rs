@@ -23,7 +23,10 @@ fn main() {
     let stress = std::env::args().any(|a| a == "--stress");
     // The demo's port size, its bytes taken at once.
     let mut link = HostLink::<1024> {
-        port: Port::new(demo::link_settings(stress)),
+        port: Port::new(
+            demo::link_settings(stress),
+            gyro_array::app::BOARD_FRAME_PATH,
+        ),
         bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();

@@ -12,7 +12,7 @@
 //!
 //! Times after the tick, µs, at 168 MHz, one instruction a cycle:
 //! - the sample frame queued at [`FRAME_US`]: the four chips' FIFO bursts
-//!   (the SPI's 110 µs, `link::port`'s `LOOP_SPI_US`) and the sample task's
+//!   (the SPI's 110 µs, `app::BOARD_FRAME_PATH`) and the sample task's
 //!   worst response on the timed board (K, 11 113 instructions, 66 µs,
 //!   `BENCH_SCENARIOS=K cargo xtask bench-loop`);
 //! - a status or info frame [`AFTER_US`] later (the sample task after its
@@ -156,7 +156,7 @@ fn command(id: u8, op: Op) -> Vec<u8> {
 /// horizon at `baud`.
 fn run(samples: u32, baud: u32) -> (Vec<Queued>, f64) {
     let mut link = Recorder {
-        port: RingPort::new(Settings::default()),
+        port: RingPort::new(Settings::default(), gyro_array::app::BOARD_FRAME_PATH),
         n: 0,
         background: false,
         decoder: Decoder::new(),

@@ -193,7 +193,10 @@ fn board_run_to(
     faulty: bool,
     mut wire: Option<&mut Wire>,
 ) -> Stream {
-    let mut port = gyro_array::link::port::RingPort::<4096>::new(Default::default());
+    let mut port = gyro_array::link::port::RingPort::<4096>::new(
+        Default::default(),
+        gyro_array::app::BOARD_FRAME_PATH,
+    );
     let plan = if faulty { faults(ms) } else { vec![] };
     let timing = Timing {
         clkin: false,
@@ -446,7 +449,10 @@ struct Comp {
 /// frame's last byte as the link works it out (`Port::horizon_us`: the
 /// loop's budgeted time and the largest frame on the wire).
 fn board_horizon_s() -> f64 {
-    let port = gyro_array::link::port::RingPort::<64>::new(Default::default());
+    let port = gyro_array::link::port::RingPort::<64>::new(
+        Default::default(),
+        gyro_array::app::BOARD_FRAME_PATH,
+    );
     DELAY_US as f64 * 1e-6 + f64::from(port.horizon_us().unwrap_or(0)) * 1e-6
 }
 

@@ -366,10 +366,11 @@ mod app {
         let mut uart = unsafe { CmsdkUart::new(UART0, 16) };
         uart.listen();
         let settings = demo::link_settings(STRESS);
-        let port = cx
-            .local
-            .port_slot
-            .insert(Port::with_queue(TX_QUEUE.stream_producer(), settings));
+        let port = cx.local.port_slot.insert(Port::with_queue(
+            TX_QUEUE.stream_producer(),
+            settings,
+            gyro_array::app::BOARD_FRAME_PATH,
+        ));
         if STRESS {
             defmt::info!("stress: the background ten times slower, a status frame every sample");
         }

@@ -114,7 +114,7 @@ fn exchange(
     if pipe.set_method(settings.method.method()).is_err() {
         exit(false);
     }
-    let mut port = RingPort::<1024>::new(settings);
+    let mut port = RingPort::<1024>::new(settings, gyro_array::app::BOARD_FRAME_PATH);
     port.set_store_state(state);
     let mut bytes = [0u8; 4 * MAX_FRAME];
     let mut n = 0;

@@ -52,7 +52,11 @@ pub(super) fn run_loop<const N: usize>(
     };
     // The board's transmit queue and port (`board-f405`'s `TX_QUEUE`),
     // its reading end emptied after each sample.
-    let mut port = Port::with_queue(BENCH_TX.stream_producer(), Settings::default());
+    let mut port = Port::with_queue(
+        BENCH_TX.stream_producer(),
+        Settings::default(),
+        gyro_array::app::BOARD_FRAME_PATH,
+    );
     let sent = BENCH_TX.stream_consumer();
     let mut bytes = 0u32;
     let pair = pair_cost(t);
