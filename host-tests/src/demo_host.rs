@@ -5,9 +5,9 @@
 
 use std::cell::RefCell;
 
-use gyro_array::app::{self as schedule, Sampled, StatusFacts};
+use gyro_array::app::{self as schedule, timed_clock, Sampled, StatusFacts};
 use gyro_array::drivers::Gyro;
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot};
+use gyro_array::link::port::{ChipTime, NoiseSnapshot};
 use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
 use gyro_array::pipeline::Pipeline;
 use gyro_sim::{demo, with_bus, CsLine, EmuBus};

@@ -12,11 +12,11 @@
 //! is always late (docs/timing.md).
 
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
-use gyro_array::app::{self as schedule, StatusFacts, StatusView};
+use gyro_array::app::{self as schedule, timed_clock, StatusFacts, StatusView};
 use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::Settings;
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, RingPort};
+use gyro_array::link::port::{ChipTime, NoiseSnapshot, RingPort};
 use gyro_array::pipeline::timed::{self, TimedIcm};
 use gyro_array::pipeline::{Output, Pipeline, PipelineConfig};
 use gyro_sim::timing::{ClockParams, Vibration};

@@ -23,11 +23,17 @@ use rtic_core::prelude::*;
 use rtic_core::Mutex;
 
 use crate::algo::static_cal::CalRecord;
+use crate::drivers::icm42688::ClockInput;
 use crate::drivers::Gyro;
-use crate::link::msg::{ClockSource, FifoAnomalies, FusionMethod, GyroStatus, Reject, Start};
-use crate::link::port::{Array, ChipTime, FramePath, NoiseSnapshot, Port, StoreRequest};
+use crate::link::msg::{
+    ClockSource, FifoAnomalies, FusionMethod, GyroStatus, Noise, Reject, Start,
+};
+use crate::link::port::{
+    Array, ChipTime, FramePath, NoiseSnapshot, NoiseSource, Port, SampleOut, StoreRequest,
+};
 use crate::link::ring::TxQueue;
-use crate::pipeline::tracker::{NoiseTracker, Probe};
+use crate::pipeline::timed::{tracking, TimedIcm};
+use crate::pipeline::tracker::{LinkNoise, NoiseTracker, Probe};
 use crate::pipeline::{Output, Pipeline};
 use crate::store::Store;
 
@@ -97,6 +103,77 @@ impl<Q: TxQueue> Link for Port<Q> {
         self
     }
     fn flush(&mut self) {}
+}
+
+/// The pipeline's output as its frame states it.
+impl<const N: usize> SampleOut for Output<N> {
+    fn seq(&self) -> u32 {
+        self.seq
+    }
+    fn fused(&self, axis: usize) -> Option<(f32, bool, u8)> {
+        self.fused
+            .get(axis)
+            .copied()
+            .flatten()
+            .map(|f| (f.rate_dps, f.fallback, f.used()))
+    }
+    fn age_us(&self) -> [u16; 3] {
+        Output::age_us(self)
+    }
+    fn gyro_rates(&self) -> &[[f32; 3]] {
+        &self.rate_dps
+    }
+    fn gyro_delays_us(&self) -> &[u32] {
+        &self.delay_us
+    }
+}
+
+/// The pipeline's noise tracker, each axis's newest estimate as a frame's
+/// noise record.
+impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
+    for LinkNoise<'_, CAP, FRAMES, T>
+{
+    fn described(&self, axis: usize) -> Option<u32> {
+        LinkNoise::described(self, axis)
+    }
+
+    fn noise(&self, axis: usize) -> Option<Noise> {
+        self.newest(axis).map(|n| Noise {
+            axis: axis as u8,
+            seq: n.seq,
+            len: n.len,
+            bridged: n.bridged,
+            sigma_dps: n.sigma_dps,
+        })
+    }
+}
+
+/// [`ChipTime`] of a timed chip.
+pub fn timed_clock<SPI, C>(t: &TimedIcm<SPI, C>) -> ChipTime
+where
+    SPI: embedded_hal::spi::SpiDevice,
+    C: crate::drivers::SampleCapture,
+{
+    let src = match t.clock_input() {
+        ClockInput::ClkIn => ClockSource::ClkIn,
+        ClockInput::Internal => ClockSource::Own,
+    };
+    let ppm = if tracking(t.clock()) {
+        t.clock().error_ppm() as i32
+    } else {
+        0
+    };
+    let c = &t.counters;
+    ChipTime {
+        source: src,
+        ppm,
+        fifo: FifoAnomalies {
+            overflows: c.overflows,
+            bad: c.bad_fifo,
+            cuts: c.cuts,
+            resent: c.resent,
+        },
+    }
 }
 
 /// The pipeline as the link's port states it (`link::port::Array`): the

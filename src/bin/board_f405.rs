@@ -75,7 +75,7 @@ use stm32f4xx_hal::{
 use gyro_array::algo::fusion::{AdaptiveConfig, Method};
 use gyro_array::algo::qualify::QualifyError;
 use gyro_array::algo::static_cal::{self, CalRecord};
-use gyro_array::app::{self as schedule, SampleClock, BOARD_FRAME_PATH};
+use gyro_array::app::{self as schedule, timed_clock, SampleClock, BOARD_FRAME_PATH};
 use gyro_array::board::f405::{self, ClockSource, CycleDelay, Int1Capture, Int1Captures};
 use gyro_array::board::record::Cause;
 use gyro_array::board::{persist, stack};
@@ -83,7 +83,7 @@ use gyro_array::drivers::adxrs453::{Adxrs453, OnAxis};
 use gyro_array::drivers::icm42688::{board_fifo, ClockInput, Icm42688};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::msg::{Settings, StoreState};
-use gyro_array::link::port::{timed_clock, ChipTime, FramePath, NoiseSnapshot, Port};
+use gyro_array::link::port::{ChipTime, FramePath, NoiseSnapshot, Port};
 use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;

@@ -25,8 +25,6 @@ use super::wire::{
 use crate::algo::fusion::{AdaptiveConfig, Method};
 use crate::algo::predict::Predictor;
 use crate::drivers::Gyro;
-use crate::pipeline::tracker::LinkNoise;
-use crate::pipeline::Output;
 
 /// The array the port speaks for, as its frames state it, and the one
 /// command the port hands on to it (the fusion method). The port knows the
@@ -53,6 +51,22 @@ pub trait Array {
     /// Fuse with `method` from now on (its noise model starts again), or
     /// refuse it.
     fn set_method(&mut self, method: FusionMethod) -> Result<(), Reject>;
+}
+
+/// One sample as its frame states it: what the port reads of the
+/// pipeline's output (`app` implements it for `pipeline::Output`).
+pub trait SampleOut {
+    /// Sequence number (every sample period, overruns included).
+    fn seq(&self) -> u32;
+    /// Axis `axis`'s fused rate (°/s), whether fusion fell back to the
+    /// plain mean, and the gyros used (a bit each); `None` without one.
+    fn fused(&self, axis: usize) -> Option<(f32, bool, u8)>;
+    /// Per axis, how long before the read the fused rate was true, µs.
+    fn age_us(&self) -> [u16; 3];
+    /// Per gyro, its rates (°/s, NaN where not read), for raw frames.
+    fn gyro_rates(&self) -> &[[f32; 3]];
+    /// Per gyro, how long before the read its rate was true, µs.
+    fn gyro_delays_us(&self) -> &[u32];
 }
 
 /// Where the E-DAVAR estimates come from (the pipeline's noise tracker).
@@ -105,26 +119,6 @@ impl NoiseSource for NoiseSnapshot {
 
     fn noise(&self, axis: usize) -> Option<Noise> {
         self.noise.get(axis).copied().flatten()
-    }
-}
-
-/// The pipeline's noise tracker, each axis's newest estimate as a frame's
-/// noise record.
-impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
-    for LinkNoise<'_, CAP, FRAMES, T>
-{
-    fn described(&self, axis: usize) -> Option<u32> {
-        LinkNoise::described(self, axis)
-    }
-
-    fn noise(&self, axis: usize) -> Option<Noise> {
-        self.newest(axis).map(|n| Noise {
-            axis: axis as u8,
-            seq: n.seq,
-            len: n.len,
-            bridged: n.bridged,
-            sigma_dps: n.sigma_dps,
-        })
     }
 }
 
@@ -238,34 +232,6 @@ pub struct ChipTime {
     pub ppm: i32,
     /// What its FIFO reads met.
     pub fifo: FifoAnomalies,
-}
-
-/// [`ChipTime`] of a timed chip.
-pub fn timed_clock<SPI, C>(t: &crate::pipeline::timed::TimedIcm<SPI, C>) -> ChipTime
-where
-    SPI: embedded_hal::spi::SpiDevice,
-    C: crate::drivers::SampleCapture,
-{
-    let src = match t.clock_input() {
-        crate::drivers::icm42688::ClockInput::ClkIn => ClockSource::ClkIn,
-        crate::drivers::icm42688::ClockInput::Internal => ClockSource::Own,
-    };
-    let ppm = if crate::pipeline::timed::tracking(t.clock()) {
-        t.clock().error_ppm() as i32
-    } else {
-        0
-    };
-    let c = &t.counters;
-    ChipTime {
-        source: src,
-        ppm,
-        fifo: FifoAnomalies {
-            overflows: c.overflows,
-            bad: c.bad_fifo,
-            cuts: c.cuts,
-            resent: c.resent,
-        },
-    }
 }
 
 impl FusionMethod {
@@ -505,9 +471,9 @@ impl<Q: TxQueue> Port<Q> {
     /// Queue the frame for sample `out` if the divider selects it: a
     /// [`Sample`] (with the next new E-DAVAR estimate from `noise`) or a
     /// [`Raw`] frame. `t_us` is the sample's time.
-    pub fn publish<const N: usize>(
+    pub fn publish(
         &mut self,
-        out: &Output<N>,
+        out: &impl SampleOut,
         t_us: u64,
         array: &impl Array,
         noise: &impl NoiseSource,
@@ -516,18 +482,16 @@ impl<Q: TxQueue> Port<Q> {
         // or an axis without a value starts its fit again.
         let follows = self
             .predictor_seq
-            .is_none_or(|q| out.seq.wrapping_sub(q) == 1);
+            .is_none_or(|q| out.seq().wrapping_sub(q) == 1);
         if !follows {
             self.predictor.clear();
         }
-        match out
-            .fused
-            .map(|f| f.map(|f| f.rate_dps).filter(|r| r.is_finite()))
-        {
+        let rate = |a: usize| out.fused(a).map(|f| f.0).filter(|r| r.is_finite());
+        match [rate(0), rate(1), rate(2)] {
             [Some(x), Some(y), Some(z)] => self.predictor.push([x, y, z]),
             _ => self.predictor.clear(),
         }
-        self.predictor_seq = Some(out.seq);
+        self.predictor_seq = Some(out.seq());
         let age_us = out.age_us();
         self.integrate(out, t_us, age_us);
         // A pulse that stopped is said once, in its own frame.
@@ -537,7 +501,7 @@ impl<Q: TxQueue> Port<Q> {
             self.send_sync();
         }
         let div = u32::from(self.settings.divider.max(1));
-        if !out.seq.is_multiple_of(div) {
+        if !out.seq().is_multiple_of(div) {
             return;
         }
         let mut health = Vec::<u8, MAX_GYROS>::new();
@@ -547,7 +511,7 @@ impl<Q: TxQueue> Port<Q> {
         match self.settings.mode {
             Mode::Fused => {
                 let mut s = Sample {
-                    seq: out.seq,
+                    seq: out.seq(),
                     t_us,
                     age_us,
                     predicted_us: None,
@@ -562,12 +526,12 @@ impl<Q: TxQueue> Port<Q> {
                         Angle { x, y, z }
                     }),
                 };
-                for (a, f) in out.fused.iter().enumerate() {
-                    if let Some(f) = f {
-                        s.rate_dps[a] = f.rate_dps;
+                for a in 0..3 {
+                    if let Some((rate, fallback, used)) = out.fused(a) {
+                        s.rate_dps[a] = rate;
                         s.valid |= 1 << a;
-                        s.degraded |= u8::from(f.fallback) << a;
-                        s.used[a] = f.used();
+                        s.degraded |= u8::from(fallback) << a;
+                        s.used[a] = used;
                     }
                 }
                 // Each axis's line read from the instant its measurement
@@ -596,15 +560,15 @@ impl<Q: TxQueue> Port<Q> {
             }
             Mode::Raw => {
                 let mut rates = Vec::<[f32; 3], MAX_GYROS>::new();
-                for r in out.rate_dps.iter().take(MAX_GYROS) {
+                for r in out.gyro_rates().iter().take(MAX_GYROS) {
                     let _ = rates.push(*r);
                 }
                 let mut age_us = Vec::<u16, MAX_GYROS>::new();
-                for d in out.delay_us.iter().take(MAX_GYROS) {
+                for d in out.gyro_delays_us().iter().take(MAX_GYROS) {
                     let _ = age_us.push((*d).min(u16::MAX as u32) as u16);
                 }
                 let r = Raw {
-                    seq: out.seq,
+                    seq: out.seq(),
                     t_us,
                     age_us,
                     rate_dps: rates,
@@ -621,14 +585,15 @@ impl<Q: TxQueue> Port<Q> {
     /// sample's period is spanned and the chips' changing delay is
     /// followed. An axis without a value stops its integral until it has
     /// two values again.
-    fn integrate<const N: usize>(&mut self, out: &Output<N>, t_us: u64, age_us: [u16; 3]) {
+    fn integrate(&mut self, out: &impl SampleOut, t_us: u64, age_us: [u16; 3]) {
         if !self.settings.angle {
             self.angle_from = [None; 3];
             return;
         }
         for a in 0..3 {
-            let now = out.fused[a]
-                .map(|f| f.rate_dps)
+            let now = out
+                .fused(a)
+                .map(|f| f.0)
                 .filter(|r| r.is_finite())
                 .map(|r| (t_us.saturating_sub(u64::from(age_us[a])), r));
             if let (Some((t0, r0)), Some((t1, r1))) = (self.angle_from[a], now) {

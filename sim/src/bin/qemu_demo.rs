@@ -57,10 +57,10 @@ use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use defmt_semihosting as _;
 use heapless::spsc::{Consumer, Producer, Queue};
 
-use gyro_array::app as schedule;
+use gyro_array::app::{self as schedule, timed_clock};
 use gyro_array::board::stack;
 use gyro_array::drivers::Gyro;
-use gyro_array::link::port::{timed_clock, ChipTime, NoiseSnapshot, Port};
+use gyro_array::link::port::{ChipTime, NoiseSnapshot, Port};
 use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker;
