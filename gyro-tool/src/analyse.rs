@@ -21,7 +21,7 @@ pub fn run(file: &Path) -> Res<bool> {
     let (frames, dec) = read_recording(file)?;
     let mut tau0_s = None;
     // Until a status frame says otherwise, the τ the board's tracker sends
-    // by default (2^LINK_TAUS samples: 1, 16, 256).
+    // by default (2^VIEW_TAUS samples: 1, 16, 256).
     let mut noise_tau = crate::summary::DEFAULT_NOISE_TAU;
     // The longest run of consecutive samples with all three axes valid.
     let (mut best, mut cur): (Vec<[f64; 3]>, Vec<[f64; 3]>) = (Vec::new(), Vec::new());

@@ -14,10 +14,10 @@ pub fn tau0_s(s: &Status) -> f64 {
 }
 
 /// The τ of the board's noise records, samples, as its tracker sends them
-/// by default (2^LINK_TAUS): what a recording without a status frame is
+/// by default (2^VIEW_TAUS): what a recording without a status frame is
 /// read with.
 pub const DEFAULT_NOISE_TAU: [u16; 3] = {
-    let t = gyro_array::pipeline::tracker::LINK_TAUS;
+    let t = gyro_array::pipeline::tracker::VIEW_TAUS;
     [1 << t[0], 1 << t[1], 1 << t[2]]
 };
 

@@ -63,7 +63,7 @@ impl<const TX: usize> schedule::Link for HostLink<TX> {
 
 /// What the status frames say of the schedule: the board's.
 pub const STATUS_VIEW: StatusView = StatusView {
-    taus: gyro_array::pipeline::tracker::LINK_TAUS,
+    taus: gyro_array::pipeline::tracker::VIEW_TAUS,
     sample_us: 1000,
 };
 

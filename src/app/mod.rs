@@ -33,7 +33,7 @@ use crate::link::port::{
 };
 use crate::link::ring::TxQueue;
 use crate::pipeline::timed::{tracking, TimedIcm};
-use crate::pipeline::tracker::{LinkNoise, NoiseTracker, Probe};
+use crate::pipeline::tracker::{NoiseTracker, NoiseView, Probe};
 use crate::pipeline::{Output, Pipeline};
 use crate::store::Store;
 
@@ -131,10 +131,10 @@ impl<const N: usize> SampleOut for Output<N> {
 /// The pipeline's noise tracker, each axis's newest estimate as a frame's
 /// noise record.
 impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseSource
-    for LinkNoise<'_, CAP, FRAMES, T>
+    for NoiseView<'_, CAP, FRAMES, T>
 {
     fn described(&self, axis: usize) -> Option<u32> {
-        LinkNoise::described(self, axis)
+        NoiseView::described(self, axis)
     }
 
     fn noise(&self, axis: usize) -> Option<Noise> {
@@ -508,10 +508,10 @@ mod tests {
             NoiseTracker::<1024, 35, 3>::new(crate::pipeline::tracker::link_config(1024)).unwrap();
         let mut bg = Background {
             tracker: &mut tracker,
-            taus: crate::pipeline::tracker::LINK_TAUS,
+            taus: crate::pipeline::tracker::VIEW_TAUS,
         };
         let view = StatusView {
-            taus: crate::pipeline::tracker::LINK_TAUS,
+            taus: crate::pipeline::tracker::VIEW_TAUS,
             sample_us: 1000,
         };
         let mut chips: [Still; 4] = core::array::from_fn(|i| Still(Rng::new(i as u64 + 1)));
@@ -670,7 +670,7 @@ mod tests {
             let mut port = RingPort::<2048>::new(Settings::default(), crate::app::BOARD_FRAME_PATH);
             let mut noise = NoiseSnapshot::default();
             let view = StatusView {
-                taus: crate::pipeline::tracker::LINK_TAUS,
+                taus: crate::pipeline::tracker::VIEW_TAUS,
                 sample_us: 1000,
             };
             let mut chips: [Still; 4] = core::array::from_fn(|i| Still(Rng::new(i as u64 + 1)));

@@ -100,7 +100,7 @@ const ICM_SPI_MAX_HZ: u32 = 24_000_000;
 const ADX_SPI_MAX_HZ: u32 = 8_000_000;
 /// σ of the link's noise estimates at τ = 2^k ms: 1, 16, 256 ms (the
 /// tracker makes their records ready as its estimates are published).
-const NOISE_TAU: [usize; 3] = tracker::LINK_TAUS;
+const NOISE_TAU: [usize; 3] = tracker::VIEW_TAUS;
 
 /// The fastest SPI clock within `max` that the prescaler (bus clock / 2ⁿ)
 /// gives exactly, so that the HAL's rounding cannot pick a faster one.

@@ -24,7 +24,7 @@ pub const fn config(lambda2: u16) -> DavarConfig {
 
 /// The τ (2ʲ samples, j = 0, 4, 8: 1, 16 and 256 ms at 1 kHz) of the link
 /// record a new tracker makes ready ([`NoiseTracker::set_view`]).
-pub const LINK_TAUS: [usize; 3] = [0, 4, 8];
+pub const VIEW_TAUS: [usize; 3] = [0, 4, 8];
 
 /// [`config`] summing the link's three τ alone (every fourth octave, a
 /// tracker with `T` = 3): what the board runs. The link's records are the
@@ -32,7 +32,7 @@ pub const LINK_TAUS: [usize; 3] = [0, 4, 8];
 /// reads are not made (some 250 instructions a sample and 3.9 KB of RAM
 /// an axis, `cargo xtask bench`).
 pub const fn link_config(lambda2: u16) -> DavarConfig {
-    config(lambda2).with_tau_octaves(LINK_TAUS[1] as u8)
+    config(lambda2).with_tau_octaves(VIEW_TAUS[1] as u8)
 }
 
 /// The three axes' hop phases. Each axis's heavy samples are the τ terms
@@ -127,7 +127,7 @@ pub struct NoiseTracker<const CAP: usize, const FRAMES: usize, const T: usize> {
     /// ring), and how many since its window started.
     held: [[u32; HELD_MEMORY]; 3],
     held_count: [u32; 3],
-    /// The link record's τ ([`LINK_TAUS`] unless set).
+    /// The link record's τ ([`VIEW_TAUS`] unless set).
     view: [usize; 3],
     /// Per axis, its newest estimate as the link sends it at `view`, and
     /// the estimate's edition (`Davar::estimate_edition`) it was made
@@ -171,7 +171,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             bridged: 0,
             held: [[0; HELD_MEMORY]; 3],
             held_count: [0; 3],
-            view: LINK_TAUS,
+            view: VIEW_TAUS,
             ready: [(0, None); 3],
         })
     }
@@ -205,7 +205,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
             core::ptr::addr_of_mut!((*p).bridged).write(0);
             core::ptr::addr_of_mut!((*p).held).write([[0; HELD_MEMORY]; 3]);
             core::ptr::addr_of_mut!((*p).held_count).write([0; 3]);
-            core::ptr::addr_of_mut!((*p).view).write(LINK_TAUS);
+            core::ptr::addr_of_mut!((*p).view).write(VIEW_TAUS);
             core::ptr::addr_of_mut!((*p).ready).write([(0, None); 3]);
             Ok(slot.assume_init_mut())
         }
@@ -365,8 +365,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseTracker<CAP, FR
     }
 
     /// The link's view of the tracker: σ at τ = 2^`taus[k]` samples.
-    pub fn at_taus(&self, taus: [usize; 3]) -> LinkNoise<'_, CAP, FRAMES, T> {
-        LinkNoise {
+    pub fn at_taus(&self, taus: [usize; 3]) -> NoiseView<'_, CAP, FRAMES, T> {
+        NoiseView {
             tracker: self,
             taus,
         }
@@ -406,7 +406,7 @@ impl<const N: usize> From<&Output<N>> for Probe {
 
 /// The tracker as the output link reads it ([`NoiseTracker::at_taus`];
 /// `link::port` makes its frames' noise record of it).
-pub struct LinkNoise<'a, const CAP: usize, const FRAMES: usize, const T: usize> {
+pub struct NoiseView<'a, const CAP: usize, const FRAMES: usize, const T: usize> {
     tracker: &'a NoiseTracker<CAP, FRAMES, T>,
     taus: [usize; 3],
 }
@@ -424,7 +424,7 @@ pub struct AxisNoise {
     pub sigma_dps: [f32; 3],
 }
 
-impl<const CAP: usize, const FRAMES: usize, const T: usize> LinkNoise<'_, CAP, FRAMES, T> {
+impl<const CAP: usize, const FRAMES: usize, const T: usize> NoiseView<'_, CAP, FRAMES, T> {
     /// Sequence number of the sample the axis's newest estimate describes
     /// (cheap: the link asks every sample).
     pub fn described(&self, axis: usize) -> Option<u32> {
@@ -645,8 +645,8 @@ mod tests {
             three.push_probe(probe);
             for a in 0..3 {
                 let (x, y) = (
-                    all.at_taus(LINK_TAUS).newest(a),
-                    three.at_taus(LINK_TAUS).newest(a),
+                    all.at_taus(VIEW_TAUS).newest(a),
+                    three.at_taus(VIEW_TAUS).newest(a),
                 );
                 assert_eq!(
                     x.map(|r| (r.seq, r.len, r.bridged, r.sigma_dps.map(f32::to_bits))),
@@ -655,7 +655,7 @@ mod tests {
                 );
                 compared += usize::from(x.is_some());
                 let (e, f) = (all.estimate(a), three.estimate(a));
-                for j in LINK_TAUS {
+                for j in VIEW_TAUS {
                     assert_eq!(
                         e.map(|e| sigma_dps(&e.step, j).to_bits()),
                         f.map(|f| sigma_dps(&f.step, j).to_bits())

@@ -37,7 +37,7 @@ pub(super) fn run_loop<const N: usize>(
     use gyro_array::link::port::{ChipTime, NoiseSnapshot, Port};
     use rtic_core::Exclusive;
     const VIEW: schedule::StatusView = schedule::StatusView {
-        taus: gyro_array::pipeline::tracker::LINK_TAUS,
+        taus: gyro_array::pipeline::tracker::VIEW_TAUS,
         sample_us: 1000,
     };
     // Every scenario's samples; a build with `BENCH_SAMPLES=N` in its
@@ -83,7 +83,7 @@ pub(super) fn run_loop<const N: usize>(
     let mut snap = NoiseSnapshot::default();
     let mut bg = schedule::Background {
         tracker: noise,
-        taus: gyro_array::pipeline::tracker::LINK_TAUS,
+        taus: gyro_array::pipeline::tracker::VIEW_TAUS,
     };
     mark::scenario();
     for n in 0..SAMPLES {
