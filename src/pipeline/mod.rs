@@ -162,8 +162,8 @@ impl<const N: usize> Output<N> {
 /// drivers, the tracker and the link), its register allocation moved with
 /// any change in fusion, by ±100 instructions a sample (`cargo xtask
 /// bench-loop`); out of line the loop's mean is also 10–30 lower.
-/// (`fuse_probed` itself stays inlinable: called alone, as in the fusion
-/// bench, out of line it cost 90 more per axis.)
+/// (`fuse_probed` itself stays inlinable, for callers that fuse alone, as
+/// the fusion bench does.)
 #[inline(never)]
 fn fuse_axis<const N: usize>(
     cal: &mut RelCal<N>,

@@ -160,12 +160,9 @@ pub fn analyse<const N: usize>(
 /// `out = blocks[g] − (a + b·m)`, `m` the per-sample median of the gyros in
 /// `peers`, `a` and `b` the least-squares fit (f64 sums: 2048 samples of
 /// up to ±2000 °/s). Where no peer read, `m` is the block's mean reference.
-/// NaN in the gyro's own block stays NaN.
-///
-/// Tried and dropped: adding a time term to the fit (`y = a + b·m + c·t`,
-/// residual keeping `c·t`) so that a drift cannot hide in `b`. Under slow
-/// sway `m` and `t` are nearly collinear over the block, the fit's error
-/// lands in `c·t`, and healthy chips failed the trend test at 0.3 Hz.
+/// NaN in the gyro's own block stays NaN. No time term: under slow sway
+/// `m` and `t` are nearly collinear over a block, and the fit's error
+/// would land in it (`docs/faults.md`, alternatives measured).
 fn against_peers<const N: usize>(
     blocks: &[[f32; BLOCK]; N],
     g: usize,

@@ -67,8 +67,7 @@ pub const LEARN_STRIDE: u32 = 2;
 /// (mod 64), y on ≡ 59 and z on ≡ 62: three different samples, so that
 /// the sample task (which learns after each frame is queued, `app`) never
 /// runs two solves at once, nor one beside a configuration read-back
-/// (`pipeline::CHECK_AT`). They also miss the E-DAVARs' heaviest samples,
-/// which mattered when those ran in the same loop and no longer do.
+/// (`pipeline::CHECK_AT`).
 pub const SOLVE_SLOTS: [u32; 3] = [6, 30, 0];
 
 use crate::algo::fusion::{median, noise_probe, AxisState, FuseError, Fused, Fusion};
@@ -281,10 +280,9 @@ impl<const N: usize> RelCal<N> {
     /// spread against the other two: x and z learn on even samples, y on
     /// odd ones; each solves at its [`SOLVE_SLOTS`], and when a chip has
     /// just warmed up x on even update counts, z on odd ones (which may
-    /// wait one update). Started together, the three learnt and solved on
-    /// the same samples: in the board's loop those samples cost 1 100 more
-    /// (learning) and 1 000 more (solving) than the others (`cargo xtask
-    /// bench`).
+    /// wait one update): no sample of the board's loop learns or solves
+    /// for all three axes (a learn costs it some 1 100 instructions, a
+    /// solve 1 000: `cargo xtask bench`).
     pub fn for_axis(cfg: CalConfig, axis: usize) -> Self {
         let mut c = Self::new(cfg);
         c.phase = (axis % LEARN_STRIDE as usize) as u8;

@@ -60,11 +60,10 @@ impl FrameDof {
     /// Fold the fourth moments of the τ0 terms `from..=to` of `ring` (a
     /// frame's) into the running covariances of q = d² (ν from them:
     /// [`Self::nu`]), on a sample of the hop of its own. Out of line, like
-    /// `refine_part`: inlined in `push`, it cost every sample ~30
-    /// instructions.
+    /// `refine_part`, so that `push`'s other samples do not carry it.
     #[inline(never)]
     pub(super) fn learn_tails<const CAP: usize>(&mut self, ring: &[i32; CAP], from: u64, to: u64) {
-        // (usize indices: a u64 loop cost twice the instructions.)
+        // (usize indices: the Cortex-M4 does u64 arithmetic in pairs.)
         let (from, count, mask) = (from as usize, (to - from) as usize + 1, CAP - 1);
         let ([mut u0, mut u1, mut u2, mut u3], [mut q1, mut q2, mut q3]) =
             ([0.0f32; 4], [0.0f32; 3]);

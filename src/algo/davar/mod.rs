@@ -19,8 +19,7 @@
 //! arrive), so placing a window anywhere in the span costs T × (blocks)
 //! integer additions, however far its edges jump. The worst sample is the
 //! hop's, and it is bounded: there is no catch-up when the window flips
-//! around a change or first fills (the old sliding design cost up to
-//! 500 000 instructions there).
+//! around a change or first fills.
 //!
 //! Sums are exact integers: |w| < 2²⁰ and m ≤ 2¹⁰ give |d| < 2³¹, d² < 2⁶²,
 //! so one term fits a u64, a 32-term block a u64 plus a 3-bit carry, and a
@@ -46,8 +45,7 @@
 //!   computed over the next three samples (a third of the τ each) and
 //!   published on the last, and the new segmentation starts on the one
 //!   after, so these estimates come one hop and 20 samples later (at
-//!   λ2 = 1024 a worst sample of about 2 000 instructions, against some
-//!   6 900 with the hop's work on one sample).
+//!   λ2 = 1024 a worst sample of about 2 000 instructions).
 //!
 //! # Reading of the paper (Tan, Wang and Zhu, 2017)
 //! - Ambiguity 8 (where t sits in its window): the estimate for t uses a
@@ -96,10 +94,9 @@ pub const BINS: usize = SEG / 2 - 1;
 
 /// A change bounds a window only if one of the LAG segmentations before put
 /// one at the same place (± one frame), or it is strong: a step stays where
-/// it is, while a one-off false alarm does not come back. (Requiring the
-/// same place exactly 4 hops earlier, which also filtered the changes a
-/// variance ramp produces, moving with the span, missed weak steps: the
-/// ramps are now told apart by a line, in `Segmentation::window`.)
+/// it is, while a one-off false alarm does not come back. (Ramps, whose
+/// changes move with the span, are told apart by a line, in
+/// `Segmentation::window`.)
 const LAG: usize = 2;
 
 /// A change whose likelihood gain exceeds STRONG × β bounds a window
@@ -583,8 +580,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 // The hop only notes the new span: the last span's window
                 // is placed and published PUBLISH_AT samples later and the
                 // new segmentation starts on the sample after, so no
-                // sample carries all three (5 650 instructions on one
-                // sample at λ2 = 1024 when they did).
+                // sample carries all three.
                 self.seg.next_first = Some(first);
                 None
             }
@@ -676,8 +672,7 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     /// One τ (2ʲ samples) of [`Davar::estimate`]: `None` before the first
     /// estimate or for j ≥ T.
     pub fn estimate_avar(&self, j: usize) -> Option<f32> {
-        // By reference: a copy of the published row (its u128 sums) cost
-        // some 170 instructions a call on the Cortex-M4.
+        // By reference: the published row is T u128 sums.
         let p = self.last.as_ref()?;
         (j < T).then(|| p.avar(j, self.cfg.tau_octaves))
     }

@@ -29,8 +29,7 @@ impl<const T: usize> Published<T> {
             Some(&acc) if terms > 0 => {
                 let inv_2m2 = f32::from_bits((127 - 1 - 2 * e as u32) << 23);
                 // (Both conversions equal `as f32`, without the library
-                // calls: 300 instructions per link frame that carries an
-                // estimate, on the Cortex-M4. A window has < 2³² terms.)
+                // calls. A window has < 2³² terms.)
                 u128_to_f32(acc) / (terms.min(u64::from(u32::MAX)) as u32) as f32 * inv_2m2
             }
             _ => 0.0,

@@ -35,8 +35,7 @@ pub(super) struct Segmentation<const FRAMES: usize> {
     /// the count of `bounds` less one, the next change to refine).
     refined: Option<(u64, usize, usize)>,
     /// The segment bounds of the segmentation being refined (or placed),
-    /// in place: copies of them cost a refinement sample some 50
-    /// instructions each at 33 bounds.
+    /// in place (never copied: 33 bounds at most).
     bounds: [u16; CELLS + 1],
     /// Frames per cell and cells.
     group: usize,
@@ -62,8 +61,7 @@ pub(super) struct Segmentation<const FRAMES: usize> {
     /// it (`marks_near`); a stale stamp from the time the block completed
     /// otherwise ([`stale`]). Whether one of the last [`LAG`]
     /// segmentations had a change within a frame of c is then one read,
-    /// where walking each segmentation's change list costs some 700
-    /// instructions on a sample whose span holds fifteen changes.
+    /// however many changes each placed.
     marks: [u16; FRAMES],
     marks_near: [u16; FRAMES],
     /// Prefix sums of x0 over the span being segmented.
@@ -151,8 +149,7 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
         let run = k.min(FRAMES - s0);
         let mut acc = 0.0f32;
         self.px[0] = 0.0;
-        // The span's frames wrap the ring at most once: two plain loops
-        // (a chained iterator cost ~1 000 more instructions at λ2 = 4096).
+        // The span's frames wrap the ring at most once: two plain loops.
         let (head, tail) = self.px[1..=k].split_at_mut(run.min(k));
         let xs = (
             x0.get(s0..s0 + run).unwrap_or(&[]),
@@ -231,8 +228,7 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
     }
     /// Part `part` (of [`REFINE_PARTS`]) of the refinement: its share of
     /// the changes, in order; `s0` is the slot of the span's first block.
-    /// Out of line: inlined in `push`, it cost every sample 33
-    /// instructions.
+    /// Out of line, so that `push`'s other samples do not carry it.
     #[inline(never)]
     pub(super) fn refine_part(&mut self, part: usize, s0: usize) {
         let (Some(prev), Some(_)) = (self.first, self.next_first) else {
@@ -356,9 +352,8 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
             core::array::from_fn(|j| if j < n_recent { self.recent[j] } else { stamp });
         let near = &self.marks_near;
         let strong = STRONG * self.beta;
-        // This hop's changes with their neighbours (l, c, r), as slices:
-        // reading the bounds one by one through checked reads cost ~250
-        // instructions with fifteen changes.
+        // This hop's changes with their neighbours (l, c, r), as slices
+        // (no checked read per bound).
         let changes = bounds.get(..=nb).unwrap_or(&[]);
         let (mut kept, mut nk) = ([0u16; CELLS + 1], 1);
         for w in changes.windows(3) {
@@ -535,9 +530,7 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
         // Widen to λ1, one frame at a time, toward the neighbour whose
         // energy is closer (in ratio) to the segment's mean. Each side's
         // gap is computed once per frame it reaches, the frames' energies
-        // walked outward over the prefix sums as slices (both sides' gaps
-        // recomputed at every step cost some 1 000 instructions more where
-        // t's segment is a few frames long).
+        // walked outward over the prefix sums as slices.
         let seg_mean = mean(s);
         let gap = |w: &[f32]| match *w {
             [a, b] => ratio_gap(b - a, seg_mean),

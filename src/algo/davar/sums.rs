@@ -194,8 +194,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Sums<CAP, FRAMES, T>
         }
     }
     /// Add every Allan term completed since the last hop to its block, per
-    /// τ in one tight loop (sliding sums in registers): ~10 instructions a
-    /// term, where doing it sample by sample cost ~60 (state reloads).
+    /// τ in one tight loop (sliding sums in registers, about 10
+    /// instructions a term on the Cortex-M4).
     /// Term k of τ = m uses samples [k, k + 2m); `next[j]` is the next term
     /// to add and `a`, `b` hold the sums of the term before it (τ > τ0:
     /// τ0's terms need no sums, [`Self::add_tau0`]).
@@ -270,10 +270,10 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Sums<CAP, FRAMES, T>
     }
     /// The terms of τ0 = 1 sample since the last hop: the squared first
     /// differences d_k = w[k + 1] − w[k], in the same pass as the lag
-    /// sums of d that ν is learnt from (`FrameDof::learn_lags`), which need the same
-    /// d. Two passes over the hop's samples cost one axis's hop some 300
-    /// instructions more on the Cortex-M4. `completed` hears of each block
-    /// whose terms are now all in (its number and slot).
+    /// sums of d that ν is learnt from (`FrameDof::learn_lags`), which
+    /// need the same d: one pass over the hop's samples. `completed`
+    /// hears of each block whose terms are now all in (its number and
+    /// slot).
     pub(super) fn add_tau0(&mut self, mut completed: impl FnMut(u64, usize)) {
         let Some(last) = self.n.checked_sub(2) else {
             return; // no complete term yet
@@ -374,9 +374,8 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize> Sums<CAP, FRAMES, T>
         let mask = CAP - 1;
         let mut left = count;
         // In runs where none of the three samples wraps around the ring:
-        // plain slices, so the loop walks three pointers (about 12
-        // instructions a term on the Cortex-M4 instead of 22 with a mask
-        // per read).
+        // plain slices, so the loop walks three pointers with no mask per
+        // read (about 12 instructions a term on the Cortex-M4).
         while left > 0 {
             let (i0, i1, i2) = (
                 i & mask,

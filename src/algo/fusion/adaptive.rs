@@ -90,8 +90,7 @@ pub(super) fn adaptive_const<const N: usize>(
     } else if active != 0 {
         // A frozen chip votes but is not fused: the gate is over the
         // voters, the constant `m`, so it is taken here, folded, and passed
-        // on (with the general mask it cost 270 more per 3-axis sample in
-        // the 12 samples after a chip sticks).
+        // on, not through the general mask.
         let all_warm = active & !st.warm == 0;
         let v = floored(st, c);
         let g = first_gate(c, y, &v, m, m.count_ones(), all_warm);
@@ -294,14 +293,13 @@ pub(super) fn adaptive_active<const N: usize>(
         update_and_fuse(c, st, y, active, active, warm, med, &v, &w, out)
     } else if N < 5 && fast_fuse {
         // A gyro gated out of a constant set, with fewer than five: inlined
-        // too (a call cost 47 more per 3-axis sample with N = 4, where the
-        // bench's spiking gyro is gated out of 5 % of the axes).
+        // too (the bench's spiking gyro is gated out of 5 % of the axes).
         update_and_fuse(c, st, y, active, good, warm, med, &v, &w, out)
     } else if fast_fuse && N == 5 && one_out && active == 31 {
         // One gyro gated out of the board's healthy sets (all five on z,
-        // the four ICM-42688-Ps on x and y), out of line: a chip that
-        // glitches on all three axes at once cost 740 more per 3-axis
-        // sample through the general path.
+        // the four ICM-42688-Ps on x and y), out of line, not through the
+        // general path: a chip that glitches on all three axes at once
+        // takes it on every axis.
         without_one::<N, 31>(c, st, y, good, warm, med, &v, &w, out)
     } else if fast_fuse && N == 5 && one_out && active == 15 {
         without_one::<N, 15>(c, st, y, good, warm, med, &v, &w, out)
