@@ -229,12 +229,14 @@ fn tau_index(octaves: u8, e: usize, count: usize) -> Option<usize> {
 /// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
 /// needs them; 0 is enough for the segmented one).
 /// RAM ≈ 4·CAP + FRAMES·(17·T + 8) + 68·STFT bytes.
+// (In this order, the small state first and the ring last: every field the
+// schedule touches each sample lies within the Cortex-M4's 4 KB load
+// offset of the struct's base, so none needs its address built.)
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize = FRAMES>
 {
     cfg: DavarConfig,
-    /// The samples and the exact sums of their Allan terms.
-    sums: Sums<CAP, FRAMES, T>,
     /// Sample of the 32-sample hop on which the hop's work is done (1..=31).
     hop_phase: u8,
     /// Frames in the span (λ2 rounded down) and the shortest window.
@@ -256,6 +258,8 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     centred: Centred<FRAMES, STFT>,
     /// The segmented placement's state.
     seg: Segmentation<FRAMES>,
+    /// The samples and the exact sums of their Allan terms.
+    sums: Sums<CAP, FRAMES, T>,
 }
 
 impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>

@@ -17,6 +17,7 @@ use super::{
 /// Optimal partitioning of one span (Segmented placement), computed one
 /// row per sample over the hop after the span completed.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub(super) struct Segmentation<const FRAMES: usize> {
     /// Frames in the span (λ2 rounded down), the shortest window in
     /// frames, and λ1 in samples.

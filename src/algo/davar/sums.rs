@@ -11,10 +11,10 @@ use crate::algo::math::u64_to_f32;
 /// τ), the τ0 blocks' energies and lag sums that the segmentation and ν
 /// read, and the whole-block sums of the last published window.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub(super) struct Sums<const CAP: usize, const FRAMES: usize, const T: usize> {
     /// Octaves between consecutive τ.
     octaves: u8,
-    ring: [i32; CAP],
     /// Samples pushed since the start or a reset.
     pub(super) n: u64,
     /// Slot of block n/32 (kept incrementally: a u64 `%` by a FRAMES that
@@ -34,13 +34,6 @@ pub(super) struct Sums<const CAP: usize, const FRAMES: usize, const T: usize> {
     /// Σ of the samples so far (wrapping: a difference of two of them is
     /// exact), while the first terms are being gathered.
     prefix: i32,
-    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
-    /// and the prefix a window ending in this block needs.
-    lo: [[u64; FRAMES]; T],
-    hi: [[u8; FRAMES]; T],
-    pre: [[u64; FRAMES]; T],
-    /// τ0 block sums as f32, once complete (the segmentation's input).
-    pub(super) x0: [f32; FRAMES],
     /// Σd², Σd·d₋₁, Σd·d₋₂ of the τ0 differences d since ν last took
     /// them (exact), and the last two d.
     pub(super) lag: [i64; 3],
@@ -52,6 +45,16 @@ pub(super) struct Sums<const CAP: usize, const FRAMES: usize, const T: usize> {
     win_f0: Option<u64>,
     win_q: [u64; T],
     win_sum: [u128; T],
+    /// Per block (terms starting in it) and τ: Σd² as low word + carry,
+    /// and the prefix a window ending in this block needs.
+    lo: [[u64; FRAMES]; T],
+    hi: [[u8; FRAMES]; T],
+    pre: [[u64; FRAMES]; T],
+    /// τ0 block sums as f32, once complete (the segmentation's input).
+    pub(super) x0: [f32; FRAMES],
+    /// The last `CAP` samples (sample i at `i & (CAP − 1)`), last: see
+    /// `Davar`'s field order.
+    ring: [i32; CAP],
 }
 
 /// Slot of block `block`.
