@@ -3,6 +3,7 @@
 //! E-DAVAR surface, fusion replay, recordings and their summaries.
 
 pub mod analyse;
+pub mod antenna;
 pub mod assess;
 pub mod bulk;
 pub mod dataflash;

@@ -1,5 +1,5 @@
 //! `gyro pointing`: a recording through the reference stabilisation loop
-//! (`gyro_array::algo::pointing`), per axis: the pointing error the stream
+//! (`crate::antenna`), per axis: the pointing error the stream
 //! leaves at the beam, against the ideal gyro's, and its split.
 //!
 //! The frames reach the antenna at the end of their own transmission
@@ -29,7 +29,7 @@
 
 use std::path::PathBuf;
 
-use gyro_array::algo::pointing::{fit_line, stats, ErrorStats, Loop, LoopParams};
+use crate::antenna::{fit_line, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_array::link::msg::Frame;
 use gyro_array::link::port::{RingPort, PREDICT_K};

@@ -7,7 +7,6 @@ pub mod fusion;
 pub mod kalman;
 pub mod math;
 pub mod mixture;
-pub mod pointing;
 pub mod predict;
 pub mod qualify;
 pub mod static_cal;

@@ -3,7 +3,7 @@
 //!
 //! The fused rate describes an instant some 2 ms before the antenna gets
 //! it (the chips' filters, the alignment, the link); on a vehicle's motion
-//! every millisecond of it is pointing error (`algo::pointing`). The
+//! every millisecond of it is pointing error (`gyro_tool::antenna`, the host's reference antenna loop). The
 //! predictor fits a straight line, by least squares, to the last `K`
 //! samples of each axis (one sample period apart) and reads it `h` after
 //! the newest, each axis at its own horizon (their delays differ). It is

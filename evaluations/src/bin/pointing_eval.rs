@@ -1,5 +1,5 @@
 //! What the antenna sees: the board's stream through the reference
-//! stabilisation loop (`gyro_array::algo::pointing`), per vehicle profile,
+//! stabilisation loop (`gyro_tool::antenna`), per vehicle profile,
 //! fault-free and with faults, side by side behind the same loop:
 //!
 //! - the ideal gyro: the true rate, sampled when each frame reaches the
@@ -37,10 +37,10 @@
 use std::path::PathBuf;
 
 use clap::Parser;
-use gyro_array::algo::pointing::{self, stats, ErrorStats, Loop, LoopParams};
 use gyro_array::algo::predict::Predictor;
 use gyro_sim::timing::{ClockParams, Tone, Vibration};
 use gyro_sim::{Fault, RateProfile};
+use gyro_tool::antenna::{self as pointing, stats, ErrorStats, Loop, LoopParams};
 use host_tests::latency::read_to_antenna_us;
 use host_tests::timed_board::{self, Timing, DELAY_US, N};
 
