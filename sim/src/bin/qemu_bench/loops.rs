@@ -97,10 +97,8 @@ pub(super) fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         (3900, 1, Fault::None),
     ]);
     d_plan[4..].copy_from_slice(&C_FAULTS);
-    // A fourth, also untuned, tried at the end of the session that added
-    // C: it broke the 10 000 at 10 221 (gyro 1 spiking on a fifth of the
-    // samples under a 100 deg/s turn: fusion's consensus gate, since made
-    // cheaper).
+    // Untuned, as every scenario after B: gyro 1 spiking on a fifth of the
+    // samples under a 100 deg/s turn works fusion's consensus gate.
     ok &= bench_loop_on(
         t,
         ipt,
@@ -153,12 +151,9 @@ pub(super) fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
-    // A sixth, untuned, tried at the end of the session that added E: it
-    // broke the 10 000 (10 035, a dozen samples after two chips stuck at
-    // once under a slow, wide sway: fusion's regate and general path
-    // while the stuck chips were not yet flagged; and 10 083 where the
-    // placement of an E-DAVAR compared every change with its history
-    // after two chips power-cycled).
+    // Two chips stuck at once under a slow, wide sway work fusion's regate
+    // and general path until they are flagged; two chips power-cycled
+    // give an E-DAVAR span many changes to place.
     ok &= bench_loop_on(
         t,
         ipt,
@@ -269,15 +264,12 @@ pub(super) fn bench_loops(t: &Ticks, ipt: f32) -> bool {
         ],
         false,
     );
-    // A ninth, untuned, added in the session after G and H: a steady
-    // 100 deg/s turn on x under a 2.5 Hz sway up to 80 deg/s; a chip
-    // spiking past the rate limit, the ADXRS453 garbling half its frames,
-    // two chips power-cycled together and then stuck together beside a
-    // third with bit errors, the ADXRS453 silent for 2 s, chips saturated,
-    // stuck and spiking at once. It first read 10 107: the E-DAVAR
-    // placement sample after the two stuck chips came back (fifteen
-    // changes in a span, each looked up in two lists of the last
-    // segmentations' changes), since made a read of a per-block stamp.
+    // A steady 100 deg/s turn on x under a 2.5 Hz sway up to 80 deg/s; a
+    // chip spiking past the rate limit, the ADXRS453 garbling half its
+    // frames, two chips power-cycled together and then stuck together
+    // beside a third with bit errors, the ADXRS453 silent for 2 s, chips
+    // saturated, stuck and spiking at once. The E-DAVAR's placement after
+    // the two stuck chips come back meets fifteen changes in a span.
     ok &= bench_loop_on(
         t,
         ipt,
