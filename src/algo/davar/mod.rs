@@ -229,11 +229,7 @@ fn tau_index(octaves: u8, e: usize, count: usize) -> Option<usize> {
 /// `STFT` frames of spectrum (FRAMES for an adaptive centred window, which
 /// needs them; 0 is enough for the segmented one).
 /// RAM ≈ 4·CAP + FRAMES·(17·T + 8) + 68·STFT bytes.
-// (In this order, the small state first and the ring last: every field the
-// schedule touches each sample lies within the Cortex-M4's 4 KB load
-// offset of the struct's base, so none needs its address built.)
 #[derive(Clone, Debug)]
-#[repr(C)]
 pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize = FRAMES>
 {
     cfg: DavarConfig,

@@ -10,6 +10,9 @@ use crate::algo::math::u64_to_f32;
 /// Allan term's square added to its 32-term block (`FRAMES` blocks, `T`
 /// τ), the τ0 blocks' energies and lag sums that the segmentation and ν
 /// read, and the whole-block sums of the last published window.
+// (In this order, the small state first and the ring last, so that what
+// the hop's schedule touches lies within the Cortex-M4's 4 KB load offset
+// of the struct's base: no address to build for each field.)
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub(super) struct Sums<const CAP: usize, const FRAMES: usize, const T: usize> {
