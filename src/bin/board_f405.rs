@@ -533,8 +533,14 @@ mod app {
                 Settings::default()
             }
         };
+        // The frame path at the clock the core runs (16 MHz on the fallback
+        // oscillator, where its instructions take 625 µs, not 60).
+        let path = FramePath {
+            core_hz,
+            ..BOARD_FRAME_PATH
+        };
         let Some(port) = cortex_m::singleton!(
-            : Port<TxProducer<TX_BYTES>> = Port::with_queue(TX_QUEUE.stream_producer(), settings, gyro_array::app::BOARD_FRAME_PATH)
+            : Port<TxProducer<TX_BYTES>> = Port::with_queue(TX_QUEUE.stream_producer(), settings, path)
         ) else {
             give_up("link port taken twice")
         };
@@ -542,10 +548,6 @@ mod app {
         // The delay compensation predicts each frame's rates to its last byte
         // at the rate the link runs.
         port.set_timing(baud, 1_000_000 / FS_HZ);
-        port.set_frame_path(FramePath {
-            core_hz,
-            ..BOARD_FRAME_PATH
-        });
         let failed = start_array(
             [&mut g0, &mut g1, &mut g2, &mut g3],
             &mut g4,

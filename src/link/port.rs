@@ -387,14 +387,6 @@ impl<Q: TxQueue> Port<Q> {
         self.retime();
     }
 
-    /// The frame path, when it changes (the board's fallback on its
-    /// internal oscillator runs at 16 MHz, where the path's instructions
-    /// take 625 µs, not 60).
-    pub fn set_frame_path(&mut self, path: FramePath) {
-        self.loop_us = path.us();
-        self.retime();
-    }
-
     fn retime(&mut self) {
         self.horizon = match self.settings.compensation {
             Compensation::Off => None,

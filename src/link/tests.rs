@@ -834,28 +834,35 @@ fn compensated_frames_state_the_instant_their_rates_are_predicted_to() {
 fn the_horizon_follows_the_core_clock() {
     use super::msg::Compensation;
     use super::port::FramePath;
-    let mut port = RingPort::<512>::new(
-        Settings {
-            compensation: Compensation::ToFrame,
-            ..Settings::default()
-        },
-        crate::app::BOARD_FRAME_PATH,
+    let horizon = |path: FramePath| {
+        let mut port = RingPort::<512>::new(
+            Settings {
+                compensation: Compensation::ToFrame,
+                ..Settings::default()
+            },
+            path,
+        );
+        port.set_timing(super::BAUD, 1000);
+        port.horizon_us().unwrap()
+    };
+    let board = crate::app::BOARD_FRAME_PATH;
+    let at_168 = horizon(board);
+    assert_eq!(
+        horizon(FramePath {
+            core_hz: 168_000_000,
+            ..board
+        }),
+        at_168
     );
-    port.set_timing(super::BAUD, 1000);
-    let at_168 = port.horizon_us().unwrap();
-    let path = crate::app::BOARD_FRAME_PATH;
-    port.set_frame_path(FramePath {
-        core_hz: 168_000_000,
-        ..path
-    });
-    assert_eq!(port.horizon_us().unwrap(), at_168);
     // The internal oscillator alone: the frame path's 10 000 instructions
     // take 625 µs, not 60.
-    port.set_frame_path(FramePath {
-        core_hz: 16_000_000,
-        ..path
-    });
-    assert_eq!(port.horizon_us().unwrap(), at_168 + 625 - 60);
+    assert_eq!(
+        horizon(FramePath {
+            core_hz: 16_000_000,
+            ..board
+        }),
+        at_168 + 625 - 60
+    );
 }
 
 #[test]
