@@ -238,9 +238,6 @@ pub struct Davar<const CAP: usize, const FRAMES: usize, const T: usize, const ST
     /// Frames in the span (λ2 rounded down) and the shortest window.
     span: usize,
     min_frames: usize,
-    /// The last placement's score and threshold.
-    score: f32,
-    threshold: f32,
     /// ν of a frame's τ0 energy, learnt from the data.
     dof: FrameDof,
     /// Threshold per frame count (Centred: K frames in the window;
@@ -350,8 +347,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
             hop_phase: 1,
             span,
             min_frames,
-            score: 0.0,
-            threshold: 0.0,
             dof: FrameDof::new(),
             thresholds: [0.0; FRAMES],
             last: None,
@@ -371,7 +366,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 *t = q;
             }
         }
-        d.threshold = d.threshold_for(span);
         Ok(d)
     }
 
@@ -380,8 +374,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
     pub fn reset(&mut self) {
         self.sums.reset();
         self.centred.reset(self.cfg.l_init);
-        self.score = 0.0;
-        self.threshold = self.threshold_for(self.span);
         self.dof = FrameDof::new();
         self.last = None;
         self.edition = self.edition.wrapping_add(1);
@@ -509,7 +501,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                         self.seg.next_row();
                     }
                     let (lo, hi) = self.seg.window(prev, self.sums.slot_of(prev));
-                    (self.score, self.threshold) = self.seg.score();
                     self.seg.placed = Some((prev, lo, hi));
                 }
             } else if segmented && (PUBLISH_AT..START_AT).contains(&rel) {
@@ -570,9 +561,6 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
                 let (lo, hi) =
                     self.centred
                         .place(first, s0, centred_adaptive, &self.cfg, &self.thresholds);
-                if let Some((score, threshold)) = self.centred.score {
-                    (self.score, self.threshold) = (score, threshold);
-                }
                 self.centred.pending = Some((first, lo, hi));
                 done
             }
@@ -633,13 +621,22 @@ impl<const CAP: usize, const FRAMES: usize, const T: usize, const STFT: usize>
         for (j, v) in avar.iter_mut().enumerate() {
             *v = p.avar(j, self.cfg.tau_octaves);
         }
+        let (score, threshold) = match self.cfg.placement {
+            Placement::Segmented => self.seg.score(),
+            // (Before the entropy rule has scored a window, or where it
+            // never does: no score, against the whole span's threshold.)
+            Placement::Centred => self
+                .centred
+                .score
+                .unwrap_or((0.0, self.threshold_for(self.span))),
+        };
         Some(DavarStep {
             t: p.t,
             start: p.start,
             end: p.end,
             len: len as u16,
-            score: self.score,
-            threshold: self.threshold,
+            score,
+            threshold,
             avar,
             tau_octaves: self.cfg.tau_octaves,
         })
