@@ -126,6 +126,16 @@ const HINGE_MAX_GAIN: f32 = 6.0;
 /// energies' slope has z² above this (and runs with the change).
 const SLOPE_Z2: f32 = 9.0;
 
+/// A lone change farther from t than the hinge test looks, which joined
+/// lines fit as well as the step, is a ramp's bend where t's segment's
+/// slope runs its way with z² above this (`Segmentation::window`). Weak
+/// evidence on purpose: the window it gives is symmetric about t and
+/// stops at the change, so a step misread costs a shorter window, never
+/// the step inside it. On a flat level a z² above 1 the change's way
+/// comes one time in six; on a ×2 ramp over λ2 at 128/2048 a segment of
+/// two thirds of λ2 read 2.5–4 (`davar-eval --sweep`).
+const FAR_Z2: f32 = 1.0;
+
 /// Most cells of the segmentation (frames are grouped beyond this, so a
 /// hop's work does not grow with λ2).
 const CELLS: usize = 32;

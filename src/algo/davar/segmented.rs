@@ -10,7 +10,7 @@ use super::dof::NU_WHITE;
 use super::shape::{hinge_over_step_from, line_over_step_from, line_sums, ratio_gap, slope_z2};
 use super::sums::ahead;
 use super::{
-    cell_group, stale, CELLS, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, REFINE_PARTS, SEG,
+    cell_group, stale, CELLS, FAR_Z2, GRADUAL, HINGE_MAX_GAIN, HINGE_SLACK, LAG, REFINE_PARTS, SEG,
     SLOPE_Z2, STRONG,
 };
 
@@ -430,8 +430,10 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
         } else {
             None
         };
-        // Whether the hinge test is what read a change as gradual.
+        // Whether the hinge test is what read a change as gradual; whether
+        // it read a change far from t so (the window then stops there).
         let hinged = Cell::new(false);
+        let inside = Cell::new(false);
         let gradual = |i: usize| {
             let (l, c, r) = (b(i - 1), b(i), b(i + 1));
             // t's own segment rising (or falling) toward or away from the
@@ -480,14 +482,26 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
             // gradual takes its experiment from 0.70 to 0.77–0.88. And not
             // strong (the second-order form holds near equal levels and
             // understates a large step's edge).
+            // Farther from t, where t's segment slopes the change's way,
+            // the same test reads a ramp whose bend the step stands for:
+            // there the segment, one-sided about t, would take the slope's
+            // bias, and the window is symmetric about t and stops at the
+            // change instead (unbiased on the ramp; on a step misread only
+            // shorter, with no step inside).
+            let near = c.abs_diff(ft) * 4 <= (3 * min_frames).max(k / 2).min(k);
+            let sloping =
+                || seg_slope.is_some_and(|(z2, up)| z2 > FAR_Z2 && up == (mean(i) > mean(i - 1)));
             if nb == 2
                 && r - l >= 2 * min_frames
-                && c.abs_diff(ft) * 4 <= (3 * min_frames).max(k / 2).min(k)
+                && (near || sloping())
                 && gain_of(&mut step) < HINGE_MAX_GAIN * beta
                 && hinge_over_step_from(px, nu, (l, c, r), sums) > -HINGE_SLACK * beta
             {
-                hinged.set(true);
-                return true;
+                if near {
+                    hinged.set(true);
+                    return true;
+                }
+                inside.set(true);
             }
             let mut h = min_frames.max(1);
             while c > l + h && c + h < r {
@@ -500,9 +514,11 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
             false
         };
         let r0 = s - usize::from(s > 0 && gradual(s));
+        let left_inside = inside.replace(false);
         let r1 = s + usize::from(s + 1 < nb && gradual(s + 1));
+        let right_inside = inside.get();
         let run = s > 0 && s + 1 < nb && dir(s - 1) == dir(s);
-        if run || r0 < s || r1 > s {
+        if run || r0 < s || r1 > s || left_inside || right_inside {
             let (mut r0, mut r1) = (r0, r1);
             if run {
                 let d = dir(s);
@@ -521,6 +537,12 @@ impl<const FRAMES: usize> Segmentation<FRAMES> {
                 .min(run_hi.saturating_sub(ft + odd));
             if hinged.get() {
                 h = h.min(hinge_half(self.min_frames, k));
+            }
+            if left_inside && r0 == s {
+                h = h.min(ft.saturating_sub(b(s)));
+            }
+            if right_inside && r1 == s {
+                h = h.min(b(s + 1).saturating_sub(ft + odd));
             }
             if 2 * h + odd < self.min_frames {
                 h = self.min_frames.saturating_sub(odd).div_ceil(2).min(ft);

@@ -1058,3 +1058,40 @@ fn slope_z2_matches_an_f64_reference() {
     assert_eq!(slope_z2(&[0.0, 1.0, 2.0, 3.0, 4.0], 21.6, (1, 4)), None);
     assert_eq!(slope_z2(&[0.0; 6], 21.6, (0, 5)), None);
 }
+
+/// Fraction of the hops inside a variance ramp at λ 128/2048 (σ² 1 → 2
+/// over λ2 from sample 6000; seven τ octaves, as `davar-eval --sweep`
+/// runs λ1 = 128) whose window is one-sided: its centre more than two
+/// frames from t.
+fn one_sided_on_a_ramp_over_lambda2() -> f64 {
+    let (mut off, mut hops) = (0u32, 0u32);
+    for seed in 1..=8 {
+        let w = white(500 + seed, 12000, |i| {
+            (1.0 + ((i as f32 - 6000.0) / 2048.0).clamp(0.0, 1.0)).sqrt()
+        });
+        let mut d = Davar::<2048, 67, 7>::new(DavarConfig::segmented(128, 2048)).unwrap();
+        for &x in &w {
+            if d.push(x).unwrap().is_some() {
+                let e = d.estimate().unwrap();
+                if (6000..6000 + 2048).contains(&e.t) {
+                    hops += 1;
+                    off += u32::from(((e.start + e.end) / 2).abs_diff(e.t) > 64);
+                }
+            }
+        }
+    }
+    off as f64 / hops as f64
+}
+
+/// Where λ1 is short against λ2 the segmentation may place the bend of a
+/// ramp over λ2 farther from t than the hinge test looks. Joined lines
+/// fitting it, and t's segment sloping the change's way, make it a bend:
+/// the window is symmetric about t and stops at the change, rather than
+/// the segment one-sided about t.
+#[test]
+fn a_far_bend_keeps_windows_centred_where_lambda1_is_short() {
+    let f = one_sided_on_a_ramp_over_lambda2();
+    eprintln!("one-sided on a ramp over 2048 at λ 128/2048: {f:.3}");
+    // 0.049 measured; 0.068 with the segment one-sided about t.
+    assert!(f < 0.058, "{f}");
+}
