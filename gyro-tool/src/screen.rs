@@ -16,7 +16,15 @@
 //!   scale is a step; the log moves when the typical difference itself
 //!   is ten times the white noise's.
 //!
-//! The longest stretch with neither is offered for the analysis
+//! - **Spikes.** A sample over twenty times the white noise (or the
+//!   quantisation step, where that is larger) from both its neighbours,
+//!   the same way: a bit error or a shock, not noise (a Gaussian sample
+//!   that far out comes once in 10⁸⁸). Named with its place and value, and
+//!   left out of the block means, so that it does not read as a step.
+//! - **A constant column.** Every sample one value: a stuck or saturated
+//!   sensor, or a setting logged as a rate; it has no noise to analyse.
+//!
+//! The longest stretch with none of these is offered for the analysis
 //! (`gyro allan --static`).
 
 /// What the check found in one column.
@@ -35,9 +43,23 @@ pub struct Screen {
     /// The log moves: neighbouring blocks differ typically by over ten
     /// times what white noise alone gives.
     pub moving: bool,
-    /// The longest stretch without a step or motion, [start, end) samples.
+    /// The longest stretch without a step, motion or spike, [start, end)
+    /// samples.
     pub quiet: (usize, usize),
+    /// Spikes: (sample index, value), the first [`SPIKES_LISTED`].
+    pub spikes: Vec<(usize, f64)>,
+    /// How many spikes in all.
+    pub spike_count: usize,
+    /// Every sample (after any start-up run) reads this value.
+    pub constant: Option<f64>,
 }
+
+/// Spikes listed by place; the rest are counted.
+pub const SPIKES_LISTED: usize = 10;
+
+/// A spike is this many times the white noise (or the quantisation step)
+/// from both neighbours.
+pub const SPIKE_SIGMAS: f64 = 20.0;
 
 impl Screen {
     /// Nothing found: the log can be analysed as a static record.
@@ -78,15 +100,53 @@ pub fn screen(rate: &[f64], tau0: f64) -> Screen {
     }
     let body = &rate[s.startup..];
     let m = body.len();
+    if body.iter().all(|&v| v == body[0]) {
+        s.constant = Some(body[0]);
+        s.quiet = (s.startup, n);
+        return s;
+    }
     let block = ((1.0 / tau0).round() as usize).clamp(10, (m / 50).max(10));
     s.block = block;
-    let means: Vec<f64> = body
+    let mut d: Vec<f64> = body.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    // The quantisation step: the smallest change there is.
+    let q = d
+        .iter()
+        .copied()
+        .filter(|&v| v > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    // Median |Δ| of white noise σ: σ√2 · 0.6745.
+    let sigma = median(&mut d) / (0.6745 * 2f64.sqrt());
+    // Spikes: far from both neighbours, the same way. The block means
+    // take the mean of the neighbours in their place.
+    let far = SPIKE_SIGMAS * sigma.max(q);
+    let mut spiked: Vec<usize> = Vec::new();
+    for i in 1..m.saturating_sub(1) {
+        let (a, b) = (body[i] - body[i - 1], body[i] - body[i + 1]);
+        if a.abs() > far && b.abs() > far && (a > 0.0) == (b > 0.0) {
+            spiked.push(i);
+        }
+    }
+    s.spike_count = spiked.len();
+    s.spikes = spiked
+        .iter()
+        .take(SPIKES_LISTED)
+        .map(|&i| (s.startup + i, body[i]))
+        .collect();
+    let cleaned: Vec<f64>;
+    let smooth = if spiked.is_empty() {
+        body
+    } else {
+        let mut c = body.to_vec();
+        for &i in &spiked {
+            c[i] = 0.5 * (body[i - 1] + body[i + 1]);
+        }
+        cleaned = c;
+        &cleaned
+    };
+    let means: Vec<f64> = smooth
         .chunks_exact(block)
         .map(|c| c.iter().sum::<f64>() / block as f64)
         .collect();
-    let mut d: Vec<f64> = body.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    // Median |Δ| of white noise σ: σ√2 · 0.6745.
-    let sigma = median(&mut d) / (0.6745 * 2f64.sqrt());
     let white = sigma * (2.0 / block as f64).sqrt();
     let diffs: Vec<f64> = means.windows(2).map(|w| w[1] - w[0]).collect();
     let mut abs: Vec<f64> = diffs.iter().map(|v| v.abs()).collect();
@@ -107,6 +167,16 @@ pub fn screen(rate: &[f64], tau0: f64) -> Screen {
             }
         }
     }
+    // A block with a spike is cut from both neighbours (after the steps:
+    // it is not one).
+    for &i in &spiked {
+        let k = i / block;
+        for j in [k.wrapping_sub(1), k] {
+            if let Some(c) = cut.get_mut(j) {
+                *c = true;
+            }
+        }
+    }
     // The longest run of blocks with no cut between them.
     let (mut best, mut start) = ((0usize, 0usize), 0usize);
     for k in 0..=diffs.len() {
@@ -121,8 +191,14 @@ pub fn screen(rate: &[f64], tau0: f64) -> Screen {
     s.quiet = if diffs.is_empty() {
         (s.startup, n)
     } else {
-        // The last block's tail belongs to the stretch that ends there.
-        let end = if best.1 == means.len() { m } else { b1 };
+        // The last block's tail belongs to the stretch that ends there,
+        // unless a spike is in it.
+        let tail_spike = spiked.iter().any(|&i| i >= means.len() * block);
+        let end = if best.1 == means.len() && !tail_spike {
+            m
+        } else {
+            b1
+        };
         (s.startup + b0, s.startup + end)
     };
     s
@@ -171,6 +247,48 @@ mod tests {
         assert!((s.steps[0].0 as i64 - 40_000).abs() <= 1000, "{s:?}");
         assert!(!s.is_static());
         assert_eq!(s.quiet, (0, 40_000));
+    }
+
+    /// A bit error's sample, far from both neighbours, is a spike: named
+    /// with its place, left out of the quiet stretch, and no step.
+    #[test]
+    fn a_spike_is_named_and_is_not_a_step() {
+        let mut y = noise(60_000, 0.05, 6);
+        y[30_500] = 1.0e6;
+        y[45_001] = -40.0;
+        let s = screen(&y, 0.001);
+        assert_eq!(s.spike_count, 2, "{s:?}");
+        assert_eq!(s.spikes, vec![(30_500, 1.0e6), (45_001, -40.0)]);
+        assert!(s.steps.is_empty() && !s.moving, "{s:?}");
+        assert!(s.is_static());
+        // Blocks of 1 000: the longest stretch without a spike's block.
+        assert_eq!(s.quiet, (0, 30_000));
+        // In the tail after the last whole block: the stretch ends before it.
+        let mut y = noise(60_500, 0.05, 9);
+        y[60_400] = 5.0;
+        let s = screen(&y, 0.001);
+        assert_eq!(s.spikes, vec![(60_400, 5.0)]);
+        assert_eq!(s.quiet, (0, 60_000));
+    }
+
+    /// Quantised noise (most steps 0 or one LSB) has no spikes: the
+    /// threshold is twenty LSB where the noise's median step is smaller.
+    #[test]
+    fn quantised_noise_has_no_spikes() {
+        let y: Vec<f64> = noise(50_000, 0.05, 7)
+            .iter()
+            .map(|v| (v / 0.1).round() * 0.1)
+            .collect();
+        let s = screen(&y, 0.01);
+        assert_eq!(s.spike_count, 0, "{s:?}");
+        assert!(s.constant.is_none());
+    }
+
+    /// A column of one value is constant, start-up run or not.
+    #[test]
+    fn a_stuck_column_is_constant() {
+        assert_eq!(screen(&[2.5; 1000], 0.001).constant, Some(2.5));
+        assert_eq!(screen(&noise(1000, 0.05, 8), 0.001).constant, None);
     }
 
     /// A car's yaw: a few °/s at 0.3 Hz over the noise.

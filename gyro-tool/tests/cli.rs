@@ -122,6 +122,64 @@ fn a_log_is_checked_before_it_is_believed() {
     assert!(out.contains("14763 samples at tau0"), "{out}");
 }
 
+/// A stuck sensor (every sample one value) is named; its deviations are
+/// 0, not the rounding a running sum leaves, and no noise model is fitted
+/// to it; a single spike is named as one (not a step) and `--static`
+/// analyses the stretch without it.
+#[test]
+fn a_stuck_column_reads_zero_without_a_model_and_a_spike_is_named() {
+    let stuck = temp("stuck.csv", &format!("z\n{}", "1.5\n".repeat(3000)));
+    let run = |args: &[&str]| {
+        let o = gyro().args(args).arg(&stuck).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(o.status.code(), Some(0), "{err}");
+        assert!(err.contains("every sample reads 1.5"), "{err}");
+        String::from_utf8_lossy(&o.stdout).to_string()
+    };
+    let out = run(&["allan", "--tau0", "0.001", "--format", "csv"]);
+    // Exactly 0 (a running sum of 1.5 · 0.001 leaves some 1e-14), and no
+    // noise model (one fitted to that rounding called a rate random walk
+    // visible).
+    let zero = out.lines().filter(|l| l.starts_with("z,oadev,")).count();
+    assert!(zero > 8, "{out}");
+    assert!(
+        out.lines()
+            .filter(|l| l.starts_with("z,oadev,"))
+            .all(|l| l.split(',').nth(4) == Some("0e0")),
+        "{out}"
+    );
+    let out = run(&["allan", "--tau0", "0.001", "--fit"]);
+    assert!(!out.contains("visible"), "{out}");
+    let (code, err) = fails(
+        &["allan", "--tau0", "0.001", "--kalibr", "/dev/null"],
+        &temp("stuck2.csv", &format!("z\n{}", "1.5\n".repeat(3000))),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no gyro fit"), "{err}");
+    let mut text = String::from("z\n");
+    for (i, line) in noise(20_000).lines().skip(1).enumerate() {
+        text.push_str(if i == 12_345 { "1e6\n" } else { line });
+        if i != 12_345 {
+            text.push('\n');
+        }
+    }
+    let p = temp("spike.csv", &text);
+    let o = gyro()
+        .args(["allan", "--tau0", "0.001", "--static"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("1 spike(s)"), "{err}");
+    assert!(err.contains("1.0000e6 at 12.345 s"), "{err}");
+    assert!(!err.contains("step"), "{err}");
+    // The stretch before the spike's block (samples 0 to 12 000 at the
+    // 1 000-sample blocks; the longer one after it is 7 000).
+    assert!(out.contains("12000 samples at tau0"), "{out}");
+}
+
 /// `gyro check` on the committed demo recording cut inside its last frame,
 /// and with one frame sent twice: each named, where both passed.
 #[test]

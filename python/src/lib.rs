@@ -473,6 +473,11 @@ fn terms_of(
     // As `gyro allan`: a chip's start-up value is never fitted as a rate.
     if data_type == "freq" && rate.is_finite() && rate > 0.0 {
         let sc = gyro_tool::screen::screen(y, 1.0 / rate);
+        if let Some(v) = sc.constant {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "every sample reads {v}: a constant has no noise to fit (a stuck or saturated sensor?)"
+            )));
+        }
         if sc.no_data_later > 0 {
             return Err(pyo3::exceptions::PyValueError::new_err(format!(
                 "the start-up value {} recurs at {} samples after the start: a chip that stopped converting",

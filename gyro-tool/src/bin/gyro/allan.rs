@@ -269,6 +269,9 @@ pub fn run(a: Args) -> Res<bool> {
     // chip's start-up value is left out; steps and motion are said, and
     // with --static only the longest quiet stretch is analysed.
     let mut used: Vec<&[f64]> = Vec::new();
+    // A constant column is analysed as its offset taken out.
+    let zeros = vec![0.0; s.rates.iter().map(Vec::len).max().unwrap_or(0)];
+    let mut stuck = vec![false; s.rates.len()];
     // With gaps, each column on its time grid, the missing samples NaN.
     let filled: Vec<Vec<f64>> = if tolerant {
         (0..s.rates.len()).map(|c| s.with_gaps(c)).collect()
@@ -280,6 +283,16 @@ pub fn run(a: Args) -> Res<bool> {
             break;
         }
         let sc = screen::screen(rate, s.tau0);
+        if let Some(v) = sc.constant {
+            // Its deviations are 0, exactly: from the offset taken out,
+            // not the rounding that a running sum of the value leaves.
+            eprintln!(
+                "gyro: {name}: every sample reads {v}: a constant has no noise (a stuck or saturated sensor, or a setting logged as a rate?); its deviations are 0 and it has no noise model"
+            );
+            stuck[used.len()] = true;
+            used.push(&zeros[..rate.len().min(zeros.len())]);
+            continue;
+        }
         if sc.no_data_later > 0 {
             return Err(format!(
                 "{name}: the start-up value {} recurs at {} samples after the start: a chip that stopped converting; cut the log where it did",
@@ -296,6 +309,26 @@ pub fn run(a: Args) -> Res<bool> {
             );
         }
         let (a, b) = sc.quiet;
+        if sc.spike_count > 0 {
+            let at: Vec<String> = sc
+                .spikes
+                .iter()
+                .map(|(i, v)| format!("{v:.4e} at {} s", short(*i as f64 * s.tau0)))
+                .collect();
+            let more = sc.spike_count - sc.spikes.len();
+            eprintln!(
+                "gyro: {name}: {} spike(s) (a sample over {} times the noise from both neighbours: a bit error or a shock): {}{}; {}",
+                sc.spike_count,
+                screen::SPIKE_SIGMAS,
+                at.join(", "),
+                if more > 0 { format!(" and {more} more") } else { String::new() },
+                if only_static {
+                    format!("analysed without them from {} to {} s (--static)", short(a as f64 * s.tau0), short(b as f64 * s.tau0))
+                } else {
+                    format!("the deviations include them; --static analyses only the longest stretch without ({} to {} s)", short(a as f64 * s.tau0), short(b as f64 * s.tau0))
+                }
+            );
+        }
         if !sc.is_static() {
             let what = if sc.moving {
                 "it moves (neighbouring 1 s means differ by over ten times the noise)".to_string()
@@ -362,7 +395,10 @@ pub fn run(a: Args) -> Res<bool> {
     // The noise model per column, on its OADEV at 8 points per decade.
     let mut fits = Vec::new();
     if want_fit || kalibr.is_some() {
-        for (name, x) in s.names.iter().zip(&phases) {
+        for ((name, x), &stuck) in s.names.iter().zip(&phases).zip(&stuck) {
+            if stuck {
+                continue;
+            }
             match fit::fit_phase(x, s.tau0) {
                 Ok(t) => fits.push((name.clone(), t)),
                 Err(e @ fit::FitError::TooFewPoints) => eprintln!("gyro: {name}: {e}"),
