@@ -197,6 +197,12 @@ struct Text {
     /// A first line of data held back by the header's detection.
     first: Option<(usize, Vec<u8>)>,
     field: Vec<u8>,
+    /// A row was read (rows of empty fields before it are padding).
+    seen: bool,
+    /// The first row of empty fields since the last row: a sample none of
+    /// whose columns has a value where another row follows (the table
+    /// reader's rule), padding if none does.
+    empty_at: Option<usize>,
 }
 
 const BLOCK: usize = 1 << 22;
@@ -232,6 +238,8 @@ impl Text {
             lines: Vec::new(),
             first: None,
             field: Vec::new(),
+            seen: false,
+            empty_at: None,
         };
         let (ln, first) = loop {
             match t.next_line()? {
@@ -362,9 +370,22 @@ impl Text {
                 tcol: self.tcol,
                 slot: &slot,
             };
-            let Some(t) = row.parse(line, ln, &mut vals, &mut self.field)? else {
-                continue;
+            let t = match row.parse(line, ln, &mut vals, &mut self.field)? {
+                Parsed::NoRecord => continue,
+                Parsed::Empty => {
+                    if self.seen && self.tcol.is_none() && self.empty_at.is_none() {
+                        self.empty_at = Some(ln);
+                    }
+                    continue;
+                }
+                Parsed::Row(t) => t,
             };
+            if let Some(at) = self.empty_at.take() {
+                // A sample with no value between two that have them: not
+                // dropped (every later sample would move a period earlier).
+                return Err(TableError::EmptyRow(self.path.clone(), at));
+            }
+            self.seen = true;
             for (o, v) in out.iter_mut().zip(&vals) {
                 o.push(*v);
             }
@@ -376,6 +397,16 @@ impl Text {
         }
         Ok(rows)
     }
+}
+
+/// What one line of a text log is.
+enum Parsed {
+    /// A blank line, a comment, blanks only.
+    NoRecord,
+    /// Separators with nothing between them.
+    Empty,
+    /// A row: its stamp, if the log has a time column.
+    Row(Option<f64>),
 }
 
 /// How a text log's rows are read.
@@ -392,22 +423,29 @@ struct Row<'a> {
 
 impl Row<'_> {
     /// The wanted columns of `line` into `vals` (in °/s), and its stamp;
-    /// None where the line is no record (blank, a comment, empty fields
-    /// only).
+    /// or that the line is no record (blank, a comment, blanks only), or
+    /// a row of empty fields between separators.
     fn parse(
         &self,
         line: &[u8],
         ln: usize,
         vals: &mut [f64],
         field: &mut Vec<u8>,
-    ) -> Result<Option<Option<f64>>, TableError> {
+    ) -> Result<Parsed, TableError> {
         let l = line.trim_ascii();
         let fields = || {
             l.split(|&b| b == self.delimiter)
                 .map(|f| unquote_bytes(f.trim_ascii()))
         };
-        if l.is_empty() || l.starts_with(b"#") || fields().all(<[u8]>::is_empty) {
-            return Ok(None);
+        if l.is_empty() || l.starts_with(b"#") {
+            return Ok(Parsed::NoRecord);
+        }
+        if fields().all(<[u8]>::is_empty) {
+            return Ok(if self.blanks || fields().count() < 2 {
+                Parsed::NoRecord
+            } else {
+                Parsed::Empty
+            });
         }
         let (mut nf, mut t) = (0, None);
         for f in fields() {
@@ -434,7 +472,7 @@ impl Row<'_> {
                 self.header.len(),
             ));
         }
-        Ok(Some(t))
+        Ok(Parsed::Row(t))
     }
 
     fn number(

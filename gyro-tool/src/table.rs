@@ -45,6 +45,10 @@ pub enum TableError {
     NoTau0,
     /// A line could not be read as a record (file, line, why).
     Record(PathBuf, usize, String),
+    /// A row of empty fields between rows with values, in a log without a
+    /// time column (file, line): a sample missing, which its place alone
+    /// cannot skip.
+    EmptyRow(PathBuf, usize),
 }
 
 impl fmt::Display for TableError {
@@ -53,6 +57,11 @@ impl fmt::Display for TableError {
             TableError::Io(p, e) => write!(f, "{}: {e}", p.display()),
             TableError::NoHeader(p) => write!(f, "{}: no header line", p.display()),
             TableError::Record(p, l, e) => write!(f, "{}:{l}: {e}", p.display()),
+            TableError::EmptyRow(p, l) => write!(
+                f,
+                "{}:{l}: a row with no value in any column between rows with values: a sample missing, which a log without a time column cannot skip (every later sample would move a period earlier); give the time column, or fill the row",
+                p.display()
+            ),
             TableError::NoColumn(p, c, have) => {
                 write!(
                     f,
@@ -264,7 +273,7 @@ pub fn read_layout(
         .from_reader(open()?);
     // A record that cannot be read (not UTF-8, an I/O error) is an error
     // with its line, never skipped.
-    let mut lines = reader.records().filter_map(|r| {
+    let lines = reader.records().filter_map(|r| {
         let rec = match r {
             Ok(rec) => rec,
             Err(e) => {
@@ -285,9 +294,12 @@ pub fn read_layout(
             })
             .filter(|f| comma || !f.is_empty())
             .collect();
-        // A line of blanks (or of empty fields only) is no record.
-        (!f.iter().all(String::is_empty)).then_some(Ok((ln, f)))
+        // A line of blanks is no record; separators with nothing between
+        // them are a row with no value (kept: see below).
+        (!f.iter().all(String::is_empty) || f.len() > 1).then_some(Ok((ln, f)))
     });
+    // Rows of empty fields before the header are padding.
+    let mut lines = lines.skip_while(|r| matches!(r, Ok((_, f)) if f.iter().all(String::is_empty)));
     let (first_ln, first) = lines.next().ok_or_else(|| TableError::NoHeader(p()))??;
     // A first line of numbers is data: the file has no header.
     let headerless = layout
@@ -317,8 +329,30 @@ pub fn read_layout(
     };
     let mut rates = vec![Vec::new(); cols.len()];
     let mut times: Vec<(usize, f64)> = Vec::new();
+    // Rows of empty fields since the last row with a value: with a time
+    // column no record (the stamps show the gap); without one a sample
+    // none of whose columns has a value, where another row follows
+    // (dropped, every later sample would move a period earlier), and a
+    // spreadsheet's padding at the end of the file where none does.
+    let (mut empties, mut seen): (Vec<usize>, bool) = (Vec::new(), false);
     for line in lines {
         let (ln, f) = line?;
+        if f.iter().all(String::is_empty) {
+            if tcol.is_none() && seen {
+                empties.push(ln);
+            }
+            continue;
+        }
+        if let Some(&ln) = empties.first() {
+            if !missing {
+                return Err(TableError::EmptyRow(p(), ln));
+            }
+            for r in rates.iter_mut() {
+                r.extend(std::iter::repeat_n(f64::NAN, empties.len()));
+            }
+            empties.clear();
+        }
+        seen = true;
         if f.len() != header.len() {
             return Err(TableError::Fields(p(), ln, f.len(), header.len()));
         }

@@ -180,6 +180,135 @@ fn a_stuck_column_reads_zero_without_a_model_and_a_spike_is_named() {
     assert!(out.contains("12000 samples at tau0"), "{out}");
 }
 
+/// A row of empty fields between rows with values, in a log without a
+/// time column, is a missing sample: refused with its line by the table
+/// and the streamed reader alike (dropped, every later sample moved a
+/// period earlier), a chip that did not answer in `gyro replay`; the
+/// same rows at the end of the file are a spreadsheet's padding.
+#[test]
+fn an_empty_row_is_a_missing_sample_not_dropped() {
+    let mut rows = String::from("a,b\n");
+    for i in 0..400 {
+        rows.push_str(&format!("{},{}\n", i % 7, i % 5));
+        if i == 200 {
+            rows.push_str(",\n");
+        }
+    }
+    let mid = temp("mid.csv", &rows);
+    for stream in [false, true] {
+        let args: &[&str] = if stream {
+            &["allan", "--tau0", "1", "--stream"]
+        } else {
+            &["allan", "--tau0", "1"]
+        };
+        let (code, err) = fails(args, &mid);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("mid.csv:203: a row with no value"), "{err}");
+    }
+    let padded = temp(
+        "padded.csv",
+        &format!("a,b\n,\n{}\n,\n,\n", "1,2\n3,4\n5,7"),
+    );
+    let o = gyro()
+        .args(["allan", "--tau0", "1"])
+        .arg(&padded)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains("3 samples"));
+    let svg = std::env::temp_dir().join(format!("gyro-cli-{}/e.svg", std::process::id()));
+    let o = gyro()
+        .args([
+            "replay",
+            "--tau0",
+            "1",
+            "--no-align",
+            "--svg",
+            svg.to_str().unwrap(),
+        ])
+        .arg(&mid)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("401 samples"), "{out}");
+}
+
+/// A reference beyond any rate is refused (its errors read inf); where no
+/// sample has both a fused rate and the reference, no RMS is printed.
+#[test]
+fn a_replays_reference_is_checked() {
+    let svg = std::env::temp_dir().join(format!("gyro-cli-{}/t.svg", std::process::id()));
+    let mut huge = String::from("t,a,b\n");
+    let mut none = String::from("t,a,b\n");
+    for i in 0..3000 {
+        huge.push_str(&format!(
+            "{},{}.5,{}.25\n",
+            if i == 7 { 1e300 } else { 0.0 },
+            i % 3,
+            i % 5
+        ));
+        none.push_str(&format!(",{}.5,{}.25\n", i % 3, i % 5));
+    }
+    let (code, err) = fails(
+        &[
+            "replay",
+            "--tau0",
+            "0.001",
+            "--truth",
+            "t",
+            "--svg",
+            svg.to_str().unwrap(),
+        ],
+        &temp("huge_truth.csv", &huge),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("reference t, sample 7"), "{err}");
+    let o = gyro()
+        .args([
+            "replay",
+            "--tau0",
+            "0.001",
+            "--truth",
+            "t",
+            "--svg",
+            svg.to_str().unwrap(),
+        ])
+        .arg(temp("no_truth.csv", &none))
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        !out.contains("RMS -0") && !out.contains("RMS 0.0000"),
+        "{out}"
+    );
+    assert!(
+        out.contains("fused: no fused sample with the reference"),
+        "{out}"
+    );
+    assert!(
+        out.contains("error RMS while in: no sample with the reference"),
+        "{out}"
+    );
+    // One chip of three ever answering: said, never a table of NaN.
+    let mut one = String::from("a,b,c\n");
+    for i in 0..3000 {
+        one.push_str(&format!("{}.5,,\n", i % 3));
+    }
+    let o = gyro()
+        .args(["replay", "--tau0", "0.001", "--svg", svg.to_str().unwrap()])
+        .arg(temp("one_chip.csv", &one))
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(!out.contains("NaN") && !out.contains("-0.000"), "{out}");
+    assert!(out.contains("never answered"), "{out}");
+}
+
 /// `gyro check` on the committed demo recording cut inside its last frame,
 /// and with one frame sent twice: each named, where both passed.
 #[test]

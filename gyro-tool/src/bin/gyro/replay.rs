@@ -62,6 +62,17 @@ pub fn run(a: Args) -> Res<bool> {
         }),
         None => None,
     };
+    if let Some((t, col)) = truth.zip(truth_col.as_ref()) {
+        // Beyond any gyro's rate, the errors against it would read inf.
+        if let Some(i) = col.iter().position(|v| v.abs() > replay::RATE_MAX_DPS) {
+            return Err(format!(
+                "reference {t}, sample {i}: {:e} deg/s is beyond +-{:e} deg/s, no rate (check the unit)",
+                col[i],
+                replay::RATE_MAX_DPS
+            )
+            .into());
+        }
+    }
     if !no_align {
         let lags = assess::lags(&[&s.rates[..]]);
         if lags.iter().any(|&l| l != 0) {
@@ -81,30 +92,43 @@ pub fn run(a: Args) -> Res<bool> {
         short(s.tau0)
     );
     for (c, name) in s.names.iter().enumerate() {
+        // Against the reference where it has a value (an empty cell:
+        // none), while the chip is in the fusion.
         let err = truth_col.as_ref().map(|t| {
-            let e: Vec<f64> = (0..n)
-                .filter(|&i| r.weights[i][c] > 0.0)
+            rms(&(0..n)
+                .filter(|&i| r.weights[i][c] > 0.0 && t[i].is_finite())
                 .map(|i| s.rates[c][i] - t[i])
-                .collect();
-            (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt()
+                .collect::<Vec<f64>>())
         });
         println!(
             "  {name}: answered {} samples, in the fusion {}{}",
             r.offered[c],
             r.used[c],
-            err.map_or(String::new(), |e| format!(", error RMS while in {e:.4}"))
+            match err {
+                None => String::new(),
+                Some(None) if r.used[c] == 0 => String::new(),
+                Some(None) => ", error RMS while in: no sample with the reference".to_string(),
+                Some(Some(e)) => format!(", error RMS while in {e:.4}"),
+            }
         );
     }
     if let Some(t) = &truth_col {
         let e: Vec<f64> = (0..n)
-            .filter(|&i| r.fused[i].is_finite())
+            .filter(|&i| r.fused[i].is_finite() && t[i].is_finite())
             .map(|i| r.fused[i] - t[i])
             .collect();
-        let rms = (e.iter().map(|e| e * e).sum::<f64>() / e.len().max(1) as f64).sqrt();
-        let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
-        println!("  fused: error RMS {rms:.4}, max {max:.4}");
+        match rms(&e) {
+            Some(rms) => {
+                let max = e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+                println!(
+                    "  fused: error RMS {rms:.4}, max {max:.4} (over {} samples)",
+                    e.len()
+                );
+            }
+            None => println!("  fused: no fused sample with the reference"),
+        }
     }
-    print_assessment(&assess::assess(&s.rates, &r, s.tau0)?, &s.names);
+    print_assessment(&assess::assess(&s.rates, &r, s.tau0)?, &s.names, &r.offered);
     // The fused gyro's noise, free of the motion: the probe's Allan
     // deviation (and, with a reference, the fused error's beside it).
     let (len, probe) = replay::longest_run_adev(&r.probe, s.tau0);
@@ -164,8 +188,16 @@ pub fn run(a: Args) -> Res<bool> {
 
 /// The truth-free measure: leave-one-out, the weights' spread and, on a
 /// static log, the Allan deviations' ratios.
-fn print_assessment(a: &assess::Assessment, names: &[String]) {
-    if !a.loo.is_empty() {
+fn print_assessment(a: &assess::Assessment, names: &[String], offered: &[usize]) {
+    // Leave-one-out needs samples where the chip left out and two others
+    // answered together: none, and every figure would read NaN.
+    let judged = a.loo.iter().any(|l| l.fused.is_finite());
+    if !a.loo.is_empty() && !judged {
+        println!(
+            "  leave-one-out: no sample where the chip left out and another answered together"
+        );
+    }
+    if judged {
         println!(
             "  leave-one-out (RMS against the chip left out, means out): the fusion of the others / the whole fusion's weights over the others / plain mean / fixed inverse-variance:"
         );
@@ -189,6 +221,10 @@ fn print_assessment(a: &assess::Assessment, names: &[String]) {
     }
     println!("  weights (mean, sd over the samples a chip answered; samples at weight 0):");
     for (c, w) in a.spread.iter().enumerate() {
+        if offered.get(c) == Some(&0) {
+            println!("    {:<10} never answered", names[c]);
+            continue;
+        }
         println!(
             "    {:<10} {:.3} ± {:.3}   {}",
             names[c], w.mean, w.sd, w.zero
@@ -209,4 +245,9 @@ fn print_assessment(a: &assess::Assessment, names: &[String]) {
     } else {
         println!("  not static (the chips' mean moves more than their noise): no Allan ratios");
     }
+}
+
+/// The root mean square of `e`; None when it is empty.
+fn rms(e: &[f64]) -> Option<f64> {
+    (!e.is_empty()).then(|| (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt())
 }
