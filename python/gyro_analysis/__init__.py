@@ -98,9 +98,21 @@ __all__ = [
 TERMS = ("Q", "N", "B", "K", "R")
 
 
+def _real(data):
+    """``data`` as a float64 array, or a TypeError where it is not real
+    numbers: NumPy would drop a complex array's imaginary part without a
+    word, and take None as one NaN."""
+    if data is None:
+        raise TypeError("data is None, not samples")
+    a = _np.asarray(data)
+    if a.dtype.kind == "c":
+        raise TypeError("data must be real numbers, not complex: take .real or abs() as you mean")
+    return _np.ascontiguousarray(a, dtype=_np.float64)
+
+
 def _series(data):
     """``data`` as a contiguous float64 vector, or a ValueError."""
-    a = _np.ascontiguousarray(data, dtype=_np.float64)
+    a = _real(data)
     if a.ndim != 1:
         raise ValueError(
             f"data must be one-dimensional (two-dimensional for the deviations: one series per column), not of shape {a.shape}"
@@ -120,7 +132,7 @@ def _wrap(name, what):
     native = getattr(_native, name)
 
     def f(data, rate=1.0, data_type="phase", taus=None):
-        a = _np.asarray(data)
+        a = _real(data)
         if a.ndim == 2:
             # One series per column (an (N, 3) gyro log): the same taus
             # and term counts for each, devs and errs one column each.
@@ -187,9 +199,11 @@ def gradev(data, rate=1.0, data_type="phase", taus=None, ci=0.9, noisetype="wp")
     of whose 2m rates is missing. Returns (taus, devs, [lo, hi], ns), the
     bounds at confidence ``ci`` from the simple EDF for ``noisetype`` (wp,
     fp, wf, ff, rf)."""
-    a = _np.ascontiguousarray(data, dtype=_np.float64)
+    a = _real(data)
     if a.ndim != 1:
         raise ValueError(f"data must be one-dimensional, not of shape {a.shape}")
+    if a.size < 2:
+        raise ValueError("too few samples for this tau")
     return _native.gradev(a, float(rate), data_type, _taus(taus), float(ci), noisetype)
 
 
@@ -197,7 +211,7 @@ def frequency2phase(freqdata, rate):
     """Phase from frequency (rate) samples, as allantools' ``frequency2phase``:
     the mean taken out, integrated at 1 / rate, a 0 in front (N + 1 points).
     NaN samples are left out of the mean and make every later point NaN."""
-    y = _np.asarray(freqdata, dtype=_np.float64)
+    y = _real(freqdata)
     if y.ndim != 1:
         raise ValueError(f"data must be one-dimensional, not of shape {y.shape}")
     if not (_np.isfinite(rate) and rate > 0):
@@ -208,7 +222,7 @@ def frequency2phase(freqdata, rate):
 def phase2frequency(phase, rate):
     """Frequency (rate) from phase, as allantools' ``phase2frequency``:
     successive differences times the rate (N − 1 points)."""
-    x = _np.asarray(phase, dtype=_np.float64)
+    x = _real(phase)
     if x.ndim != 1:
         raise ValueError(f"data must be one-dimensional, not of shape {x.shape}")
     if not (_np.isfinite(rate) and rate > 0):
@@ -289,7 +303,28 @@ def noise_fit(data, rate=1.0, data_type="freq", model_taus=None):
     """
     import json
 
-    t = json.loads(_native.noise_fit(_series(data), float(rate), data_type, _taus(model_taus)))
+    y = _series(data)
+    if data_type == "freq" and _np.isfinite(rate) and rate > 0 and _np.all(_np.isfinite(y)):
+        # As ``gyro allan`` says it: a log that moves, steps or spikes is
+        # not a noise record, and its fit says so only through chi2.
+        s = screen(y, rate)
+        if s["spike_count"] or not s["static"]:
+            import warnings
+
+            what = []
+            if s["spike_count"]:
+                what.append(f"{s['spike_count']} spike(s), the first at sample {s['spikes'][0][0]}")
+            if s["moving"]:
+                what.append("motion")
+            if s["steps"]:
+                what.append(f"{len(s['steps'])} step(s), the first at sample {s['steps'][0][0]}")
+            a, b = s["quiet"]
+            warnings.warn(
+                f"not a static noise record ({', '.join(what)}): the fit mixes them in; "
+                f"the longest stretch without is samples {a} to {b} (screen()['quiet'])",
+                stacklevel=2,
+            )
+    t = json.loads(_native.noise_fit(y, float(rate), data_type, _taus(model_taus)))
     model = ("model_taus", "model_adev") if model_taus is not None else ()
     return _fit_dict(t, model)
 
@@ -408,7 +443,10 @@ def screen(data, rate=1.0):
     left out by :func:`noise_fit`) and ``startup_value``; ``no_data_later``
     (that value later in the log); ``steps`` (``[index, size]`` pairs);
     ``moving``; ``quiet`` (the longest stretch without a step or motion,
-    ``[start, end)``); ``block`` (samples a block); ``static``.
+    ``[start, end)``); ``block`` (samples a block); ``spikes`` (``[index,
+    value]`` pairs of samples over twenty times the noise from both
+    neighbours, the first ten) and ``spike_count``; ``constant`` (the one
+    value of a column that has no other, else None); ``static``.
     """
     import json
 
@@ -436,7 +474,7 @@ def kalibr_yaml(data, rate=1.0, data_type="freq", topic="/imu0", accel=None):
     """
 
     def axes(a, what):
-        arr = _np.asarray(a, dtype=_np.float64)
+        arr = _real(a)
         if arr.ndim == 1:
             return [_series(arr)]
         if arr.ndim == 2:

@@ -12,6 +12,8 @@ import sys
 import threading
 import time
 
+import warnings
+
 import numpy as np
 import pytest
 import yaml
@@ -265,9 +267,30 @@ def test_ctrl_c_stops_a_long_surface():
         (lambda: ga.replay(np.zeros((100, 1))), ValueError, "2 to 8 chip columns, got 1"),
         (lambda: ga.replay(np.zeros((100, 9))), ValueError, "2 to 8 chip columns, got 9"),
         (lambda: ga.read_recording(HERE / "no-such.glk"), OSError, "no-such.glk"),
+        (lambda: ga.oadev(np.ones(300) + 1j, rate=1.0), TypeError, "not complex"),
+        (lambda: ga.deviation(np.ones(300) * 1j, rate=1.0), TypeError, "not complex"),
+        (lambda: ga.frequency2phase(np.ones(300) + 1j, 1.0), TypeError, "not complex"),
+        (lambda: ga.kalibr_yaml(np.ones((300, 3)) + 1j), TypeError, "not complex"),
+        (lambda: ga.gradev(None), TypeError, "None"),
+        (lambda: ga.gradev([1.0]), ValueError, "too few samples"),
+        (lambda: ga.noise_fit(np.full(3000, 1.5), rate=100.0), ValueError, "every sample reads 1.5"),
     ],
 )
 def test_errors_name_the_problem(call, error, message):
     with pytest.raises(error) as e:
         call()
     assert message in str(e.value)
+
+
+def test_a_fit_on_a_log_that_is_not_a_noise_record_warns():
+    """A spike (a bit error) in a static record: the fit warns, naming it
+    and the stretch without it, as ``gyro allan`` does; a clean record
+    does not."""
+    rng = np.random.default_rng(3)
+    y = rng.normal(0.0, 0.1, 50_000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ga.noise_fit(y, rate=100.0)
+    y[25_000] = 1e6
+    with pytest.warns(UserWarning, match="1 spike.*sample 25000"):
+        ga.noise_fit(y, rate=100.0)
