@@ -238,6 +238,23 @@ fn an_empty_row_is_a_missing_sample_not_dropped() {
     assert!(out.contains("401 samples"), "{out}");
 }
 
+/// An emulated log too short for any analysis is refused, not written.
+#[test]
+fn an_emulated_log_of_no_samples_is_an_error() {
+    let out = std::env::temp_dir().join(format!("gyro-cli-{}/none.csv", std::process::id()));
+    let o = gyro()
+        .args(["emulate", "--hz", "1e-9", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("0 samples; the analyses need at least 3"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// A reference beyond any rate is refused (its errors read inf); where no
 /// sample has both a fused rate and the reference, no RMS is printed.
 #[test]

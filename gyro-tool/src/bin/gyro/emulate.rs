@@ -70,6 +70,13 @@ pub fn run(a: Args) -> Res<bool> {
         p.rrw_deg_h_rt_h = k;
     }
     let n = (hours * 3600.0 * hz).round() as u64;
+    if n < 3 {
+        // Fewer than any deviation needs: no file, rather than one that
+        // every analysis refuses.
+        return Err(
+            format!("{hours} h at {hz} Hz is {n} samples; the analyses need at least 3").into(),
+        );
+    }
     let dt = (1.0 / hz) as f32;
     let mut rng = Rng::new(seed);
     let mut axis = AxisNoise::default();
