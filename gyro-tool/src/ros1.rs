@@ -45,11 +45,60 @@ fn decode(d: &[u8]) -> Option<(i64, [f64; 3])> {
     Some((ns, [f64_at(w)?, f64_at(w + 8)?, f64_at(w + 16)?]))
 }
 
+/// The index position the bag header states (ROS bag format 2.0: the
+/// magic line, then the header record: its length, then fields of a
+/// length and `name=value`, `index_pos` a u64); None where there is no
+/// such header.
+fn index_pos(path: &Path) -> std::io::Result<Option<u64>> {
+    use std::io::Read;
+    const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
+    let mut head = Vec::new();
+    std::fs::File::open(path)?
+        .take(MAGIC.len() as u64 + 4 + 4096)
+        .read_to_end(&mut head)?;
+    let Some(rest) = head.strip_prefix(MAGIC) else {
+        return Ok(None);
+    };
+    let u32_at = |b: &[u8], o: usize| {
+        b.get(o..o + 4)
+            .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]) as usize)
+    };
+    let Some(header) = u32_at(rest, 0).and_then(|n| rest.get(4..4 + n)) else {
+        return Ok(None);
+    };
+    let mut at = 0;
+    while let Some(n) = u32_at(header, at) {
+        let Some(field) = header.get(at + 4..at + 4 + n) else {
+            break;
+        };
+        if let Some(v) = field.strip_prefix(b"index_pos=") {
+            return Ok(<[u8; 8]>::try_from(v).ok().map(u64::from_le_bytes));
+        }
+        at += 4 + n;
+    }
+    Ok(None)
+}
+
 /// Read the gyro `columns` (every axis of the largest IMU topic when empty)
 /// of the ROS 1 bag at `path`.
 pub fn read(path: &Path, columns: &[String], grid: bool) -> Result<Series, TableError> {
     let p = || path.to_path_buf();
     let bad = |e: &dyn std::fmt::Display| TableError::Record(p(), 0, format!("ROS bag: {e}"));
+    // `rosbag` 0.6.3 slices its chunk section up to the header's index
+    // position without checking it against the file (a bag cut short, as a
+    // recorder killed mid-write leaves it, panicked there): checked here.
+    let len = std::fs::metadata(path)
+        .map_err(|e| TableError::Io(p(), e))?
+        .len();
+    match index_pos(path).map_err(|e| TableError::Io(p(), e))? {
+        Some(at) if at <= len => {}
+        Some(at) => {
+            return Err(bad(&format!(
+                "cut short: its index is at byte {at}, the file has {len} (`rosbag reindex` rebuilds it from the chunks)"
+            )))
+        }
+        None => return Err(bad(&"no bag header with an index position (not a ROS 1 bag 2.0)")),
+    }
     let bag = RosBag::new(path).map_err(|e| TableError::Io(p(), e))?;
     // Connection id → topic, for the IMU connections.
     let mut imu_conns = std::collections::HashMap::new();

@@ -238,6 +238,21 @@ fn an_empty_row_is_a_missing_sample_not_dropped() {
     assert!(out.contains("401 samples"), "{out}");
 }
 
+/// A ROS 1 bag cut short (a recorder killed mid-write) is an error that
+/// says so; the `rosbag` crate panicked on it.
+#[test]
+fn a_ros1_bag_cut_short_is_refused() {
+    let bag = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/vectors/ros1/imu.bag");
+    let bytes = std::fs::read(bag).unwrap();
+    let dir = std::env::temp_dir().join(format!("gyro-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cut = dir.join("cut.bag");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let (code, err) = fails(&["allan", "--topic", "/imu/data"], &cut);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("cut short"), "{err}");
+}
+
 /// An emulated log too short for any analysis is refused, not written.
 #[test]
 fn an_emulated_log_of_no_samples_is_an_error() {
