@@ -27,6 +27,14 @@ fn fails(args: &[&str], file: &std::path::Path) -> (i32, String) {
     (o.status.code().unwrap_or(-1), err)
 }
 
+/// Standard output and error of `gyro args file`, which must succeed.
+fn succeeds(args: &[&str], file: &std::path::Path) -> (String, String) {
+    let o = gyro().args(args).arg(file).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+    (String::from_utf8_lossy(&o.stdout).to_string(), err)
+}
+
 fn noise(n: usize) -> String {
     let mut s = String::from("z\n");
     let mut x: u64 = 1;
@@ -106,15 +114,10 @@ fn a_log_is_checked_before_it_is_believed() {
         };
         text.push_str(&format!("{v}\n"));
     }
-    let p = temp("startup.csv", &text);
-    let o = gyro()
-        .args(["allan", "--tau0", "0.001", "--static"])
-        .arg(&p)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(o.status.code(), Some(0), "{err}");
+    let (out, err) = succeeds(
+        &["allan", "--tau0", "0.001", "--static"],
+        &temp("startup.csv", &text),
+    );
     assert!(err.contains("first 32 samples read -250"), "{err}");
     assert!(err.contains("NOT a static log: 1 step(s)"), "{err}");
     assert!(err.contains("analysed alone"), "{err}");
@@ -163,15 +166,10 @@ fn a_stuck_column_reads_zero_without_a_model_and_a_spike_is_named() {
             text.push('\n');
         }
     }
-    let p = temp("spike.csv", &text);
-    let o = gyro()
-        .args(["allan", "--tau0", "0.001", "--static"])
-        .arg(&p)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    let out = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(o.status.code(), Some(0), "{err}");
+    let (out, err) = succeeds(
+        &["allan", "--tau0", "0.001", "--static"],
+        &temp("spike.csv", &text),
+    );
     assert!(err.contains("1 spike(s)"), "{err}");
     assert!(err.contains("1.0000e6 at 12.345 s"), "{err}");
     assert!(!err.contains("step"), "{err}");
@@ -286,34 +284,19 @@ fn a_replays_reference_is_checked() {
         ));
         none.push_str(&format!(",{}.5,{}.25\n", i % 3, i % 5));
     }
-    let (code, err) = fails(
-        &[
-            "replay",
-            "--tau0",
-            "0.001",
-            "--truth",
-            "t",
-            "--svg",
-            svg.to_str().unwrap(),
-        ],
-        &temp("huge_truth.csv", &huge),
-    );
+    let args = [
+        "replay",
+        "--tau0",
+        "0.001",
+        "--truth",
+        "t",
+        "--svg",
+        svg.to_str().unwrap(),
+    ];
+    let (code, err) = fails(&args, &temp("huge_truth.csv", &huge));
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("reference t, sample 7"), "{err}");
-    let o = gyro()
-        .args([
-            "replay",
-            "--tau0",
-            "0.001",
-            "--truth",
-            "t",
-            "--svg",
-            svg.to_str().unwrap(),
-        ])
-        .arg(temp("no_truth.csv", &none))
-        .output()
-        .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout);
+    let (out, _) = succeeds(&args, &temp("no_truth.csv", &none));
     assert!(
         !out.contains("RMS -0") && !out.contains("RMS 0.0000"),
         "{out}"
