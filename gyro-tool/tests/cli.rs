@@ -322,6 +322,7 @@ fn a_replays_reference_is_checked() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(!out.contains("NaN") && !out.contains("-0.000"), "{out}");
     assert!(out.contains("never answered"), "{out}");
+    assert!(!out.contains("not static"), "{out}");
 }
 
 /// `gyro check` on the committed demo recording cut inside its last frame,

@@ -242,8 +242,14 @@ fn print_assessment(a: &assess::Assessment, names: &[String], offered: &[usize])
                 p.m, p.fused_over_mean, p.probe_over_fused
             );
         }
-    } else {
+    } else if judged {
         println!("  not static (the chips' mean moves more than their noise): no Allan ratios");
+    } else {
+        // The static test compares the motion with the chips' noise, which
+        // only chips answering together show.
+        println!(
+            "  static or not, untold (no samples where chips answered together): no Allan ratios"
+        );
     }
 }
 
