@@ -269,8 +269,7 @@ pub fn run(a: Args) -> Res<bool> {
     // chip's start-up value is left out; steps and motion are said, and
     // with --static only the longest quiet stretch is analysed.
     let mut used: Vec<&[f64]> = Vec::new();
-    // A constant column is analysed as its offset taken out.
-    let zeros = vec![0.0; s.rates.iter().map(Vec::len).max().unwrap_or(0)];
+    // The constant columns: their phase is their offset taken out.
     let mut stuck = vec![false; s.rates.len()];
     // With gaps, each column on its time grid, the missing samples NaN.
     let filled: Vec<Vec<f64>> = if tolerant {
@@ -284,13 +283,11 @@ pub fn run(a: Args) -> Res<bool> {
         }
         let sc = screen::screen(rate, s.tau0);
         if let Some(v) = sc.constant {
-            // Its deviations are 0, exactly: from the offset taken out,
-            // not the rounding that a running sum of the value leaves.
             eprintln!(
                 "gyro: {name}: every sample reads {v}: a constant has no noise (a stuck or saturated sensor, or a setting logged as a rate?); its deviations are 0 and it has no noise model"
             );
             stuck[used.len()] = true;
-            used.push(&zeros[..rate.len().min(zeros.len())]);
+            used.push(rate);
             continue;
         }
         if sc.no_data_later > 0 {
@@ -309,6 +306,11 @@ pub fn run(a: Args) -> Res<bool> {
             );
         }
         let (a, b) = sc.quiet;
+        let stretch = format!(
+            "{} to {} s",
+            short(a as f64 * s.tau0),
+            short(b as f64 * s.tau0)
+        );
         if sc.spike_count > 0 {
             let at: Vec<String> = sc
                 .spikes
@@ -323,9 +325,9 @@ pub fn run(a: Args) -> Res<bool> {
                 at.join(", "),
                 if more > 0 { format!(" and {more} more") } else { String::new() },
                 if only_static {
-                    format!("analysed without them from {} to {} s (--static)", short(a as f64 * s.tau0), short(b as f64 * s.tau0))
+                    format!("analysed without them from {stretch} (--static)")
                 } else {
-                    format!("the deviations include them; --static analyses only the longest stretch without ({} to {} s)", short(a as f64 * s.tau0), short(b as f64 * s.tau0))
+                    format!("the deviations include them; --static analyses only the longest stretch without ({stretch})")
                 }
             );
         }
@@ -341,9 +343,7 @@ pub fn run(a: Args) -> Res<bool> {
                 format!("{} step(s): {}", sc.steps.len(), at.join(", "))
             };
             eprintln!(
-                "gyro: {name}: NOT a static log: {what}; its noise figures mix in the motion. The longest quiet stretch is {} to {} s ({} samples){}",
-                short(a as f64 * s.tau0),
-                short(b as f64 * s.tau0),
+                "gyro: {name}: NOT a static log: {what}; its noise figures mix in the motion. The longest quiet stretch is {stretch} ({} samples){}",
                 b - a,
                 if only_static { ": analysed alone (--static)" } else { "; --static analyses only it" }
             );
@@ -371,7 +371,16 @@ pub fn run(a: Args) -> Res<bool> {
         s.rates.clone()
     } else {
         used.iter()
-            .map(|rate| dev::phase_from_rate(rate, s.tau0))
+            .zip(&stuck)
+            .map(|(rate, &stuck)| {
+                // A constant's phase with its offset out is 0, exactly (a
+                // running sum of the value would leave its rounding).
+                if stuck {
+                    Ok(vec![0.0; rate.len() + 1])
+                } else {
+                    dev::phase_from_rate(rate, s.tau0)
+                }
+            })
             .collect::<Result<Vec<_>, _>>()?
     };
     for ((name, rate), x) in s.names.iter().zip(&used).zip(&phases) {
