@@ -55,6 +55,20 @@ pub fn replay(chips: &[Vec<f64>]) -> Res<Replay> {
     replay_until(chips, &AtomicBool::new(false))
 }
 
+/// Every sample of `col` (named `what`) within ±[`RATE_MAX_DPS`]: one
+/// beyond it is no gyro's rate, and the fusion's f32 squares (or errors
+/// against it) would overflow.
+pub fn check_rates(what: &str, col: &[f64]) -> Res<()> {
+    match col.iter().position(|v| v.abs() > RATE_MAX_DPS) {
+        Some(i) => Err(format!(
+            "{what}, sample {i}: {:e} deg/s is beyond +-{RATE_MAX_DPS:e} deg/s, no gyro's rate (check the unit)",
+            col[i]
+        )
+        .into()),
+        None => Ok(()),
+    }
+}
+
 /// [`replay`], given up with [`crate::Stopped`] soon after `stop` is set
 /// (the Python package's Ctrl-C).
 pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
@@ -74,13 +88,7 @@ pub fn replay_until(chips: &[Vec<f64>], stop: &AtomicBool) -> Res<Replay> {
     // 1e6 °/s, far past any gyro's full scale (the board's chips: ±2000),
     // overflows it and every sample is refused without a word. Say so.
     for (c, col) in chips.iter().enumerate() {
-        if let Some(i) = col.iter().position(|v| v.abs() > RATE_MAX_DPS) {
-            return Err(format!(
-                "chip column {c}, sample {i}: {:e} deg/s is beyond +-{RATE_MAX_DPS:e} deg/s, no gyro's rate (check the unit)",
-                col[i]
-            )
-            .into());
-        }
+        check_rates(&format!("chip column {c}"), col)?;
     }
     let fusion = Fusion::<MAX_CHIPS>::new(Method::Adaptive(AdaptiveConfig::default()))
         .map_err(|e| format!("fusion: {e:?}"))?;

@@ -63,15 +63,7 @@ pub fn run(a: Args) -> Res<bool> {
         None => None,
     };
     if let Some((t, col)) = truth.zip(truth_col.as_ref()) {
-        // Beyond any gyro's rate, the errors against it would read inf.
-        if let Some(i) = col.iter().position(|v| v.abs() > replay::RATE_MAX_DPS) {
-            return Err(format!(
-                "reference {t}, sample {i}: {:e} deg/s is beyond +-{:e} deg/s, no rate (check the unit)",
-                col[i],
-                replay::RATE_MAX_DPS
-            )
-            .into());
-        }
+        replay::check_rates(&format!("reference {t}"), col)?;
     }
     if !no_align {
         let lags = assess::lags(&[&s.rates[..]]);
