@@ -24,15 +24,18 @@ pub fn is_bag(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("bag"))
 }
 
+/// The little-endian u32 at byte `o` of `b`, if it holds one (ROS 1
+/// serialises every length and integer so).
+fn u32_le(b: &[u8], o: usize) -> Option<u32> {
+    b.get(o..o + 4)?.try_into().ok().map(u32::from_le_bytes)
+}
+
 /// The stamp (ns) and angular velocity (rad/s) of a serialised
 /// `sensor_msgs/Imu`: header (seq u32, stamp sec u32 + nsec u32, frame_id
 /// u32 length + bytes), orientation (4 f64), its covariance (9 f64), the
 /// angular velocity (3 f64).
 fn decode(d: &[u8]) -> Option<(i64, [f64; 3])> {
-    let u32_at = |o: usize| {
-        d.get(o..o + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
+    let u32_at = |o: usize| u32_le(d, o);
     let f64_at = |o: usize| {
         d.get(o..o + 8)
             .and_then(|b| b.try_into().ok())
@@ -59,15 +62,12 @@ fn index_pos(path: &Path) -> std::io::Result<Option<u64>> {
     let Some(rest) = head.strip_prefix(MAGIC) else {
         return Ok(None);
     };
-    let u32_at = |b: &[u8], o: usize| {
-        b.get(o..o + 4)
-            .map(|x| u32::from_le_bytes([x[0], x[1], x[2], x[3]]) as usize)
-    };
-    let Some(header) = u32_at(rest, 0).and_then(|n| rest.get(4..4 + n)) else {
+    let len_at = |b: &[u8], o: usize| u32_le(b, o).map(|n| n as usize);
+    let Some(header) = len_at(rest, 0).and_then(|n| rest.get(4..4 + n)) else {
         return Ok(None);
     };
     let mut at = 0;
-    while let Some(n) = u32_at(header, at) {
+    while let Some(n) = len_at(header, at) {
         let Some(field) = header.get(at + 4..at + 4 + n) else {
             break;
         };
