@@ -303,28 +303,27 @@ def noise_fit(data, rate=1.0, data_type="freq", model_taus=None):
     """
     import json
 
-    y = _series(data)
-    if data_type == "freq" and _np.isfinite(rate) and rate > 0 and _np.all(_np.isfinite(y)):
-        # As ``gyro allan`` says it: a log that moves, steps or spikes is
-        # not a noise record, and its fit says so only through chi2.
-        s = screen(y, rate)
-        if s["spike_count"] or not s["static"]:
-            import warnings
+    t = json.loads(_native.noise_fit(_series(data), float(rate), data_type, _taus(model_taus)))
+    # The check the fit ran (rates only). As ``gyro allan`` says it: a log
+    # that moves, steps or spikes is not a noise record, and its fit says
+    # so only through chi2.
+    s = t.pop("screen", None)
+    if s is not None and (s["spike_count"] or not s["static"]):
+        import warnings
 
-            what = []
-            if s["spike_count"]:
-                what.append(f"{s['spike_count']} spike(s), the first at sample {s['spikes'][0][0]}")
-            if s["moving"]:
-                what.append("motion")
-            if s["steps"]:
-                what.append(f"{len(s['steps'])} step(s), the first at sample {s['steps'][0][0]}")
-            a, b = s["quiet"]
-            warnings.warn(
-                f"not a static noise record ({', '.join(what)}): the fit mixes them in; "
-                f"the longest stretch without is samples {a} to {b} (screen()['quiet'])",
-                stacklevel=2,
-            )
-    t = json.loads(_native.noise_fit(y, float(rate), data_type, _taus(model_taus)))
+        what = []
+        if s["spike_count"]:
+            what.append(f"{s['spike_count']} spike(s), the first at sample {s['spikes'][0][0]}")
+        if s["moving"]:
+            what.append("motion")
+        if s["steps"]:
+            what.append(f"{len(s['steps'])} step(s), the first at sample {s['steps'][0][0]}")
+        a, b = s["quiet"]
+        warnings.warn(
+            f"not a static noise record ({', '.join(what)}): the fit mixes them in; "
+            f"the longest stretch without is samples {a} to {b} (screen()['quiet'])",
+            stacklevel=2,
+        )
     model = ("model_taus", "model_adev") if model_taus is not None else ()
     return _fit_dict(t, model)
 

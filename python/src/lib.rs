@@ -453,12 +453,18 @@ fn noise_fit(
     data_type: &str,
     model_taus: Option<Vec<f64>>,
 ) -> PyResult<String> {
-    let t = terms_of(py, data, rate, data_type)?;
+    let (t, sc) = terms_of(py, data, rate, data_type)?;
     let mut v = serde_json::to_value(&t).map_err(value_error)?;
-    if let (Some(taus), serde_json::Value::Object(o)) = (model_taus, &mut v) {
-        let adev: Vec<f64> = taus.iter().map(|&tau| t.avar(tau).sqrt()).collect();
-        o.insert("model_taus".into(), taus.into());
-        o.insert("model_adev".into(), adev.into());
+    if let serde_json::Value::Object(o) = &mut v {
+        if let Some(taus) = model_taus {
+            let adev: Vec<f64> = taus.iter().map(|&tau| t.avar(tau).sqrt()).collect();
+            o.insert("model_taus".into(), taus.into());
+            o.insert("model_adev".into(), adev.into());
+        }
+        // The check the fit ran, for the Python side's warning.
+        if let Some(sc) = sc {
+            o.insert("screen".into(), screen_json(&sc)?);
+        }
     }
     serde_json::to_string(&v).map_err(value_error)
 }
@@ -468,9 +474,10 @@ fn terms_of(
     data: PyReadonlyArray1<'_, f64>,
     rate: f64,
     data_type: &str,
-) -> PyResult<fit::Terms> {
+) -> PyResult<(fit::Terms, Option<gyro_tool::screen::Screen>)> {
     let mut y = data.as_slice()?;
     // As `gyro allan`: a chip's start-up value is never fitted as a rate.
+    let mut screened = None;
     if data_type == "freq" && rate.is_finite() && rate > 0.0 {
         let sc = gyro_tool::screen::screen(y, 1.0 / rate);
         if let Some(v) = sc.constant {
@@ -486,10 +493,19 @@ fn terms_of(
             )));
         }
         y = &y[sc.startup..];
+        screened = Some(sc);
     }
     let x = phase_of(y, rate, data_type)?;
     let tau0 = 1.0 / rate;
-    py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)
+    let t = py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)?;
+    Ok((t, screened))
+}
+
+/// A screen as JSON, with its verdict (`static`).
+fn screen_json(sc: &gyro_tool::screen::Screen) -> PyResult<serde_json::Value> {
+    let mut v = serde_json::to_value(sc).map_err(value_error)?;
+    v["static"] = serde_json::Value::Bool(sc.is_static());
+    Ok(v)
 }
 
 /// The check `gyro allan` runs before believing a rate log
@@ -505,9 +521,7 @@ fn screen(data: PyReadonlyArray1<'_, f64>, rate: f64) -> PyResult<String> {
         return Err(value_error(DevError::NonFinite(i)));
     }
     let sc = gyro_tool::screen::screen(y, 1.0 / rate);
-    let mut v = serde_json::to_value(&sc).map_err(value_error)?;
-    v["static"] = serde_json::Value::Bool(sc.is_static());
-    serde_json::to_string(&v).map_err(value_error)
+    serde_json::to_string(&screen_json(&sc)?).map_err(value_error)
 }
 
 /// Kalibr's `imu.yaml` from the fits of the gyro axes (°/s) and the
@@ -525,11 +539,11 @@ fn kalibr_yaml(
 ) -> PyResult<String> {
     let g = gyro
         .into_iter()
-        .map(|d| terms_of(py, d, rate, data_type))
+        .map(|d| terms_of(py, d, rate, data_type).map(|(t, _)| t))
         .collect::<PyResult<Vec<_>>>()?;
     let a = accel
         .into_iter()
-        .map(|d| terms_of(py, d, rate, data_type))
+        .map(|d| terms_of(py, d, rate, data_type).map(|(t, _)| t))
         .collect::<PyResult<Vec<_>>>()?;
     fit::kalibr_yaml(&g, &a, gyro_tool::short(rate), topic)
         .ok_or_else(|| pyo3::exceptions::PyValueError::new_err("no gyro axis to fit"))
