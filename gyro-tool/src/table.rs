@@ -334,23 +334,23 @@ pub fn read_layout(
     // none of whose columns has a value, where another row follows
     // (dropped, every later sample would move a period earlier), and a
     // spreadsheet's padding at the end of the file where none does.
-    let (mut empties, mut seen): (Vec<usize>, bool) = (Vec::new(), false);
+    // (The first such row's line, and how many.)
+    let (mut empties, mut seen): (Option<(usize, usize)>, bool) = (None, false);
     for line in lines {
         let (ln, f) = line?;
         if f.iter().all(String::is_empty) {
             if tcol.is_none() && seen {
-                empties.push(ln);
+                empties.get_or_insert((ln, 0)).1 += 1;
             }
             continue;
         }
-        if let Some(&ln) = empties.first() {
+        if let Some((ln, count)) = empties.take() {
             if !missing {
                 return Err(TableError::EmptyRow(p(), ln));
             }
             for r in rates.iter_mut() {
-                r.extend(std::iter::repeat_n(f64::NAN, empties.len()));
+                r.extend(std::iter::repeat_n(f64::NAN, count));
             }
-            empties.clear();
         }
         seen = true;
         if f.len() != header.len() {
