@@ -133,11 +133,9 @@ fn a_log_is_checked_before_it_is_believed() {
 fn a_stuck_column_reads_zero_without_a_model_and_a_spike_is_named() {
     let stuck = temp("stuck.csv", &format!("z\n{}", "1.5\n".repeat(3000)));
     let run = |args: &[&str]| {
-        let o = gyro().args(args).arg(&stuck).output().unwrap();
-        let err = String::from_utf8_lossy(&o.stderr).to_string();
-        assert_eq!(o.status.code(), Some(0), "{err}");
+        let (out, err) = succeeds(args, &stuck);
         assert!(err.contains("every sample reads 1.5"), "{err}");
-        String::from_utf8_lossy(&o.stdout).to_string()
+        out
     };
     let out = run(&["allan", "--tau0", "0.001", "--format", "csv"]);
     // Exactly 0 (a running sum of 1.5 · 0.001 leaves some 1e-14), and no
@@ -155,7 +153,7 @@ fn a_stuck_column_reads_zero_without_a_model_and_a_spike_is_named() {
     assert!(!out.contains("visible"), "{out}");
     let (code, err) = fails(
         &["allan", "--tau0", "0.001", "--kalibr", "/dev/null"],
-        &temp("stuck2.csv", &format!("z\n{}", "1.5\n".repeat(3000))),
+        &stuck,
     );
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("no gyro fit"), "{err}");
@@ -207,32 +205,20 @@ fn an_empty_row_is_a_missing_sample_not_dropped() {
         "padded.csv",
         &format!("a,b\n,\n{}\n,\n,\n", "1,2\n3,4\n5,7"),
     );
-    let o = gyro()
-        .args(["allan", "--tau0", "1"])
-        .arg(&padded)
-        .output()
-        .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    assert!(String::from_utf8_lossy(&o.stdout).contains("3 samples"));
+    let (out, _) = succeeds(&["allan", "--tau0", "1"], &padded);
+    assert!(out.contains("3 samples"), "{out}");
     let svg = std::env::temp_dir().join(format!("gyro-cli-{}/e.svg", std::process::id()));
-    let o = gyro()
-        .args([
+    let (out, _) = succeeds(
+        &[
             "replay",
             "--tau0",
             "1",
             "--no-align",
             "--svg",
             svg.to_str().unwrap(),
-        ])
-        .arg(&mid)
-        .output()
-        .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout);
+        ],
+        &mid,
+    );
     assert!(out.contains("401 samples"), "{out}");
 }
 
@@ -314,12 +300,10 @@ fn a_replays_reference_is_checked() {
     for i in 0..3000 {
         one.push_str(&format!("{}.5,,\n", i % 3));
     }
-    let o = gyro()
-        .args(["replay", "--tau0", "0.001", "--svg", svg.to_str().unwrap()])
-        .arg(temp("one_chip.csv", &one))
-        .output()
-        .unwrap();
-    let out = String::from_utf8_lossy(&o.stdout);
+    let (out, _) = succeeds(
+        &["replay", "--tau0", "0.001", "--svg", svg.to_str().unwrap()],
+        &temp("one_chip.csv", &one),
+    );
     assert!(!out.contains("NaN") && !out.contains("-0.000"), "{out}");
     assert!(out.contains("never answered"), "{out}");
     assert!(!out.contains("not static"), "{out}");
