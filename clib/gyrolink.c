@@ -234,6 +234,7 @@ static void rd_settings(reader *r, gl_settings *s)
     s->compensation = rd_variant(r, 3);
     s->horizon_us = s->compensation == 2 ? rd_v16(r) : 0;
     s->angle = rd_option(r); /* a bool: 0 or 1, as an Option's tag */
+    s->path_trim_us = rd_zz16(r);
 }
 
 static void rd_status(reader *r, gl_status *s)
@@ -530,6 +531,12 @@ size_t gl_encode_command(const gl_command *c, uint32_t link_seq, uint8_t *out, s
             wr_varint(&w, c->horizon_us);
         }
         break;
+    case GL_SET_PATH_TRIM: {
+        /* An i16 as postcard writes it: zigzag, then a varint. */
+        int32_t v = c->path_trim_us;
+        wr_varint(&w, (uint32_t)((v < 0) ? ((uint32_t)(-(v + 1)) << 1) | 1u : (uint32_t)v << 1));
+        break;
+    }
     default:
         return 0;
     }

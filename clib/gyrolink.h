@@ -22,7 +22,7 @@ extern "C" {
 #endif
 
 /** The protocol version this library speaks. */
-#define GL_VERSION 7u
+#define GL_VERSION 8u
 /** Gyros a frame can describe at most. */
 #define GL_MAX_GYROS 8u
 /** Longest payload (version, link_seq, body), bytes. */
@@ -114,7 +114,9 @@ typedef struct {
 
 /** The board's settings. mode: 0 Fused, 1 Raw; method: 0 Mean, 1 Zhang,
  * 2 Adaptive; compensation: 0 Off, 1 ToFrame, 2 Horizon(horizon_us);
- * angle: 1 when sample frames carry the integrated angle. */
+ * angle: 1 when sample frames carry the integrated angle; path_trim_us:
+ * how much longer the ICM-42688-P's signal path was measured than its
+ * datasheet's reading, µs (new in version 8). */
 typedef struct {
     uint8_t mode;
     uint8_t method;
@@ -123,6 +125,7 @@ typedef struct {
     uint8_t compensation;
     uint16_t horizon_us;
     uint8_t angle;
+    int16_t path_trim_us;
 } gl_settings;
 
 /** One gyro in a status frame. clock: 0 Polled, 1 Own, 2 ClkIn. */
@@ -264,19 +267,23 @@ typedef enum {
     /** time_us: the controller's time at its last sync pulse. */
     GL_SYNC_TIME = 9,
     /** Send an info frame now. */
-    GL_REQUEST_INFO = 10
+    GL_REQUEST_INFO = 10,
+    /** path_trim_us: the signal path's trim, ±800 µs (new in version 8). */
+    GL_SET_PATH_TRIM = 11
 } gl_op;
 
 /** A command: `arg` is the mode, the method, the divider, the status
  * period, the angle (0 or 1), or the compensation (0 Off, 1 ToFrame, 2 Horizon with
  * `horizon_us`); unused for GL_REQUEST_STATUS, GL_SAVE_SETTINGS,
- * GL_FACTORY_RESET and GL_REQUEST_INFO; GL_SYNC_TIME takes `time_us`. */
+ * GL_FACTORY_RESET and GL_REQUEST_INFO; GL_SYNC_TIME takes `time_us`,
+ * GL_SET_PATH_TRIM `path_trim_us`. */
 typedef struct {
     uint8_t id;
     gl_op op;
     uint32_t arg;
     uint16_t horizon_us;
     uint64_t time_us;
+    int16_t path_trim_us;
 } gl_command;
 
 /**

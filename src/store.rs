@@ -39,7 +39,7 @@ pub const SETTINGS_KEY: u8 = 1;
 pub const CALIBRATION_KEY: u8 = 2;
 /// The settings item's format: a change in [`Settings`] raises it, and an
 /// item of another format reads as corrupt (the defaults come up).
-pub const FORMAT: u16 = 1;
+pub const FORMAT: u16 = 2;
 
 /// Scratch for one item: its key and the largest value (a calibration
 /// record), rounded up.

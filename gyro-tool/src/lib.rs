@@ -11,6 +11,7 @@ pub mod dev;
 pub mod edf;
 pub mod fit;
 pub mod kind;
+pub mod lag;
 pub mod pipe;
 pub mod plot;
 pub mod pointing;

@@ -79,6 +79,21 @@ impl Series {
         r0 + ((t - self.t_us[*hint]) / span).clamp(0.0, 1.0) * (r1 - r0)
     }
 
+    /// The rate on axis `a` at `t` (µs), read linearly; the end values
+    /// outside.
+    pub fn value(&self, a: usize, t: f64) -> f64 {
+        let mut hint = self.t_us.partition_point(|&x| x <= t).saturating_sub(1);
+        self.at(a, t, &mut hint)
+    }
+
+    /// The first and last instants, µs.
+    pub fn covered(&self) -> (f64, f64) {
+        (
+            self.t_us.first().copied().unwrap_or(0.0),
+            self.t_us.last().copied().unwrap_or(0.0),
+        )
+    }
+
     /// A `t_us,x_dps,y_dps,z_dps` CSV (a header line, then rows in time
     /// order).
     pub fn from_csv(path: &PathBuf) -> Res<Self> {

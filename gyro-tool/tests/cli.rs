@@ -643,3 +643,89 @@ fn a_streamed_log_refuses_what_it_cannot_do_by_name() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+/// `gyro lag` on a recording whose rates are 120 µs older than the
+/// instants they state, against the table's rate: the lag on every axis,
+/// and the trim to set is the one the status frame states plus it. Frames
+/// the board predicted are left out and counted; a reference that does not
+/// move is said, not fitted.
+#[test]
+fn lag_reads_the_paths_delay_against_a_rate_table() {
+    use gyro_array::link::msg::{Frame, Sample, Status};
+    use gyro_array::link::wire::encode;
+    let table = |t_us: f64, a: usize| {
+        let w = 2.0 * std::f64::consts::PI * [2.0, 3.0, 1.5][a];
+        [60.0, -40.0, 90.0][a] * (w * t_us * 1e-6).sin()
+    };
+    let (age, lag) = (1670.0, 120.0);
+    let mut rec = Vec::new();
+    let mut buf = [0u8; gyro_array::link::wire::MAX_FRAME];
+    let mut status = Status::widest(5);
+    status.settings.path_trim_us = 30;
+    let n = encode(0, &Frame::Status(status), &mut buf).unwrap();
+    rec.extend_from_slice(&buf[..n]);
+    let mut truth = String::from("t_us,x_dps,y_dps,z_dps\n");
+    for k in 0..4000u32 {
+        let t = 10_000.0 + f64::from(k) * 1000.0;
+        let stated = t - age;
+        let frame = Frame::Sample(Sample {
+            seq: k,
+            t_us: t as u64,
+            age_us: [age as u16; 3],
+            predicted_us: (k % 10 == 0).then_some(500),
+            rate_dps: core::array::from_fn(|a| {
+                (1.002 * table(stated - lag, a) + 0.3 + 0.01 * f64::from(k % 7)) as f32
+            }),
+            valid: 0b111,
+            degraded: 0,
+            used: [0b1111; 3],
+            health: Default::default(),
+            noise: None,
+            angle: None,
+        });
+        let n = encode(k + 1, &frame, &mut buf).unwrap();
+        rec.extend_from_slice(&buf[..n]);
+    }
+    for k in 0..50_000u32 {
+        let t = f64::from(k) * 100.0;
+        truth.push_str(&format!(
+            "{t},{},{},{}\n",
+            table(t, 0),
+            table(t, 1),
+            table(t, 2)
+        ));
+    }
+    let file = temp("lag.glk", "");
+    std::fs::write(&file, &rec).unwrap();
+    let csv = temp("lag_truth.csv", &truth);
+    let (out, _) = succeeds(&["lag", "--truth", csv.to_str().unwrap()], &file);
+    assert!(
+        out.contains("400 frames predicted by the board left out"),
+        "{out}"
+    );
+    assert!(out.contains("the path trim in force 30 µs"), "{out}");
+    for a in ["x", "y", "z"] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("{a} ")))
+            .unwrap_or_else(|| panic!("{out}"));
+        let got: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+        assert!((got - lag).abs() < 2.0, "{line}");
+    }
+    assert!(out.contains("--send path-trim=150"), "{out}");
+    // A table at rest: no lag can be read.
+    let still = temp(
+        "still.csv",
+        &(0..50_000)
+            .map(|k| format!("{},0.5,0.5,0.5\n", k * 100))
+            .fold(String::from("t_us,x,y,z\n"), |s, l| s + &l),
+    );
+    let o = gyro()
+        .args(["lag", "--truth", still.to_str().unwrap()])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(out.contains("no axis moved enough"), "{out}");
+}

@@ -8,7 +8,6 @@ use std::cell::RefCell;
 use gyro_array::app::{self as schedule, timed_clock, Sampled, StatusFacts};
 use gyro_array::drivers::Gyro;
 use gyro_array::link::port::{ChipTime, NoiseSnapshot};
-use gyro_array::pipeline::timed::{self, BOARD_DELAY_US};
 use gyro_array::pipeline::Pipeline;
 use gyro_sim::{demo, with_bus, CsLine, EmuBus};
 use rtic_core::Exclusive;
@@ -69,10 +68,6 @@ pub fn run<L: schedule::Link>(
         });
         let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
         let (t_us, missed) = clock.tick(now_us);
-        let at = timed::array_instant(now_us, BOARD_DELAY_US);
-        for t in timed.iter_mut() {
-            t.set_instant(at, BOARD_DELAY_US);
-        }
         let s = {
             let [c0, c1, c2, c3] = &mut timed;
             let mut gyros: [&mut dyn Gyro; GYROS] = [c0, c1, c2, c3, &mut adx];

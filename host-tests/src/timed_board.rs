@@ -96,6 +96,9 @@ pub struct Timing {
     pub power_up_s: f64,
     /// Each chip's scale error (a fraction; the fixture's chips have none).
     pub scale_error: [f32; N],
+    /// The board's path trim (`Settings::path_trim_us`), as a rate table
+    /// measured it (0: the datasheet's reading).
+    pub path_trim_us: i16,
     /// A chip whose PLL has failed from power-up, and its RC oscillator's
     /// error (a fraction): it samples off its nominal rate by that much.
     pub rc_fallback: Option<(usize, f64)>,
@@ -136,6 +139,7 @@ impl Timing {
             path_reading,
             scale_error: [0.0; N],
             rc_fallback: None,
+            path_trim_us: 0,
         }
     }
 }
@@ -267,7 +271,13 @@ pub fn run(
         let _ = ti.driver().flush_fifo();
     }
     let mut link: HostLink = HostLink {
-        port: RingPort::new(Settings::default(), gyro_array::app::BOARD_FRAME_PATH),
+        port: RingPort::new(
+            Settings {
+                path_trim_us: timing.path_trim_us,
+                ..Settings::default()
+            },
+            gyro_array::app::BOARD_FRAME_PATH,
+        ),
         bytes: 0,
     };
     let mut noise = NoiseSnapshot::default();
@@ -280,11 +290,7 @@ pub fn run(
         }
         with_bus(&bus, |b| b.advance(1e-3));
         let now_us = with_bus(&bus, |b| b.time64_s()).unwrap_or(0.0) * 1e6;
-        let stated_us = now_us - DELAY_US as f64;
-        let at = timed::array_instant(now_us as u64 as u32, DELAY_US);
-        for ti in t.iter_mut() {
-            ti.set_instant(at, DELAY_US);
-        }
+        let stated_us = now_us - f64::from(timed::board_delay_us(timing.path_trim_us));
         let mut clocks = [ChipTime::default(); N];
         for (slot, ti) in clocks.iter_mut().zip(t.iter()) {
             *slot = timed_clock(ti);
@@ -413,4 +419,48 @@ pub fn power_up(profile: RateProfile, seed: u64, timing: Timing, ms: u32, warm_m
         late: core::array::from_fn(|i| l[i].late - w[i].late),
         timing: ran.timing,
     }
+}
+
+/// The bench procedure (docs/timing.md) on the emulated board: `ms` of a
+/// rate table's `profile` (the first `warm_ms` left out), the fused rate at
+/// each instant the board states, through `gyro lag`'s fit
+/// ([`gyro_tool::lag::fit`]) against the table's rate on the board's clock.
+/// Per axis the fit, and their inverse-variance lag (`None` where no axis
+/// moved enough).
+pub fn bench_lag(
+    profile: RateProfile,
+    seed: u64,
+    timing: Timing,
+    ms: u32,
+    warm_ms: u32,
+) -> (Vec<gyro_tool::lag::AxisLag>, Option<(f64, f64)>) {
+    let mut at_us: [Vec<f64>; 3] = Default::default();
+    let mut rate: [Vec<f64>; 3] = Default::default();
+    run(
+        profile,
+        seed,
+        ms,
+        timing,
+        [Fault::None; N],
+        |_| 0,
+        |smp| {
+            if smp.n < warm_ms {
+                return;
+            }
+            for (a, f) in smp.out.fused.iter().enumerate() {
+                if let Some(f) = f {
+                    at_us[a].push(smp.stated_s * 1e6);
+                    rate[a].push(f64::from(f.rate_dps));
+                }
+            }
+        },
+    );
+    let axes: Vec<gyro_tool::lag::AxisLag> = (0..3)
+        .filter_map(|a| {
+            let truth = |t_us: f64| profile.at_f64(t_us * 1e-6)[a];
+            gyro_tool::lag::fit(&at_us[a], &rate[a], &truth, (f64::MIN, f64::MAX))
+        })
+        .collect();
+    let lag = gyro_tool::lag::combined(&axes);
+    (axes, lag)
 }

@@ -30,7 +30,7 @@ use crate::link::port::{
     Array, ChipTime, FramePath, NoiseSnapshot, NoiseSource, Port, SampleOut, StoreRequest,
 };
 use crate::link::ring::TxQueue;
-use crate::pipeline::timed::{tracking, TimedIcm};
+use crate::pipeline::timed::{array_instant, board_delay_us, tracking, TimedIcm};
 use crate::pipeline::tracker::{NoiseTracker, NoiseView, Probe};
 use crate::pipeline::{Output, Pipeline};
 use crate::store::Store;
@@ -281,9 +281,10 @@ impl StatusView {
     }
 }
 
-/// The sample task's work at a tick read at `t_us`, `missed` periods after
-/// the last: the chips read through `gyros` (already set to the tick's
-/// instant), fused, the frame queued with the newest noise estimate, the
+/// The sample task's work at a tick read at `t_us` (the low 32 bits the
+/// captures' µs count at the read), `missed` periods after the last: the
+/// chips aimed at the tick's one instant (behind the read by the board's
+/// stated delay for the path trim in force) and read through `gyros`, fused, the frame queued with the newest noise estimate, the
 /// calibration's learning, and a status frame when one is due (its facts
 /// from `facts`). The pipeline and the link are held for all of it:
 /// everything else that takes them (commands) runs below this task.
@@ -303,6 +304,12 @@ pub fn sample<const N: usize, L: Link>(
     (pipe, link).lock(|pipe, link| {
         if missed > 0 {
             pipe.note_overrun(missed);
+        }
+        let trim = link.port().settings().path_trim_us;
+        let behind = board_delay_us(trim);
+        let at = array_instant(t_us as u32, behind);
+        for g in gyros.iter_mut() {
+            g.aim(at, behind, trim);
         }
         let out = pipe.read_and_fuse(gyros);
         // The frame first: the antenna waits for it.

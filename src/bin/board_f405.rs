@@ -88,7 +88,7 @@ use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
 use gyro_array::link::{BAUD, FALLBACK_BAUD};
 use gyro_array::pipeline::selftest;
 use gyro_array::pipeline::startup::start_array;
-use gyro_array::pipeline::timed::{self, AtInstant, TimedIcm, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::{AtInstant, TimedIcm, BOARD_DELAY_US};
 use gyro_array::pipeline::tracker::{self, NoiseTracker};
 use gyro_array::pipeline::{Pipeline, PipelineConfig};
 use gyro_array::store::Store;
@@ -706,10 +706,6 @@ mod app {
             let ago = now.wrapping_sub(SYNC_US.load(Ordering::Relaxed)) as i32;
             let edge = t_us.wrapping_sub(i64::from(ago) as u64);
             cx.shared.link.lock(|l| l.port.sync_pulse(edge));
-        }
-        let at = timed::array_instant(now, BOARD_DELAY_US);
-        for t in l.chips.timed.iter_mut() {
-            t.set_instant(at, BOARD_DELAY_US);
         }
         let clocks = *l.clocks;
         let Chips { timed, adx } = l.chips;

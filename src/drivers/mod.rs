@@ -123,6 +123,13 @@ pub trait Gyro {
     fn delay_us(&self) -> u32 {
         0
     }
+
+    /// Aim the next read at one instant of the array: `at` on the board's
+    /// clock (1/16 µs: `pipeline::clock::Instant16`), `behind_us` before
+    /// the read, with the part's signal path `path_trim_us` longer than
+    /// its datasheet's reading (`link::msg::Settings::path_trim_us`). A
+    /// gyro that reads its newest sample whatever the instant ignores it.
+    fn aim(&mut self, _at: u32, _behind_us: u32, _path_trim_us: i16) {}
 }
 
 #[cfg(test)]

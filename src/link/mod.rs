@@ -22,7 +22,7 @@ pub mod wire;
 mod tests;
 
 /// Protocol version, the first byte of every payload.
-pub const VERSION: u8 = 7;
+pub const VERSION: u8 = 8;
 
 /// UART speed: 6 Mbaud, exact on the STM32F405's USART1 (84 MHz APB2,
 /// oversampling by 8, USARTDIV = 1.75), on RS-422 to the antenna

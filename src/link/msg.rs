@@ -168,7 +168,7 @@ pub use super::sync::SyncState;
 
 /// Which board, which firmware, which chips. A frame of its own, not a
 /// part of the status frame: with an acknowledgement and a sample frame
-/// the status frame fills 598 of the 600 bytes a millisecond carries at
+/// the status frame fills all 600 bytes a millisecond carries at
 /// 6 Mbaud (`link::tests`), and none of this changes from one second to
 /// the next but the temperatures.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -408,6 +408,13 @@ pub struct Settings {
     pub compensation: Compensation,
     /// Whether sample frames carry [`Sample::angle`].
     pub angle: bool,
+    /// How much longer the ICM-42688-P's signal path is than its datasheet
+    /// reading, µs (± [`MAX_PATH_TRIM_US`]; new in version 8): measured on
+    /// a rate table (`gyro lag`, docs/timing.md), since the datasheet
+    /// gives the filters' bandwidths and not their shapes. The chips' rates
+    /// are then taken from that much later in their streams, and the
+    /// stated instant's distance behind the read grows by it.
+    pub path_trim_us: i16,
 }
 
 /// What the sample frames' rates are predicted to ([`Sample::predicted_us`]).
@@ -464,6 +471,7 @@ impl Status {
                 status_every: u32::MAX,
                 compensation: Compensation::Horizon(u16::MAX),
                 angle: true,
+                path_trim_us: -MAX_PATH_TRIM_US,
             },
             noise_tau: [u16::MAX; 3],
             sample_us: u32::MAX,
@@ -490,7 +498,8 @@ impl Settings {
             Compensation::Horizon(h) => h <= MAX_HORIZON_US,
             _ => true,
         };
-        if (1..=1000).contains(&self.divider) && status_ok && horizon_ok {
+        let trim_ok = self.path_trim_us.unsigned_abs() <= MAX_PATH_TRIM_US.unsigned_abs();
+        if (1..=1000).contains(&self.divider) && status_ok && horizon_ok && trim_ok {
             Ok(())
         } else {
             Err(Reject::OutOfRange)
@@ -519,6 +528,12 @@ pub enum StoreState {
 /// to a few milliseconds says little about the rate further out.
 pub const MAX_HORIZON_US: u16 = 10_000;
 
+/// The largest [`Settings::path_trim_us`] either way, µs: twice the spread
+/// the datasheet's silence allows (a critically damped anti-alias filter
+/// −52 µs, a UI filter with the 0.8 ms delay a flight stack quotes +354 µs:
+/// docs/timing.md), within the 8 ms of samples each chip keeps.
+pub const MAX_PATH_TRIM_US: i16 = 800;
+
 impl Default for Settings {
     fn default() -> Self {
         Self {
@@ -528,6 +543,7 @@ impl Default for Settings {
             status_every: 1000,
             compensation: Compensation::ToFrame,
             angle: false,
+            path_trim_us: 0,
         }
     }
 }
@@ -602,4 +618,6 @@ pub enum Op {
     SyncTime(u64),
     /// Send a [`Frame::Info`] now.
     RequestInfo,
+    /// Set [`Settings::path_trim_us`] (new in version 8).
+    SetPathTrim(i16),
 }

@@ -833,6 +833,7 @@ impl<Q: TxQueue> Port<Q> {
             Op::SetCompensation(c) => next.compensation = c,
             Op::SetAngle(on) => next.angle = on,
             Op::RequestInfo => self.info_requested = true,
+            Op::SetPathTrim(t) => next.path_trim_us = t,
             Op::SyncTime(t) => {
                 // Taken whether or not it pairs: the Sync frame says what
                 // became of it.
@@ -855,6 +856,7 @@ impl<Q: TxQueue> Port<Q> {
             Op::SetDivider(d) => set.divider = d,
             Op::SetStatusEvery(n) => set.status_every = n,
             Op::SetCompensation(c) => set.compensation = c,
+            Op::SetPathTrim(t) => set.path_trim_us = t,
             _ => {}
         }
         set.check()?;

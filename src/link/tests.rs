@@ -407,6 +407,9 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
             Err(Reject::OutOfRange),
         ),
         (Op::SetCompensation(Compensation::Horizon(3000)), Ok(())),
+        (Op::SetPathTrim(MAX_PATH_TRIM_US + 1), Err(Reject::OutOfRange)),
+        (Op::SetPathTrim(-MAX_PATH_TRIM_US - 1), Err(Reject::OutOfRange)),
+        (Op::SetPathTrim(-354), Ok(())),
     ];
     for (id, (op, want)) in cases.iter().enumerate() {
         let got = exchange(&mut port, &mut pipe, &command_bytes(id as u8, *op));
@@ -421,20 +424,28 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
     }
     let s = port.settings();
     assert_eq!(
-        (s.divider, s.mode, s.method, s.status_every, s.compensation),
+        (
+            s.divider,
+            s.mode,
+            s.method,
+            s.status_every,
+            s.compensation,
+            s.path_trim_us
+        ),
         (
             10,
             Mode::Raw,
             FusionMethod::Mean,
             0,
-            Compensation::Horizon(3000)
+            Compensation::Horizon(3000),
+            -354
         )
     );
     assert_eq!(pipe.fusion().method(), Method::Mean);
     assert!(port.status_due(1), "requested");
     assert!(!port.status_due(2), "request cleared, periodic off");
     let c = port.counters();
-    assert_eq!((c.accepted, c.rejected), (6, 4));
+    assert_eq!((c.accepted, c.rejected), (7, 6));
 }
 
 #[test]
@@ -674,18 +685,18 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x99, 0x31, 0x00]
+        [0x02, 0x08, 0x01, 0x01, 0x01, 0x05, 0x07, 0x04, 0x70, 0xbb, 0x00]
     );
     // The store commands, as the C library's test has them.
     for (op, crc) in [
-        (Op::SaveSettings, [0xdb, 0x11]),
-        (Op::FactoryReset, [0xfa, 0x01]),
+        (Op::SaveSettings, [0x32, 0x9b]),
+        (Op::FactoryReset, [0x13, 0x8b]),
     ] {
         let n = encode(0, &Command { id: 7, op }, &mut buf).unwrap();
         let code = if op == Op::SaveSettings { 0x06 } else { 0x07 };
         assert_eq!(
             buf[..n],
-            [0x02, 0x07, 0x01, 0x01, 0x01, 0x05, 0x07, code, crc[0], crc[1], 0x00]
+            [0x02, 0x08, 0x01, 0x01, 0x01, 0x05, 0x07, code, crc[0], crc[1], 0x00]
         );
     }
     let n = encode(
@@ -700,8 +711,8 @@ fn the_specification_examples_are_what_the_code_sends() {
     assert_eq!(
         buf[..n],
         [
-            0x02, 0x07, 0x01, 0x01, 0x01, 0x0c, 0x07, 0x09, 0xbc, 0xb5, 0xe2, 0xb3, 0xc5, 0xc6,
-            0x04, 0x8f, 0x0d, 0x00
+            0x02, 0x08, 0x01, 0x01, 0x01, 0x0c, 0x07, 0x09, 0xbc, 0xb5, 0xe2, 0xb3, 0xc5, 0xc6,
+            0x04, 0xe2, 0x96, 0x00
         ]
     );
     let n = encode(
@@ -715,7 +726,7 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x02, 0x07, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0x3e, 0xea, 0x00]
+        [0x02, 0x08, 0x01, 0x01, 0x01, 0x06, 0x07, 0x08, 0x01, 0xfc, 0x33, 0x00]
     );
     let n = encode(
         5,
@@ -728,7 +739,21 @@ fn the_specification_examples_are_what_the_code_sends() {
     .unwrap();
     assert_eq!(
         buf[..n],
-        [0x03, 0x07, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0x4c, 0xe4, 0x00]
+        [0x03, 0x08, 0x05, 0x01, 0x01, 0x08, 0x03, 0x01, 0x07, 0x01, 0x04, 0xfd, 0xb2, 0x00]
+    );
+    // The path trim: an i16 as a zigzag varint (+354 → 708 → c4 05).
+    let n = encode(
+        0,
+        &Command {
+            id: 7,
+            op: Op::SetPathTrim(354),
+        },
+        &mut buf,
+    )
+    .unwrap();
+    assert_eq!(
+        buf[..n],
+        [0x02, 0x08, 0x01, 0x01, 0x01, 0x07, 0x07, 0x0b, 0xc4, 0x05, 0x64, 0x1a, 0x00]
     );
 }
 

@@ -116,12 +116,28 @@ pub fn board_spi_us(cfg: &Config) -> f32 {
 /// half-span and one sample period for the newest mean to exist, for a
 /// chip 1 % slow (a PLL's limit), rounded up to 10 µs. A chip fallen back
 /// to its RC oscillator, up to 8 % slow, is late for part of its samples
-/// and left out of those (`timing-eval` prints the budget).
-pub fn stated_delay_us(cfg: &Config) -> u32 {
+/// and left out of those (`timing-eval` prints the budget). `path_trim_us`:
+/// the path measured that much longer than the datasheet's reading
+/// ([`crate::link::msg::Settings::path_trim_us`]).
+pub fn stated_delay_us(cfg: &Config, path_trim_us: i16) -> u32 {
     let n = cfg.odr.per_ms() as f32;
     let period = 1e6 / cfg.odr.hz();
-    let d = 1.01 * (cfg.filter.group_delay_us(cfg.odr) + (n - 1.0) / 2.0 * period + period);
+    let path = cfg.filter.group_delay_us(cfg.odr) + f32::from(path_trim_us);
+    let d = 1.01 * (path.max(0.0) + (n - 1.0) / 2.0 * period + period);
     (libm::ceilf(d / 10.0) * 10.0) as u32
+}
+
+/// The board's [`stated_delay_us`] with its path trimmed by
+/// `path_trim_us`: [`BOARD_DELAY_US`] untrimmed.
+pub fn board_delay_us(path_trim_us: i16) -> u32 {
+    if path_trim_us == 0 {
+        BOARD_DELAY_US
+    } else {
+        stated_delay_us(
+            &crate::drivers::icm42688::board_fifo(ClockInput::Internal),
+            path_trim_us,
+        )
+    }
 }
 
 /// Reads without a sample after which a chip on CLKIN is taken to have lost
@@ -145,8 +161,12 @@ pub struct TimedIcm<SPI, C> {
     clock: ChipClock,
     /// Where the samples go as they are parsed.
     intake: Intake,
-    /// The signal path's delay, 1/16 µs of the chip's clock.
+    /// The signal path's delay, 1/16 µs of the chip's clock: the
+    /// datasheet's reading and the trim measured on a rate table
+    /// ([`Gyro::aim`]).
     path16: u32,
+    /// The datasheet's reading of [`Self::path16`].
+    path16_doc: u32,
     /// Chip µs between samples.
     period_us: u32,
     /// °/s per LSB at the configured full scale.
@@ -195,6 +215,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
                 spiked: 0,
             },
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
+            path16_doc: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
             period_us,
             dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
             at: None,
@@ -577,6 +598,12 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
     fn delay_us(&self) -> u32 {
         self.behind_us
     }
+
+    fn aim(&mut self, at: Instant16, behind_us: u32, path_trim_us: i16) {
+        self.set_instant(at, behind_us);
+        let trim16 = (i32::from(path_trim_us) * Q as i32) as u32;
+        self.path16 = self.path16_doc.wrapping_add(trim16);
+    }
 }
 
 /// Whether the tracker has the chip's clock.
@@ -633,6 +660,12 @@ impl<G: Gyro> Gyro for AtInstant<G> {
 
     fn delay_us(&self) -> u32 {
         self.g.delay_us()
+    }
+
+    /// The array's distance behind the read (the trim is the ICM-42688-P's
+    /// path, not this part's).
+    fn aim(&mut self, _at: Instant16, behind_us: u32, _path_trim_us: i16) {
+        self.behind_us = behind_us;
     }
 
     fn identity(&self) -> (crate::link::msg::Part, u16) {
@@ -705,7 +738,7 @@ mod tests {
     #[test]
     fn the_board_states_the_delay_its_sampling_needs() {
         for clock in [ClockInput::Internal, ClockInput::ClkIn] {
-            assert_eq!(stated_delay_us(&board_fifo(clock)), BOARD_DELAY_US);
+            assert_eq!(stated_delay_us(&board_fifo(clock), 0), BOARD_DELAY_US);
         }
     }
 }

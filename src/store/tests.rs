@@ -30,6 +30,7 @@ fn settings(i: u32) -> Settings {
         status_every: 100 + i,
         compensation: Compensation::Horizon((i % 10_000) as u16),
         angle: i % 3 == 1,
+        path_trim_us: (i % 1601) as i16 - 800,
     }
 }
 

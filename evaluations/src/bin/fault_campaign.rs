@@ -476,6 +476,7 @@ fn draw_timed(
             path_reading: gyro_sim::PathReading::DOCUMENTED,
             scale_error: [0.0; 4],
             rc_fallback: None,
+            path_trim_us: 0,
         },
         inj,
         ev,

@@ -742,6 +742,7 @@ fn timing(out: &Path, seed: u64) -> Result<(), Err> {
                     ..ClockParams::fixed(0.0)
                 }),
                 rc_fallback: (!clkin).then_some((3, -0.07)),
+                path_trim_us: 0,
                 ..Timing::sweep(
                     clkin,
                     RtcTick::Microsecond,

@@ -215,6 +215,7 @@ fn board_run_to(
         vibration: p.vibration,
         scale_error: [0.0; 4],
         rc_fallback: None,
+        path_trim_us: 0,
     };
     let mut s = Stream {
         now_s: vec![],

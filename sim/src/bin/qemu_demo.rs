@@ -62,7 +62,7 @@ use gyro_array::board::stack;
 use gyro_array::drivers::Gyro;
 use gyro_array::link::port::{ChipTime, NoiseSnapshot, Port};
 use gyro_array::link::ring::{TxBuffer, TxConsumer, TxProducer};
-use gyro_array::pipeline::timed::{self, TimingCounters, BOARD_DELAY_US};
+use gyro_array::pipeline::timed::TimingCounters;
 use gyro_array::pipeline::tracker;
 use gyro_array::pipeline::Pipeline;
 use gyro_sim::qemu::cmsdk_uart::{CmsdkUart, UART0};
@@ -486,10 +486,6 @@ mod app {
         // board), for the instant and the frame.
         let now_us = with_bus(bus, |b| b.timer_us()).unwrap_or(0);
         let (t_us, missed) = l.clock.tick(now_us);
-        let at = timed::array_instant(now_us, BOARD_DELAY_US);
-        for t in l.chips.0.timed.iter_mut() {
-            t.set_instant(at, BOARD_DELAY_US);
-        }
         let clocks = *l.clocks;
         let demo::Chips { timed, adx, .. } = &mut l.chips.0;
         let [c0, c1, c2, c3] = timed;

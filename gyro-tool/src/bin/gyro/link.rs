@@ -53,9 +53,13 @@ fn parse_op(s: &str) -> Result<Op, String> {
         ("compensation", v) => {
             Op::SetCompensation(Compensation::Horizon(u16::try_from(num(v)?).unwrap_or(u16::MAX)))
         }
+        ("path-trim", v) => {
+            let t = v.parse::<i32>().map_err(|e| format!("{s:?}: {e}"))?;
+            Op::SetPathTrim(i16::try_from(t).unwrap_or(if t < 0 { i16::MIN } else { i16::MAX }))
+        }
         _ => {
             return Err(format!(
-                "{s:?}: expected status, info, save, factory-reset, angle=on|off, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive or compensation=off|frame|MICROSECONDS"
+                "{s:?}: expected status, info, save, factory-reset, angle=on|off, divider=N, status-every=N, mode=fused|raw, method=mean|zhang|adaptive, compensation=off|frame|MICROSECONDS or path-trim=MICROSECONDS"
             ))
         }
     })

@@ -7,7 +7,9 @@
 //!   the stream: `status`, `divider=N`, `status-every=N`,
 //!   `mode=fused|raw`, `method=mean|zhang|adaptive`,
 //!   `compensation=off|frame|MICROSECONDS` (the delay compensation: off,
-//!   to the frame's last byte, or to a horizon after the sample's time).
+//!   to the frame's last byte, or to a horizon after the sample's time),
+//!   `path-trim=MICROSECONDS` (the chips' signal path measured longer
+//!   than the datasheet's reading: `gyro lag`).
 //! - `gyro check FILE`: integrity of a recording (no corrupt frame, no
 //!   gap), optionally against the firmware's own count and CRC-32.
 //! - `gyro decode FILE --what samples|noise|raw|status -o CSV`.
@@ -17,6 +19,9 @@
 //!   the reference stabilisation loop: the pointing error it adds to the
 //!   ideal gyro's per axis, split into delay and noise (and, against a
 //!   reference, calibration and faults).
+//! - `gyro lag FILE --truth CSV`: how far the frames' rates lie behind the
+//!   instants they state, per axis, against a rate table's reference: the
+//!   path trim to set (docs/timing.md, the bench procedure).
 //!
 //! SRC is `serial:PATH[@BAUD]`, `tcp:HOST:PORT`, `unix:PATH`, `file:PATH`
 //! or `-`. Protocol: `docs/link.md`.
@@ -34,7 +39,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use gyro_tool::{analyse, pointing};
+use gyro_tool::{analyse, lag, pointing};
 
 #[derive(Parser)]
 #[command(
@@ -87,6 +92,16 @@ enum Cmd {
         /// most as SVG.
         #[arg(long)]
         svg: Option<PathBuf>,
+    },
+    /// How far the sample frames' rates lie behind the instants they
+    /// state, against a reference rate on the board's clock (a rate
+    /// table's): the signal path's trim to set (`--send path-trim=N`).
+    Lag {
+        /// The recording (made with `--send compensation=off`).
+        file: PathBuf,
+        /// The true rate on the board's clock (CSV: t_us,x_dps,y_dps,z_dps).
+        #[arg(long)]
+        truth: PathBuf,
     },
     /// Allan-family deviations of a rate log: comma-, semicolon-, tab- or
     /// blank-separated text, with a header line or without one, one column
@@ -141,6 +156,7 @@ fn run(cli: Cli) -> gyro_tool::Res<bool> {
         Cmd::Decode(a) => decode::run(a),
         Cmd::Analyse { file } => analyse::run(&file),
         Cmd::Pointing { file, truth, svg } => pointing::run(&file, truth.as_ref(), svg.as_ref()),
+        Cmd::Lag { file, truth } => lag::run(&file, &truth),
         Cmd::Allan(a) => allan::run(a),
         Cmd::Emulate(a) => emulate::run(a),
         Cmd::Davar(a) => davar::run(a),

@@ -555,6 +555,7 @@ pub(super) fn bench_loop_on(
                 }
                 b.advance(dt);
             });
+            u64::from(n) * 1000
         },
         |sample| {
             let mut gyros: [&mut dyn Gyro; 5] = [&mut g0, &mut g1, &mut g2, &mut g3, &mut g4];
@@ -599,8 +600,6 @@ pub(super) fn bench_timed_loop_on(
         emu_device, timed_array, with_bus, ChipTiming, CsLine, EmuBus, EmuCapture, EmuDelay,
         PathModel,
     };
-    const DELAY_US: u32 = gyro_array::pipeline::timed::BOARD_DELAY_US;
-
     let chips = timed_array(
         profile,
         seed,
@@ -687,19 +686,15 @@ pub(super) fn bench_timed_loop_on(
                     }
                 }
                 b.advance(1e-3);
-            });
+                // The captures' µs at the read (TIM5's on the board): the
+                // sample task aims the chips from it.
+                u64::from(b.timer_us())
+            })
+            .unwrap_or(0)
         },
         |sample| {
-            // The board's timer would give this instant; the bus's clock
-            // stands in for it.
-            let now_us = with_bus(&bus, |b| b.timer_us()).unwrap_or(0);
-            let at = gyro_array::pipeline::timed::array_instant(now_us, DELAY_US);
-            let mut gyros: [&mut TimedIcm<_, _>; 4] = [&mut g0, &mut g1, &mut g2, &mut g3];
-            for g in gyros.iter_mut() {
-                g.set_instant(at, DELAY_US);
-            }
-            let [a, b, c, d] = gyros;
-            let mut gyros: [&mut dyn Gyro; 4] = [a, b, c, d];
+            // The board's sample task aims them at the tick's instant.
+            let mut gyros: [&mut dyn Gyro; 4] = [&mut g0, &mut g1, &mut g2, &mut g3];
             sample(&mut gyros)
         },
     );

@@ -11,7 +11,8 @@ use super::*;
 static BENCH_TX: gyro_array::link::ring::TxBuffer<4096> = gyro_array::link::ring::TxBuffer::new();
 
 /// The measured part of the whole-loop bench, whatever the chips: per
-/// sample, `before(n)` (faults, the bus's time) untimed, then `step`,
+/// sample, `before(n)` (faults, the bus's time; it gives the tick's µs on
+/// the captures' clock) untimed, then `step`,
 /// which hands the chips to the board's sample task (`app::sample`):
 /// timed and marked for the exact count up to its frame queued (the
 /// frame's path: phase 0) and after it (the learning, a status frame when
@@ -27,7 +28,7 @@ pub(super) fn run_loop<const N: usize>(
     pipe: &mut gyro_array::pipeline::Pipeline<N>,
     noise: &mut gyro_array::pipeline::tracker::NoiseTracker<1024, 35, 3>,
     meter: &dyn Fn() -> (gyro_sim::Meter, u32),
-    mut before: impl FnMut(u32),
+    mut before: impl FnMut(u32) -> u64,
     mut step: impl FnMut(
         &mut dyn FnMut(&mut [&mut dyn gyro_array::drivers::Gyro; N]) -> gyro_array::app::Sampled<N>,
     ) -> gyro_array::app::Sampled<N>,
@@ -88,7 +89,7 @@ pub(super) fn run_loop<const N: usize>(
     mark::scenario();
     for n in 0..SAMPLES {
         mark::sample();
-        before(n);
+        let t_us = before(n);
         let (m0, _) = meter();
         let t0 = t.now();
         let mut tq = t0;
@@ -99,7 +100,7 @@ pub(super) fn run_loop<const N: usize>(
                 &mut Exclusive(&mut port),
                 &mut Exclusive(&mut snap),
                 gyros,
-                (u64::from(n) * 1000, 0),
+                (t_us, 0),
                 &VIEW,
                 || {
                     mark::link();
