@@ -407,8 +407,14 @@ fn every_command_is_acknowledged_or_rejected_with_its_reason() {
             Err(Reject::OutOfRange),
         ),
         (Op::SetCompensation(Compensation::Horizon(3000)), Ok(())),
-        (Op::SetPathTrim(MAX_PATH_TRIM_US + 1), Err(Reject::OutOfRange)),
-        (Op::SetPathTrim(-MAX_PATH_TRIM_US - 1), Err(Reject::OutOfRange)),
+        (
+            Op::SetPathTrim(MAX_PATH_TRIM_US + 1),
+            Err(Reject::OutOfRange),
+        ),
+        (
+            Op::SetPathTrim(-MAX_PATH_TRIM_US - 1),
+            Err(Reject::OutOfRange),
+        ),
         (Op::SetPathTrim(-354), Ok(())),
     ];
     for (id, (op, want)) in cases.iter().enumerate() {

@@ -833,7 +833,7 @@ fn power_up_sweep(seed: u64) {
     // that much later than stated, whatever the phase.
     println!();
     println!(
-        "the filters' shapes (open in the datasheet), 24 phases each on CLKIN and on own clocks:"
+        "the filters' shapes (open in the datasheet), {PHASES} phases each on CLKIN and on own clocks:"
     );
     println!(
         "(then the bench procedure: 2 s of a rate table's 2 Hz sway through `gyro lag`'s fit, the trim it gives set, and the sweep again)"
@@ -872,10 +872,10 @@ fn power_up_sweep(seed: u64) {
         ),
         ("both", PathReading::BOTH),
     ] {
-        let runs: Vec<(u32, bool)> = (0..24u32).flat_map(|k| [(k, true), (k, false)]).collect();
+        let runs: Vec<(u32, bool)> = (0..PHASES).flat_map(|k| [(k, true), (k, false)]).collect();
         let sweep = |trim: i16| {
             let out: Vec<PowerUp> = par_map(&runs, |&(k, clkin)| {
-                let up = f64::from(k) * 250e-6 / 24.0;
+                let up = f64::from(k) * 250e-6 / f64::from(PHASES);
                 let timing = Timing {
                     path_trim_us: trim,
                     ..Timing::sweep(
