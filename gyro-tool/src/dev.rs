@@ -39,6 +39,9 @@ pub enum DevError {
     /// input: values or a τ0 beyond what f64 carries through the sums
     /// (samples near ±1e308, a τ0 of 1e-300).
     Overflow(usize),
+    /// TheoBR's bias ratio over more phase points than it is computed for
+    /// (the limit): its Theo1 terms grow as N³.
+    TooLong(usize),
 }
 
 impl fmt::Display for DevError {
@@ -51,6 +54,10 @@ impl fmt::Display for DevError {
             DevError::Overflow(m) => write!(
                 f,
                 "the deviation at factor {m} is not finite: the values or tau0 are beyond what f64 carries through the sums"
+            ),
+            DevError::TooLong(max) => write!(
+                f,
+                "TheoBR and TheoH are computed for at most {max} phase points (their bias ratio's Theo1 terms grow as N³): average the rates in blocks first"
             ),
         }
     }
@@ -211,7 +218,8 @@ fn deviations_unchecked(
             })
             .collect());
     }
-    let one = |m: usize| match deviation_checked(kind, x, tau0, m) {
+    let mut ratio = None;
+    let mut one = |m: usize| match deviation_in(kind, x, tau0, m, &mut ratio) {
         Ok(p) => Ok(Some(p)),
         Err(DevError::TooShort) => Ok(None),
         Err(e) => Err(e),
@@ -448,8 +456,87 @@ fn deviation_checked(kind: Kind, x: &[f64], tau0: f64, m: usize) -> Result<Point
             let s: f64 = x[m..].iter().zip(x).map(|(b, a)| (b - a) * (b - a)).sum();
             (s / k as f64, k)
         }
+        Kind::Theobr | Kind::Theoh => return theo_point(kind, x, tau0, m, &mut None),
     };
     Ok(Point::bare(m, tau0, var.sqrt(), terms, n))
+}
+
+/// [`deviation_checked`] over one series' factors in turn, TheoBR's bias
+/// ratio computed once for all of them (`ratio`, None before).
+fn deviation_in(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    m: usize,
+    ratio: &mut Option<f64>,
+) -> Result<Point, DevError> {
+    match kind {
+        Kind::Theobr | Kind::Theoh => theo_point(kind, x, tau0, m, ratio),
+        _ => deviation_checked(kind, x, tau0, m),
+    }
+}
+
+/// The most phase points TheoBR and TheoH are computed for: the bias
+/// ratio sums Theo1 at some N/30 factors up to 0.13 N, about N³/900 terms
+/// (9·10⁹ here, seconds), where Theo1 at one factor is N m/2.
+pub const THEO_BR_MAX_POINTS: usize = 20_000;
+
+/// TheoBR's bias ratio over phase `x` (SP 1065 eq. 31): the mean over
+/// i = 0 ..= k, k = ⌊0.1 N/3 − 3⌋, of OAVAR at factor 9 + 3i over Theo1
+/// at 12 + 4i, the two at the same averaging time (Theo1's is 0.75 m τ0;
+/// τ0 cancels). A pair whose Theo1 is 0 (a phase with no second
+/// differences there) adds nothing; none at all reads 1.
+fn theo_br_ratio(x: &[f64]) -> Result<f64, DevError> {
+    let n = x.len();
+    if n > THEO_BR_MAX_POINTS {
+        return Err(DevError::TooLong(THEO_BR_MAX_POINTS));
+    }
+    let k = (0.1 * n as f64 / 3.0 - 3.0).floor();
+    if k < 0.0 {
+        return Err(DevError::TooShort);
+    }
+    let (mut sum, mut pairs) = (0.0, 0usize);
+    for i in 0..=k as usize {
+        let a = deviation_checked(Kind::Oadev, x, 1.0, 9 + 3 * i)?.dev;
+        let t = deviation_checked(Kind::Theo1, x, 1.0, 12 + 4 * i)?.dev;
+        if t > 0.0 {
+            sum += (a * a) / (t * t);
+            pairs += 1;
+        }
+    }
+    Ok(if pairs == 0 { 1.0 } else { sum / (k + 1.0) })
+}
+
+/// TheoBR at Theo1's factor `m` (reported as Theo1 is), or TheoH at
+/// factor `m` (its averaging time m τ0: OADEV up to a tenth of the record,
+/// beyond it TheoBR at Theo1's 4m/3), the bias ratio taken from `ratio` or
+/// computed into it.
+fn theo_point(
+    kind: Kind,
+    x: &[f64],
+    tau0: f64,
+    m: usize,
+    ratio: &mut Option<f64>,
+) -> Result<Point, DevError> {
+    let n = x.len();
+    if kind == Kind::Theoh && crate::kind::theoh_is_oadev(m, n) {
+        return deviation_checked(Kind::Oadev, x, tau0, m);
+    }
+    let f = match kind {
+        Kind::Theoh if m.is_multiple_of(3) => 4 * m / 3,
+        Kind::Theoh => return Err(DevError::TooShort),
+        _ => m,
+    };
+    let p = deviation_checked(Kind::Theo1, x, tau0, f)?;
+    let r = match *ratio {
+        Some(r) => r,
+        None => {
+            let r = theo_br_ratio(x)?;
+            *ratio = Some(r);
+            r
+        }
+    };
+    Ok(Point::bare(m, tau0, p.dev * r.sqrt(), p.terms, n))
 }
 
 /// Gap-tolerant overlapping Allan deviation at factor `m` of phase `x`
@@ -713,11 +800,28 @@ pub fn curve_with(
     (cf, chi2): (f64, crate::edf::Chi2),
     alphas: &mut Alphas,
 ) -> Result<Vec<Point>, DevError> {
-    let factors: Vec<usize> = grid
-        .factors(kind.max_factor(x.len()))
+    let n = x.len();
+    let max = kind.max_factor(n);
+    let mut factors: Vec<usize> = grid
+        .factors(max)
         .into_iter()
-        .filter(|&m| kind.takes_factor(m))
+        .map(|m| {
+            // TheoH's long averaging times are at multiples of 3: the
+            // grid's factor there moves to the nearest.
+            if kind == Kind::Theoh && !crate::kind::theoh_is_oadev(m, n) {
+                let r = (m + 1) / 3 * 3;
+                if r > max {
+                    r - 3
+                } else {
+                    r
+                }
+            } else {
+                m
+            }
+        })
+        .filter(|&m| kind.takes_factor(m, n))
         .collect();
+    factors.dedup();
     curve_at(kind, x, tau0, &factors, (cf, chi2), alphas)
 }
 
@@ -782,10 +886,11 @@ pub fn curve_at(
 ) -> Result<Vec<Point>, DevError> {
     check(x, tau0)?;
     let mut last_alpha = None;
+    let mut ratio = None;
     let points: Vec<Point> = factors
         .iter()
         .map(|&m| {
-            deviation_checked(kind, x, tau0, m).map(|p| {
+            deviation_in(kind, x, tau0, m, &mut ratio).map(|p| {
                 let alpha = *alphas.entry(m).or_insert_with(|| noise_alpha(x, m));
                 with_interval(kind, p, alpha, &mut last_alpha, x.len(), (cf, chi2))
             })
@@ -1193,6 +1298,82 @@ mod tests {
             c.iter().all(|p| p.m % 2 == 0) && c.len() == 11,
             "{:?}",
             c.iter().map(|p| p.m).collect::<Vec<_>>()
+        );
+    }
+
+    /// TheoBR and TheoH against allantools 2024.6's own Theo1 and OADEV
+    /// combined by SP 1065 eqs. 31–32 (`allantools_theobr.csv`, from
+    /// `tests/make_theobr_vectors.py`; allantools has neither): the bias
+    /// ratio, 23 TheoBR and 51 TheoH points to 1e-9 relative, the same
+    /// term counts; TheoH's factors beyond a tenth of the record only at
+    /// multiples of 3, curves skipping the others; too long a record is a
+    /// typed error, not minutes of work.
+    #[test]
+    fn theobr_and_theoh_match_allantools_theo1_and_oadev() {
+        let x = values(
+            include_str!("../tests/vectors/allantools_phase.csv")
+                .split_once('\n')
+                .unwrap()
+                .1,
+        );
+        let mut checked = 0;
+        let mut worst = 0.0f64;
+        for l in include_str!("../tests/vectors/allantools_theobr.csv")
+            .lines()
+            .skip(1)
+        {
+            let f: Vec<&str> = l.split(',').collect();
+            let (m, want, n): (usize, f64, usize) = (
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].parse().unwrap(),
+            );
+            let got = match f[0] {
+                "ratio" => {
+                    let r = theo_br_ratio(&x).unwrap();
+                    worst = worst.max(((r - want) / want).abs());
+                    checked += 1;
+                    continue;
+                }
+                "theobr" => deviation(Kind::Theobr, &x, 1.0, m).unwrap(),
+                "theoh" => deviation(Kind::Theoh, &x, 1.0, m).unwrap(),
+                k => panic!("{k}"),
+            };
+            worst = worst.max(((got.dev - want) / want).abs());
+            assert!(((got.dev - want) / want).abs() < 1e-9, "{l}: {}", got.dev);
+            assert_eq!(got.terms, n, "{l}");
+            assert_eq!(got.tau, m as f64, "{l}");
+            checked += 1;
+        }
+        assert_eq!(checked, 1 + 23 + 51);
+        assert!(worst < 1e-9, "worst {worst:e}");
+        // Beyond a tenth of the record TheoH has values at multiples of 3
+        // only; below it every factor (OADEV's).
+        assert!(matches!(
+            deviation(Kind::Theoh, &x, 1.0, 401),
+            Err(DevError::TooShort)
+        ));
+        let c = curve(Kind::Theoh, &x, 1.0, Grid::PerDecade(10)).unwrap();
+        assert!(c.iter().all(|p| p.m * 10 <= 3999 || p.m % 3 == 0));
+        assert!(c.iter().any(|p| p.m * 10 > 3999));
+        // The batch shares the ratio: the same values one at a time.
+        let ms = [10, 64, 3996];
+        let batch = deviations(Kind::Theobr, &x, 1.0, &ms).unwrap();
+        for (m, p) in ms.iter().zip(batch) {
+            assert_eq!(
+                p.unwrap().dev,
+                deviation(Kind::Theobr, &x, 1.0, *m).unwrap().dev
+            );
+        }
+        let long = vec![0.0; THEO_BR_MAX_POINTS + 1];
+        assert_eq!(
+            deviation(Kind::Theobr, &long, 1.0, 10),
+            Err(DevError::TooLong(THEO_BR_MAX_POINTS))
+        );
+        // Under 90 points there is no pair for the ratio.
+        assert_eq!(
+            deviation(Kind::Theobr, &x[..89], 1.0, 10),
+            Err(DevError::TooShort)
         );
     }
 

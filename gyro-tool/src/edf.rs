@@ -239,9 +239,14 @@ pub fn of(kind: Kind, alpha: i32, m: usize, n: usize) -> Option<f64> {
         }
         .filter(|e| *e > 0.0),
         // No EDF model here yet: these points carry no interval.
-        Kind::Mtotdev | Kind::Ttotdev | Kind::Htotdev | Kind::Mtie | Kind::Tierms | Kind::Theo1 => {
-            None
-        }
+        Kind::Mtotdev
+        | Kind::Ttotdev
+        | Kind::Htotdev
+        | Kind::Mtie
+        | Kind::Tierms
+        | Kind::Theo1
+        | Kind::Theobr
+        | Kind::Theoh => None,
     }
 }
 

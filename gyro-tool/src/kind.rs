@@ -39,6 +39,14 @@ pub enum Kind {
     /// Theo1 (Howe & Peppar; SP 1065 eq. 30) at even factors m; its
     /// averaging time is 0.75 m τ0, reported at m τ0 as allantools does.
     Theo1,
+    /// Bias-removed Theo1 (Howe & Tasset; SP 1065 eq. 31): Theo1 times the
+    /// mean ratio of OAVAR to Theo1 at the same averaging times over the
+    /// record's first tenth; at Theo1's factors, reported as Theo1 is.
+    Theobr,
+    /// TheoH (SP 1065 eq. 32): OADEV up to a tenth of the record, TheoBR
+    /// beyond, each point at its own averaging time m τ0 (there TheoBR at
+    /// Theo1 factor 4m/3: m a multiple of 3).
+    Theoh,
 }
 
 impl Kind {
@@ -64,6 +72,8 @@ impl Kind {
             Kind::Mtie => "mtie",
             Kind::Tierms => "tierms",
             Kind::Theo1 => "theo1",
+            Kind::Theobr => "theobr",
+            Kind::Theoh => "theoh",
         }
     }
 
@@ -84,12 +94,28 @@ impl Kind {
             Kind::Htotdev => n.saturating_sub(1) / 3,
             // At least two windows.
             Kind::Mtie | Kind::Tierms => n.saturating_sub(2),
-            Kind::Theo1 => n.saturating_sub(1),
+            Kind::Theo1 | Kind::Theobr => n.saturating_sub(1),
+            // TheoBR at 4m/3 ≤ n − 1.
+            Kind::Theoh => n.saturating_sub(1) * 3 / 4,
         }
     }
 
-    /// Whether it has a value at factor `m` (Theo1: even factors only).
-    pub fn takes_factor(self, m: usize) -> bool {
-        m > 0 && (self != Kind::Theo1 || m.is_multiple_of(2))
+    /// Whether it has a value at factor `m` over `n` phase points (Theo1
+    /// and TheoBR: even factors only; TheoH beyond a tenth of the record:
+    /// multiples of 3).
+    pub fn takes_factor(self, m: usize, n: usize) -> bool {
+        m > 0
+            && match self {
+                Kind::Theo1 | Kind::Theobr => m.is_multiple_of(2),
+                Kind::Theoh => theoh_is_oadev(m, n) || m.is_multiple_of(3),
+                _ => true,
+            }
     }
+}
+
+/// Whether TheoH's point at factor `m` over `n` phase points is OADEV's:
+/// its averaging time within a tenth of the record's span (SP 1065 eq. 32's
+/// k, the largest τ ≤ 0.1 T).
+pub fn theoh_is_oadev(m: usize, n: usize) -> bool {
+    10 * m <= n.saturating_sub(1)
 }

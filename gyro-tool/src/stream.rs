@@ -42,8 +42,9 @@ const LANES: usize = 8;
 
 /// Whether `kind` can be computed in one pass here. TOTDEV reflects the
 /// phase about its last point, MTOTDEV, TTOTDEV and HTOTDEV detrend each
-/// 3m stretch, Theo1 sums m/2 terms per start, MTIE takes each window's
-/// range: none of them is a fixed set of lagged differences.
+/// 3m stretch, Theo1 (and TheoBR and TheoH with it) sums m/2 terms per
+/// start, MTIE takes each window's range: none of them is a fixed set of
+/// lagged differences.
 pub fn streams(kind: Kind) -> bool {
     matches!(
         kind,
@@ -587,7 +588,7 @@ impl Stream {
             let mut last_alpha = None;
             self.factors
                 .iter()
-                .filter(|f| ms.binary_search(&f.m).is_ok() && kind.takes_factor(f.m))
+                .filter(|f| ms.binary_search(&f.m).is_ok() && kind.takes_factor(f.m, n))
                 .filter_map(|f| point(kind, f).map(|p| (f, p)))
                 .map(|(f, p)| dev::with_interval(kind, p, f.alpha(), &mut last_alpha, n, ci))
                 .collect()

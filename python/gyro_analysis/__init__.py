@@ -42,7 +42,9 @@ The rest of the ``gyro`` tool's analysis, on the same code:
   of a robot log on one time grid as :func:`replay`'s chips;
 - beyond allantools' seven: :func:`mtotdev`, :func:`ttotdev`,
   :func:`htotdev`, :func:`theo1`, :func:`mtie`, :func:`tierms` and
-  :func:`gradev` (equal to allantools 2024.6; ``gradev``'s bounds work);
+  :func:`gradev` (equal to allantools 2024.6; ``gradev``'s bounds work),
+  :func:`theobr` and :func:`theoh` (Stable32's, which allantools lacks:
+  equal to allantools' own Theo1 and OADEV combined by SP 1065 eqs. 31–32);
   every deviation takes an (N, k) array, one column per series.
 
 :class:`Dataset` is allantools' ``Dataset`` (``compute(name)`` gives the
@@ -72,6 +74,8 @@ _DEVIATIONS = (
     "ttotdev",
     "htotdev",
     "theo1",
+    "theobr",
+    "theoh",
     "mtie",
     "tierms",
 )
@@ -229,6 +233,14 @@ def phase2frequency(phase, rate):
         raise ValueError("tau0 must be a finite number of seconds > 0")
     return _np.diff(x) * float(rate)
 theo1 = _wrap("theo1", "Theo1 at even factors (SP 1065 eq. 30), reported at m tau0 as allantools does")
+theobr = _wrap(
+    "theobr",
+    "Bias-removed Theo1 (SP 1065 eq. 31) at Theo1's even factors, reported as theo1 is; at most 20 000 points",
+)
+theoh = _wrap(
+    "theoh",
+    "TheoH (SP 1065 eq. 32): OADEV up to a tenth of the record, TheoBR beyond, each at its averaging time; at most 20 000 points",
+)
 tierms = _wrap("tierms", "Time interval error RMS, in the phase's unit (error 0, as allantools)")
 
 

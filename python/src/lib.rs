@@ -201,7 +201,9 @@ fn deviation_arrays<'py>(
     // between them (every factor costs about the same).
     // OADEV's octaves are one sweep whatever their number.
     let sweep = kind == Kind::Oadev && ms.iter().all(|m| m.is_power_of_two());
-    let batch = if sweep {
+    // TheoBR's bias ratio is the series', computed once for every factor.
+    let whole = sweep || matches!(kind, Kind::Theobr | Kind::Theoh);
+    let batch = if whole {
         ms.len().max(1)
     } else {
         (CHECK_TERMS / x.len().max(1)).max(1)
@@ -261,6 +263,8 @@ allantools_fn!(htotdev, Kind::Htotdev);
 allantools_fn!(mtie, Kind::Mtie);
 allantools_fn!(tierms, Kind::Tierms);
 allantools_fn!(theo1, Kind::Theo1);
+allantools_fn!(theobr, Kind::Theobr);
+allantools_fn!(theoh, Kind::Theoh);
 
 /// allantools' `gradev`: the gap-resistant overlapping Allan deviation of
 /// data whose missing points are NaN. Phase: the terms whose three points
@@ -1126,6 +1130,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tierms, m)?)?;
     m.add_function(wrap_pyfunction!(gradev, m)?)?;
     m.add_function(wrap_pyfunction!(theo1, m)?)?;
+    m.add_function(wrap_pyfunction!(theobr, m)?)?;
+    m.add_function(wrap_pyfunction!(theoh, m)?)?;
     m.add_function(wrap_pyfunction!(read_log, m)?)?;
     m.add_function(wrap_pyfunction!(allan_file, m)?)?;
     m.add_function(wrap_pyfunction!(deviation, m)?)?;

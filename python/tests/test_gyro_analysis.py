@@ -63,6 +63,34 @@ def test_the_total_family_and_tie_equal_allantools(shape, kind, data_type):
 
 
 @pytest.mark.parametrize("shape", ["white", "random walk"])
+def test_theobr_and_theoh_are_allantools_theo1_and_oadev_by_sp1065(shape):
+    # allantools has neither: its own Theo1 and OADEV combined by NIST
+    # SP 1065 eq. 31 (the bias ratio over the record's first tenth) and
+    # eq. 32 (OADEV to a tenth of the record, TheoBR beyond).
+    x = np.cumsum(noise(shape, 600, seed=3))
+    n = len(x)
+    k = int(np.floor(0.1 * n / 3 - 3))
+    a = allantools.oadev(x, rate=1.0, data_type="phase", taus=[9 + 3 * i for i in range(k + 1)])[1]
+    t = allantools.theo1(x, rate=1.0, data_type="phase", taus=[12 + 4 * i for i in range(k + 1)])[1]
+    ratio = np.mean(a**2 / t**2)
+    ms = [10, 16, 32, 64, 128, 256, 598]
+    want = allantools.theo1(x, rate=1.0, data_type="phase", taus=ms)
+    got = ga.theobr(x, rate=1.0, data_type="phase", taus=ms)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[3], want[3])
+    np.testing.assert_allclose(got[1], want[1] * np.sqrt(ratio), rtol=1e-9, atol=0)
+    # TheoH: factor m at m tau0; beyond 10 m > N - 1, Theo1's 4m/3.
+    low, high = [1, 2, 5, 20, 59], [60, 66, 150, 300, 447]
+    got = ga.theoh(x, rate=1.0, data_type="phase", taus=low + high + [61, 62])
+    np.testing.assert_array_equal(got[0], low + high)  # 61, 62: no value there
+    o = allantools.oadev(x, rate=1.0, data_type="phase", taus=low)[1]
+    b = allantools.theo1(x, rate=1.0, data_type="phase", taus=[4 * m // 3 for m in high])[1]
+    np.testing.assert_allclose(got[1], np.concatenate([o, b * np.sqrt(ratio)]), rtol=1e-9, atol=0)
+    with pytest.raises(ValueError, match="at most 20000 phase points"):
+        ga.theobr(np.zeros(20001), rate=1.0, data_type="phase", taus=[10])
+
+
+@pytest.mark.parametrize("shape", ["white", "random walk"])
 def test_gradev_equals_allantools_on_phase_with_holes(shape):
     x = np.cumsum(noise(shape, 3000, seed=11))
     x[400:430] = np.nan
