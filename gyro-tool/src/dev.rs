@@ -1024,6 +1024,32 @@ mod tests {
             .collect()
     }
 
+    /// The allantools oracle's phase record (`tests/make_allantools_vectors.py`).
+    fn oracle_phase() -> Vec<f64> {
+        values(
+            include_str!("../tests/vectors/allantools_phase.csv")
+                .split_once('\n')
+                .unwrap()
+                .1,
+        )
+    }
+
+    /// An oracle file's rows: kind, m, deviation, terms.
+    fn oracle_rows(csv: &str) -> Vec<(&str, usize, f64, usize)> {
+        csv.lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (
+                    f[0],
+                    f[1].parse().unwrap(),
+                    f[2].parse().unwrap(),
+                    f[3].parse().unwrap(),
+                )
+            })
+            .collect()
+    }
+
     fn phase_dat() -> Vec<f64> {
         values(include_str!("../tests/stable32/PHASE.DAT"))
     }
@@ -1181,25 +1207,12 @@ mod tests {
     /// count aside: allantools reports N − 2 as Stable32 does).
     #[test]
     fn every_deviation_matches_allantools() {
-        let x = values(
-            include_str!("../tests/vectors/allantools_phase.csv")
-                .split_once('\n')
-                .unwrap()
-                .1,
-        );
+        let x = oracle_phase();
         assert_eq!(x.len(), 4000);
         let (mut worst, mut checked) = (0.0f64, 0);
-        for l in include_str!("../tests/vectors/allantools_devs.csv")
-            .lines()
-            .skip(1)
+        for (name, m, want, n) in oracle_rows(include_str!("../tests/vectors/allantools_devs.csv"))
         {
-            let f: Vec<&str> = l.split(',').collect();
-            let kind = Kind::from_name(f[0]).unwrap();
-            let (m, want, n): (usize, f64, usize) = (
-                f[1].parse().unwrap(),
-                f[2].parse().unwrap(),
-                f[3].parse().unwrap(),
-            );
+            let kind = Kind::from_name(name).unwrap();
             let p = deviation(kind, &x, 1.0, m).unwrap();
             worst = worst.max(((p.dev - want) / want).abs());
             if kind != Kind::Totdev {
@@ -1216,24 +1229,12 @@ mod tests {
     /// 1e-9 relative, the same number of terms.
     #[test]
     fn the_total_family_and_tie_match_allantools() {
-        let x = values(
-            include_str!("../tests/vectors/allantools_phase.csv")
-                .split_once('\n')
-                .unwrap()
-                .1,
-        );
+        let x = oracle_phase();
         let (mut worst, mut checked) = (0.0f64, 0);
-        for l in include_str!("../tests/vectors/allantools_family.csv")
-            .lines()
-            .skip(1)
+        for (name, m, want, n) in
+            oracle_rows(include_str!("../tests/vectors/allantools_family.csv"))
         {
-            let f: Vec<&str> = l.split(',').collect();
-            let kind = Kind::from_name(f[0]).unwrap();
-            let (m, want, n): (usize, f64, usize) = (
-                f[1].parse().unwrap(),
-                f[2].parse().unwrap(),
-                f[3].parse().unwrap(),
-            );
+            let kind = Kind::from_name(name).unwrap();
             let p = deviation(kind, &x, 1.0, m).unwrap();
             worst = worst.max(((p.dev - want) / want).abs());
             assert!(
@@ -1253,23 +1254,9 @@ mod tests {
     /// value, and curves skip them.
     #[test]
     fn theo1_matches_allantools() {
-        let x = values(
-            include_str!("../tests/vectors/allantools_phase.csv")
-                .split_once('\n')
-                .unwrap()
-                .1,
-        );
+        let x = oracle_phase();
         let mut checked = 0;
-        for l in include_str!("../tests/vectors/allantools_theo1.csv")
-            .lines()
-            .skip(1)
-        {
-            let f: Vec<&str> = l.split(',').collect();
-            let (m, want, n): (usize, f64, usize) = (
-                f[1].parse().unwrap(),
-                f[2].parse().unwrap(),
-                f[3].parse().unwrap(),
-            );
+        for (_, m, want, n) in oracle_rows(include_str!("../tests/vectors/allantools_theo1.csv")) {
             let p = deviation(Kind::Theo1, &x, 1.0, m).unwrap();
             assert!(
                 ((p.dev - want) / want).abs() < 1e-9,
@@ -1310,25 +1297,14 @@ mod tests {
     /// typed error, not minutes of work.
     #[test]
     fn theobr_and_theoh_match_allantools_theo1_and_oadev() {
-        let x = values(
-            include_str!("../tests/vectors/allantools_phase.csv")
-                .split_once('\n')
-                .unwrap()
-                .1,
-        );
+        let x = oracle_phase();
         let mut checked = 0;
         let mut worst = 0.0f64;
-        for l in include_str!("../tests/vectors/allantools_theobr.csv")
-            .lines()
-            .skip(1)
+        for (name, m, want, n) in
+            oracle_rows(include_str!("../tests/vectors/allantools_theobr.csv"))
         {
-            let f: Vec<&str> = l.split(',').collect();
-            let (m, want, n): (usize, f64, usize) = (
-                f[1].parse().unwrap(),
-                f[2].parse().unwrap(),
-                f[3].parse().unwrap(),
-            );
-            let got = match f[0] {
+            let l = format!("{name} {m}");
+            let got = match name {
                 "ratio" => {
                     let r = theo_br_ratio(&x).unwrap();
                     worst = worst.max(((r - want) / want).abs());
@@ -1384,12 +1360,7 @@ mod tests {
     /// exactly where none of its rates is missing (checked term by term).
     #[test]
     fn gradev_matches_allantools_on_a_holed_record() {
-        let mut x = values(
-            include_str!("../tests/vectors/allantools_phase.csv")
-                .split_once('\n')
-                .unwrap()
-                .1,
-        );
+        let mut x = oracle_phase();
         let whole = x.clone();
         for i in (500..520).chain([1700]).chain(2500..2900) {
             x[i] = f64::NAN;
