@@ -919,7 +919,7 @@ pub fn with_interval(
     // The Allan family converges for α > −3 and its EDF tables stop at
     // random-walk FM: a steeper identification (drift at the longest τ) is
     // read as −2 there; Hadamard's go to −4.
-    let floor = if matches!(kind, Kind::Hdev | Kind::Ohdev) {
+    let floor = if matches!(kind, Kind::Hdev | Kind::Ohdev | Kind::Htotdev) {
         -4
     } else {
         -2
@@ -1067,6 +1067,56 @@ mod tests {
                 )
             })
             .collect()
+    }
+
+    /// Stable32's MTIE, TIE rms and Theo1 (at white FM, where it needs no
+    /// bias correction) tables for PHASE.DAT (no
+    /// interval columns): every value to the five digits it prints and its
+    /// term counts (Theo1's "#" counts the m/2 inner terms of each start).
+    #[test]
+    fn mtie_tierms_and_theo1_match_stable32_on_phase_dat() {
+        let x = phase_dat();
+        let mut checked = 0;
+        for (kind, text, col) in [
+            (
+                Kind::Mtie,
+                include_str!("../tests/stable32/phase_dat_mtie.txt"),
+                3,
+            ),
+            (
+                Kind::Tierms,
+                include_str!("../tests/stable32/phase_dat_tierms.txt"),
+                3,
+            ),
+            (
+                Kind::Theo1,
+                include_str!("../tests/stable32/phase_dat_theo1_alpha0.txt"),
+                5,
+            ),
+        ] {
+            for l in data_lines(text) {
+                let f: Vec<&str> = l.split_whitespace().collect();
+                let m: usize = f[0].parse().unwrap();
+                // (Theo1's counts printed as 1.0050e+05: to five digits.)
+                let terms: f64 = f[2].parse().unwrap();
+                let want: f64 = f[col].parse().unwrap();
+                let p = deviation(kind, &x, 1.0, m).unwrap();
+                let half = 0.5e-4 * 10f64.powi(want.log10().floor() as i32);
+                assert!(
+                    (p.dev - want).abs() <= half * 1.001,
+                    "{kind:?} m {m}: {} against {want}",
+                    p.dev
+                );
+                let unit = 10f64.powi(terms.log10().floor() as i32 - 4);
+                assert!(
+                    (p.terms as f64 - terms).abs() <= 0.5 * unit,
+                    "{kind:?} m {m}: {} terms",
+                    p.terms
+                );
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 9 + 139 + 181);
     }
 
     /// Every value of Stable32's tables for PHASE.DAT, to the five digits
