@@ -46,7 +46,7 @@ def test_equals_allantools(shape, kind, data_type):
 FAMILY = ["mtotdev", "ttotdev", "htotdev", "mtie", "tierms", "theo1"]
 
 
-@pytest.mark.parametrize("shape", ["white", "random walk"])
+@pytest.mark.parametrize("shape", ["white", "flicker", "random walk"])
 @pytest.mark.parametrize("kind", FAMILY)
 @pytest.mark.parametrize("data_type", ["freq", "phase"])
 def test_the_total_family_and_tie_equal_allantools(shape, kind, data_type):
@@ -62,7 +62,7 @@ def test_the_total_family_and_tie_equal_allantools(shape, kind, data_type):
         np.testing.assert_allclose(got[2], want[2], rtol=1e-9, atol=0)
 
 
-@pytest.mark.parametrize("shape", ["white", "random walk"])
+@pytest.mark.parametrize("shape", ["white", "flicker", "random walk"])
 def test_theobr_and_theoh_are_allantools_theo1_and_oadev_by_sp1065(shape):
     # allantools has neither: its own Theo1 and OADEV combined by NIST
     # SP 1065 eq. 31 (the bias ratio over the record's first tenth) and
@@ -90,7 +90,7 @@ def test_theobr_and_theoh_are_allantools_theo1_and_oadev_by_sp1065(shape):
         ga.theobr(np.zeros(20001), rate=1.0, data_type="phase", taus=[10])
 
 
-@pytest.mark.parametrize("shape", ["white", "random walk"])
+@pytest.mark.parametrize("shape", ["white", "flicker", "random walk"])
 def test_gradev_equals_allantools_on_phase_with_holes(shape):
     x = np.cumsum(noise(shape, 3000, seed=11))
     x[400:430] = np.nan
