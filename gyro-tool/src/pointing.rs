@@ -119,6 +119,11 @@ impl Series {
             if s.t_us.last().is_some_and(|&l| t <= l) || !t.is_finite() {
                 return Err(format!("{}:{}: time not increasing", path.display(), i + 1).into());
             }
+            if ![x, y, z].iter().all(|v| v.is_finite()) {
+                return Err(
+                    format!("{}:{}: a rate that is not a number", path.display(), i + 1).into(),
+                );
+            }
             s.t_us.push(t);
             s.rate.push([x, y, z]);
         }

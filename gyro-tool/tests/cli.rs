@@ -728,4 +728,27 @@ fn lag_reads_the_paths_delay_against_a_rate_table() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(1), "{out}");
     assert!(out.contains("no axis moved enough"), "{out}");
+    // A reference with a rate that is no number: refused with its line.
+    let bad = temp("bad_truth.csv", &truth.replacen(",0,", ",inf,", 1));
+    let (code, err) = fails(&["lag", "--truth", bad.to_str().unwrap()], &file);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains(":2: a rate that is not a number"), "{err}");
+    // A recording without sample frames: said, not fitted.
+    let empty = temp("status_only.glk", "");
+    std::fs::write(
+        &empty,
+        &rec[..rec.iter().position(|&b| b == 0).unwrap() + 1],
+    )
+    .unwrap();
+    let o = gyro()
+        .args(["lag", "--truth", csv.to_str().unwrap()])
+        .arg(&empty)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(
+        out.contains("0 sample frames") && out.contains("no axis moved enough"),
+        "{out}"
+    );
 }
