@@ -269,7 +269,12 @@ def test_dataset_is_allantools_dataset_with_intervals_fit_table_and_plot(tmp_pat
     short = (ga.Dataset(data=y[:2000], rate=100.0, data_type="freq"), at.Dataset(data=y[:2000], rate=100.0, data_type="freq"))
     r, t = short[0].compute("theo1"), short[1].compute("theo1")
     np.testing.assert_allclose(r["stat"], t["stat"], rtol=1e-9)
-    # No EDF model for Theo1 here: no interval, said as NaN.
+    # Theo1's interval (Howe's EDF) brackets it where the noise type is
+    # known; MTIE has no EDF model: no interval, said as NaN.
+    lo, hi = short[0].out["stat_lo"], short[0].out["stat_hi"]
+    known = np.isfinite(lo)
+    assert known.any() and np.all(lo[known] < r["stat"][known]) and np.all(r["stat"][known] < hi[known])
+    short[0].compute("mtie")
     assert np.isnan(short[0].out["stat_lo"]).all()
     for fn in ("oadev", "mdev", "totdev"):
         r, t = ours.compute(fn), theirs.compute(fn)
