@@ -485,7 +485,7 @@ pub const THEO_BR_MAX_POINTS: usize = 20_000;
 /// i = 0 ..= k, k = ⌊0.1 N/3 − 3⌋, of OAVAR at factor 9 + 3i over Theo1
 /// at 12 + 4i, the two at the same averaging time (Theo1's is 0.75 m τ0;
 /// τ0 cancels). A pair whose Theo1 is 0 (a phase with no second
-/// differences there) adds nothing; none at all reads 1.
+/// differences there) is left out of the mean; none at all reads 1.
 fn theo_br_ratio(x: &[f64]) -> Result<f64, DevError> {
     let n = x.len();
     if n > THEO_BR_MAX_POINTS {
@@ -504,7 +504,7 @@ fn theo_br_ratio(x: &[f64]) -> Result<f64, DevError> {
             pairs += 1;
         }
     }
-    Ok(if pairs == 0 { 1.0 } else { sum / (k + 1.0) })
+    Ok(if pairs == 0 { 1.0 } else { sum / pairs as f64 })
 }
 
 /// TheoBR at Theo1's factor `m` (reported as Theo1 is), or TheoH at
