@@ -739,6 +739,11 @@ mod tests {
     fn the_board_states_the_delay_its_sampling_needs() {
         for clock in [ClockInput::Internal, ClockInput::ClkIn] {
             assert_eq!(stated_delay_us(&board_fifo(clock), 0), BOARD_DELAY_US);
+            // A path measured longer is stated further behind (the slow UI
+            // filter's reading, docs/timing.md), a shorter one nearer.
+            assert_eq!(board_delay_us(353), 2020);
+            assert_eq!(board_delay_us(-53), 1610);
+            assert_eq!(board_delay_us(0), BOARD_DELAY_US);
         }
     }
 }
