@@ -805,20 +805,7 @@ pub fn curve_with(
     let mut factors: Vec<usize> = grid
         .factors(max)
         .into_iter()
-        .map(|m| {
-            // TheoH's long averaging times are at multiples of 3: the
-            // grid's factor there moves to the nearest.
-            if kind == Kind::Theoh && !crate::kind::theoh_is_oadev(m, n) {
-                let r = (m + 1) / 3 * 3;
-                if r > max {
-                    r - 3
-                } else {
-                    r
-                }
-            } else {
-                m
-            }
-        })
+        .map(|m| kind.snap_factor(m, n))
         .filter(|&m| kind.takes_factor(m, n))
         .collect();
     factors.dedup();

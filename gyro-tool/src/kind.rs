@@ -113,6 +113,23 @@ impl Kind {
     }
 }
 
+impl Kind {
+    /// A grid's factor `m` over `n` phase points moved to where the kind
+    /// has a value: TheoH's long averaging times are at multiples of 3
+    /// (the nearest within [`Kind::max_factor`]); any other, as it is.
+    pub fn snap_factor(self, m: usize, n: usize) -> usize {
+        if self != Kind::Theoh || theoh_is_oadev(m, n) {
+            return m;
+        }
+        let r = (m + 1) / 3 * 3;
+        if r > self.max_factor(n) {
+            r.saturating_sub(3)
+        } else {
+            r
+        }
+    }
+}
+
 /// Whether TheoH's point at factor `m` over `n` phase points is OADEV's:
 /// its averaging time within a tenth of the record's span (SP 1065 eq. 32's
 /// k, the largest τ ≤ 0.1 T).

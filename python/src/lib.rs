@@ -179,6 +179,26 @@ fn factors(taus: Option<&Bound<'_, PyAny>>, n: usize, rate: f64) -> PyResult<Vec
     Ok(out)
 }
 
+/// [`factors`] for deviation `kind`: a keyword grid's factors moved to
+/// where the kind has values (TheoH's long τ at multiples of 3, as
+/// `gyro allan` does); given τ as they are.
+fn grid_factors(
+    kind: Kind,
+    taus: Option<&Bound<'_, PyAny>>,
+    n: usize,
+    rate: f64,
+) -> PyResult<Vec<usize>> {
+    let keyword = taus.is_none_or(|t| t.is_instance_of::<PyString>());
+    let mut ms = factors(taus, n, rate)?;
+    if keyword {
+        for m in ms.iter_mut() {
+            *m = kind.snap_factor(*m, n);
+        }
+        ms.dedup();
+    }
+    Ok(ms)
+}
+
 /// Terms a batch of factors sums before Ctrl-C is checked.
 const CHECK_TERMS: usize = 100_000_000;
 
@@ -195,7 +215,7 @@ fn deviation_arrays<'py>(
 ) -> PyResult<Arrays4<'py>> {
     let x = phase_of(data.as_slice()?, rate, data_type)?;
     let tau0 = 1.0 / rate;
-    let ms = factors(taus, x.len(), rate)?;
+    let ms = grid_factors(kind, taus, x.len(), rate)?;
     let (mut t, mut d, mut e, mut n) = (vec![], vec![], vec![], vec![]);
     // In batches of about a second's work on 10⁷ points, Ctrl-C checked
     // between them (every factor costs about the same).
@@ -380,9 +400,9 @@ fn deviation<'py>(
     }
     let x = phase_of(data.as_slice()?, rate, data_type)?;
     let tau0 = 1.0 / rate;
-    let ms: Vec<usize> = factors(taus, x.len(), rate)?
+    let ms: Vec<usize> = grid_factors(kind, taus, x.len(), rate)?
         .into_iter()
-        .filter(|&m| m <= kind.max_factor(x.len()))
+        .filter(|&m| m <= kind.max_factor(x.len()) && kind.takes_factor(m, x.len()))
         .collect();
     let points = py
         .detach(|| {
@@ -501,7 +521,9 @@ fn terms_of(
     }
     let x = phase_of(y, rate, data_type)?;
     let tau0 = 1.0 / rate;
-    let t = py.detach(|| fit::fit_phase(&x, tau0)).map_err(value_error)?;
+    let t = py
+        .detach(|| fit::fit_phase(&x, tau0))
+        .map_err(value_error)?;
     Ok((t, screened))
 }
 

@@ -86,6 +86,9 @@ def test_theobr_and_theoh_are_allantools_theo1_and_oadev_by_sp1065(shape):
     o = allantools.oadev(x, rate=1.0, data_type="phase", taus=low)[1]
     b = allantools.theo1(x, rate=1.0, data_type="phase", taus=[4 * m // 3 for m in high])[1]
     np.testing.assert_allclose(got[1], np.concatenate([o, b * np.sqrt(ratio)]), rtol=1e-9, atol=0)
+    # A keyword grid's long factors move to multiples of 3, as the CLI's.
+    octave = ga.theoh(x, rate=1.0, data_type="phase", taus="octave")[0]
+    np.testing.assert_array_equal(octave, [1, 2, 4, 8, 16, 32, 63, 129, 255])
     with pytest.raises(ValueError, match="at most 20000 phase points"):
         ga.theobr(np.zeros(20001), rate=1.0, data_type="phase", taus=[10])
 
