@@ -102,12 +102,15 @@ impl Kind {
 
     /// Whether it has a value at factor `m` over `n` phase points (Theo1
     /// and TheoBR: even factors only; TheoH beyond a tenth of the record:
-    /// multiples of 3).
+    /// multiples of 3; TheoBR, and TheoH there, from
+    /// [`THEO_BR_MIN_POINTS`] on).
     pub fn takes_factor(self, m: usize, n: usize) -> bool {
+        let ratio = n >= THEO_BR_MIN_POINTS;
         m > 0
             && match self {
-                Kind::Theo1 | Kind::Theobr => m.is_multiple_of(2),
-                Kind::Theoh => theoh_is_oadev(m, n) || m.is_multiple_of(3),
+                Kind::Theo1 => m.is_multiple_of(2),
+                Kind::Theobr => m.is_multiple_of(2) && ratio,
+                Kind::Theoh => theoh_is_oadev(m, n) || (m.is_multiple_of(3) && ratio),
                 _ => true,
             }
     }
@@ -129,6 +132,10 @@ impl Kind {
         }
     }
 }
+
+/// The fewest phase points TheoBR's bias ratio has a pair in (SP 1065
+/// eq. 31: ⌊0.1 N/3 − 3⌋ ≥ 0).
+pub const THEO_BR_MIN_POINTS: usize = 90;
 
 /// Whether TheoH's point at factor `m` over `n` phase points is OADEV's:
 /// its averaging time within a tenth of the record's span (SP 1065 eq. 32's

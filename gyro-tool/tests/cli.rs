@@ -752,3 +752,25 @@ fn lag_reads_the_paths_delay_against_a_rate_table() {
         "{out}"
     );
 }
+
+/// TheoBR on a log too short for its bias ratio, beside another deviation:
+/// the others computed, TheoBR's table saying why it is empty (the ratio
+/// failed the whole command before).
+#[test]
+fn theobr_on_a_short_log_says_why_it_has_no_value() {
+    let file = temp("five.txt", "z\n1\n2\n3\n4\n5\n");
+    let (out, _) = succeeds(
+        &["allan", "--tau0", "1", "--dev", "theobr,theoh,oadev"],
+        &file,
+    );
+    assert!(
+        out.contains(
+            "no tau with a value: too few samples (TheoBR's bias ratio needs 90 phase points)"
+        ),
+        "{out}"
+    );
+    assert!(
+        out.contains("OADEV") && out.contains("7.071068e-1"),
+        "{out}"
+    );
+}

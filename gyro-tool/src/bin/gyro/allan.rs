@@ -605,6 +605,20 @@ fn emit(
                     "m", "tau (s)", "min", "deviation", "max", "edf", "terms", "alpha"
                 )?;
                 let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.6e}"));
+                if cv.points.is_empty() {
+                    writeln!(
+                        w,
+                        "  no tau with a value: too few samples{}",
+                        if matches!(cv.deviation, dev::Kind::Theobr | dev::Kind::Theoh) {
+                            format!(
+                                " (TheoBR's bias ratio needs {} phase points)",
+                                gyro_tool::kind::THEO_BR_MIN_POINTS
+                            )
+                        } else {
+                            String::new()
+                        }
+                    )?;
+                }
                 for p in &cv.points {
                     writeln!(
                         w,
