@@ -161,12 +161,12 @@ pub struct TimedIcm<SPI, C> {
     clock: ChipClock,
     /// Where the samples go as they are parsed.
     intake: Intake,
-    /// The signal path's delay, 1/16 µs of the chip's clock: the
-    /// datasheet's reading and the trim measured on a rate table
-    /// ([`Gyro::aim`]).
+    /// The signal path's delay, 1/16 µs of the chip's clock, as the
+    /// datasheet reads it.
     path16: u32,
-    /// The datasheet's reading of [`Self::path16`].
-    path16_doc: u32,
+    /// What a rate table measured the path longer than that, 1/16 µs
+    /// ([`Gyro::aim`]; wrapping, so a shorter path is a negative trim).
+    trim16: u32,
     /// Chip µs between samples.
     period_us: u32,
     /// °/s per LSB at the configured full scale.
@@ -215,7 +215,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
                 spiked: 0,
             },
             path16: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
-            path16_doc: libm::roundf(cfg.filter.group_delay_us(cfg.odr) * Q) as u32,
+            trim16: 0,
             period_us,
             dps_per_lsb: 1.0 / cfg.full_scale.lsb_per_dps(),
             at: None,
@@ -249,7 +249,7 @@ impl<SPI: SpiDevice, C: SampleCapture> TimedIcm<SPI, C> {
             .scale
             .us16_of(self.intake.align.newest()?)
             .wrapping_add(self.stamp_offset.wrapping_mul(16))
-            .wrapping_sub(self.path16);
+            .wrapping_sub(self.path16.wrapping_add(self.trim16));
         self.clock.board_instant16(chip)
     }
 
@@ -550,7 +550,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
         };
         let t = self.intake.scale.counts16_of(
             chip.wrapping_sub(self.stamp_offset.wrapping_mul(16))
-                .wrapping_add(self.path16),
+                .wrapping_add(self.path16.wrapping_add(self.trim16)),
         );
         match self.intake.align.at(t, self.dps_per_lsb) {
             Aligned::Rate(rate_dps) => {
@@ -601,8 +601,7 @@ impl<SPI: SpiDevice, C: SampleCapture> Gyro for TimedIcm<SPI, C> {
 
     fn aim(&mut self, at: Instant16, behind_us: u32, path_trim_us: i16) {
         self.set_instant(at, behind_us);
-        let trim16 = (i32::from(path_trim_us) * Q as i32) as u32;
-        self.path16 = self.path16_doc.wrapping_add(trim16);
+        self.trim16 = (i32::from(path_trim_us) * Q as i32) as u32;
     }
 }
 
