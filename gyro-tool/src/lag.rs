@@ -98,39 +98,42 @@ pub fn fit(
         return None;
     }
     let h = 50.0;
-    let slope: Vec<f64> = t
+    let slope_ms = t
         .iter()
-        .map(|&x| (truth(x + h) - truth(x - h)) / (2.0 * h * 1e-6))
-        .collect();
-    let slope_rms = (slope.iter().map(|s| s * s).sum::<f64>() / t.len() as f64).sqrt();
+        .map(|&x| ((truth(x + h) - truth(x - h)) / (2.0 * h * 1e-6)).powi(2))
+        .sum::<f64>()
+        / t.len() as f64;
+    let slope_rms = slope_ms.sqrt();
     if slope_rms.is_nan() || slope_rms < MIN_SLOPE {
         return None;
     }
     let mut g = vec![0.0; t.len()];
-    // The residual at `lag` over every `stride`-th sample.
-    let mut ssr = |lag: f64, stride: usize| {
-        let mut k = 0;
-        for &x in t.iter().step_by(stride) {
-            g[k] = truth(x - lag);
-            k += 1;
+    // The residual at `lag` over samples `ts`, `rs`.
+    let mut ssr = |ts: &[f64], rs: &[f64], lag: f64| {
+        for (gi, &x) in g.iter_mut().zip(ts) {
+            *gi = truth(x - lag);
         }
-        let rs: Vec<f64> = r.iter().step_by(stride).copied().collect();
-        line(&rs, &g[..k]).2
+        line(rs, &g[..ts.len()]).2
     };
-    // The scan on at most SCAN_SAMPLES of them (a long recording's would
-    // take minutes), the minimum's parabola on all.
+    // The scan on at most SCAN_SAMPLES of them, evenly spaced (a long
+    // recording's would take minutes), the minimum's parabola on all.
     let stride = t.len().div_ceil(SCAN_SAMPLES).max(1);
+    let (ts, rs): (Vec<f64>, Vec<f64>) = t.iter().zip(&r).step_by(stride).unzip();
     let steps = (SPAN_US / STEP_US) as i64;
     let scan: Vec<(f64, f64)> = (-steps..=steps)
         .map(|k| {
             let lag = k as f64 * STEP_US;
-            (lag, ssr(lag, stride))
+            (lag, ssr(&ts, &rs, lag))
         })
         .collect();
     let k = (0..scan.len()).min_by(|&a, &b| scan[a].1.total_cmp(&scan[b].1))?;
     let mut lag = scan[k].0;
     if k > 0 && k + 1 < scan.len() {
-        let (y0, y1, y2) = (ssr(lag - STEP_US, 1), ssr(lag, 1), ssr(lag + STEP_US, 1));
+        let (y0, y1, y2) = (
+            ssr(&t, &r, lag - STEP_US),
+            ssr(&t, &r, lag),
+            ssr(&t, &r, lag + STEP_US),
+        );
         let curv = y0 - 2.0 * y1 + y2;
         if curv > 0.0 {
             lag += 0.5 * STEP_US * (y0 - y2) / curv;
